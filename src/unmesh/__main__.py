@@ -1,0 +1,5 @@
+import sys
+
+from unmesh.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""Reading and writing surfel clouds and triangle meshes (PLY, OBJ+MTL, OFF)."""
