@@ -116,10 +116,14 @@ def as_points(value: Any, name: str = "points", dim: int = 3, length: int | None
     >>> as_points([0.0, 1.0, 2.0]).shape
     (1, 3)
     """
-    arr = np.asarray(value) if not isinstance(value, np.ndarray) else value
-    if arr.ndim == 1 and arr.shape[0] == dim:
-        arr = arr[None, :]
-    return as_array(arr, name, (None, dim), np.float64, finite=True, length=length)
+    if not isinstance(value, np.ndarray):
+        try:
+            value = np.asarray(value)
+        except (TypeError, ValueError):
+            return as_array(value, name, (None, dim), np.float64, finite=True, length=length)
+    if value.ndim == 1 and value.shape[0] == dim:
+        value = value[None, :]
+    return as_array(value, name, (None, dim), np.float64, finite=True, length=length)
 
 
 def as_indices(
