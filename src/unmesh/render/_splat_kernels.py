@@ -1,0 +1,573 @@
+"""Numba kernels of EWA surface splatting (thesis 3.2), tiled and parallel.
+
+Pipeline (all camera conventions as in :mod:`unmesh.render._kernels`):
+
+1. :func:`splat_setup` (parallel over surfels) writes per-surfel parameters ``P`` (N, NPARAM)
+   and a pixel box (N, 4).
+2. :func:`unmesh.render._kernels.bin_boxes` buckets surfels into screen tiles (front-facing
+   surfels first) and :func:`gather_rows` copies their parameter rows into tile order.
+3. :func:`splat_tiles` (parallel over tiles; a tile owns its pixels, so there are no write
+   races) runs the visibility pass (extended depth test, 3.2.1: the buffer keeps
+   ``min(z_f + eps_s)``; fragments that may still pass are recorded) and the accumulation pass
+   (``sum w``, ``sum w c``, ``sum w n``, ``sum w z`` of the recorded fragments with
+   ``z_f <= zvis``) on tile-local buffers.
+4. :func:`splat_resolve` normalises (third pass).
+
+Every fragment is generated in one loop, :func:`_tile_pass`, which knows the surfel index ``s``
+and the fragment's position: that is where per-fragment clipping (chapter 4, clipped splatting)
+happens; today it evaluates per-surfel clip planes (:func:`_keep`). Partial updates (5.7) use
+the same loop in its direct-accumulation mode, so their contributions are bit-identical.
+
+Fragment model (perspective-correct ray-splat intersection with an approximate EWA prefilter,
+after Botsch et al. 2004/2005 and Zwicker et al. 2001): the pixel ray meets the surfel plane at
+local coordinates ``(u, v)`` in units of the semi-axes, ``rho3 = u^2 + v^2``; the screen-space
+low-pass filter contributes ``rho2 = |pixel - projected centre|^2 / r_f^2``; the fragment exists
+when ``rho = min(rho3, rho2) < 1`` and weighs ``w = exp(-kappa rho)`` (a clipped Gaussian).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from unmesh.render._kernels import sphere_box
+
+__all__ = ["NPARAM", "fill_tiles", "gather_rows", "splat_resolve", "splat_setup", "splat_tiles"]
+
+#: Parameter layout of one (surfel, tile) pair (rows written in tile order):
+#: 0 cz, 1-3 n (camera), 4 c.n, 5-7 b1 = a1/|a1|^2, 8-10 b2 = a2/|a2|^2, 11 c.b1, 12 c.b2
+#: (``inf`` for degenerate ellipses, which then only reach pixels through the screen filter),
+#: 13-14 projected centre (col, row), 15 radius, 16-18 colour, 19-22 pixel box x0, x1, y0, y1,
+#: 23 depth range ``zr`` of the surfel's fragments (negative: seen edge-on, see :func:`_fragment`).
+NPARAM = 24
+#: Surfels whose normal is more than ``atan(EDGE_ON_TAN)`` (76 degrees) from the view ray through
+#: their centre are "edge-on": where their screen filter wins, fragments take the centre depth.
+EDGE_ON_TAN = 4.0
+
+
+@njit(cache=True)
+def _camera_point(frame, eye, p):
+    qx = p[0] - eye[0]
+    qy = p[1] - eye[1]
+    qz = p[2] - eye[2]
+    return (frame[0, 0] * qx + frame[0, 1] * qy + frame[0, 2] * qz,
+            frame[1, 0] * qx + frame[1, 1] * qy + frame[1, 2] * qz,
+            frame[2, 0] * qx + frame[2, 1] * qy + frame[2, 2] * qz)
+
+
+@njit(cache=True)
+def _camera_vector(frame, v):
+    return (frame[0, 0] * v[0] + frame[0, 1] * v[1] + frame[0, 2] * v[2],
+            frame[1, 0] * v[0] + frame[1, 1] * v[1] + frame[1, 2] * v[2],
+            frame[2, 0] * v[0] + frame[2, 1] * v[1] + frame[2, 2] * v[2])
+
+
+@njit(cache=True)
+def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H, rfilter):
+    """Pixel box of a surfel (inclusive ranges; ``x0 > x1`` when invisible).
+
+    The intersection of two conservative boxes: the bounding sphere's exact box and the box of
+    the ellipse ``{c + u a1 + v a2 : u^2 + v^2 <= 1}`` under the projection linearised at the
+    centre, widened by a bound ``err`` on the second-order remainder (skipped for splats larger
+    than a quarter of their depth); then united with the screen filter disc around the
+    projected centre.
+    """
+    x0, x1, y0, y1 = sphere_box(c0, c1, c2, r, f, cx, cy, ortho, near, W, H, 0.0)
+    if ortho or c2 > near:
+        if ortho:
+            sx = cx + f * c0
+            sy = cy - f * c1
+            hx = f * math.sqrt(a00 * a00 + a10 * a10) + 1e-3
+            hy = f * math.sqrt(a01 * a01 + a11 * a11) + 1e-3
+        else:
+            iz = 1.0 / c2
+            sx = cx + f * c0 * iz
+            sy = cy - f * c1 * iz
+            q = r * iz
+            if q < 0.25:
+                j0 = c0 * iz
+                j1 = c1 * iz
+                ex = a00 - j0 * a02
+                ey = a01 - j1 * a02
+                fx = a10 - j0 * a12
+                fy = a11 - j1 * a12
+                err = 2.0 * f * (1.0 + abs(j0) + abs(j1)) * q * q / (1.0 - q) + 1e-3
+                hx = f * iz * math.sqrt(ex * ex + fx * fx) + err
+                hy = f * iz * math.sqrt(ey * ey + fy * fy) + err
+            else:
+                hx = 1e30
+                hy = 1e30
+        if x0 <= x1 and y0 <= y1 and hx < 1e29:
+            x0 = max(x0, math.ceil(max(sx - hx, -2.0) - 0.5))
+            x1 = min(x1, math.floor(min(sx + hx, W + 2.0) - 0.5))
+            y0 = max(y0, math.ceil(max(sy - hy, -2.0) - 0.5))
+            y1 = min(y1, math.floor(min(sy + hy, H + 2.0) - 0.5))
+        if rfilter > 0.0 and abs(sx) < 1e9 and abs(sy) < 1e9:
+            fx0 = max(math.ceil(max(sx - rfilter, -2.0) - 0.5), 0)
+            fx1 = min(math.floor(min(sx + rfilter, W + 2.0) - 0.5), W - 1)
+            fy0 = max(math.ceil(max(sy - rfilter, -2.0) - 0.5), 0)
+            fy1 = min(math.floor(min(sy + rfilter, H + 2.0) - 0.5), H - 1)
+            if fx0 <= fx1 and fy0 <= fy1:
+                if x0 > x1 or y0 > y1:
+                    return fx0, fx1, fy0, fy1
+                return min(x0, fx0), max(x1, fx1), min(y0, fy0), max(y1, fy1)
+    return x0, x1, y0, y1
+
+
+@njit(cache=True, parallel=True)
+def splat_setup(pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H, rfilter,
+                P, box, group):
+    """Per-surfel parameters ``P`` (N, NPARAM), pixel boxes (N, 4) int32 and groups (N,) int8.
+
+    ``pos``, ``nrm``, ``colors`` (N,3) world; ``radii`` (N,) the largest semi-axis; ``axes``
+    (N,2,3) tangent axes used when ``elliptical`` (circular surfels get a tangent frame built from
+    the camera-space normal, Duff et al. 2017); ``frame`` (3,3) world-to-camera rows;
+    ``rfilter`` the screen filter radius (pixels).
+    ``group`` is 0 for surfels facing the camera, 1 otherwise (binned after the front-facing
+    ones so that early depth rejection works).
+    """
+    n = pos.shape[0]
+    for i in prange(n):
+        c0, c1, c2 = _camera_point(frame, eye, pos[i])
+        n0, n1, n2 = _camera_vector(frame, nrm[i])
+        if elliptical:
+            a00, a01, a02 = _camera_vector(frame, axes[i, 0])
+            a10, a11, a12 = _camera_vector(frame, axes[i, 1])
+        else:
+            rad = radii[i]
+            sg = 1.0 if n2 >= 0.0 else -1.0
+            aa = -1.0 / (sg + n2)
+            bb = n0 * n1 * aa
+            a00 = (1.0 + sg * n0 * n0 * aa) * rad
+            a01 = sg * bb * rad
+            a02 = -sg * n0 * rad
+            a10 = bb * rad
+            a11 = (sg + n1 * n1 * aa) * rad
+            a12 = -n1 * rad
+        # dual basis b1, b2 of the (possibly non-orthogonal) axes: b_i . a_j = delta_ij in the
+        # surfel plane, so (u, v) = ((p - c) . b1, (p - c) . b2) are the ellipse coordinates of
+        # {c + u a1 + v a2 : u^2 + v^2 <= 1}; for orthogonal axes b_i = a_i / |a_i|^2 (eq. 3.13).
+        g00 = a00 * a00 + a01 * a01 + a02 * a02
+        g11 = a10 * a10 + a11 * a11 + a12 * a12
+        g01 = a00 * a10 + a01 * a11 + a02 * a12
+        det = g00 * g11 - g01 * g01
+        tr = g00 + g11
+        valid = g00 > 1e-300 and g11 > 1e-300 and det > 1e-12 * tr * tr
+        hd = 0.5 * (g00 - g11)
+        r = math.sqrt(0.5 * tr + math.sqrt(hd * hd + g01 * g01))  # largest semi-axis
+        if valid:
+            idet = 1.0 / det
+            b10 = (g11 * a00 - g01 * a10) * idet
+            b11 = (g11 * a01 - g01 * a11) * idet
+            b12 = (g11 * a02 - g01 * a12) * idet
+            b20 = (g00 * a10 - g01 * a00) * idet
+            b21 = (g00 * a11 - g01 * a01) * idet
+            b22 = (g00 * a12 - g01 * a02) * idet
+        else:
+            b10 = b11 = b12 = b20 = b21 = b22 = 0.0
+        P[i, 0] = c2
+        P[i, 1] = n0
+        P[i, 2] = n1
+        P[i, 3] = n2
+        P[i, 4] = c0 * n0 + c1 * n1 + c2 * n2
+        P[i, 5] = b10
+        P[i, 6] = b11
+        P[i, 7] = b12
+        P[i, 8] = b20
+        P[i, 9] = b21
+        P[i, 10] = b22
+        P[i, 11] = c0 * b10 + c1 * b11 + c2 * b12 if valid else np.inf
+        P[i, 12] = c0 * b20 + c1 * b21 + c2 * b22 if valid else np.inf
+        if ortho:
+            P[i, 13] = cx + f * c0
+            P[i, 14] = cy - f * c1
+        elif c2 > near:
+            P[i, 13] = cx + f * c0 / c2
+            P[i, 14] = cy - f * c1 / c2
+        else:
+            P[i, 13] = np.nan
+            P[i, 14] = np.nan
+        P[i, 15] = r
+        # depth range of the fragments: the ellipse itself (r) plus the screen filter footprint
+        # (rfilter pixels in world units at the centre depth) on the tilted plane
+        if ortho:
+            fw = rfilter / f
+            cos = abs(n2)
+        else:
+            fw = rfilter * c2 / f if c2 > near else 0.0
+            cl = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+            cos = abs(c0 * n0 + c1 * n1 + c2 * n2) / cl if cl > 0.0 else 1.0
+        sin = math.sqrt(max(1.0 - cos * cos, 0.0))
+        if sin > EDGE_ON_TAN * cos:
+            P[i, 23] = -(r + fw * EDGE_ON_TAN)
+        else:
+            P[i, 23] = r + fw * sin / cos
+        for j in range(3):
+            P[i, 16 + j] = colors[i, j]
+        x0, x1, y0, y1 = _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H,
+                                    rfilter)
+        box[i, 0] = x0
+        box[i, 1] = x1
+        box[i, 2] = y0
+        box[i, 3] = y1
+        P[i, 19] = x0
+        P[i, 20] = x1
+        P[i, 21] = y0
+        P[i, 22] = y1
+        facing = n2 if ortho else c0 * n0 + c1 * n1 + c2 * n2
+        group[i] = 0 if facing <= 0.0 else 1
+
+
+@njit(cache=True, parallel=True)
+def gather_rows(P, items, out):
+    """``out[k] = P[items[k]]``: pair rows in tile order, so that tiles read them contiguously."""
+    m = P.shape[1]
+    for k in prange(items.shape[0]):
+        s = items[k]
+        for j in range(m):
+            out[k, j] = P[s, j]
+
+
+@njit(cache=True)
+def _fragment(X, Y, pcx, pcy, ortho, inv_rf2, cz, nx, ny, nz, cn, b1x, b1y, b1z, b2x, b2y, b2z, cb1, cb2,
+              sx, sy, zr):
+    """``(rho, z)`` of one surfel at the pixel whose ray has ``X, Y`` and centre ``(pcx, pcy)``.
+
+    The surfel is given by its parameters (layout of ``P``). ``rho = min(rho3, rho2)``; ``z`` is
+    the depth where the pixel ray meets the surfel plane, clamped to the surfel's depth range
+    ``cz +- |zr|`` (ellipse plus screen-filter footprint), so fragments of neighbouring surfels of
+    one surface agree in depth even when the screen filter wins (minification); for edge-on
+    surfels (``zr < 0``) the centre depth is used where the screen filter wins.
+    """
+    ex = pcx - sx
+    ey = pcy - sy
+    rho2 = (ex * ex + ey * ey) * inv_rf2
+    if not (rho2 >= 0.0):
+        rho2 = np.inf
+    if ortho:
+        dn = nz
+    else:
+        dn = X * nx + Y * ny + nz
+    z = cz
+    rho3 = np.inf
+    if abs(dn) > 1e-12:
+        if ortho:
+            t = (cn - X * nx - Y * ny) / dn
+            qx = X
+            qy = Y
+        else:
+            t = cn / dn
+            qx = t * X
+            qy = t * Y
+        u = qx * b1x + qy * b1y + t * b1z - cb1
+        v = qx * b2x + qy * b2y + t * b2z - cb2
+        rho3 = u * u + v * v
+        if not (rho3 >= 0.0):
+            rho3 = np.inf
+        if zr > 0.0 or rho3 <= rho2:
+            za = abs(zr)
+            if t == t:
+                z = min(max(t, cz - za), cz + za)
+    return min(rho3, rho2), z
+
+
+@njit(cache=True)
+def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode):
+    """Per-fragment clip test of surfel ``s`` at depth ``z`` (chapter 4 hook).
+
+    Surfel ``s`` owns planes ``clip_planes[clip_offsets[s]:clip_offsets[s+1]]`` (rows
+    ``(nx, ny, nz, d)`` in world space); plane ``j`` keeps points with ``n.x + d <= 0``.
+    ``clip_mode[s] == 0`` keeps a fragment kept by *all* planes (convex corner), ``1`` by *any*
+    plane (concave corner).
+    """
+    a = clip_offsets[s]
+    b = clip_offsets[s + 1]
+    if a == b:
+        return True
+    if ortho:
+        px = X
+        py = Y
+    else:
+        px = X * z
+        py = Y * z
+    wx = eye[0] + px * frame[0, 0] + py * frame[1, 0] + z * frame[2, 0]
+    wy = eye[1] + px * frame[0, 1] + py * frame[1, 1] + z * frame[2, 1]
+    wz = eye[2] + px * frame[0, 2] + py * frame[1, 2] + z * frame[2, 2]
+    anymode = clip_mode[s] != 0
+    for j in range(a, b):
+        side = clip_planes[j, 0] * wx + clip_planes[j, 1] * wy + clip_planes[j, 2] * wz + clip_planes[j, 3]
+        if anymode and side <= 0.0:
+            return True
+        if not anymode and side > 0.0:
+            return False
+    return not anymode
+
+
+@njit(cache=True)
+def _accumulate(q, k, w, z, Pt, lw, lc, ln, ld, lcount):
+    """Add one fragment of pair ``k`` with weight ``w`` and depth ``z`` to tile pixel ``q``."""
+    lw[q] += w
+    lc[q, 0] += w * Pt[k, 16]
+    lc[q, 1] += w * Pt[k, 17]
+    lc[q, 2] += w * Pt[k, 18]
+    ln[q, 0] += w * Pt[k, 1]
+    ln[q, 1] += w * Pt[k, 2]
+    ln[q, 2] += w * Pt[k, 3]
+    ld[q] += w * z
+    lcount[q] += 1
+
+
+@njit(cache=True)
+def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa, eps_factor,
+               sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, lz, lw, lc, ln, ld, lcount,
+               frag_q, frag_k, frag_rho, frag_z):
+    """The fragment loop of one tile: the one place every splat fragment is generated.
+
+    ``mode 0`` (visibility pass of a full update): every fragment not already behind ``lz``
+    is recorded in ``frag_*`` and lowers ``lz`` to ``z + eps`` (``eps = eps_factor * r``,
+    3.2.1); returns the number recorded. The accumulation pass (:func:`_accumulate_records`)
+    then keeps the recorded fragments with ``z <= lz``; since ``lz`` only decreases, these are
+    exactly the fragments of all surfels that pass the final extended depth test.
+    ``mode 1`` (partial updates, fixed ``lz``): fragments with ``z <= lz`` are accumulated
+    directly with weight ``sign * w``; returns 0.
+
+    A surfel that cannot reach ``lz`` anywhere in its box (``cz - |zr| > lz``) is skipped
+    before any fragment work. Chapter 4's clipped splatting tests each fragment here
+    (:func:`_keep`, surfel ``items[k]``).
+    """
+    nrec = 0
+    for k in range(a, b):
+        bx0 = max(int(Pt[k, 19]), x0)
+        bx1 = min(int(Pt[k, 20]), x0 + tw - 1)
+        by0 = max(int(Pt[k, 21]), y0)
+        by1 = min(int(Pt[k, 22]), y0 + th - 1)
+        cz = Pt[k, 0]
+        zr = Pt[k, 23]
+        eps = eps_factor * Pt[k, 15]
+        zmin = cz - abs(zr)
+        reach = False
+        for py in range(by0, by1 + 1):
+            row = (py - y0) * tw - x0
+            for px in range(bx0, bx1 + 1):
+                if zmin <= lz[row + px]:
+                    reach = True
+                    break
+            if reach:
+                break
+        if not reach:
+            continue
+        nx = Pt[k, 1]
+        ny = Pt[k, 2]
+        nz = Pt[k, 3]
+        cn = Pt[k, 4]
+        b1x = Pt[k, 5]
+        b1y = Pt[k, 6]
+        b1z = Pt[k, 7]
+        b2x = Pt[k, 8]
+        b2y = Pt[k, 9]
+        b2z = Pt[k, 10]
+        cb1 = Pt[k, 11]
+        cb2 = Pt[k, 12]
+        sx = Pt[k, 13]
+        sy = Pt[k, 14]
+        s = items[k]
+        clip = has_clip and clip_offsets[s + 1] > clip_offsets[s]
+        for py in range(by0, by1 + 1):
+            pcy = py + 0.5
+            Y = (cy - pcy) * invf
+            row = (py - y0) * tw - x0
+            for px in range(bx0, bx1 + 1):
+                pcx = px + 0.5
+                X = (pcx - cx) * invf
+                rho, z = _fragment(X, Y, pcx, pcy, ortho, inv_rf2, cz, nx, ny, nz, cn, b1x, b1y, b1z,
+                                   b2x, b2y, b2z, cb1, cb2, sx, sy, zr)
+                if rho >= 1.0 or z <= near:
+                    continue
+                q = row + px
+                if z > lz[q]:
+                    continue
+                if clip and not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode):
+                    continue
+                if mode == 0:
+                    frag_q[nrec] = q
+                    frag_k[nrec] = k
+                    frag_rho[nrec] = rho
+                    frag_z[nrec] = z
+                    nrec += 1
+                    if z + eps < lz[q]:
+                        lz[q] = z + eps
+                else:
+                    _accumulate(q, k, sign * math.exp(-kappa * rho), z, Pt, lw, lc, ln, ld, lcount)
+    return nrec
+
+
+@njit(cache=True)
+def _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z):
+    """Accumulation pass of a full update over the fragments recorded by :func:`_tile_pass`:
+    those with ``z <= lz`` add ``sign * exp(-kappa rho)`` times colour, normal and depth."""
+    for i in range(nrec):
+        q = frag_q[i]
+        z = frag_z[i]
+        if z <= lz[q]:
+            _accumulate(q, frag_k[i], sign * math.exp(-kappa * frag_rho[i]), z, Pt, lw, lc, ln, ld, lcount)
+
+
+@njit(cache=True, parallel=True)
+def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, rfilter, kappa, eps_factor, has_clip,
+                eye, frame, clip_offsets, clip_planes, clip_mode, visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z,
+                count):
+    """Visibility (optional) and accumulation passes over all tiles, in parallel.
+
+    ``Pt`` (P, NPARAM) pair parameters and ``items`` (P,) surfel indices in tile order with
+    ``offsets`` from :func:`unmesh.render._kernels.bin_boxes`; ``order`` the tile permutation.
+    ``zvis`` (H,W) is the visibility buffer: updated when ``visibility`` is true (full update),
+    otherwise only read (partial updates, 5.7). ``acc_n`` sums camera-space normals.
+    Accumulators (H,W) / (H,W,3) float64 and ``count`` (H,W) int32 get ``sign`` (+1 splat,
+    -1 unsplat) times the contributions; pixels whose count returns to zero are reset to exact
+    zeros.
+    """
+    ntx = (W + tile - 1) // tile
+    invf = 1.0 / f
+    inv_rf2 = 1.0 / (rfilter * rfilter) if rfilter > 0.0 else np.inf
+    for kk in prange(order.shape[0]):
+        t = order[kk]
+        a = offsets[t]
+        b = offsets[t + 1]
+        if a == b:
+            continue
+        tyi = t // ntx
+        txi = t - tyi * ntx
+        x0 = txi * tile
+        y0 = tyi * tile
+        tw = min(tile, W - x0)
+        th = min(tile, H - y0)
+        m = tw * th
+        lz = np.empty(m)
+        for i in range(th):
+            for j in range(tw):
+                lz[i * tw + j] = zvis[y0 + i, x0 + j]
+        lw = np.zeros(m)
+        lc = np.zeros((m, 3))
+        ln = np.zeros((m, 3))
+        ld = np.zeros(m)
+        lcount = np.zeros(m, dtype=np.int32)
+        if visibility:
+            cap = 0
+            for k in range(a, b):
+                w_ = min(int(Pt[k, 20]), x0 + tw - 1) - max(int(Pt[k, 19]), x0) + 1
+                h_ = min(int(Pt[k, 22]), y0 + th - 1) - max(int(Pt[k, 21]), y0) + 1
+                if w_ > 0 and h_ > 0:
+                    cap += w_ * h_
+            frag_q = np.empty(cap, dtype=np.int32)
+            frag_k = np.empty(cap, dtype=np.int64)
+            frag_rho = np.empty(cap)
+            frag_z = np.empty(cap)
+            nrec = _tile_pass(0, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
+                              eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, lz, lw,
+                              lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
+            for i in range(th):
+                for j in range(tw):
+                    zvis[y0 + i, x0 + j] = lz[i * tw + j]
+            _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
+        else:
+            dummy_i = np.empty(0, dtype=np.int32)
+            dummy_k = np.empty(0, dtype=np.int64)
+            dummy_f = np.empty(0)
+            _tile_pass(1, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
+                       eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, lz, lw, lc, ln, ld, lcount,
+                       dummy_i, dummy_k, dummy_f, dummy_f)
+        for i in range(th):
+            for j in range(tw):
+                q = i * tw + j
+                if lcount[q] == 0:
+                    continue
+                gy = y0 + i
+                gx = x0 + j
+                c = count[gy, gx] + (lcount[q] if sign > 0 else -lcount[q])
+                count[gy, gx] = c
+                if c <= 0:
+                    count[gy, gx] = 0
+                    acc_w[gy, gx] = 0.0
+                    acc_z[gy, gx] = 0.0
+                    for k3 in range(3):
+                        acc_c[gy, gx, k3] = 0.0
+                        acc_n[gy, gx, k3] = 0.0
+                    continue
+                acc_w[gy, gx] += lw[q]
+                acc_z[gy, gx] += ld[q]
+                for k3 in range(3):
+                    acc_c[gy, gx, k3] += lc[q, k3]
+                    acc_n[gy, gx, k3] += ln[q, k3]
+
+
+@njit(cache=True, parallel=True)
+def splat_resolve(acc_w, acc_c, acc_n, acc_z, count, frame, albedo, normal, depth, covered, weight):
+    """Normalisation pass: where splats contributed, overwrite the G-buffer with
+    ``sum w c / sum w``, the normalised ``sum w n`` rotated to world space (``-forward`` if it
+    vanishes), ``sum w z / sum w`` and the accumulated weight."""
+    H, W = acc_w.shape
+    for py in prange(H):
+        for px in range(W):
+            w = acc_w[py, px]
+            if count[py, px] <= 0 or not (w > 0.0):
+                continue
+            for k in range(3):
+                albedo[py, px, k] = min(max(acc_c[py, px, k] / w, 0.0), 1.0)
+            nx = acc_n[py, px, 0]
+            ny = acc_n[py, px, 1]
+            nz = acc_n[py, px, 2]
+            ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if ln > 1e-12 * abs(w):
+                nx /= ln
+                ny /= ln
+                nz /= ln
+            else:
+                nx = 0.0
+                ny = 0.0
+                nz = -1.0
+            for k in range(3):
+                normal[py, px, k] = frame[0, k] * nx + frame[1, k] * ny + frame[2, k] * nz
+            depth[py, px] = acc_z[py, px] / w
+            covered[py, px] = True
+            weight[py, px] = w
+
+
+@njit(cache=True, parallel=True)
+def fill_tiles(Pt, offsets, order, tile, W, H, out):
+    """Benchmark baseline: visit the pixels :func:`splat_tiles` may evaluate (every pair's box
+    within each tile, reading the same pair rows), twice, with a trivial depth-test-like write
+    and no EWA arithmetic. ``out`` (H,W) receives the pass-2 visit counts."""
+    ntx = (W + tile - 1) // tile
+    for kk in prange(order.shape[0]):
+        t = order[kk]
+        a = offsets[t]
+        b = offsets[t + 1]
+        if a == b:
+            continue
+        tyi = t // ntx
+        txi = t - tyi * ntx
+        x0 = txi * tile
+        y0 = tyi * tile
+        tw = min(tile, W - x0)
+        th = min(tile, H - y0)
+        lz = np.full(tw * th, np.inf)
+        lw = np.zeros(tw * th)
+        for mode in range(2):
+            for k in range(a, b):
+                bx0 = max(int(Pt[k, 19]), x0)
+                bx1 = min(int(Pt[k, 20]), x0 + tw - 1)
+                by0 = max(int(Pt[k, 21]), y0)
+                by1 = min(int(Pt[k, 22]), y0 + th - 1)
+                zz = Pt[k, 0]
+                for py in range(by0, by1 + 1):
+                    row = (py - y0) * tw - x0
+                    for px in range(bx0, bx1 + 1):
+                        if mode == 0:
+                            lz[row + px] = min(lz[row + px], zz)
+                        elif zz <= lz[row + px]:
+                            lw[row + px] += 1.0
+        for i in range(th):
+            for j in range(tw):
+                out[y0 + i, x0 + j] = lw[i * tw + j]
