@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import fibonacci_sphere
+from .conftest import fibonacci_sphere
 from unmesh import SurfelCloud
 from unmesh.render import Camera, render
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import fibonacci_sphere
+from .conftest import fibonacci_sphere
 from unmesh import SurfelCloud
 from unmesh.render import Camera, ClipPlanes, SplatOptions, SplatRenderer, render
 from unmesh.render._reference import splat_reference

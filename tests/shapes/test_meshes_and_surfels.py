@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from surfels.helpers import uncovered
+from ..surfels.helpers import uncovered
 from unmesh.shapes import Blob, Box, Cylinder, Disc, Plane, Sphere, Torus, euler_rotation
 from unmesh.spatial import knn
 
