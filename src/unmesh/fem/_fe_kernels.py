@@ -1,0 +1,220 @@
+"""Numba kernels of element integration (9.17–9.19), element stiffness and assembly.
+
+Numpy references of each kernel are in the tests (``tests/fem/test_kernels.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from unmesh.fem._mvc_kernels import mvc_point
+
+
+@njit(cache=True)
+def _tri_cross(points, a, b, c):
+    e1 = points[b] - points[a]
+    e2 = points[c] - points[a]
+    return np.array((e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]))
+
+
+@njit(cache=True)
+def sample_counts(node_off, tri_off):
+    """Samples per element: 1 for tetrahedra, else one per vertex plus one per triangle."""
+    ne = node_off.shape[0] - 1
+    out = np.empty(ne, dtype=np.int64)
+    for e in range(ne):
+        n = node_off[e + 1] - node_off[e]
+        m = tri_off[e + 1] - tri_off[e]
+        out[e] = 1 if (n == 4 and m == 4) else n + m
+    return out
+
+
+@njit(cache=True, parallel=True)
+def integrate(points, node_off, nodes, tri_off, tris_local, sample_off, grad_off, correction):
+    """Quadrature of every element (9.17–9.19) with MVC gradients at the samples.
+
+    Returns
+    -------
+    volumes (E,), mu (Σn,) volume fractions (9.17), weights (Σq,) = V μ/2 and V ν/2
+    (sum V per element), samples (Σq,3), grads (Σ n·q, 3): gradient of local
+    shape function i at sample q of element e at ``grad_off[e] + q·n + i``.
+    With ``correction``, grads get the consistency correction so that
+    Σ_q w_q ∇φ_i(p_q) = ∮ φ_i n dA exactly.
+    """
+    ne = node_off.shape[0] - 1
+    vols = np.zeros(ne)
+    mu = np.zeros(nodes.shape[0])
+    weights = np.zeros(sample_off[ne])
+    samples = np.zeros((sample_off[ne], 3))
+    grads = np.zeros((grad_off[ne], 3))
+    for e in prange(ne):
+        n = node_off[e + 1] - node_off[e]
+        n0 = node_off[e]
+        t0 = tri_off[e]
+        m = tri_off[e + 1] - t0
+        verts = np.empty((n, 3))
+        for k in range(n):
+            verts[k] = points[nodes[n0 + k]]
+        c = np.zeros(3)
+        for k in range(n):
+            c += verts[k]
+        c /= n
+        tris = tris_local[t0:t0 + m]
+        # cone volumes of the triangles to the centre (9.17)-(9.18) and exact boundary integrals
+        tv = np.empty(m)
+        exact = np.zeros((n, 3))
+        V = 0.0
+        for t in range(m):
+            a = tris[t, 0]
+            b = tris[t, 1]
+            cc = tris[t, 2]
+            cr = _tri_cross(verts, a, b, cc)
+            tv[t] = ((verts[a] - c) * cr).sum() / 6.0
+            V += tv[t]
+            for r in range(3):
+                exact[tris[t, r]] += cr / 6.0
+        vols[e] = V
+        for t in range(m):
+            for r in range(3):
+                mu[n0 + tris[t, r]] += tv[t] / (3.0 * V)
+        s0 = sample_off[e]
+        g0 = grad_off[e]
+        if n == 4 and m == 4:
+            # linear tetrahedron: one sample, constant barycentric gradients
+            weights[s0] = V
+            samples[s0] = c
+            for t in range(m):
+                opp = 6 - tris[t, 0] - tris[t, 1] - tris[t, 2]
+                cr = _tri_cross(verts, tris[t, 0], tris[t, 1], tris[t, 2])
+                grads[g0 + opp] = -cr / (6.0 * V)
+            continue
+        lo = np.empty(3)
+        hi = np.empty(3)
+        for k in range(3):
+            lo[k] = verts[:, k].min()
+            hi[k] = verts[:, k].max()
+        scale = np.sqrt(((hi - lo) ** 2).sum())
+        phi = np.empty(n)
+        for i in range(n):
+            samples[s0 + i] = 0.8 * verts[i] + 0.2 * c
+            weights[s0 + i] = V * mu[n0 + i] / 2.0
+        for t in range(m):
+            cf = (verts[tris[t, 0]] + verts[tris[t, 1]] + verts[tris[t, 2]]) / 3.0
+            samples[s0 + n + t] = 0.9 * cf + 0.1 * c
+            weights[s0 + n + t] = tv[t] / 2.0
+        q = n + m
+        for k in range(q):
+            base = g0 + k * n
+            mvc_point(verts, tris, samples[s0 + k], scale, phi, grads[base:base + n], True)
+        if correction:
+            for i in range(n):
+                acc = np.zeros(3)
+                for k in range(q):
+                    acc += weights[s0 + k] * grads[g0 + k * n + i]
+                fix = (exact[i] - acc) / V
+                for k in range(q):
+                    grads[g0 + k * n + i] += fix
+    return vols, mu, weights, samples, grads
+
+
+@njit(cache=True, parallel=True)
+def element_stiffness(node_off, sample_off, grad_off, weights, grads, lam, mu, k_off):
+    """Element stiffness K_e = Σ_q w_q Bᵀ C B (9.19) in Lamé form, as (n,n,3,3) blocks.
+
+    Block (a, b), entry (i, j) = Σ_q w_q (λ g_a,i g_b,j + μ g_a,j g_b,i + μ δ_ij g_a·g_b).
+    ``lam``, ``mu`` are per element.
+    """
+    ne = node_off.shape[0] - 1
+    out = np.zeros(k_off[ne])
+    for e in prange(ne):
+        n = node_off[e + 1] - node_off[e]
+        base = k_off[e]
+        la = lam[e]
+        mm = mu[e]
+        for q in range(sample_off[e], sample_off[e + 1]):
+            w = weights[q]
+            g = grads[grad_off[e] + (q - sample_off[e]) * n: grad_off[e] + (q - sample_off[e] + 1) * n]
+            for a in range(n):
+                for b in range(n):
+                    dot = g[a, 0] * g[b, 0] + g[a, 1] * g[b, 1] + g[a, 2] * g[b, 2]
+                    o = base + (a * n + b) * 9
+                    for i in range(3):
+                        for j in range(3):
+                            v = la * g[a, i] * g[b, j] + mm * g[a, j] * g[b, i]
+                            if i == j:
+                                v += mm * dot
+                            out[o + i * 3 + j] += w * v
+    return out
+
+
+@njit(cache=True)
+def scatter_blocks(block_map, blocks, nblocks):
+    """Sum element blocks (K,9) into global blocks (nblocks,9) by ``block_map`` (K,)."""
+    out = np.zeros((nblocks, 9))
+    for k in range(block_map.shape[0]):
+        b = block_map[k]
+        for j in range(9):
+            out[b, j] += blocks[k, j]
+    return out
+
+
+@njit(cache=True, parallel=True)
+def rotated_blocks(node_off, k_off, ke, rots):
+    """Rotated element blocks R K_ab Rᵀ (stiffness warping, 9.1.4) as (Σn², 9)."""
+    ne = node_off.shape[0] - 1
+    out = np.empty((k_off[ne] // 9, 9))
+    for e in prange(ne):
+        n = node_off[e + 1] - node_off[e]
+        R = rots[e]
+        T = np.empty((3, 3))
+        for ab in range(n * n):
+            o = k_off[e] + ab * 9
+            for i in range(3):
+                for j in range(3):
+                    T[i, j] = R[i, 0] * ke[o + j] + R[i, 1] * ke[o + 3 + j] + R[i, 2] * ke[o + 6 + j]
+            r = o // 9
+            for i in range(3):
+                for j in range(3):
+                    out[r, i * 3 + j] = T[i, 0] * R[j, 0] + T[i, 1] * R[j, 1] + T[i, 2] * R[j, 2]
+    return out
+
+
+@njit(cache=True, parallel=True)
+def warped_forces(points_rest, x, node_off, nodes, k_off, ke, rots, n_nodes):
+    """Per-element warped elastic forces f_e = -R K_e (Rᵀ x_e - X_e) and energies.
+
+    Returns (element forces (Σn,3), element energies (E,)). Summing the
+    element forces per node gives the global elastic force.
+    """
+    ne = node_off.shape[0] - 1
+    fe = np.zeros((nodes.shape[0], 3))
+    energy = np.zeros(ne)
+    for e in prange(ne):
+        n = node_off[e + 1] - node_off[e]
+        n0 = node_off[e]
+        R = rots[e]
+        dl = np.empty((n, 3))
+        for a in range(n):
+            p = nodes[n0 + a]
+            for i in range(3):
+                dl[a, i] = R[0, i] * x[p, 0] + R[1, i] * x[p, 1] + R[2, i] * x[p, 2] - points_rest[p, i]
+        # remove the mean so round-off of large translations does not enter
+        mean = np.zeros(3)
+        for a in range(n):
+            mean += dl[a]
+        mean /= n
+        for a in range(n):
+            dl[a] -= mean
+        en = 0.0
+        for a in range(n):
+            fa = np.zeros(3)
+            for b in range(n):
+                o = k_off[e] + (a * n + b) * 9
+                for i in range(3):
+                    fa[i] += ke[o + i * 3] * dl[b, 0] + ke[o + i * 3 + 1] * dl[b, 1] + ke[o + i * 3 + 2] * dl[b, 2]
+            en += 0.5 * (fa[0] * dl[a, 0] + fa[1] * dl[a, 1] + fa[2] * dl[a, 2])
+            for i in range(3):
+                fe[n0 + a, i] = -(R[i, 0] * fa[0] + R[i, 1] * fa[1] + R[i, 2] * fa[2])
+        energy[e] = en
+    return fe, energy

@@ -1,0 +1,142 @@
+"""Numba kernels of the polyhedral mesh: face triangulation and element geometry.
+
+Every kernel takes only arrays and scalars and has a numpy reference in
+:mod:`unmesh.fem.mesh` or the tests.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True)
+def _newell(points, nodes, start, stop):
+    nx = 0.0
+    ny = 0.0
+    nz = 0.0
+    for k in range(start, stop):
+        a = nodes[k]
+        b = nodes[start + (k - start + 1) % (stop - start)]
+        nx += (points[a, 1] - points[b, 1]) * (points[a, 2] + points[b, 2])
+        ny += (points[a, 2] - points[b, 2]) * (points[a, 0] + points[b, 0])
+        nz += (points[a, 0] - points[b, 0]) * (points[a, 1] + points[b, 1])
+    return nx, ny, nz
+
+
+@njit(cache=True)
+def _ear_score(points, a, b, c, nx, ny, nz):
+    """Signed quality of triangle (a, b, c) w.r.t. the face normal: 2A·n / Σ|e|²."""
+    ux = points[b, 0] - points[a, 0]
+    uy = points[b, 1] - points[a, 1]
+    uz = points[b, 2] - points[a, 2]
+    vx = points[c, 0] - points[a, 0]
+    vy = points[c, 1] - points[a, 1]
+    vz = points[c, 2] - points[a, 2]
+    cx = uy * vz - uz * vy
+    cy = uz * vx - ux * vz
+    cz = ux * vy - uy * vx
+    wx = points[c, 0] - points[b, 0]
+    wy = points[c, 1] - points[b, 1]
+    wz = points[c, 2] - points[b, 2]
+    s = ux * ux + uy * uy + uz * uz + vx * vx + vy * vy + vz * vz + wx * wx + wy * wy + wz * wz
+    if s <= 0.0:
+        return 0.0
+    return (cx * nx + cy * ny + cz * nz) / s
+
+
+@njit(cache=True, parallel=True)
+def triangulate_faces(points, face_nodes, face_offsets, tol):
+    """Triangulate convex (possibly t-junctioned) polygons by greedy ear clipping.
+
+    Ears are clipped at strictly convex corners only (score > ``tol``), best
+    quality first, never leaving a degenerate remainder, so collinear
+    (t-junction) vertices never produce zero-area triangles. Triangle ``t`` of
+    face ``f`` is row ``face_offsets[f] - 2 f + t``; orientation follows the face.
+    """
+    nf = face_offsets.shape[0] - 1
+    ntri = face_offsets[nf] - 2 * nf
+    tris = np.empty((ntri, 3), dtype=np.int64)
+    for f in prange(nf):
+        start = face_offsets[f]
+        stop = face_offsets[f + 1]
+        n = stop - start
+        out = start - 2 * f
+        nx, ny, nz = _newell(points, face_nodes, start, stop)
+        nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if nn > 0.0:
+            nx /= nn
+            ny /= nn
+            nz /= nn
+        ring = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            ring[k] = face_nodes[start + k]
+        m = n
+        t = 0
+        strict = np.empty(n, dtype=np.bool_)
+        while m > 3:
+            nstrict = 0
+            for k in range(m):
+                strict[k] = _ear_score(points, ring[(k - 1) % m], ring[k], ring[(k + 1) % m], nx, ny, nz) > tol
+                if strict[k]:
+                    nstrict += 1
+            best = -1
+            best_score = -1.0
+            for k in range(m):
+                if not strict[k]:
+                    continue
+                a = ring[(k - 1) % m]
+                b = ring[k]
+                c = ring[(k + 1) % m]
+                sc = _ear_score(points, a, b, c, nx, ny, nz)
+                # the remainder must keep three strict corners (else it is degenerate)
+                sa = _ear_score(points, ring[(k - 2) % m], a, c, nx, ny, nz)
+                sb = _ear_score(points, a, c, ring[(k + 2) % m], nx, ny, nz)
+                count = nstrict - 1 - int(strict[(k - 1) % m]) - int(strict[(k + 1) % m])
+                count += int(sa > tol) + int(sb > tol)
+                if count < 3:
+                    continue
+                if m == 4:
+                    sc = min(sc, _ear_score(points, a, c, ring[(k + 2) % m], nx, ny, nz))
+                if sc > best_score:
+                    best_score = sc
+                    best = k
+            if best < 0:
+                best = 0  # fully degenerate polygon: fall back to a fan (zero-area triangles)
+            tris[out + t, 0] = ring[(best - 1) % m]
+            tris[out + t, 1] = ring[best]
+            tris[out + t, 2] = ring[(best + 1) % m]
+            t += 1
+            for k in range(best, m - 1):
+                ring[k] = ring[k + 1]
+            m -= 1
+        tris[out + t, 0] = ring[0]
+        tris[out + t, 1] = ring[1]
+        tris[out + t, 2] = ring[2]
+    return tris
+
+
+@njit(cache=True, parallel=True)
+def element_tri_volumes(points, elem_tri_ptr, elem_tris, centers):
+    """Signed volume of the tetrahedron (triangle, element centre) per element triangle (9.17–9.18)."""
+    ne = elem_tri_ptr.shape[0] - 1
+    out = np.empty(elem_tris.shape[0])
+    for e in prange(ne):
+        cx = centers[e, 0]
+        cy = centers[e, 1]
+        cz = centers[e, 2]
+        for t in range(elem_tri_ptr[e], elem_tri_ptr[e + 1]):
+            a = elem_tris[t, 0]
+            b = elem_tris[t, 1]
+            c = elem_tris[t, 2]
+            ax = points[a, 0] - cx
+            ay = points[a, 1] - cy
+            az = points[a, 2] - cz
+            bx = points[b, 0] - cx
+            by = points[b, 1] - cy
+            bz = points[b, 2] - cz
+            qx = points[c, 0] - cx
+            qy = points[c, 1] - cy
+            qz = points[c, 2] - cz
+            out[t] = (ax * (by * qz - bz * qy) + ay * (bz * qx - bx * qz) + az * (bx * qy - by * qx)) / 6.0
+    return out

@@ -1,0 +1,249 @@
+"""Numba kernels: 3D mean value coordinates and their gradients (9.8–9.10, Appendix D).
+
+For a triangle T = (a, b, c) of the (outward) triangulated element boundary and an
+evaluation point x, with d_k = v_k - x, the spherical triangle's moment
+``m_T = ∫ u dS = ½ Σ_edges θ_pq (d_p × d_q)/|d_p × d_q|`` is written as
+``m_T = Σ_k w_{T,k} d_k`` (Cramer's rule), which gives
+
+    w_{T,i} = m_T · (d_j × d_k) / D_T,   D_T = d_i · (d_j × d_k) = 6 V_{i,j,k}(x),
+
+the volume ratios of (9.8). Summing over T gives the weights w_i; (9.10)
+normalises them. Because Σ_T m_T = ∫_{S²} u dS = 0, Σ_i w_i d_i = 0, which is
+linear precision (9.11). Gradients are the exact derivatives of these
+expressions (the corrected Appendix D: ∇D_T = -(v_j - v_i) × (v_k - v_i)).
+Triangles of zero area contribute nothing and are skipped (9.1.1, "numerical
+issues").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True)
+def _acc_triangle(pa, pb, pc, x, ia, ib, ic, w, gw, want_grad):
+    """Add triangle (pa, pb, pc)'s weights (and gradients) for point x into w, gw."""
+    d = np.empty((3, 3))
+    for k in range(3):
+        d[0, k] = pa[k] - x[k]
+        d[1, k] = pb[k] - x[k]
+        d[2, k] = pc[k] - x[k]
+    # D = (v_a - x) . ((v_b - v_a) x (v_c - v_a)), exact near the face plane
+    e1 = np.empty(3)
+    e2 = np.empty(3)
+    for k in range(3):
+        e1[k] = pb[k] - pa[k]
+        e2[k] = pc[k] - pa[k]
+    nrm = np.empty(3)
+    nrm[0] = e1[1] * e2[2] - e1[2] * e2[1]
+    nrm[1] = e1[2] * e2[0] - e1[0] * e2[2]
+    nrm[2] = e1[0] * e2[1] - e1[1] * e2[0]
+    D = d[0, 0] * nrm[0] + d[0, 1] * nrm[1] + d[0, 2] * nrm[2]
+    if D == 0.0:
+        return
+    m = np.zeros(3)
+    J = np.zeros((3, 3))
+    for e in range(3):
+        p = e
+        q = (e + 1) % 3
+        ax = d[p, 0]
+        ay = d[p, 1]
+        az = d[p, 2]
+        bx = d[q, 0]
+        by = d[q, 1]
+        bz = d[q, 2]
+        cx = ay * bz - az * by
+        cy = az * bx - ax * bz
+        cz = ax * by - ay * bx
+        s = np.sqrt(cx * cx + cy * cy + cz * cz)
+        t = ax * bx + ay * by + az * bz
+        if s == 0.0:
+            continue  # x on the edge line: the edge's term vanishes (θ = 0) or x is on the boundary
+        th = np.arctan2(s, t)
+        nx = cx / s
+        ny = cy / s
+        nz = cz / s
+        m[0] += 0.5 * th * nx
+        m[1] += 0.5 * th * ny
+        m[2] += 0.5 * th * nz
+        if want_grad:
+            # ∇θ = (t n×(b-a) + s (a+b)) / (s² + t²)
+            gx = bx - ax
+            gy = by - ay
+            gz = bz - az
+            qx = ny * gz - nz * gy
+            qy = nz * gx - nx * gz
+            qz = nx * gy - ny * gx
+            den = s * s + t * t
+            tx = (t * qx + s * (ax + bx)) / den
+            ty = (t * qy + s * (ay + by)) / den
+            tz = (t * qz + s * (az + bz)) / den
+            # J(θ n) = n ∇θᵀ + (θ/s)(I - n nᵀ)[b - a]_x
+            r = th / s
+            # [g]_x with g = b - a
+            G = np.array(((0.0, -gz, gy), (gz, 0.0, -gx), (-gy, gx, 0.0)))
+            nv = np.array((nx, ny, nz))
+            tv = np.array((tx, ty, tz))
+            for j in range(3):
+                ng = nv[0] * G[0, j] + nv[1] * G[1, j] + nv[2] * G[2, j]
+                for i in range(3):
+                    J[i, j] += 0.5 * (nv[i] * tv[j] + r * (G[i, j] - nv[i] * ng))
+    idx = (ia, ib, ic)
+    for r in range(3):
+        j = (r + 1) % 3
+        k = (r + 2) % 3
+        # c = d_j x d_k
+        cx = d[j, 1] * d[k, 2] - d[j, 2] * d[k, 1]
+        cy = d[j, 2] * d[k, 0] - d[j, 0] * d[k, 2]
+        cz = d[j, 0] * d[k, 1] - d[j, 1] * d[k, 0]
+        N = m[0] * cx + m[1] * cy + m[2] * cz
+        wi = N / D
+        w[idx[r]] += wi
+        if want_grad:
+            # ∇N = Jᵀ c + m × (d_k - d_j);  ∇D = -nrm
+            ex = d[k, 0] - d[j, 0]
+            ey = d[k, 1] - d[j, 1]
+            ez = d[k, 2] - d[j, 2]
+            gN0 = J[0, 0] * cx + J[1, 0] * cy + J[2, 0] * cz + (m[1] * ez - m[2] * ey)
+            gN1 = J[0, 1] * cx + J[1, 1] * cy + J[2, 1] * cz + (m[2] * ex - m[0] * ez)
+            gN2 = J[0, 2] * cx + J[1, 2] * cy + J[2, 2] * cz + (m[0] * ey - m[1] * ex)
+            gw[idx[r], 0] += (gN0 + wi * nrm[0]) / D
+            gw[idx[r], 1] += (gN1 + wi * nrm[1]) / D
+            gw[idx[r], 2] += (gN2 + wi * nrm[2]) / D
+
+
+@njit(cache=True)
+def _on_triangle(pa, pb, pc, x, eps):
+    """Barycentric coordinates if x lies on triangle (pa, pb, pc) within eps, else bary[0] = nan."""
+    e1 = pb - pa
+    e2 = pc - pa
+    n = np.cross(e1, e2)
+    nn = np.sqrt((n * n).sum())
+    bary = np.full(3, np.nan)
+    if nn == 0.0:
+        return bary
+    r = x - pa
+    dist = abs((r * n).sum()) / nn
+    if dist > eps:
+        return bary
+    l1 = (np.cross(r, e2) * n).sum() / (nn * nn)
+    l2 = (np.cross(e1, r) * n).sum() / (nn * nn)
+    l0 = 1.0 - l1 - l2
+    lim = -eps / np.sqrt(nn)
+    if l0 >= lim and l1 >= lim and l2 >= lim:
+        bary[0] = l0
+        bary[1] = l1
+        bary[2] = l2
+    return bary
+
+
+@njit(cache=True)
+def mvc_point(verts, tris, x, scale, phi, grad, want_grad):
+    """Coordinates (and gradients) of one point for one polyhedron; writes phi (n,), grad (n,3).
+
+    Points on the boundary (within 1e-12·scale) get the barycentric coordinates of
+    the triangle they lie on; their gradient is evaluated 1e-7·scale inside.
+    """
+    n = verts.shape[0]
+    mt = tris.shape[0]
+    eps = 1e-12 * scale
+    # on a vertex / on a face: the limit is barycentric on the boundary triangle
+    hit = -1
+    bary = np.full(3, np.nan)
+    for t in range(mt):
+        b = _on_triangle(verts[tris[t, 0]], verts[tris[t, 1]], verts[tris[t, 2]], x, eps)
+        if not np.isnan(b[0]):
+            hit = t
+            bary = b
+            break
+    xe = x.copy()
+    if hit >= 0:
+        for k in range(n):
+            phi[k] = 0.0
+        for r in range(3):
+            phi[tris[hit, r]] += bary[r]
+        if not want_grad:
+            return
+        c = np.zeros(3)
+        for k in range(n):
+            c += verts[k]
+        c /= n
+        dirv = c - x
+        dn = np.sqrt((dirv * dirv).sum())
+        xe = x + 1e-7 * scale * dirv / dn
+    w = np.zeros(n)
+    gw = np.zeros((n, 3))
+    for t in range(mt):
+        a = tris[t, 0]
+        b = tris[t, 1]
+        c2 = tris[t, 2]
+        e1 = verts[b] - verts[a]
+        e2 = verts[c2] - verts[a]
+        cr = np.cross(e1, e2)
+        if np.sqrt((cr * cr).sum()) <= 1e-14 * ((e1 * e1).sum() + (e2 * e2).sum()):
+            continue  # zero-area triangle: no net contribution
+        _acc_triangle(verts[a], verts[b], verts[c2], xe, a, b, c2, w, gw, want_grad)
+    W = w.sum()
+    if hit < 0:
+        for k in range(n):
+            phi[k] = w[k] / W
+    if want_grad:
+        gW = np.zeros(3)
+        for k in range(n):
+            gW += gw[k]
+        for k in range(n):
+            pk = w[k] / W
+            for j in range(3):
+                grad[k, j] = (gw[k, j] - pk * gW[j]) / W
+
+
+@njit(cache=True, parallel=True)
+def mvc_many(verts, tris, points, want_grad):
+    """Coordinates of many points in one polyhedron: phi (P,n), grad (P,n,3)."""
+    n = verts.shape[0]
+    P = points.shape[0]
+    phi = np.zeros((P, n))
+    grad = np.zeros((P, n, 3))
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for k in range(3):
+        lo[k] = verts[:, k].min()
+        hi[k] = verts[:, k].max()
+    scale = np.sqrt(((hi - lo) ** 2).sum())
+    for p in prange(P):
+        mvc_point(verts, tris, points[p], scale, phi[p], grad[p], want_grad)
+    return phi, grad
+
+
+@njit(cache=True, parallel=True)
+def mvc_elements(points, node_off, nodes, tri_off, tris_local, sample_off, samples):
+    """Gradients of all shape functions at each element's samples.
+
+    ``tris_local`` index into the element's sorted node list. Element e has
+    samples ``sample_off[e]:sample_off[e+1]``; its gradients occupy
+    ``grad[gofs[e] + q*n_e + i]`` with ``gofs[e] = Σ_{e'<e} n_{e'} · q_{e'}``.
+    Returns (phi_flat, grad_flat (·,3), gofs (E+1,)).
+    """
+    ne = node_off.shape[0] - 1
+    gofs = np.zeros(ne + 1, dtype=np.int64)
+    for e in range(ne):
+        gofs[e + 1] = gofs[e] + (node_off[e + 1] - node_off[e]) * (sample_off[e + 1] - sample_off[e])
+    phi = np.zeros(gofs[ne])
+    grad = np.zeros((gofs[ne], 3))
+    for e in prange(ne):
+        n = node_off[e + 1] - node_off[e]
+        verts = np.empty((n, 3))
+        for k in range(n):
+            verts[k] = points[nodes[node_off[e] + k]]
+        tris = tris_local[tri_off[e]:tri_off[e + 1]]
+        lo = np.empty(3)
+        hi = np.empty(3)
+        for k in range(3):
+            lo[k] = verts[:, k].min()
+            hi[k] = verts[:, k].max()
+        scale = np.sqrt(((hi - lo) ** 2).sum())
+        for q in range(sample_off[e], sample_off[e + 1]):
+            base = gofs[e] + (q - sample_off[e]) * n
+            mvc_point(verts, tris, samples[q], scale, phi[base:base + n], grad[base:base + n], True)
+    return phi, grad, gofs

@@ -1,0 +1,47 @@
+"""The ``unmesh fem`` command: run an FEM scene file (format: docs/fem_scene.md).
+
+Usage::
+
+    unmesh fem SCENE.toml -o OUTDIR [--duration SECONDS] [--resume] [--set KEY=VALUE] [--no-progress]
+
+Writes ``OUTDIR/mesh_NNNNN.vtu`` + ``OUTDIR/mesh.pvd`` (ParaView), ``OUTDIR/surface_NNNNN.ply``
+(renderer) and ``OUTDIR/summary.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+__all__ = ["register"]
+
+
+def _build(scene: Any) -> Any:
+    from unmesh.fem.scene import build_simulation
+
+    return build_simulation(scene)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from unmesh.sim.cli import run_scene_command
+
+    return run_scene_command(args, _build)
+
+
+def register(sub: Any) -> None:
+    """Add the ``fem`` sub-command.
+
+    Example
+    -------
+    >>> import argparse
+    >>> sub = argparse.ArgumentParser().add_subparsers()
+    >>> register(sub)
+    """
+    from unmesh.sim.cli import add_run_arguments
+
+    p = sub.add_parser("fem", help="linear FEM on convex polyhedra with cutting (chapter 9)",
+                       description="Run a finite element scene: polyhedral meshes with mean value shape functions, "
+                                   "stiffness warping, implicit Euler, scripted cuts. Writes mesh_NNNNN.vtu + mesh.pvd "
+                                   "(ParaView), surface_NNNNN.ply and summary.json into OUTDIR.")
+    add_run_arguments(p)
+    p.set_defaults(func=_run)

@@ -1,0 +1,497 @@
+"""Dynamics (9.20, 9.1.4): stiffness warping, implicit Euler, damping, gravity, fixed and
+moving nodes, ground contact, and deferred re-integration after topology changes.
+
+Equations of motion ``M ü + D u̇ + K u = F`` (9.20) with lumped masses (9.21),
+Rayleigh damping ``D = α M + β K'`` and warped stiffness: each element's rotation
+R_e (Horn, :mod:`unmesh.fem.rotations`) rotates the current positions back to the
+rest frame, so the elastic force is ``f = -Σ_e R_e K_e (R_eᵀ x_e - X_e)`` and a rigid
+motion produces none. One linearised implicit Euler step solves
+
+    ((1 + Δt α) M + (Δt β + Δt²) K') v⁺ = M v + Δt (f(x) + F),   x⁺ = x + Δt v⁺,
+
+with ``K' = Σ R_e K_e R_eᵀ``, by PCG warm-started from the last velocity with a
+lagged, warped LU preconditioner (``solver="lu-pcg"``, default), block-Jacobi PCG
+(``"cg"``) or a sparse LU factorisation per step (``"direct"``); see
+:mod:`unmesh.fem.solvers`. Fixed and moving nodes and ground contact (an active set
+of nodes whose normal velocity is prescribed so they land on the plane, released
+when the contact force would pull) are constraints of that solve.
+
+Example
+-------
+>>> import numpy as np
+>>> from unmesh.fem import hex_grid
+>>> sim = Dynamics(hex_grid((2, 2, 2), origin=(0, 0.5, 0)), 50.0, 0.3, 1.0, ground=Ground())
+>>> for _ in range(50):
+...     _ = sim.step(0.01)
+>>> bool(sim.positions()[:, 1].min() >= -1e-9)
+True
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from unmesh._validate import as_array, as_indices, positive_scalar, scalar
+from unmesh.errors import InputError
+from unmesh.fem import _fe_kernels as FK
+from unmesh.fem import _solve_kernels as SK
+from unmesh.fem.assembly import BlockPattern, ElementStiffness, element_stiffness, lame_parameters
+from unmesh.fem.integration import concat, integrate_elements
+from unmesh.fem.mesh import PolyMesh
+from unmesh.fem.rotations import _horn_all
+from unmesh.fem.solvers import SOLVERS, LaggedLU, direct_solve, node_rotations, pcg
+
+__all__ = ["Dynamics", "Ground", "Load", "Prescribed", "kernel_threads"]
+
+#: Meshes with fewer nodes than this run the numba kernels on one thread: parallel
+#: regions on small arrays cost more in synchronisation than they save, and on a
+#: shared (oversubscribed) machine they were measured up to 10x slower than serial.
+SERIAL_NODES = 30000
+#: ``solver="auto"``: block-Jacobi PCG iterations before switching to the factorised preconditioner.
+AUTO_CG_ITERATIONS = 150
+
+
+@contextlib.contextmanager
+def kernel_threads(n_nodes: int) -> Iterator[None]:
+    """Use one numba thread for small problems inside the block.
+
+    Example
+    -------
+    >>> with kernel_threads(10):
+    ...     pass
+    """
+    import numba
+
+    before = numba.get_num_threads()
+    if n_nodes < SERIAL_NODES and before > 1:
+        numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
+@dataclass(frozen=True)
+class Ground:
+    """A ground plane ``x·normal >= height`` with Coulomb-like friction.
+
+    Example
+    -------
+    >>> Ground(height=0.0, friction=0.3).normal
+    (0.0, 1.0, 0.0)
+    """
+
+    height: float = 0.0
+    normal: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    friction: float = 0.5
+
+    def unit_normal(self) -> np.ndarray:
+        """The normal, normalised."""
+        n = np.asarray(self.normal, dtype=np.float64)
+        ln = np.linalg.norm(n)
+        if not ln > 0:
+            raise InputError(f"ground.normal: expected a non-zero vector, got {self.normal}")
+        return n / ln
+
+
+@dataclass(frozen=True)
+class Prescribed:
+    """Nodes moving with a prescribed velocity (zero: fixed) while ``start <= t < stop``.
+
+    Example
+    -------
+    >>> Prescribed(np.array([0, 1])).velocity
+    (0.0, 0.0, 0.0)
+    """
+
+    nodes: np.ndarray
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    start: float = 0.0
+    stop: float = float("inf")
+
+
+@dataclass(frozen=True)
+class Load:
+    """A total force split evenly over a node group (e.g. an end load).
+
+    Example
+    -------
+    >>> Load(np.array([3, 4]), (0.0, -1.0, 0.0)).force
+    (0.0, -1.0, 0.0)
+    """
+
+    nodes: np.ndarray
+    force: tuple[float, float, float]
+
+
+@dataclass
+class _Topology:
+    """Pending topology change (applied at the end of the step)."""
+
+    mesh: PolyMesh
+    parent: np.ndarray  # new element -> element of the integrated mesh it came from (material)
+    kept: np.ndarray  # new element -> integrated element with identical data, -1 if changed
+
+
+@dataclass
+class StepInfo:
+    """Diagnostics of one step."""
+
+    solve_seconds: float = 0.0
+    reintegration_seconds: float = 0.0
+    iterations: int = 0
+    contacts: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Dynamics:
+    """Implicit-Euler dynamics of a polyhedral mesh with stiffness warping.
+
+    Parameters
+    ----------
+    mesh : PolyMesh
+        Rest configuration.
+    young, poisson, density : float or (E,) arrays
+        Material per element (Y, ν, ρ).
+    gravity : (3,) floats
+    prescribed : list of Prescribed
+        Fixed or moving node groups.
+    ground : Ground, optional
+    rayleigh : (alpha, beta)
+        Rayleigh damping ``D = α M + β K'`` (default none, as in Appendix F.3).
+    solver : {"auto", "lu-pcg", "cg", "direct"}
+        Linear solver of the implicit step (:mod:`unmesh.fem.solvers`); ``"auto"``
+        (default) uses block-Jacobi PCG and switches to ``"lu-pcg"`` for good when
+        that does not converge within 150 iterations.
+    warping : bool
+        Stiffness warping (default True); False is plain linear elasticity.
+    correction : bool
+        Consistency correction of the element quadrature.
+    cg_tol : float
+        Relative residual of the PCG solve.
+
+    Attributes
+    ----------
+    mesh, u (n,3) displacements, v (n,3) velocities, time.
+
+    Example
+    -------
+    >>> from unmesh.fem import hex_grid
+    >>> sim = Dynamics(hex_grid((2, 2, 2)), 100.0, 0.3, gravity=(0, -9.81, 0))
+    >>> info = sim.step(0.01)
+    >>> round(sim.time, 6), bool(sim.v[:, 1].mean() < 0)
+    (0.01, True)
+    """
+
+    def __init__(self, mesh: PolyMesh, young: Any, poisson: Any, density: Any = 1.0, *,
+                 gravity: Any = (0.0, -9.81, 0.0), prescribed: list[Prescribed] | None = None,
+                 ground: Ground | None = None, loads: list[Load] | None = None, rayleigh: tuple[float, float] = (0.0, 0.0), solver: str = "auto",
+                 warping: bool = True, correction: bool = True, cg_tol: float = 1e-6, cg_maxiter: int = 5000) -> None:
+        if solver not in SOLVERS:
+            raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
+        ne = mesh.n_elements
+        self.young = _expand(young, ne, "young")
+        self.poisson = _expand(poisson, ne, "poisson")
+        self.density = _expand(density, ne, "density")
+        lame_parameters(self.young, self.poisson)
+        if np.any(~(self.density > 0)):
+            raise InputError("density: expected positive values")
+        self.gravity = as_array(gravity, "gravity", (3,))
+        self.ground = ground
+        self.alpha = scalar(rayleigh[0], "rayleigh alpha", minimum=0.0)
+        self.beta = scalar(rayleigh[1], "rayleigh beta", minimum=0.0)
+        self.solver = solver
+        self.warping = bool(warping)
+        self.correction = bool(correction)
+        self.cg_tol = positive_scalar(cg_tol, "cg_tol")
+        self.cg_maxiter = int(cg_maxiter)
+        self.lagged = LaggedLU()
+        self._stiff = False  # "auto": block-Jacobi PCG failed, use the factorised preconditioner
+        self.mesh = mesh
+        self.u = np.zeros((mesh.n_nodes, 3))
+        self.v = np.zeros((mesh.n_nodes, 3))
+        self.time = 0.0
+        self.groups: list[tuple[np.ndarray, Prescribed]] = []
+        for p in prescribed or []:
+            member = np.zeros(mesh.n_nodes, bool)
+            member[as_indices(p.nodes, "prescribed nodes", (None,), upper=mesh.n_nodes)] = True
+            self.groups.append((member, p))
+        self.loads: list[tuple[np.ndarray, Load]] = []
+        for ld in loads or []:
+            member = np.zeros(mesh.n_nodes, bool)
+            member[as_indices(ld.nodes, "load nodes", (None,), upper=mesh.n_nodes)] = True
+            self.loads.append((member, ld))
+        self.contact = np.zeros(mesh.n_nodes, bool)
+        self._pending: _Topology | None = None
+        self.last = StepInfo()
+        t0 = time.perf_counter()
+        self.integ = integrate_elements(mesh, self.correction)
+        self._setup_element_data()
+        self.last.reintegration_seconds = time.perf_counter() - t0
+
+    # -- element data ----------------------------------------------------------------------
+    def _setup_element_data(self, kstiff: ElementStiffness | None = None) -> None:
+        integ = self.integ
+        self.kstiff = kstiff if kstiff is not None else element_stiffness(integ, self.young, self.poisson)
+        n = self.mesh.n_nodes
+        per = np.repeat(integ.volumes * self.density, np.diff(integ.node_offsets)) * integ.mu
+        self.masses = np.bincount(integ.nodes, weights=per, minlength=n)
+        self.pattern = BlockPattern.build(integ.node_offsets, integ.nodes, n)
+        self._K0: np.ndarray | None = None
+        self._used = np.zeros(n, bool)
+        self._used[integ.nodes] = True
+
+    # -- state ------------------------------------------------------------------------------
+    def positions(self) -> np.ndarray:
+        """Current node positions (n,3) = rest + displacement."""
+        return self.mesh.points + self.u
+
+    def rotations(self) -> np.ndarray:
+        """Per-element rotations R_e (E,3,3) from Horn's method (identity without warping)."""
+        if not self.warping:
+            return np.broadcast_to(np.eye(3), (self.mesh.n_elements, 3, 3)).copy()
+        return _horn_all(self.mesh.points, self.positions(), self.integ.node_offsets, self.integ.nodes, self.integ.mu)
+
+    def elastic_forces(self, rots: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """Warped elastic forces (n,3) and the elastic energy Σ_e ½ dᵀ K_e d."""
+        R = self.rotations() if rots is None else rots
+        fe, en = FK.warped_forces(self.mesh.points, self.positions(), self.integ.node_offsets, self.integ.nodes,
+                                  self.kstiff.offsets, self.kstiff.data, R, self.mesh.n_nodes)
+        f = np.zeros((self.mesh.n_nodes, 3))
+        for k in range(3):
+            f[:, k] = np.bincount(self.integ.nodes, weights=fe[:, k], minlength=self.mesh.n_nodes)
+        return f, float(en.sum())
+
+    def kinetic_energy(self) -> float:
+        """½ Σ m_i |v_i|²."""
+        return 0.5 * float((self.masses * (self.v**2).sum(axis=1)).sum())
+
+    def elastic_energy(self) -> float:
+        """Warped elastic energy Σ_e ½ (Rᵀx - X)ᵀ K_e (Rᵀx - X)."""
+        return self.elastic_forces()[1]
+
+    def potential_energy(self) -> float:
+        """Gravitational potential -Σ m_i g·x_i."""
+        return -float((self.masses * (self.positions() @ self.gravity)).sum())
+
+    # -- constraints -----------------------------------------------------------------------
+    def _prescribed(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        n = self.mesh.n_nodes
+        mask = ~self._used.copy()  # orphan nodes are held
+        vel = np.zeros((n, 3))
+        for member, p in self.groups:
+            if p.start <= t < p.stop:
+                mask |= member
+                vel[member] = p.velocity
+        return mask, vel
+
+    def external_forces(self) -> np.ndarray:
+        """Gravity plus loads (n,3)."""
+        f = self.masses[:, None] * self.gravity[None, :]
+        for member, ld in self.loads:
+            cnt = int(member.sum())
+            if cnt:
+                f[member] += np.asarray(ld.force, dtype=np.float64) / cnt
+        return f
+
+    # -- time step -----------------------------------------------------------------------------
+    def step(self, dt: float) -> StepInfo:
+        """Advance by ``dt`` (see :meth:`_step`)."""
+        with kernel_threads(self.mesh.n_nodes):
+            return self._step(dt)
+
+    def _step(self, dt: float) -> StepInfo:
+        """Advance by ``dt`` with one linearised implicit Euler step; returns timings.
+
+        Pending topology changes (:meth:`change_topology`; all cuts of a step are
+        committed together) are integrated once, before the solve (the deferred
+        re-integration of 9.3.1).
+        """
+        dt = positive_scalar(dt, "dt")
+        info = StepInfo()
+        info.reintegration_seconds = self.flush()
+        t0 = time.perf_counter()
+        n = self.mesh.n_nodes
+        x = self.positions()
+        R = self.rotations()
+        f_el, _ = self.elastic_forces(R)
+        blocks = FK.rotated_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R)
+        K = FK.scatter_blocks(self.pattern.block_map, blocks, len(self.pattern.indices))
+        cm = 1.0 + dt * self.alpha
+        ck = dt * self.beta + dt * dt
+        A = SK.add_diagonal(K, self.pattern.diag, ck, self.masses, cm)
+        b = self.masses[:, None] * self.v + dt * (f_el + self.external_forces())
+        fixed, vfix = self._prescribed(self.time)
+        normal = self.ground.unit_normal() if self.ground is not None else np.array([0.0, 1.0, 0.0])
+        active = self.contact & ~fixed if self.ground is not None else np.zeros(n, bool)
+        pinv = SK.block_jacobi(A, self.pattern.diag) if self.solver in ("cg", "auto") else None
+        prec = None
+        mode = self.solver
+        if mode == "auto":
+            mode = "lu-pcg" if self._stiff else "cg"
+        prec = self._lu_preconditioner(R, cm, ck, info) if mode == "lu-pcg" else None
+        vnew = self.v
+        worst = 0
+        for _ in range(8):
+            kind = np.where(fixed, 1, np.where(active, 2, 0)).astype(np.int64)
+            x0 = self.v.copy()
+            x0[fixed] = vfix[fixed]
+            if active.any():
+                target = (self.ground.height - x[active] @ normal) / dt
+                x0[active] += (target - x0[active] @ normal)[:, None] * normal
+            if mode == "cg":
+                limit = AUTO_CG_ITERATIONS if self.solver == "auto" else self.cg_maxiter
+                vnew, its, res = SK.filtered_pcg(self.pattern.indptr, self.pattern.indices, A, pinv, b, x0, kind,
+                                                normal, self.cg_tol, limit)
+                if self.solver == "auto" and res > self.cg_tol:
+                    # too stiff for block-Jacobi: switch to the factorised preconditioner for good
+                    info.iterations += int(its)
+                    self._stiff = True
+                    mode = "lu-pcg"
+                    prec = self._lu_preconditioner(R, cm, ck, info)
+            if mode == "lu-pcg":
+                vnew, its, _res = pcg(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec,
+                                      self.cg_tol, self.cg_maxiter)
+            elif mode == "direct":
+                vnew, its = direct_solve(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal), 1
+            info.iterations += int(its)
+            worst = max(worst, int(its))
+            if self.ground is None:
+                break
+            pred = (x + dt * vnew) @ normal - self.ground.height
+            add = ~active & ~fixed & self._used & (pred < -1e-12 * max(1.0, abs(self.ground.height)))
+            Av = SK.bsr_matvec(self.pattern.indptr, self.pattern.indices, A, vnew)
+            lam = (Av - b) @ normal
+            release = active & (lam < 0)
+            if not add.any() and not release.any():
+                break
+            active = (active | add) & ~release
+        if self.ground is not None and active.any():
+            Av = SK.bsr_matvec(self.pattern.indptr, self.pattern.indices, A, vnew)
+            lam = np.maximum((Av - b) @ normal, 0.0)
+            vt = vnew[active] - np.outer(vnew[active] @ normal, normal)
+            speed = np.linalg.norm(vt, axis=1)
+            dv = np.minimum(speed, self.ground.friction * lam[active] / np.maximum(self.masses[active], 1e-300))
+            scale = np.where(speed > 0, 1.0 - dv / np.where(speed > 0, speed, 1.0), 1.0)
+            vnew[active] = np.outer(vnew[active] @ normal, normal) + vt * scale[:, None]
+        self.contact = active
+        self.lagged.last_iterations = worst
+        info.contacts = int(active.sum())
+        self.v = vnew
+        self.u = self.u + dt * vnew
+        self.time += dt
+        info.solve_seconds = time.perf_counter() - t0
+        self.last = info
+        return info
+
+    def _lu_preconditioner(self, R: np.ndarray, cm: float, ck: float, info: StepInfo) -> Any:
+        coeffs = (cm, ck)
+        if self.lagged.needs_factor(coeffs):
+            if self._K0 is None:
+                self._K0 = FK.scatter_blocks(self.pattern.block_map, self.kstiff.data.reshape(-1, 9),
+                                             len(self.pattern.indices))
+            A0 = SK.add_diagonal(self._K0, self.pattern.diag, ck, self.masses, cm)
+            self.lagged.factor(self.pattern.indptr, self.pattern.indices, A0, coeffs)
+            info.extra["factorized"] = True
+        Q = node_rotations(R, self.integ.node_offsets, self.integ.nodes, self.integ.mu, self.mesh.n_nodes)
+        return self.lagged.preconditioner(Q)
+
+    # -- topology changes -------------------------------------------------------------------
+    def change_topology(self, mesh: PolyMesh, node_weights: sp.sparray, element_parent: np.ndarray,
+                        changed: np.ndarray) -> None:
+        """Switch to a new mesh after cutting; re-integration is deferred to the next :meth:`step`.
+
+        Parameters
+        ----------
+        mesh : PolyMesh
+            The new mesh (rest configuration).
+        node_weights : sparse (n_new, n_old)
+            New node state = weights @ old node state (interpolation on edges,
+            copies for duplicated nodes).
+        element_parent : (E_new,) int
+            Old element each new element comes from (material, unchanged data).
+        changed : (E_new,) bool
+            Elements whose integration must be recomputed.
+        """
+        W = sp.csr_array(node_weights)
+        if W.shape != (mesh.n_nodes, self.mesh.n_nodes):
+            raise InputError(f"node_weights: expected shape {(mesh.n_nodes, self.mesh.n_nodes)}, got {W.shape}")
+        W.sort_indices()
+        parent = np.asarray(element_parent, dtype=np.int64)
+        ch = np.asarray(changed, bool).copy()
+        if self._pending is not None:  # compose with the change not integrated yet
+            prev = self._pending
+            ch |= prev.kept[parent] < 0
+            kept = np.where(ch, -1, prev.kept[parent])
+            parent = prev.parent[parent]
+        else:
+            kept = np.where(ch, -1, parent)
+        self.u = W @ self.u
+        self.v = W @ self.v
+        self.lagged.invalidate()
+        # membership (fixed groups, contact) follows pure copies only
+        nnz = np.diff(W.indptr)
+        first = W.indices[np.minimum(W.indptr[:-1], max(len(W.indices) - 1, 0))]
+        val = W.data[np.minimum(W.indptr[:-1], max(len(W.data) - 1, 0))]
+        copy = (nnz == 1) & (val == 1.0)
+        self.groups = [(m[first] & copy, p) for m, p in self.groups]
+        self.loads = [(m[first] & copy, ld) for m, ld in self.loads]
+        self.contact = self.contact[first] & copy
+        self._pending = _Topology(mesh, parent, kept)
+        self.mesh = mesh
+        self._used = np.zeros(mesh.n_nodes, bool)
+        self._used[mesh.element_nodes()[1]] = True
+
+    def _apply_pending(self) -> None:
+        pend = self._pending
+        self._pending = None
+        assert pend is not None
+        mesh = pend.mesh
+        old_integ, old_k = self.integ, self.kstiff
+        self.young = self.young[pend.parent]
+        self.poisson = self.poisson[pend.parent]
+        self.density = self.density[pend.parent]
+        changed = np.flatnonzero(pend.kept < 0)
+        keep_new = np.flatnonzero(pend.kept >= 0)
+        kept_old = pend.kept[keep_new]
+        new = integrate_elements(mesh, self.correction, elements=changed)
+        kept = old_integ.take(kept_old)
+        noff, nodes = mesh.element_nodes()
+        order = np.empty(mesh.n_elements, np.int64)
+        order[keep_new] = np.arange(len(keep_new))
+        order[changed] = len(keep_new) + np.arange(len(changed))
+        integ = concat([kept, new], order)
+        # unchanged elements keep their local node order; their node ids are the new mesh's
+        integ = type(integ)(noff, nodes, integ.volumes, integ.mu, integ.sample_offsets, integ.weights,
+                            integ.samples, integ.grad_offsets, integ.grads, integ.corrected)
+        ks_new = element_stiffness(new, self.young[changed], self.poisson[changed])
+        from unmesh.fem.integration import gather_csr
+
+        koff_k, kdat_k = gather_csr(old_k.offsets, old_k.data, kept_old)
+        koff = np.r_[0, np.cumsum(np.r_[np.diff(koff_k), np.diff(ks_new.offsets)])].astype(np.int64)
+        kdata = np.concatenate([kdat_k, ks_new.data])
+        koff2, kdata2 = gather_csr(koff, kdata, order)
+        self.integ = integ
+        self._setup_element_data(ElementStiffness(noff, nodes, koff2, kdata2))
+
+    def flush(self) -> float:
+        """Apply a pending topology change now; returns the seconds spent re-integrating."""
+        if self._pending is None:
+            return 0.0
+        t = time.perf_counter()
+        self._apply_pending()
+        return time.perf_counter() - t
+
+
+def _expand(value: Any, n: int, name: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0:
+        return np.full(n, float(arr))
+    return as_array(arr, name, (n,)).copy()

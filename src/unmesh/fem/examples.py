@@ -1,0 +1,193 @@
+"""Gallery examples of FEM on convex polyhedra (chapter 9).
+
+``fem-single-element`` (Fig. 9.3), ``fem-random-planes-cube`` (Fig. 9.4),
+``fem-progressive-slicing`` (Fig. 9.9), ``fem-blob-slicing`` (Fig. 9.10) run the shipped
+scene files; ``fem-accuracy`` shows the patch test with and without the consistency
+correction and the cantilever convergence. Surfaces are drawn faceted, every element
+in its own colour, so the element tessellation is visible.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unmesh.gallery import ExampleContext, example
+
+__all__ = ["element_colored_surface", "run_shipped_scene"]
+
+_PALETTE = np.array([[0.85, 0.45, 0.30], [0.35, 0.60, 0.85], [0.55, 0.78, 0.40], [0.90, 0.75, 0.35],
+                     [0.70, 0.50, 0.80], [0.40, 0.75, 0.75], [0.85, 0.55, 0.65], [0.60, 0.60, 0.55]])
+
+
+def element_colored_surface(mesh: Any, displacement: np.ndarray) -> Any:
+    """Faceted boundary TriangleMesh (unshared vertices) coloured by element (palette by id).
+
+    Example
+    -------
+    >>> from unmesh.fem import hex_grid
+    >>> m = hex_grid((2, 1, 1))
+    >>> len(element_colored_surface(m, np.zeros((m.n_nodes, 3))).vertices)
+    60
+    """
+    from unmesh.meshes import TriangleMesh
+
+    tris, elems = mesh.boundary_triangles(return_elements=True)
+    x = mesh.points + displacement
+    v = x[tris].reshape(-1, 3)
+    col = np.repeat(_PALETTE[elems % len(_PALETTE)], 3, axis=0)
+    return TriangleMesh(v, np.arange(len(v)).reshape(-1, 3), vertex_colors=col)
+
+
+def run_shipped_scene(ctx: ExampleContext, name: str, overrides: dict[str, Any]) -> tuple[Path, dict[str, Any]]:
+    """Run ``examples/fem/<name>.toml`` into ``ctx.outdir/<name>``; returns (outdir, summary).
+
+    Example
+    -------
+    Used by the examples of this module, e.g.
+    ``run_shipped_scene(ctx, "cantilever", {"simulation.duration": 20.0})``.
+    """
+    from unmesh import scenes
+    from unmesh.fem.scene import build_simulation
+    from unmesh.sim.cli import run_scene
+
+    out = ctx.path(name)
+    run_scene(scenes.path(f"fem/{name}.toml"), out, build_simulation, overrides=overrides, progress=ctx.progress)
+    summary = json.loads((out / "summary.json").read_text())
+    ctx.file(out / "summary.json", f"{name}: summary.json")
+    return out, summary
+
+
+def _render_run(ctx: ExampleContext, out: Path, summary: dict[str, Any], eye: Any, target: Any, picks: list[int],
+                caption: str, size: tuple[int, int]) -> None:
+    from unmesh.fem.vtk_io import read_vtu
+    from unmesh.render import Camera, render, save_image, write_video
+
+    n = len(summary["frames"])
+    cam = Camera(eye, target, width=size[0], height=size[1], fov=40)
+
+    from unmesh.meshes import TriangleMesh
+
+    ground = TriangleMesh([[-3, 0, -3], [3, 0, -3], [3, 0, 3], [-3, 0, 3]], [[0, 2, 1], [0, 3, 2]],
+                          vertex_colors=np.full((4, 3), 0.82))
+
+    def frame(k: int) -> np.ndarray:
+        mesh, pdata = read_vtu(out / f"mesh_{k:05d}.vtu", check=False)
+        return render([ground, element_colored_surface(mesh, pdata["displacement"])], cam).color
+
+    write_video((frame(k) for k in range(n)), out / "movie.mp4", fps=min(30.0, n / max(summary["frames"][-1]["time"],
+                                                                                      1e-9)))
+    ctx.video(out / "movie.mp4", caption)
+    strip = np.concatenate([frame(min(k, n - 1)) for k in picks], axis=1)
+    save_image(out / "frames.png", strip)
+    ctx.image(out / "frames.png", f"{caption}: frames {', '.join(str(min(k, n - 1)) for k in picks)}")
+
+
+def _per_frame(summary: dict[str, Any]) -> float:
+    fr = summary["frames"][1:]
+    return float(np.mean([f["step_seconds"] * 0 + f["solve_seconds"] + f["reintegration_seconds"]
+                          + f.get("cut_seconds", 0.0) for f in fr])) if fr else 0.0
+
+
+@example("fem-single-element", "A single 12-node element dropped on the ground (Fig. 9.3)", section="FEM")
+def single_element(ctx: ExampleContext) -> None:
+    """One convex element with 12 nodes (a hexagonal antiprism): its mean value shape functions
+    are non-linear, so the single element deforms non-linearly on impact, bounces and settles
+    (Y = 50, ν = 0.3, Δt = 0.001, implicit Euler, stiffness warping)."""
+    t = time.perf_counter()
+    out, s = run_shipped_scene(ctx, "single_element", {"simulation.duration": 0.8} if ctx.quick else {})
+    ctx.metric("nodes / elements", f"{s['nodes_initial']} / {s['elements_initial']}", "(thesis: 12 / 1)")
+    ctx.metric("wall time", round(time.perf_counter() - t, 2), "s")
+    ctx.metric("solve time per frame", round(_per_frame(s), 4), "s (thesis: 0.012 s on 2007 hardware)")
+    size = (240, 180) if ctx.quick else (480, 360)
+    _render_run(ctx, out, s, (2.2, 1.3, 2.6), (0.0, 0.4, 0.0), [0, 12, 16, 20, 30, 60], "12-node element", size)
+
+
+@example("fem-random-planes-cube", "A cube split by 30 random planes falls (Fig. 9.4)", section="FEM")
+def random_planes(ctx: ExampleContext) -> None:
+    """A single hexahedral element is split 30 times by random planes (9.3.1), each time in a
+    randomly chosen element: a consistent mesh of 31 highly irregular convex elements (one
+    colour each) that falls and deforms on impact."""
+    out, s = run_shipped_scene(ctx, "random_planes_cube", {"simulation.duration": 0.7} if ctx.quick else {})
+    last = s["frames"][-1]
+    ctx.metric("nodes / elements after the splits", f"{last['nodes']} / {last['elements']}", "(thesis: 184 / 31)")
+    ctx.metric("volume after the splits", round(last["volume"], 12), "(1 before)")
+    ctx.metric("solve time per frame", round(_per_frame(s), 4), "s (thesis: 0.22 s on 2007 hardware)")
+    size = (240, 180) if ctx.quick else (480, 360)
+    _render_run(ctx, out, s, (2.0, 1.5, 2.6), (0.0, 0.45, 0.0), [0, 9, 13, 18, 30, 74], "random planes", size)
+
+
+@example("fem-progressive-slicing", "Progressive slicing of a 3×3×3 hexahedral block (Fig. 9.9)", section="FEM")
+def progressive(ctx: ExampleContext) -> None:
+    """Two slanted blades move down through a block of 27 hexahedra (9.3.2). Each step cuts the
+    quad the blade swept: crossed elements are split by its plane, in-plane faces along the
+    blade, and nodes inside the swept area are duplicated, so the slices separate and topple.
+    Only the nodes needed to sample the cut surface are created; elements are not subdivided."""
+    over = {"simulation.duration": 1.2} if ctx.quick else {}
+    out, s = run_shipped_scene(ctx, "progressive_slicing", over)
+    first, last = s["frames"][0], s["frames"][-1]
+    ctx.metric("nodes", f"{first['nodes']} -> {last['nodes']}", "(thesis: 64 -> 1214)")
+    ctx.metric("elements", f"{first['elements']} -> {last['elements']}", "(thesis: 27 -> 60)")
+    ctx.metric("volume drift", f"{abs(last['volume'] - first['volume']):.2e}")
+    ctx.metric("time per frame (solve + re-integration + cut)", round(_per_frame(s), 3),
+               "s (thesis: 0.8 s, 0.04 s without re-integration)")
+    size = (240, 180) if ctx.quick else (480, 360)
+    _render_run(ctx, out, s, (1.7, 1.6, 2.4), (0.0, 0.4, 0.0), [0, 12, 25, 40, 55, 75], "progressive slicing", size)
+
+
+@example("fem-blob-slicing", "Slicing a tetrahedralised organic blob (Fig. 9.10)", section="FEM")
+def blob(ctx: ExampleContext) -> None:
+    """The built-in bunny-like blob, tetrahedralised with TetGen, is sliced on both sides by two
+    tilted blades moving through it; the slices separate and tip over. Cut tetrahedra become
+    general convex polyhedra (Y = 3000, ν = 0.3, Δt = 0.04)."""
+    over = {"simulation.duration": 1.4, "objects[0].mesh.spacing": 0.15} if ctx.quick else {}
+    out, s = run_shipped_scene(ctx, "blob_slicing", over)
+    first, last = s["frames"][0], s["frames"][-1]
+    ctx.metric("nodes", f"{first['nodes']} -> {last['nodes']}")
+    ctx.metric("elements", f"{first['elements']} -> {last['elements']}")
+    ctx.metric("time per frame (solve + re-integration + cut)", round(_per_frame(s), 3), "s (thesis: 6.08 s)")
+    ctx.metric("cut steps skipped as degenerate", sum(f.get("cuts_skipped", 0) for f in s["frames"]))
+    size = (240, 180) if ctx.quick else (480, 360)
+    _render_run(ctx, out, s, (0.9, 1.5, 2.8), (0.0, 0.4, 0.0), [0, 15, 30, 45, 60, 75], "blob slicing", size)
+
+
+@example("fem-accuracy", "Patch test and cantilever convergence", section="FEM")
+def accuracy(ctx: ExampleContext) -> None:
+    """Linear fields are reproduced exactly on irregular polyhedra only with the consistency
+    correction (the sampled gradients integrate exactly); a 10×1×1 cantilever (Y = 1000,
+    ν = 0.3, end load 1) converges towards the Euler–Bernoulli tip deflection 4.0."""
+    from unmesh.fem import cut_by_plane, hex_grid, solve_static, voronoi_foam
+
+    rng = np.random.default_rng(1)
+    cube = hex_grid((2, 2, 2))
+    for _ in range(6):
+        cube = cut_by_plane(cube, rng.random(3), rng.normal(size=3))
+    A = rng.normal(size=(3, 3)) * 1e-2
+    for name, mesh in (("Voronoi foam (40 cells)", voronoi_foam(40, seed=4)), ("cube cut by 6 planes", cube)):
+        exact = mesh.points @ A.T
+        bnd = np.unique(mesh.boundary_triangles())
+        for corr in (False, True):
+            u = solve_static(mesh, 1e3, 0.3, bnd, np.zeros_like(exact), displacements=exact, correction=corr)
+            err = float(np.abs(u - exact).max() / np.abs(exact).max())
+            ctx.metric(f"patch test, {name}, {'with' if corr else 'without'} correction", f"{err:.2e}")
+    sizes = (10, 20) if ctx.quick else (10, 20, 40, 80)
+    rows = []
+    for nx in sizes:
+        m = hex_grid((nx, nx // 10, nx // 10), size=(10, 1, 1))
+        left = np.flatnonzero(np.isclose(m.points[:, 0], 0))
+        right = np.flatnonzero(np.isclose(m.points[:, 0], 10))
+        y, z = m.points[right, 1], m.points[right, 2]
+        w = np.where(np.isclose(y, 0) | np.isclose(y, 1), 0.5, 1.0) * np.where(np.isclose(z, 0) | np.isclose(z, 1), 0.5, 1.0)
+        f = np.zeros((m.n_nodes, 3))
+        f[right, 1] = -w / w.sum()
+        t = time.perf_counter()
+        d = float(-solve_static(m, 1e3, 0.3, left, f)[right, 1].mean())
+        rows.append(f"{nx}×{nx // 10}×{nx // 10} cells ({m.n_elements}): tip deflection {d:.4f} "
+                    f"({100 * (d / 4 - 1):+.1f} %, {time.perf_counter() - t:.1f} s)")
+        ctx.metric(f"cantilever {nx}×{nx // 10}×{nx // 10}", round(d, 4), "(Euler–Bernoulli: 4.0)")
+    ctx.text("Cantilever convergence on cube cells: " + "; ".join(rows) + ". scikit-fem on the same problem: linear "
+             "tetrahedra 3.58 (12,960 tets), trilinear hexahedra 3.94 (2,160).")

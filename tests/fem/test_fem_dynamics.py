@@ -1,0 +1,216 @@
+"""Horn rotations, stiffness warping, implicit Euler, contact, constraints, solvers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from unmesh.errors import InputError
+from unmesh.fem import _fe_kernels as FK
+from unmesh.fem import _solve_kernels as SK
+from unmesh.fem import convex_polyhedron, hex_grid, horn_rotations, voronoi_foam
+from unmesh.fem.dynamics import Dynamics, Ground, Load, Prescribed
+from unmesh.fem.rotations import horn_matrix, jacobi_eigh4
+
+
+def test_jacobi_eigen_solver_matches_numpy(rng):
+    for _ in range(50):
+        a = rng.normal(size=(4, 4))
+        a = a + a.T
+        w, v = jacobi_eigh4(a)
+        ref = np.linalg.eigvalsh(a)
+        np.testing.assert_allclose(np.sort(w), ref, atol=1e-12 * abs(ref).max())
+        np.testing.assert_allclose(a @ v, v * w, atol=1e-12 * abs(ref).max())
+
+
+@pytest.mark.parametrize("shape", ["random", "flat", "flat_triangle_pair"])
+def test_horn_recovers_exact_rotations_including_flat_elements(rng, shape):
+    if shape == "random":
+        X = rng.normal(size=(7, 3))
+    elif shape == "flat":
+        X = np.c_[rng.normal(size=(6, 2)), np.zeros(6)]
+    else:
+        X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)  # three points: a degenerate "element"
+    for _ in range(20):
+        R = Rotation.random(random_state=rng.integers(1 << 30)).as_matrix()
+        x = X @ R.T + rng.normal(size=3)
+        Rh = horn_rotations(X, x, [0, len(X)], np.arange(len(X)))[0]
+        np.testing.assert_allclose(Rh, R, atol=1e-10)
+        assert np.linalg.det(Rh) == pytest.approx(1.0)
+
+
+def test_horn_matrix_eigenvector_is_the_least_squares_rotation(rng):
+    X = rng.normal(size=(8, 3))
+    x = X @ Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix().T + 0.01 * rng.normal(size=(8, 3))
+    Xc, xc = X - X.mean(axis=0), x - x.mean(axis=0)
+    _, v = np.linalg.eigh(horn_matrix(Xc.T @ xc))
+    Rh = horn_rotations(X, x, [0, 8], np.arange(8))[0]
+    q = v[:, -1]
+    R = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+    np.testing.assert_allclose(Rh, R, atol=1e-10)
+    u, _, vt = np.linalg.svd(Xc.T @ xc)  # Kabsch: R = V Uᵀ
+    np.testing.assert_allclose(Rh, vt.T @ u.T, atol=1e-8)
+
+
+def test_rigid_motion_gives_zero_warped_force(rng):
+    mesh = voronoi_foam(12, seed=2)
+    sim = Dynamics(mesh, 1e3, 0.3)
+    for _ in range(3):
+        R = Rotation.random(random_state=rng.integers(1 << 30)).as_matrix()
+        sim.u = mesh.points @ R.T + rng.normal(size=3) * 5 - mesh.points
+        f, energy = sim.elastic_forces()
+        assert abs(f).max() < 1e-10 * 1e3 and energy < 1e-20
+    # without warping a rotation does produce (spurious) forces
+    lin = Dynamics(mesh, 1e3, 0.3, warping=False)
+    lin.u = sim.u
+    assert abs(lin.elastic_forces()[0]).max() > 1.0
+
+
+def test_internal_forces_sum_to_zero(rng):
+    sim = Dynamics(voronoi_foam(10, seed=7), 1e3, 0.3)
+    sim.u = rng.normal(size=sim.u.shape) * 0.05
+    f, _ = sim.elastic_forces()
+    assert abs(f.sum(axis=0)).max() < 1e-11 * abs(f).max()
+
+
+def test_warped_force_kernel_matches_numpy(rng):
+    sim = Dynamics(voronoi_foam(5, seed=3), 50.0, 0.3)
+    sim.u = rng.normal(size=sim.u.shape) * 0.1
+    R = sim.rotations()
+    f, energy = sim.elastic_forces(R)
+    ref = np.zeros_like(f)
+    eref = 0.0
+    integ, ks = sim.integ, sim.kstiff
+    for e in range(sim.mesh.n_elements):
+        nd = integ.nodes[integ.node_offsets[e]:integ.node_offsets[e + 1]]
+        d = sim.positions()[nd] @ R[e] - sim.mesh.points[nd]
+        d -= d.mean(axis=0)
+        Ke = ks.matrix(e)
+        fe = -(Ke @ d.ravel()).reshape(-1, 3) @ R[e].T
+        np.add.at(ref, nd, fe)
+        eref += 0.5 * d.ravel() @ Ke @ d.ravel()
+    np.testing.assert_allclose(f, ref, atol=1e-12 * abs(ref).max())
+    assert energy == pytest.approx(eref, rel=1e-12)
+    # rotated blocks vs einsum
+    blocks = FK.rotated_blocks(integ.node_offsets, ks.offsets, ks.data, R)
+    e_of_block = np.repeat(np.arange(len(R)), np.diff(integ.node_offsets) ** 2)
+    ref_b = np.einsum("bij,bjk,blk->bil", R[e_of_block], ks.data.reshape(-1, 3, 3), R[e_of_block]).reshape(-1, 9)
+    np.testing.assert_allclose(blocks, ref_b, atol=1e-12 * abs(ref_b).max())
+
+
+def test_block_kernels_match_scipy(rng):
+    sim = Dynamics(voronoi_foam(8, seed=1), 50.0, 0.3)
+    p = sim.pattern
+    blocks = rng.normal(size=(len(p.indices), 9))
+    import scipy.sparse as sp
+
+    A = sp.bsr_array((blocks.reshape(-1, 3, 3), p.indices, p.indptr), shape=(3 * p.n_nodes,) * 2)
+    x = rng.normal(size=(p.n_nodes, 3))
+    np.testing.assert_allclose(SK.bsr_matvec(p.indptr, p.indices, blocks, x).ravel(), A @ x.ravel(), atol=1e-12)
+
+
+def _drop(solver: str, steps: int = 60) -> Dynamics:
+    sim = Dynamics(hex_grid((2, 2, 2), origin=(0, 0.3, 0)), 50.0, 0.3, 1.0, ground=Ground(friction=0.5),
+                   solver=solver, cg_tol=1e-10)
+    for _ in range(steps):
+        sim.step(0.005)
+    return sim
+
+
+def test_solvers_agree():
+    a, b, c = (_drop(s, 80) for s in ("lu-pcg", "cg", "direct"))
+    np.testing.assert_allclose(a.u, c.u, atol=1e-7)
+    np.testing.assert_allclose(b.u, c.u, atol=1e-7)
+
+
+def test_falling_element_bounces_and_settles():
+    k = np.arange(6)
+    top = np.c_[0.4 * np.cos(k * np.pi / 3), np.full(6, 0.25), 0.4 * np.sin(k * np.pi / 3)]
+    bot = np.c_[0.45 * np.cos(k * np.pi / 3 + np.pi / 6), np.full(6, -0.25), 0.45 * np.sin(k * np.pi / 3 + np.pi / 6)]
+    poly = convex_polyhedron(np.r_[top, bot] @ Rotation.from_euler("xyz", [25, 10, 15], degrees=True).as_matrix().T
+                             + [0, 0.9, 0])
+    assert poly.n_nodes == 12
+    sim = Dynamics(poly, 50.0, 0.3, 1.0, ground=Ground(friction=0.5), rayleigh=(0.0, 0.01))
+    m = sim.masses
+    com, low, energy = [], [], []
+    for _ in range(800):
+        sim.step(0.004)
+        x = sim.positions()
+        com.append((m * x[:, 1]).sum() / m.sum())
+        low.append(x[:, 1].min())
+        energy.append(sim.kinetic_energy() + sim.elastic_energy())
+    com, low = np.array(com), np.array(low)
+    assert low.min() > -1e-9  # never below the ground
+    first = int(np.argmax(low < 1e-9))
+    bottom = first + int(np.argmin(com[first:first + 100]))
+    assert com[bottom:bottom + 150].max() > com[bottom] + 0.05  # it bounces back up ...
+    assert low[bottom:bottom + 150].max() > 1e-3  # ... and leaves the ground
+    assert energy[-1] < 0.05 * max(energy)  # and comes to rest (damped)
+    assert np.ptp(com[-100:]) < 0.02
+
+
+def test_fixed_and_moving_nodes_and_loads():
+    m = hex_grid((4, 1, 1), size=(4, 1, 1))
+    left = np.flatnonzero(m.points[:, 0] == 0)
+    right = np.flatnonzero(m.points[:, 0] == 4)
+    sim = Dynamics(m, 1e3, 0.3, 1.0, gravity=(0, 0, 0), prescribed=[Prescribed(left), Prescribed(right, (0.1, 0, 0),
+                                                                                                stop=0.5)],
+                   rayleigh=(1.0, 0.01))
+    for _ in range(50):
+        sim.step(0.01)
+    np.testing.assert_allclose(sim.u[right, 0], 0.05, atol=1e-12)  # moved with 0.1 for 0.5 s
+    for _ in range(50):
+        sim.step(0.01)
+    assert abs(sim.u[left]).max() == 0
+    assert sim.u[right, 0].max() < 0.04  # released: the stretched bar springs back
+    sim2 = Dynamics(m, 1e3, 0.0, 1.0, gravity=(0, 0, 0), prescribed=[Prescribed(left)],
+                    loads=[Load(right, (1.0, 0.0, 0.0))], rayleigh=(2.0, 0.0))
+    for _ in range(300):
+        sim2.step(0.05)
+    # the damped motion settles at the static solution (about 4e-3 = F L / (Y A))
+    from unmesh.fem import solve_static
+
+    f = np.zeros((m.n_nodes, 3))
+    f[right, 0] = 1.0 / len(right)
+    static = solve_static(m, 1e3, 0.0, left, f)
+    np.testing.assert_allclose(sim2.u, static, atol=2e-3 * abs(static).max())
+    assert static[right, 0].mean() == pytest.approx(4e-3, rel=0.03)
+
+
+def test_damping_dissipates_and_bad_arguments():
+    m = hex_grid((2, 2, 2))
+    with pytest.raises(InputError, match="solver"):
+        Dynamics(m, 1.0, 0.3, solver="magic")
+    with pytest.raises(InputError, match="density"):
+        Dynamics(m, 1.0, 0.3, density=-1.0)
+    sims = []
+    for ray in ((0.0, 0.0), (0.0, 0.05)):
+        s = Dynamics(m, 100.0, 0.3, gravity=(0, 0, 0), rayleigh=ray)
+        s.v[:, 0] = m.points[:, 1] - 0.5  # shear motion
+        for _ in range(20):
+            s.step(0.01)
+        sims.append(s.kinetic_energy() + s.elastic_energy())
+    assert sims[1] < sims[0]
+
+
+def test_reintegration_after_a_cut_equals_a_fresh_integration(rng):
+    from unmesh.fem import element_stiffness, integrate_elements
+    from unmesh.fem.cutting import PlaneCut, PolygonCut, apply_cuts
+
+    mesh = voronoi_foam(12, seed=5)
+    sim = Dynamics(mesh, 50.0, 0.3, 1.0, gravity=(0, 0, 0))
+    sim.u = rng.normal(size=sim.u.shape) * 1e-3
+    r = apply_cuts(mesh, [PlaneCut((0.5, 0.4, 0.5), (0.3, 1.0, 0.2)),
+                          PolygonCut(np.array([[-1, 0.7, -1], [2, 0.7, -1], [2, 0.7, 0.5], [-1, 0.7, 0.5]]))])
+    assert 0 < r.changed.sum() < r.mesh.n_elements
+    sim.change_topology(r.mesh, r.node_weights, r.element_parent, r.changed)
+    assert sim.flush() > 0
+    fresh = integrate_elements(r.mesh)
+    np.testing.assert_array_equal(sim.integ.nodes, fresh.nodes)
+    np.testing.assert_allclose(sim.integ.volumes, fresh.volumes, rtol=1e-12)
+    np.testing.assert_allclose(sim.integ.grads, fresh.grads, atol=1e-10 * abs(fresh.grads).max())
+    ks = element_stiffness(fresh, 50.0, 0.3)
+    np.testing.assert_allclose(sim.kstiff.data, ks.data, atol=1e-10 * abs(ks.data).max())
+    assert sim.masses.sum() == pytest.approx(mesh.volume(), rel=1e-12)
+    sim.step(0.01)  # and the dynamics run on the new mesh
