@@ -1,0 +1,199 @@
+"""Gallery examples of point-sampled thin shells (thesis chapter 7).
+
+Each example runs a shipped scene (``examples/shells/*.toml``), renders the dense surfel
+frames (discontinuity surfels are left out of the image) with one fixed camera into a video
+and a strip of stills, and reports figures read from ``summary.json``. ``ctx.quick`` runs
+them coarser and shorter.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unmesh.gallery import ExampleContext, example
+
+__all__ = ["render_frames", "run_shell_scene"]
+
+SECTION = "Thin shells"
+
+
+def run_shell_scene(ctx: ExampleContext, name: str, quick: dict[str, Any], duration: float | None = None) -> Path:
+    """Run ``examples/shells/NAME.toml`` into ``ctx.path(NAME)`` (with ``quick`` overrides in quick mode).
+
+    Returns the output directory.
+    """
+    from unmesh.scenes import path
+    from unmesh.shells.scene import build_shell_simulation
+    from unmesh.sim.cli import run_scene
+
+    out = ctx.path(name)
+    run_scene(path(f"shells/{name}.toml"), out, build_shell_simulation, overrides=quick if ctx.quick else None,
+              duration=duration, progress=ctx.progress)
+    return out
+
+
+def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path | None = None, size: int = 320,
+                  fps: float = 25.0) -> tuple[list[np.ndarray], Path | None]:
+    """Render selected frames (stills) and optionally every frame (video) with one camera.
+
+    Discontinuity surfels (attribute ``discontinuity == 1``) only clip edges (section 4.3)
+    and are not drawn.
+    """
+    from unmesh import io
+    from unmesh.render import Camera, render, write_video
+
+    files = sorted((outdir / "frames").glob("frame_*.ply"))
+    clouds = {}
+
+    def load(i: int) -> Any:
+        if i not in clouds:
+            c = io.load(files[i])
+            keep = c.attributes.get("discontinuity", np.zeros(len(c))) == 0
+            clouds.clear()
+            clouds[i] = c.subset(keep)
+        return clouds[i]
+
+    pts = np.concatenate([load(i).positions[::7] for i in np.linspace(0, len(files) - 1, 6).astype(int)])
+    cam = Camera.fit(pts, size, size, direction=direction)
+    stills = [render(load(min(i, len(files) - 1)), cam).color for i in frames]
+    written = None
+    if video is not None:
+        written = write_video((render(load(i), cam).color for i in range(len(files))), video, fps=fps)
+    return stills, written
+
+
+def _strip(ctx: ExampleContext, name: str, images: list[np.ndarray], caption: str) -> None:
+    from unmesh.render import save_image
+
+    path = ctx.path(f"{name}.png")
+    save_image(path, np.concatenate(images, axis=1))
+    ctx.image(path, caption)
+
+
+def _summary(outdir: Path) -> dict[str, Any]:
+    return json.loads((outdir / "summary.json").read_text())
+
+
+def _nodes(outdir: Path, frame: int) -> Any:
+    from unmesh import io
+
+    return io.load(outdir / "nodes" / f"frame_{frame:05d}.ply")
+
+
+def _times(ctx: ExampleContext, s: dict[str, Any]) -> None:
+    fr = s["frames"][1:]
+    for key in ("force_seconds", "fracture_seconds", "surface_seconds"):
+        ctx.metric(f"mean {key.replace('_seconds', '')} time per frame", round(float(1000 * np.mean([f[key] for f in fr])), 1),
+                   "ms")
+    ctx.metric("nodes / surfels / fibers", f"{s['nodes']} / {s['surfels']} / {s['fibers_initial']}")
+
+
+@example("shell-hanging-sheet", "A clamped sheet sags under gravity", SECTION)
+def hanging_sheet(ctx: ExampleContext) -> None:
+    """A 1 m sheet clamped along one edge sags into a smooth, symmetric shape and comes to rest."""
+    out = run_shell_scene(ctx, "hanging_sheet", {"surface.nodes": 150, "surface.spacing": 0.02,
+                                                 "simulation.duration": 1.0})
+    s = _summary(out)
+    last = len(s["frames"]) - 1
+    stills, video = render_frames(out, [0, last // 4, last // 2, last], (0.5, 0.3, 1.0),
+                                  ctx.path("hanging_sheet.mp4"))
+    _strip(ctx, "hanging_sheet", stills, "frames 0, 1/4, 1/2 and the end")
+    ctx.video(video, "the sheet sagging")
+    x = _nodes(out, last).positions
+    ctx.metric("tip sag", round(float(1.0 - x[:, 1].min()), 3), "m")
+    ctx.metric("mirror asymmetry of the sag (z -> -z)", round(float(_asymmetry(x)), 4), "m")
+    ctx.metric("final kinetic energy / max", f"{s['frames'][-1]['kinetic_energy'] / max(f['kinetic_energy'] for f in s['frames']):.2e}")
+    _times(ctx, s)
+
+
+def _asymmetry(x: np.ndarray) -> float:
+    """Mean |y(x, z) - y(x, -z)| between each node and its mirror image's nearest node."""
+    from unmesh.spatial import knn
+
+    mirror = x[:, [0, 2]] * [1.0, -1.0]
+    _, i = knn(x[:, [0, 2]], 1, queries=mirror)
+    return float(np.abs(x[:, 1] - x[i[:, 0], 1]).mean())
+
+
+@example("shell-elastic-drop", "An elastic dome bounces (Fig. 7.4)", SECTION)
+def elastic_drop(ctx: ExampleContext) -> None:
+    """An elastic dome (F.1: K_s = K_b = 25, D = 0.4, dt = 0.01) thrown on the floor deforms,
+    bounces and comes to rest."""
+    out = run_shell_scene(ctx, "elastic_drop", {"surface.nodes": 400, "surface.spacing": 0.5,
+                                                "simulation.duration": 3.0})
+    s = _summary(out)
+    last = len(s["frames"]) - 1
+    g = [f["gravity_energy"] for f in s["frames"]]
+    hit = int(np.argmin(g[: last // 2 + 1]))
+    stills, video = render_frames(out, [0, hit, hit + 5, last], (0.0, 0.35, 1.0), ctx.path("elastic_drop.mp4"))
+    _strip(ctx, "elastic_drop", stills, "before, at and after the impact, and the rest state")
+    ctx.video(video, "the dome bouncing")
+    ctx.metric("rise of the centre of mass after the impact (bounce)",
+               round(float((max(g[hit:]) - g[hit]) / (s["mass"] * 1.0)), 3), "units")
+    _times(ctx, s)
+
+
+@example("shell-plastic-drop", "A plastic bust dents (Fig. 7.5)", SECTION)
+def plastic_drop(ctx: ExampleContext) -> None:
+    """A heavy plastic blob (F.1: K_s = K_b = 1000, alpha = 2, beta = 0.2, D = 0.5) thrown on
+    the floor dents and stays dented."""
+    out = run_shell_scene(ctx, "plastic_drop", {"surface.nodes": 400, "surface.spacing": 0.6,
+                                                "simulation.duration": 2.5})
+    s = _summary(out)
+    last = len(s["frames"]) - 1
+    stills, video = render_frames(out, [0, last // 4, last // 2, last], (0.4, 0.3, 1.0),
+                                  ctx.path("plastic_drop.mp4"))
+    _strip(ctx, "plastic_drop", stills, "the blob denting on impact; the dent stays")
+    ctx.video(video, "plastic impact")
+    h0 = np.ptp(_nodes(out, 0).positions[:, 1])
+    h1 = np.ptp(_nodes(out, last).positions[:, 1])
+    ctx.metric("height after / before", round(float(h1 / h0), 3))
+    _times(ctx, s)
+
+
+@example("shell-tearing-poster", "A poster tears from a weak point (Fig. 7.8)", SECTION)
+def tearing_poster(ctx: ExampleContext) -> None:
+    """A poster (F.1: K_s = 1000, K_b = 10000, gamma_s = 0.02, D = 0.3, dt = 0.001) pulled
+    apart at its sides tears from a weak point at the top."""
+    from unmesh.errors import UnstableSimulationError
+
+    try:
+        out = run_shell_scene(ctx, "tearing_poster", {"surface.nodes": 500, "surface.spacing": 0.4,
+                                                      "simulation.duration": 2.0})
+        note = ""
+    except UnstableSimulationError as exc:
+        out = ctx.path("tearing_poster")
+        note = f" The run stopped early: {exc}"
+    s = _summary(out)
+    last = len(s["frames"]) - 1
+    stills, video = render_frames(out, [0, last // 3, 2 * last // 3, last], (0.0, 0.0, 1.0),
+                                  ctx.path("tearing_poster.mp4"))
+    _strip(ctx, "tearing_poster", stills, "the tear running down from the weak point")
+    ctx.video(video, "tearing")
+    ctx.text(f"Cracks: {s['frames'][-1]['cracks']}, pieces: {s['frames'][-1]['components']}.{note}")
+    ctx.metric("cracks", s["frames"][-1]["cracks"])
+    ctx.metric("pieces of the fiber graph", s["frames"][-1]["components"])
+    _times(ctx, s)
+
+
+@example("shell-balloon", "A balloon inflated until it tears (Fig. 7.10)", SECTION)
+def balloon(ctx: ExampleContext) -> None:
+    """A sphere (F.1: K_s = K_b = 100, gamma_s = 0.04, D = 0.4, dt = 0.001) under rising
+    pressure grows until it tears; the air escapes and the shell relaxes."""
+    out = run_shell_scene(ctx, "balloon", {"surface.nodes": 500, "surface.spacing": 0.4})
+    s = _summary(out)
+    last = len(s["frames"]) - 1
+    cracked = next((f["frame"] for f in s["frames"] if f["cracks"] > 0), last)
+    stills, video = render_frames(out, [0, max(cracked - 1, 0), min(cracked + 3, last), last], (0.6, 0.3, 1.0),
+                                  ctx.path("balloon.mp4"))
+    _strip(ctx, "balloon", stills, "at rest, inflated, tearing, relaxed")
+    ctx.video(video, "inflation and tear")
+    r0 = np.linalg.norm(_nodes(out, 0).positions, axis=1).mean()
+    r1 = np.linalg.norm(_nodes(out, max(cracked - 1, 0)).positions, axis=1).mean()
+    ctx.metric("radius growth before the tear", f"{100 * (r1 / r0 - 1):.1f}", "%")
+    ctx.metric("cracks", s["frames"][-1]["cracks"])
+    _times(ctx, s)

@@ -1,0 +1,169 @@
+"""Elastic forces of a fiber-sampled shell with numba kernels (thesis 7.2.2, eqs. 7.12-7.17).
+
+Same energy and forces as :func:`unmesh.shells.energy.elastic_forces_reference`, computed
+in the two passes of 7.2.2 (see :mod:`unmesh.shells._kernels`). The result also carries
+the current fiber lengths and angles and the node normals, which plasticity (7.19-7.23),
+fracture (7.24) and the pressure force reuse without recomputing them.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from unmesh.shells import _kernels
+from unmesh.shells.energy import FiberState
+from unmesh.shells.fibers import ARC_SAMPLES
+from unmesh.shells.topology import ShellTopology
+
+__all__ = ["ForceResult", "arc_weights", "elastic_forces", "threads_for"]
+
+#: Below this many work items the kernels run on one thread (thread start-up costs more).
+PARALLEL_MIN = 4000
+
+
+class threads_for:
+    """Run numba kernels single-threaded for small problems (``with threads_for(n): ...``).
+
+    Example
+    -------
+    >>> with threads_for(10):
+    ...     pass
+    """
+
+    def __init__(self, items: int) -> None:
+        self.serial = items < PARALLEL_MIN
+
+    def __enter__(self) -> None:
+        import numba
+
+        if self.serial:
+            self.previous = numba.get_num_threads()
+            numba.set_num_threads(1)
+
+    def __exit__(self, *exc: object) -> None:
+        import numba
+
+        if self.serial:
+            numba.set_num_threads(self.previous)
+
+
+@functools.lru_cache(maxsize=16)
+def arc_weights(samples: int) -> np.ndarray:
+    """Speed-sample weights (2n, 3) used by the kernels for ``samples`` = n per segment (B.4-B.6).
+
+    Example
+    -------
+    >>> arc_weights(1)
+    array([[-1.0625,  1.125 , -0.0625],
+           [ 0.0625, -1.125 ,  1.0625]])
+    """
+    from unmesh.shells.fibers import _samples
+
+    w = _kernels.sample_weights(_samples(samples))
+    w.setflags(write=False)
+    return w
+
+
+@dataclass(frozen=True, eq=False)
+class ForceResult:
+    """Output of :func:`elastic_forces`.
+
+    Attributes
+    ----------
+    forces : ndarray (N, 3)
+        ``-grad (E_s + E_b)``.
+    stretch_energy, bend_energy : ndarray (N,)
+        Per-node membrane (7.7) and bending (7.11) energy.
+    lengths, angles : ndarray (F,)
+        Current ``l~`` and ``theta`` of every fiber.
+    normals : ndarray (N, 3)
+        Current umbrella normals (zero where a node has no umbrella pairs).
+    umbrella : ndarray (N, 3)
+        Umbrella vectors ``s_i`` (twice the vector area of each node's fan).
+    node_terms : ndarray (N, 4)
+        ``A_i, A_i^0, H_i, H_i^0`` of every node (7.6, 7.9; zeros without fibers).
+    """
+
+    forces: np.ndarray
+    stretch_energy: np.ndarray
+    bend_energy: np.ndarray
+    lengths: np.ndarray
+    angles: np.ndarray
+    normals: np.ndarray
+    umbrella: np.ndarray
+    node_terms: np.ndarray
+
+    @property
+    def energy(self) -> float:
+        """Total elastic energy."""
+        return float(self.stretch_energy.sum() + self.bend_energy.sum())
+
+
+def elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, ks: float, kb: float,
+                   samples: int = ARC_SAMPLES, reference: np.ndarray | None = None,
+                   node_offsets: np.ndarray | None = None) -> ForceResult:
+    """Elastic forces on all nodes (7.16, two passes), energies and fiber measures.
+
+    Parameters
+    ----------
+    x : ndarray (N, 3) float64, C-contiguous
+        Node positions (not validated: this is the inner loop of the simulation).
+    topology : ShellTopology
+    state : FiberState
+        Rest state aligned with ``topology.fibers``.
+    ks, kb : float
+        ``K_s``, ``K_b``.
+    samples : int
+        Arc-length samples per segment.
+    reference : ndarray (F,), optional
+        Angles of the previous step: each ``theta`` is taken on the branch ``theta + 2 pi k``
+        nearest to it (continuity through folds); default the rest angles.
+    node_offsets : ndarray (N, 2), optional
+        Offsets ``(dA_i, dH_i)`` of the node terms, ``A_i - A_i^0 - dA_i`` and
+        ``H_i - H_i^0 - dH_i`` (kept by fracture so that rebuilding a node's fibers does not
+        change its node terms; default zero).
+
+    Returns
+    -------
+    ForceResult
+
+    Example
+    -------
+    >>> from unmesh.shells.nodes import grid_sheet
+    >>> x, topo = grid_sheet(5, 5)
+    >>> state = FiberState.at_rest(x, topo)
+    >>> r = elastic_forces(x * 1.01, topo, state, 100.0, 1.0)
+    >>> bool(np.abs(r.forces.sum(axis=0)).max() < 1e-9), r.energy > 0
+    (True, True)
+    """
+    with threads_for(len(topology.fibers)):
+        return _elastic_forces(x, topology, state, ks, kb, samples, reference, node_offsets)
+
+
+def _elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, ks: float, kb: float, samples: int,
+                    reference: np.ndarray | None, node_offsets: np.ndarray | None) -> ForceResult:
+    n = topology.n_nodes
+    nf = len(topology.fibers)
+    s = np.empty((n, 3))
+    normals = np.empty((n, 3))
+    _kernels.umbrella(x, topology.pairs, topology.pair_offsets, s, normals)
+    lengths = np.empty(nf)
+    angles = np.empty(nf)
+    fgrad = np.empty((nf, 3, 3))
+    gs = np.empty((n, 3))
+    es = np.empty(n)
+    eb = np.empty(n)
+    node = np.empty((n, 4))
+    offsets = np.zeros((n, 2)) if node_offsets is None else node_offsets
+    _kernels.fiber_pass(x, s, topology.soft, topology.fibers, topology.fiber_offsets, state.rest_length(),
+                        state.rest_angle(), state.stretch_scale, state.bend_scale, float(ks), float(kb),
+                        arc_weights(int(samples)), state.rest_angle() if reference is None else reference,
+                        offsets, lengths, angles, fgrad, gs, es, eb, node, np.empty((nf, 3, 3)), np.empty((nf, 3)))
+    forces = np.empty((n, 3))
+    _kernels.gather_forces(x, fgrad, topology.fiber_incidence_offsets, topology.fiber_incidence, gs,
+                           topology.pairs, topology.pair_offsets, topology.pair_center,
+                           topology.pair_incidence_offsets, topology.pair_incidence, forces)
+    return ForceResult(forces, es, eb, lengths, angles, normals, s, node)

@@ -1,0 +1,335 @@
+"""Surface animation: the dense surfel cloud follows the simulation nodes (thesis 7.4, 7.26-7.30).
+
+Every *passive point* ``p`` (each dense surfel, and each discontinuity surfel at a crack)
+is bound to its nearest simulation nodes ``x_0 .. x_K`` in the rest state, sorted by
+distance. With ``N`` the normal of the least-squares plane through them, each further
+node ``x_i`` spans a local frame (7.26)::
+
+    e1 = x_i - x_0,   e2 = N x e1 / |e1|,   e3 = e2 x e1 / |e1|
+
+``p - x_0`` is stored in local coordinates ``y_k = (p - x_0).e_k / |e_k|^2`` (7.27), and
+after deformation ``p'_i = x'_0 + sum_k y_k e'_k`` (7.28) is blended with weights
+``w_i = w(|x_i - p| / |x_K - p|)`` (7.29, 7.30) where ``w(r) = ((1 - r) / r)^2`` has
+``w(0) = inf`` and ``w(1) = 0`` (so ``x_K`` only sets the radius). Tangent axes are mapped
+the same way as vectors (without ``x_0``), and the normal is their cross product, so
+normals and axes rotate and stretch with the shell. Rigid motions are reproduced exactly.
+
+With cracks, only nodes *visible* from ``p`` (7.3.2) are bound, so the two sides of a tear
+separate cleanly; each crack also adds a pair of *discontinuity surfels* with opposite
+normals on either side of the crack plane (for the edge clipping of 4.3; written with the
+per-surfel attribute ``discontinuity = 1``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from unmesh._validate import as_points
+from unmesh.errors import InputError
+from unmesh.shells import _skinning_kernels as _sk
+from unmesh.shells.forces import threads_for
+from unmesh.surfels import SurfelCloud
+
+__all__ = ["DEFAULT_SKIN_NODES", "SkinnedSurface", "bind_points", "deform_reference", "skin_weight"]
+
+#: Nodes per passive point: x_0 and K further nodes (K - 1 weighted frames).
+DEFAULT_SKIN_NODES = 6
+
+
+def skin_weight(r: np.ndarray) -> np.ndarray:
+    """The blending weight ``w(r) = ((1 - r)/r)^2`` of (7.30): w(0) = inf, w(1) = 0.
+
+    Example
+    -------
+    >>> skin_weight(np.array([0.5, 1.0]))
+    array([1., 0.])
+    """
+    r = np.asarray(r, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        return np.where(r < 1, ((1 - r) / np.maximum(r, 1e-12)) ** 2, 0.0)
+
+
+def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocked: Any = None,
+                tree: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    """Bind points to their nearest (visible) nodes: indices (S, K+1) and frame weights (S, K).
+
+    Parameters
+    ----------
+    points : array_like (S, 3)
+        Rest positions of the passive points.
+    node_rest : array_like (N, 3)
+        Rest positions of the nodes.
+    k : int
+        Frame nodes per point (besides the nearest node ``x_0``).
+    blocked : callable, optional
+        ``blocked(p, q) -> bool (M,)`` crack visibility test; hidden nodes are skipped (a
+        point that sees none of its ``3 (K + 1)`` nearest nodes follows the nearest one).
+    tree : unmesh.spatial.KDTree, optional
+        Tree over ``node_rest`` to reuse.
+
+    Returns
+    -------
+    bind : ndarray (S, K + 1) int64
+        ``x_0`` first, then frame nodes by distance; -1 where fewer nodes are visible.
+    weights : ndarray (S, K)
+        ``w(|x_i - p| / |x_last - p|)`` for the frame nodes, the last (radius) node 0.
+
+    Example
+    -------
+    >>> nodes = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 2, 0]])
+    >>> b, w = bind_points([[0.1, 0.1, 0]], nodes, k=3)
+    >>> b.tolist(), bool(w[0, 2] == 0)
+    ([[0, 1, 2, 3]], True)
+    """
+    from unmesh.spatial import KDTree
+
+    p = as_points(points, "points")
+    x = as_points(node_rest, "node_rest")
+    if int(k) != k or k < 1:
+        raise InputError(f"skin_nodes: expected a positive integer, got {k!r}")
+    want = int(min(k + 1, len(x)))
+    cand = want if blocked is None else int(min(3 * want, len(x)))
+    t = tree if tree is not None else KDTree(x)
+    dist, idx = t.knn(p, cand)
+    keep = idx >= 0
+    if blocked is not None and len(p):
+        rows = np.repeat(np.arange(len(p)), cand).reshape(idx.shape)
+        m = np.flatnonzero(keep)
+        hit = blocked(p[rows.reshape(-1)[m]], x[idx.reshape(-1)[m]])
+        flat = keep.reshape(-1)
+        flat[m[hit]] = False
+        keep = flat.reshape(idx.shape)
+    # a point hidden from every candidate (a sliver between two cracks) follows its nearest node
+    lost = ~keep.any(axis=1) & (idx[:, 0] >= 0)
+    keep[lost, 0] = True
+    rank = np.cumsum(keep, axis=1)
+    keep &= rank <= want
+    bind = np.full((len(p), k + 1), -1, dtype=np.int64)
+    dd = np.full((len(p), k + 1), np.inf)
+    col = rank - 1
+    r_, c_ = np.nonzero(keep)
+    bind[r_, col[r_, c_]] = idx[r_, c_]
+    dd[r_, col[r_, c_]] = dist[r_, c_]
+    count = (bind >= 0).sum(axis=1)
+    last = np.take_along_axis(dd, np.maximum(count - 1, 0)[:, None], axis=1)
+    weights = np.zeros((len(p), k))
+    frames = dd[:, 1:]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        weights = np.where(np.isfinite(frames), skin_weight(frames / np.maximum(last, 1e-300)), 0.0)
+    # two visible nodes only: the single frame gets weight 1 (no radius node to spare)
+    weights[count == 2, 0] = 1.0
+    return bind, weights
+
+
+def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray, rest_normals: np.ndarray,
+                     bind: np.ndarray, weights: np.ndarray, points: np.ndarray,
+                     axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Plain numpy version of the skinning kernel (7.26-7.30), for tests.
+
+    Returns
+    -------
+    points : ndarray (S, 3)
+    axes : ndarray (S, 2, 3)
+    """
+    out_p = np.empty_like(points)
+    out_a = np.empty_like(axes)
+
+    def plane(x, nrm, nodes):
+        nodes = nodes[nodes >= 0]
+        o = nrm[nodes].sum(axis=0)
+        if len(nodes) < 3:
+            return o / np.linalg.norm(o)
+        d = x[nodes] - x[nodes].mean(axis=0)
+        _, vec = np.linalg.eigh(d.T @ d)
+        v = vec[:, 0]
+        return v if v @ o >= 0 else -v
+
+    def frame(x, o, j, n):
+        e1 = x[j] - x[o]
+        ln = np.linalg.norm(e1)
+        e2 = np.cross(n, e1) / ln
+        e3 = np.cross(e2, e1) / ln
+        return np.stack([e1, e2, e3])
+
+    for s in range(len(points)):
+        o = bind[s, 0]
+        n_rest = plane(rest, rest_normals, bind[s])
+        n_cur = plane(cur, cur_normals, bind[s])
+        acc_p, acc_a, wsum = np.zeros(3), np.zeros((2, 3)), 0.0
+        for i in range(weights.shape[1]):
+            j, w = bind[s, i + 1], weights[s, i]
+            if j < 0 or w <= 0:
+                continue
+            f, g = frame(rest, o, j, n_rest), frame(cur, o, j, n_cur)
+            coord = lambda d, f=f: (f @ d) / np.einsum("ij,ij->i", f, f)  # noqa: E731
+            acc_p += w * (coord(points[s] - rest[o]) @ g)
+            acc_a += w * np.stack([coord(axes[s, 0]) @ g, coord(axes[s, 1]) @ g])
+            wsum += w
+        if wsum > 0:
+            out_p[s] = cur[o] + acc_p / wsum
+            out_a[s] = acc_a / wsum
+        else:
+            out_p[s] = cur[o] + points[s] - rest[o]
+            out_a[s] = axes[s]
+    return out_p, out_a
+
+
+class SkinnedSurface:
+    """The dense surfel cloud of a shell, bound to its simulation nodes, plus crack surfels.
+
+    Parameters
+    ----------
+    cloud : SurfelCloud
+        Dense surface in the rest state.
+    node_rest : ndarray (N, 3)
+        Rest positions of the simulation nodes.
+    node_normals : ndarray (N, 3)
+        Rest normals of the nodes (orientation of the local planes).
+    skin_nodes : int
+        Frame nodes per point ``K``.
+
+    Example
+    -------
+    >>> from unmesh.shells.nodes import grid_sheet
+    >>> x, _ = grid_sheet(4, 4)
+    >>> cloud = SurfelCloud(x[:5] + [0.3, 0.2, 0], np.tile([0, 0, 1.0], (5, 1)), radii=np.full(5, 0.5))
+    >>> surf = SkinnedSurface(cloud, x, np.tile([0, 0, 1.0], (16, 1)), skin_nodes=4)
+    >>> moved = surf.deform(x + [0, 0, 2.0], np.tile([0, 0, 1.0], (16, 1)))
+    >>> bool(np.allclose(moved.positions, cloud.positions + [0, 0, 2]))
+    True
+    """
+
+    def __init__(self, cloud: SurfelCloud, node_rest: np.ndarray, node_normals: np.ndarray,
+                 skin_nodes: int = DEFAULT_SKIN_NODES) -> None:
+        from unmesh.spatial import KDTree
+
+        self.cloud = cloud
+        self.node_rest = np.ascontiguousarray(node_rest, dtype=np.float64)
+        self.node_normals = np.ascontiguousarray(node_normals, dtype=np.float64)
+        self.k = int(skin_nodes)
+        self.tree = KDTree(self.node_rest)
+        axes = cloud.tangent_axes()
+        self.points = np.ascontiguousarray(cloud.positions)
+        self.axes = np.ascontiguousarray(axes)
+        cross = np.cross(axes[:, 0], axes[:, 1])
+        self.orient = np.where(np.einsum("ij,ij->i", cross, cloud.normals) >= 0, 1.0, -1.0)
+        self.colors = cloud.colors
+        self.discontinuity = np.zeros(len(cloud), dtype=np.uint8)
+        self.bind, self.weights = bind_points(self.points, self.node_rest, self.k, tree=self.tree)
+        self.plane = self._planes(self.bind)
+        self._reach = self._max_reach()
+        from unmesh.shells.topology import csr_from_groups
+
+        # surfels of the dense cloud grouped by their nearest node at rest (never changes)
+        self._owned_offsets, self._owned = csr_from_groups(self.bind[:, 0].copy(), len(self.node_rest))
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def _planes(self, bind: np.ndarray) -> np.ndarray:
+        out = np.empty((len(bind), 3))
+        if len(bind):
+            _sk.rest_plane_normals(self.node_rest, self.node_normals, bind, out)
+        return out
+
+    def _max_reach(self, rows: Any = None) -> float:
+        bind = self.bind if rows is None else self.bind[rows]
+        pts = self.points if rows is None else self.points[rows]
+        valid = bind >= 0
+        if not valid.any():
+            return 0.0
+        d = np.where(valid, np.linalg.norm(self.node_rest[np.maximum(bind, 0)] - pts[:, None], axis=2), 0)
+        return float(d.max())
+
+    def rebind_near(self, centers: np.ndarray, radius: float, blocked: Any) -> int:
+        """Bind again, with visibility, every point within reach of the given crack centres.
+
+        Returns the number of points re-bound.
+        """
+        if len(centers) == 0 or len(self.points) == 0:
+            return 0
+        c = np.asarray(centers, dtype=np.float64)
+        reach = self._reach + radius
+        # candidates: surfels owned by nodes within reach + (surfel-to-owner distance <= reach)
+        _, near = self.tree.radius_neighbors(c, 2.0 * reach)
+        near = np.unique(near)
+        rows = np.concatenate([self._owned[self._owned_offsets[i]:self._owned_offsets[i + 1]] for i in near]
+                              + [np.arange(len(self.cloud), len(self.points))])
+        if len(rows) == 0:
+            return 0
+        d = np.min(np.linalg.norm(self.points[rows][:, None, :] - c[None, :, :], axis=2), axis=1)
+        rows = np.unique(rows[d <= reach])
+        if len(rows) == 0:
+            return 0
+        b, w = bind_points(self.points[rows], self.node_rest, self.k, blocked=blocked, tree=self.tree)
+        self.bind[rows], self.weights[rows] = b, w
+        self.plane[rows] = self._planes(b)
+        self._reach = max(self._reach, self._max_reach(rows))
+        return len(rows)
+
+    def add_discontinuity(self, center: np.ndarray, normal: np.ndarray, radius: float, surface_normal: np.ndarray,
+                          blocked: Any) -> None:
+        """Add the two discontinuity surfels of one crack disc; see :meth:`add_discontinuities`."""
+        self.add_discontinuities([center], [normal], [radius], [surface_normal], blocked)
+
+    def add_discontinuities(self, centers: Any, normals: Any, radii: Any, surface_normals: Any, blocked: Any) -> None:
+        """Add the two discontinuity surfels of each crack disc (rest coordinates), bound with visibility.
+
+        They sit a tenth of the radius to either side of the crack plane; each faces away
+        from its own side (towards the gap), spans the crack line and the surface normal,
+        and takes the colour of a surfel of the nearest node.
+        """
+        pts, axes, facing, colors = [], [], [], []
+        for center, normal, radius, surface_normal in zip(centers, normals, radii, surface_normals, strict=True):
+            n = np.asarray(normal, dtype=np.float64)
+            n = n / np.linalg.norm(n)
+            sn = np.asarray(surface_normal, dtype=np.float64)
+            along = np.cross(sn, n)
+            along /= np.linalg.norm(along)
+            up = sn - (sn @ n) * n
+            up /= np.linalg.norm(up)
+            pts += [center + 0.1 * radius * n, center - 0.1 * radius * n]
+            axes += [np.stack([radius * along, radius * up])] * 2
+            facing += [-n, n]
+            _, node = self.tree.knn(np.asarray(center, dtype=np.float64)[None], 1)
+            owned = self._owned[self._owned_offsets[node[0, 0]]:self._owned_offsets[node[0, 0] + 1]]
+            colors += [self.colors[owned[0]] if len(owned) else self.colors[0]] * 2
+        if not pts:
+            return
+        p, a = np.asarray(pts), np.asarray(axes)
+        cross = np.cross(a[:, 0], a[:, 1])
+        orient = np.where(np.einsum("ij,ij->i", cross, np.asarray(facing)) >= 0, 1.0, -1.0)
+        b, w = bind_points(p, self.node_rest, self.k, blocked=blocked, tree=self.tree)
+        self.points = np.concatenate([self.points, p])
+        self.axes = np.concatenate([self.axes, a])
+        self.orient = np.concatenate([self.orient, orient])
+        self.colors = np.concatenate([self.colors, np.asarray(colors)])
+        self.discontinuity = np.concatenate([self.discontinuity, np.ones(len(p), dtype=np.uint8)])
+        self.bind = np.concatenate([self.bind, b])
+        self.weights = np.concatenate([self.weights, w])
+        self.plane = np.concatenate([self.plane, self._planes(b)])
+
+    def deform(self, node_positions: np.ndarray, node_normals: np.ndarray) -> SurfelCloud:
+        """The deformed cloud for current node positions and (umbrella) normals.
+
+        Returns
+        -------
+        SurfelCloud
+            Circular surfels (radius = longer deformed tangent axis) with the per-surfel
+            attribute ``discontinuity`` (uint8, 1 for crack surfels).
+        """
+        s = len(self.points)
+        out_p = np.empty((s, 3))
+        out_a = np.empty((s, 2, 3))
+        out_n = np.empty((s, 3))
+        with threads_for(s // 4):
+            _sk.deform(self.node_rest, np.ascontiguousarray(node_positions), np.ascontiguousarray(node_normals),
+                       self.bind, self.weights, self.plane, self.points, self.axes, self.orient, out_p, out_a, out_n)
+        radii = np.linalg.norm(out_a, axis=2).max(axis=1)
+        radii = np.where(radii > 0, radii, 1e-9)
+        bad = ~(np.linalg.norm(out_n, axis=1) > 0)
+        out_n[bad] = (0.0, 0.0, 1.0)
+        return SurfelCloud(out_p, out_n, radii=radii, colors=self.colors,
+                           attributes={"discontinuity": self.discontinuity})

@@ -1,0 +1,124 @@
+"""Fracture (7.24, 7.3.2): crack discs, visibility, neighbourhood and fiber rebuild, tearing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.shells.conftest import Box, grid_cloud, grid_nodes
+from unmesh.shells import CrackSet, FiberState, ShellMaterial, ShellSimulation, build_topology
+from unmesh.shells.fracture import fracture_candidates, rebuild_near, select_cracks
+
+
+def blocked_reference(p, q, cracks):
+    out = np.zeros(len(p), bool)
+    for c, n, r in zip(cracks.centers, cracks.normals, cracks.radii, strict=True):
+        dp, dq = (p - c) @ n, (q - c) @ n
+        cross = (dp >= 0) != (dq >= 0)
+        t = np.where(cross, dp / np.where(cross, dp - dq, 1.0), 0.0)
+        hit = p + t[:, None] * (q - p)
+        out |= cross & (np.linalg.norm(hit - c, axis=1) <= r)
+    return out
+
+
+def test_segments_blocked_matches_reference(rng):
+    cracks = CrackSet()
+    for _ in range(20):
+        cracks.add(rng.uniform(-1, 1, 3), rng.normal(size=3), rng.uniform(0.1, 0.5), 0, 0.0)
+    p, q = rng.uniform(-1.5, 1.5, (2000, 3)), rng.uniform(-1.5, 1.5, (2000, 3))
+    got = cracks.blocked(p, q)
+    np.testing.assert_array_equal(got, blocked_reference(p, q, cracks))
+    assert 0 < got.sum() < len(p)
+    # a node on the disc belongs to the + side
+    c = CrackSet()
+    c.add([0.0, 0, 0], [1.0, 0, 0], 1.0, 0, 0.0)
+    assert c.blocked(np.zeros((2, 3)), np.array([[-0.5, 0, 0], [0.5, 0, 0]])).tolist() == [True, False]
+
+
+def test_fracture_candidates_follow_7_24():
+    s = FiberState.uniform([1.0, 1.0, 1.0, 1.0], [0.0, 0.0, 0.0, 0.1], fracture_stretch=0.02, fracture_bend=0.5)
+    idx, exc = fracture_candidates(s, np.array([1.01, 1.03, 0.5, 1.0]), np.array([0.0, 0.0, 0.0, 0.7]))
+    assert idx.tolist() == [1, 3]
+    np.testing.assert_allclose(exc, [1.5, 1.2])
+
+
+def test_rebuild_cuts_every_fiber_across_the_crack():
+    """After a crack, no neighbour segment crosses a disc and no fiber spans it (Fig. 7.7)."""
+    cloud = grid_cloud(41, 41, 0.025)
+    idx = grid_nodes(41, 41, 2)
+    rest = cloud.positions[idx]
+    topo = build_topology(rest, cloud.normals[idx])
+    state = FiberState.at_rest(rest, topo)
+    cracks = CrackSet()
+    i = int(np.argmin(np.linalg.norm(rest, axis=1)))
+    cracks.add(rest[i], [1.0, 0, 0], 0.2, i, 0.0)
+    near = np.flatnonzero(np.linalg.norm(rest - rest[i], axis=1) < 0.6)
+    mat = ShellMaterial(ks=1.0, kb=1.0)
+    new_topo, new_state, origin = rebuild_near(rest, cloud.normals[idx], topo, state, cracks, near, 12, 120.0,
+                                       mat.fiber_material)
+    assert len(new_state) == len(new_topo.fibers) == len(origin)
+    kept = origin >= 0
+    np.testing.assert_array_equal(topo.fibers[origin[kept]], new_topo.fibers[kept])
+    rows = np.repeat(np.arange(new_topo.n_nodes), np.diff(new_topo.neighbor_offsets))
+    assert not cracks.blocked(rest[rows], rest[new_topo.neighbors]).any()
+    f = new_topo.fibers
+    assert not cracks.blocked(rest[f[:, 0]], rest[f[:, 1]]).any()
+    assert not cracks.blocked(rest[f[:, 1]], rest[f[:, 2]]).any()
+    crossing = cracks.blocked(rest[topo.fibers[:, 0]], rest[topo.fibers[:, 1]]) | cracks.blocked(
+        rest[topo.fibers[:, 1]], rest[topo.fibers[:, 2]])
+    assert crossing.sum() > 0   # there were fibers across the crack before
+    # a brand-new state at rest: zero energy and force
+    from unmesh.shells import elastic_forces
+
+    r = elastic_forces(rest, new_topo, new_state, 10.0, 10.0)
+    assert np.abs(r.forces).max() < 1e-9
+
+
+def test_select_cracks_uses_the_fiber_tangent():
+    cloud = grid_cloud(21, 21, 0.05)
+    idx = grid_nodes(21, 21, 2)
+    rest = cloud.positions[idx]
+    topo = build_topology(rest, cloud.normals[idx])
+    f = topo.fibers
+    k = int(np.flatnonzero(np.abs((rest[f[:, 2]] - rest[f[:, 0]])[:, 2]) < 1e-9)[0])   # a fiber along x
+    chosen = select_cracks(np.array([k]), topo, rest, cloud.normals[idx], CrackSet())
+    node, _center, normal, radius = chosen[0]
+    assert node == f[k, 1]
+    np.testing.assert_allclose(np.abs(normal), [1.0, 0, 0], atol=1e-12)
+    assert radius == pytest.approx(0.1 * (4 + 4 * np.sqrt(2)) / 8 * 6 / 6, rel=0.3)
+
+
+def test_torn_sheet_ends_in_two_pieces():
+    """A strip pulled apart at its ends tears through at its weak middle: two pieces."""
+    from unmesh.shells import MaterialRegion
+
+    cloud = grid_cloud(61, 21, 0.02)
+    idx = grid_nodes(61, 21, 2)
+    mat = ShellMaterial(ks=1000.0, kb=100.0, damping=2.0, density=2.0, fracture_stretch=0.03,
+                        regions=(MaterialRegion(Box([-0.03, -1, -1], [0.03, 1, 1]), fracture=0.5),
+                                 MaterialRegion(Box([-1, -1, -1], [-0.4, 1, 1]), fracture=5.0),   # reinforced grips
+                                 MaterialRegion(Box([0.4, -1, -1], [1, 1, 1]), fracture=5.0)))
+    sim = ShellSimulation(cloud, mat, 0.0005, node_indices=idx, gravity=(0, 0, 0), total_area=1.2 * 0.4,
+                          handles=[{"region": Box([-1, -1, -1], [-0.55, 1, 1]), "velocity": (-0.2, 0, 0)},
+                                   {"region": Box([0.55, -1, -1], [1, 1, 1]), "velocity": (0.2, 0, 0)}])
+    for step in range(4000):
+        sim.step()
+        assert sim.check() is None
+        if step % 50 == 0 and len(sim.cracks):
+            count, labels = sim.topology.components()
+            sizes = np.sort(np.bincount(labels))[::-1]
+            if count >= 2 and sizes[1] > 0.3 * len(sim.rest):
+                break
+    count, labels = sim.topology.components()
+    sizes = np.sort(np.bincount(labels))[::-1]
+    assert len(sim.cracks) > 0
+    assert sizes[1] > 0.3 * len(sim.rest)   # two big pieces
+    left = labels == labels[np.argmin(sim.rest[:, 0])]
+    big = np.bincount(labels)[labels] > 5
+    assert np.all(sim.rest[left & big, 0] < 0.1)
+    # each piece carries discontinuity surfels with opposite normals
+    surf = sim.deformed_surface()
+    disc = surf.attributes["discontinuity"] == 1
+    assert disc.sum() == 2 * len(sim.cracks)
+    n = surf.normals[disc].reshape(-1, 2, 3)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", n[:, 0], n[:, 1]), -1.0, atol=0.2)
