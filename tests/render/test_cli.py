@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from .conftest import fibonacci_sphere
 from unmesh import Particles, TriangleMesh, io
 from unmesh.cli import main
+
+from .conftest import fibonacci_sphere
 
 
 @pytest.fixture

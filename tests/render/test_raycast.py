@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from .conftest import fibonacci_sphere
 from unmesh import SurfelCloud
 from unmesh.render import Camera, render
+
+from .conftest import fibonacci_sphere
 
 
 @pytest.fixture(scope="module")

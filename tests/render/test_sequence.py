@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from .conftest import fibonacci_sphere
 from unmesh import Particles, SurfelCloud, TriangleMesh, io
 from unmesh.errors import InputError
 from unmesh.render import Camera, find_frames, render_sequence, turntable
+
+from .conftest import fibonacci_sphere
 
 
 def sph_like(path, frames=3):

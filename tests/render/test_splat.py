@@ -6,11 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from .conftest import fibonacci_sphere
 from unmesh import SurfelCloud
 from unmesh.render import Camera, ClipPlanes, SplatOptions, SplatRenderer, render
 from unmesh.render._reference import splat_reference
 from unmesh.render.splat import surfel_arrays
+
+from .conftest import fibonacci_sphere
 
 CAMERAS = {
     "perspective": Camera((0.3, 0.2, 3), (0, 0, 0), width=48, height=40, fov=50),

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ..surfels.helpers import uncovered
 from unmesh.shapes import Blob, Box, Cylinder, Disc, Plane, Sphere, Torus, euler_rotation
 from unmesh.spatial import knn
+
+from ..surfels.helpers import uncovered
 
 ROT = euler_rotation([10.0, 25.0, -40.0])
 CLOSED = [
