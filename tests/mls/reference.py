@@ -96,11 +96,18 @@ def inside(surf: MLSSurface, x: np.ndarray) -> np.ndarray:
     return ~(np.einsum("ij,ij->i", x - p, n) > 0)  # (3.9), sign corrected
 
 
+#: Number of regula-falsi steps taken by :func:`intersect` (lets tests check that the bracketing ran).
+BRACKET_STEPS = [0]
+
+
 def intersect(surf: MLSSurface, o: np.ndarray, d: np.ndarray, max_iter: int = 30, tol: float = 1e-7,
-              eps2: float = 0.5, max_attempts: int = 32):
-    """Algorithm 3.1 with brute-force disc starts; returns (t, hit)."""
+              eps2: float = 0.5, max_attempts: int = 32, bracket: bool = True):
+    """Algorithm 3.1 with brute-force disc starts; returns (t, hit).
+
+    ``bracket=False``: plain plane steps only (no regula falsi once a bracket exists).
+    """
     c = surf.cloud
-    rho = np.minimum(np.maximum(c.radii, surf.sigmas), surf.grid.cell_size)
+    rho = np.minimum(np.maximum(c.radii, surf.sigmas), surf.support * (1 + 1e-6))
     t_out = np.full(len(o), np.inf)
     hit = np.zeros(len(o), bool)
     for i in range(len(o)):
@@ -119,6 +126,8 @@ def intersect(surf: MLSSurface, o: np.ndarray, d: np.ndarray, max_iter: int = 30
             j = np.flatnonzero(cand)[np.argmin(th[cand])]
             t0 = t = th[j]
             conv = False
+            a = b = None  # bracket ends (t, step) with step > 0 / step < 0
+            last = 0
             for _ in range(max_iter):
                 fit = local_fit(surf, oo + t * dd)
                 if fit is None:
@@ -127,12 +136,27 @@ def intersect(surf: MLSSurface, o: np.ndarray, d: np.ndarray, max_iter: int = 30
                 nd = n @ dd
                 if abs(nd) < 1e-3 * dn:
                     break
-                tn = t + n @ (p - (oo + t * dd)) / nd  # plane-ray intersection (Alg. 3.1, line 4)
+                g = n @ (p - (oo + t * dd)) / nd  # plane-ray intersection (Alg. 3.1, line 4)
+                tn = t + g
                 if abs(tn - t0) * dn > surf.support:
                     break
-                if abs(tn - t) * dn <= tol * sl:
+                if abs(g) * dn <= tol * sl:
                     conv, t = True, tn
                     break
+                if g > 0:
+                    if last == 1 and b is not None:
+                        b = (b[0], b[1] / 2)  # Illinois
+                    a, last = (t, g), 1
+                else:
+                    if last == 2 and a is not None:
+                        a = (a[0], a[1] / 2)
+                    b, last = (t, g), 2
+                if bracket and a is not None and b is not None:
+                    if abs(b[0] - a[0]) * dn <= tol * sl:
+                        conv, t = True, tn
+                        break
+                    tn = (a[0] * b[1] - b[0] * a[1]) / (b[1] - a[1])  # regula falsi in the bracket
+                    BRACKET_STEPS[0] += 1
                 t = tn
             if conv and t > 0:
                 if np.linalg.norm(q - (oo + t * dd)) < eps2 * sl:
@@ -140,3 +164,16 @@ def intersect(surf: MLSSurface, o: np.ndarray, d: np.ndarray, max_iter: int = 30
                     break
             tlo = th[j] + rho[j] / dn
     return t_out, hit
+
+
+def interpolate(surf: MLSSurface, x: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """MLS-weighted average of per-surfel ``values`` (N, k) at ``x`` (M, 3); nearest surfel where no kernel reaches."""
+    c = surf.cloud
+    out = np.empty((len(x), values.shape[1]))
+    for i, xx in enumerate(x):
+        w = _weights(((c.positions - xx) ** 2).sum(1), surf.sigmas, surf.cutoff, surf.kernel)
+        if w.sum() > 0:
+            out[i] = (w[:, None] * values).sum(0) / w.sum()
+        else:
+            out[i] = values[np.argmin(((c.positions - xx) ** 2).sum(1))]
+    return out

@@ -137,3 +137,24 @@ def ray_torus(o: np.ndarray, d: np.ndarray, R: float = 1.0, r: float = 0.35) -> 
                 out[i] = t
                 break
     return out
+
+
+def varying_sphere_cloud(h0: float, ratio: float = 5.0, radius: float = 1.0) -> SurfelCloud:
+    """Unit-sphere spiral whose spacing (and surfel radius) grows ``ratio``-fold from z = -1 to z = 1.
+
+    Local spacing ``h(z) = h0·(1 + (ratio - 1)(z + 1)/2)``: the z of the samples follow the
+    cumulative density ``∝ ∫ dz / h(z)²`` (hexagonal-like density ``2/(√3 h²)`` per area),
+    longitudes the golden angle; radii ``RADIUS_FACTOR·h(z)``.
+    """
+    b = (ratio - 1.0) / 2.0
+    a = 1.0 + b
+    total = (1.0 - 1.0 / ratio) / b  # ∫_{-1}^{1} dz / (a + b z)²
+    n = int(np.rint(2 * np.pi * 2 / (np.sqrt(3) * (h0 * radius) ** 2) * total))
+    i = np.arange(n) + 0.5
+    u = i / n * total
+    z = (1.0 / (1.0 - b * u) - a) / b
+    rr = np.sqrt(np.clip(1 - z * z, 0.0, None))
+    phi = GOLDEN * i
+    nrm = np.stack([rr * np.cos(phi), rr * np.sin(phi), z], axis=1)
+    h = h0 * radius * (a + b * z)
+    return SurfelCloud(nrm * radius, nrm, radii=RADIUS_FACTOR * h)

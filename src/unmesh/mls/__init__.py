@@ -8,14 +8,17 @@
 * :func:`inside` — inside/outside test (3.9, sign corrected).
 * :func:`intersect` — first ray–surface intersection (Algorithm 3.1) for many rays,
   with normals, for ray-cast rendering.
-* :class:`MLSSurface` — the kernel options plus a prepared search grid; build one for
+* :func:`interpolate` — MLS-weighted interpolation of any per-surfel attribute
+  (colours, scalars) at arbitrary points, with the weights of the local fit.
+* :class:`MLSSurface` — the kernel options plus prepared search grids; build one for
   repeated queries on the same cloud.
 
 Weights are ``w_i(x) = φ(‖x − x_i‖/σ_i)`` with the clipped Gaussian (3.11) or
 Wendland C² (3.12) kernel of :mod:`unmesh.kernels`, per-sample widths
 ``σ_i = sigma_factor·r_i`` (default 2 surfel radii) or an explicit ``sigma``, and
-support ``cutoff·σ_i`` (default 3). Neighbours come from the cell grid of
-:mod:`unmesh.spatial`.
+support ``cutoff·σ_i`` (default 3). Neighbours come from cell grids of
+:mod:`unmesh.spatial`, one per power-of-two band of the supports, so clouds whose
+radii vary (mesh samplings, scans) cost what their local kernels need.
 
 Example
 -------
@@ -33,9 +36,11 @@ True
 >>> t, hit = mls.intersect(sphere, [0, 0, 3.0], [0, 0, -1.0])
 >>> bool(hit[0]), bool(abs(t[0] - 2) < 2e-3)
 (True, True)
+>>> mls.interpolate(sphere, [[0.0, 0.0, 1.0]], n[:, 2]).round(2).tolist()  # the height z
+[0.99]
 """
 
-from unmesh.mls.operators import inside, intersect, project
+from unmesh.mls.operators import inside, interpolate, intersect, project
 from unmesh.mls.surface import DEFAULT_SIGMA_FACTOR, MLSSurface, as_surface
 
-__all__ = ["DEFAULT_SIGMA_FACTOR", "MLSSurface", "as_surface", "inside", "intersect", "project"]
+__all__ = ["DEFAULT_SIGMA_FACTOR", "MLSSurface", "as_surface", "inside", "interpolate", "intersect", "project"]

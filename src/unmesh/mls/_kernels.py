@@ -1,12 +1,27 @@
 """Numba kernels of the MLS surface (thesis section 3.1).
 
-All kernels work on the samples sorted by cell of an :class:`unmesh.spatial.CellGrid`
-whose cell edge is the largest kernel support ``cutoff·max σ_i``, so the 27-cell
-stencil of a point holds every sample whose kernel reaches it. Arrays:
+Samples are bucketed into *support levels* (power-of-two bands of the support
+``cutoff·σ_i``, :func:`unmesh.mls.surface.size_levels`), each with its own
+:class:`unmesh.spatial.CellGrid` whose cell edge is the level's largest support plus a
+margin ``m``. Per-sample data is in *kernel order* (level after level, each level
+sorted by cell) in one packed array ``gpack`` (N, 10): columns 0–2 position, 3–5
+unit normal, 6 squared support ``(cutoff·σ_i)²``, 7 ``1/σ_i²`` (Gaussian) or
+``1/(cutoff·σ_i)`` (Wendland), 8 σ_i, 9 support ``cutoff·σ_i``; ``grho`` (N,) are the
+disc radii for ray starts. The level grids (``lv_*``): ``lv_origin`` (L,3),
+``lv_inv`` (L,) inverse cell edges, ``lv_dims`` (L,3), and the concatenated sorted
+non-empty cell keys ``lv_keys`` of all levels (level ℓ:
+``lv_keys[lv_koff[ℓ]:lv_koff[ℓ+1]]``) with their starts ``lv_start`` (level ℓ:
+``lv_start[lv_koff[ℓ]+ℓ : lv_koff[ℓ+1]+ℓ+1]``, already offset to kernel order).
+Cells are found with the helpers of :mod:`unmesh.spatial._kernels`.
 
-``gp`` (N,3) positions, ``gn`` (N,3) unit normals, ``gs`` (N,) kernel widths σ_i,
-``grho`` (N,) disc radii for ray starts, all in grid order; ``origin``, ``inv_cell``,
-``cell``, ``dims``, ``cell_keys``, ``cell_start`` from the grid.
+Neighbour gathering (:func:`gather`): the candidates around a centre c are the
+samples with ``‖c − x_i‖ < cutoff·σ_i + m``, found in the 27-cell stencil of c in
+every level grid, and copied with their data into a work buffer. They hold every
+sample whose kernel reaches any point within m of c, so the iterations of a
+projection or a ray, and neighbouring queries of a work item, reuse one candidate
+list (:func:`refresh`) while they stay within m of its centre. Candidates come out in
+ascending kernel order whatever the centre (stencil rows are visited in key order),
+so a fit gives bit-identical results however its list was gathered.
 
 Options (integers so that they can be passed to numba):
 ``kernel`` 0 = clipped Gaussian (3.11), 1 = Wendland C² (3.12) with support
@@ -18,6 +33,8 @@ The local fit at a point x (:func:`local_fit`) writes into ``res``:
 q (3.6), ``res[9]`` weight sum, ``res[10]`` mean σ of the neighbours, ``res[11]``
 neighbour count. ``p − x`` is parallel to ``n``.
 
+Ray casting (Algorithm 3.1) builds on these in :mod:`unmesh.mls._ray_kernels`.
+
 The plain numpy reference implementation is ``tests/mls/reference.py``.
 """
 
@@ -28,21 +45,34 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from unmesh.kernels._kernels import clipped_gaussian_w, wendland_c2_w
-from unmesh.spatial._kernels import find_cell, point_cell, stencil_ranges
+from unmesh.spatial._kernels import point_cell, stencil_ranges
 
 #: Status codes of :func:`project_kernel`.
 CONVERGED, NOT_CONVERGED, NO_NEIGHBORS, LOST = 0, 1, 2, 3
 
 _BLOCK = 64  # queries per parallel work item (work arrays are allocated per item)
-_CAP = 1024  # neighbour buffer of a local fit
+_CAP = 1024  # initial candidate buffer of a work item (grown on demand)
+_SLACK = 1.0 + 1e-9  # relative slack of the candidate test (round-off in the kernels' cut-off tests)
 
 
-@njit(cache=True)
-def _weight(d2, s, cutoff, kernel):
+@njit(cache=True, inline="always")
+def _wrow(d2, cut2, inv, kernel):
+    """MLS weight w(d²) (3.11 or 3.12) from precomputed ``cut2 = (cutoff·σ)²`` and ``inv``
+    (``1/σ²`` for the Gaussian, ``1/(cutoff·σ)`` for Wendland), without a division.
+
+    Equals ``clipped_gaussian_w(d2, σ, cutoff)`` / ``wendland_c2_w(√d2, cutoff·σ)`` of
+    :mod:`unmesh.kernels._kernels` up to round-off; the Gaussian is cut exactly where
+    ``clipped_gaussian_w`` cuts it.
+    """
+    if d2 >= cut2:
+        return 0.0
     if kernel == 0:
-        return clipped_gaussian_w(d2, s, cutoff)
-    return wendland_c2_w(math.sqrt(d2), cutoff * s)
+        return math.exp(-d2 * inv)
+    u = math.sqrt(d2) * inv
+    if u >= 1.0:
+        return 0.0
+    b = 1.0 - u
+    return b * b * b * b * (1.0 + 4.0 * u)
 
 
 @njit(cache=True)
@@ -145,72 +175,182 @@ def solve_spd(A, b, n):
     return True
 
 
-@njit(cache=True, inline="always")
-def _add_quad(A, rhs, gp, a, w, ox, oy, oz, nx, ny, nz, t1, t2, isl):
-    """Add sample a with weight w to the normal equations of the quadratic height field."""
-    rx = gp[a, 0] - ox
-    ry = gp[a, 1] - oy
-    rz = gp[a, 2] - oz
-    u = (t1[0] * rx + t1[1] * ry + t1[2] * rz) * isl
-    v = (t2[0] * rx + t2[1] * ry + t2[2] * rz) * isl
-    z = nx * rx + ny * ry + nz * rz
-    phi = (1.0, u, v, u * u, u * v, v * v)
-    for r in range(6):
-        wr = w * phi[r]
-        rhs[r] += wr * z
-        for c in range(r, 6):
-            A[r, c] += wr * phi[c]
+# -- neighbour gathering -----------------------------------------------------------------
 
 
 @njit(cache=True)
-def local_fit(x, gp, gn, gs, cutoff, kernel, normal_mode, degree,
-              origin, inv_cell, dims, cell_keys, cell_start, ranges, A, rhs, res, nbr, wbuf):
+def gather(c, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, ranges, cand, cbuf):
+    """Candidates around ``c`` (3,): samples with ``‖c − x_i‖ < cutoff·σ_i + margin``, ascending.
+
+    Writes the sample indices into ``cand`` and their rows of ``gpack`` (columns 0–8)
+    into ``cbuf`` and returns how many candidates there are; a count of ``len(cand)``
+    or more means the buffers were too small (their contents are then invalid).
+    ``ranges`` is a (9, 2) int64 work array.
+    """
+    last = cand.shape[0] - 1
+    n = 0
+    c0, c1, c2 = c[0], c[1], c[2]
+    for lv in range(lv_inv.shape[0]):
+        k0 = lv_koff[lv]
+        k1 = lv_koff[lv + 1]
+        dims = lv_dims[lv]
+        i, j, k = point_cell(c, lv_origin[lv], lv_inv[lv], dims)
+        ns = stencil_ranges(i, j, k, 1, dims, lv_keys[k0:k1], lv_start[k0 + lv:k1 + lv + 1], ranges)
+        for s in range(ns):
+            for a in range(ranges[s, 0], ranges[s, 1]):
+                dx = gpack[a, 0] - c0
+                dy = gpack[a, 1] - c1
+                dz = gpack[a, 2] - c2
+                r = (gpack[a, 9] + margin) * _SLACK
+                # branch-free compaction (the test fails unpredictably for a third of the samples)
+                cand[min(n, last)] = a
+                n += dx * dx + dy * dy + dz * dz < r * r
+    for m in range(min(n, last + 1)):
+        a = cand[m]
+        for t in range(9):
+            cbuf[m, t] = gpack[a, t]
+    return n
+
+
+@njit(cache=True)
+def refresh(x, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, ranges,
+            cand, cbuf, nbuf, centre, meta):
+    """Make the candidate list valid for ``x``: keep it when ``x`` is within ``margin`` of its centre.
+
+    ``meta[0]`` = number of candidates, ``meta[1]`` = 1 when the list is valid;
+    ``centre`` (3,) its gather point. Returns the work buffers ``(cand, cbuf, nbuf)``,
+    reallocated (1.5× the need) when the candidates do not fit.
+    """
+    if meta[1] != 0:
+        dx = x[0] - centre[0]
+        dy = x[1] - centre[1]
+        dz = x[2] - centre[2]
+        if dx * dx + dy * dy + dz * dz <= margin * margin:
+            return cand, cbuf, nbuf
+    n = gather(x, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, ranges, cand, cbuf)
+    if n >= cand.shape[0]:
+        cand, cbuf, nbuf = work_buffers(n + n // 2 + 1)
+        n = gather(x, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, ranges, cand, cbuf)
+    meta[0] = n
+    meta[1] = 1
+    centre[0] = x[0]
+    centre[1] = x[1]
+    centre[2] = x[2]
+    return cand, cbuf, nbuf
+
+
+@njit(cache=True)
+def work_buffers(size):
+    """Candidate indices (size,) int64, candidate rows (size, 9) and neighbour rows (size, 4) float64."""
+    return np.empty(size, np.int64), np.empty((size, 9)), np.empty((size, 4))
+
+
+# -- local fit -------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _quadratic(nbuf, cnt, ex, ey, ez, nx, ny, nz, isl, A, rhs):
+    """Weighted normal equations of the height field ``z = a + b u + c v + d u² + e uv + f v²`` (3.3).
+
+    ``nbuf[:cnt]`` holds the neighbours' offsets from x and weights; ``(u, v, z)`` are
+    their coordinates in the frame at ``o = x + e`` with normal n, u and v in units of
+    ``1/isl``. ``A = Σ w φ φᵀ`` (φ = (1, u, v, u², uv, v²)) is assembled from the 15
+    moments ``Σ w u^i v^j`` (i + j <= 4), ``rhs = Σ w z φ``. Returns the tangents (t1, t2).
+    """
+    t1, t2 = tangent_frame(nx, ny, nz)
+    m00 = m10 = m01 = m20 = m11 = m02 = 0.0
+    m30 = m21 = m12 = m03 = m40 = m31 = m22 = m13 = m04 = 0.0
+    r0 = r1 = r2 = r3 = r4 = r5 = 0.0
+    for m in range(cnt):
+        rx = nbuf[m, 0] - ex
+        ry = nbuf[m, 1] - ey
+        rz = nbuf[m, 2] - ez
+        w = nbuf[m, 3]
+        u = (t1[0] * rx + t1[1] * ry + t1[2] * rz) * isl
+        v = (t2[0] * rx + t2[1] * ry + t2[2] * rz) * isl
+        z = nx * rx + ny * ry + nz * rz
+        wu = w * u
+        wv = w * v
+        wuu = wu * u
+        wuv = wu * v
+        wvv = wv * v
+        m00 += w
+        m10 += wu
+        m01 += wv
+        m20 += wuu
+        m11 += wuv
+        m02 += wvv
+        m30 += wuu * u
+        m21 += wuu * v
+        m12 += wvv * u
+        m03 += wvv * v
+        m40 += wuu * u * u
+        m31 += wuu * u * v
+        m22 += wuu * v * v
+        m13 += wvv * u * v
+        m04 += wvv * v * v
+        wz = w * z
+        r0 += wz
+        r1 += wz * u
+        r2 += wz * v
+        r3 += wz * u * u
+        r4 += wz * u * v
+        r5 += wz * v * v
+    A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4], A[0, 5] = m00, m10, m01, m20, m11, m02
+    A[1, 1], A[1, 2], A[1, 3], A[1, 4], A[1, 5] = m20, m11, m30, m21, m12
+    A[2, 2], A[2, 3], A[2, 4], A[2, 5] = m02, m21, m12, m03
+    A[3, 3], A[3, 4], A[3, 5] = m40, m31, m22
+    A[4, 4], A[4, 5] = m22, m13
+    A[5, 5] = m04
+    rhs[0], rhs[1], rhs[2], rhs[3], rhs[4], rhs[5] = r0, r1, r2, r3, r4, r5
+    return t1, t2
+
+
+@njit(cache=True)
+def local_fit(x, kernel, normal_mode, degree, cbuf, ncand, nbuf, A, rhs, res):
     """MLS fit at point ``x`` (3,): plane (3.5, 3.6, 3.8) and optional quadratic (3.3, 3.4).
 
-    ``nbr`` (int64) and ``wbuf`` (float64) are work buffers of equal length for the
-    neighbours and their weights; when they overflow the quadratic pass scans the
-    stencil again. Returns False when no sample's kernel reaches ``x`` (or the
-    normals cancel); otherwise fills ``res`` (see the module docstring).
+    ``cbuf[:ncand]`` (rows of ``gpack``, see :func:`gather`) must hold every sample
+    whose kernel reaches ``x``, in ascending sample order; ``nbuf`` (at least as
+    long, 4 columns) receives the neighbours' offsets from x and weights
+    (:func:`_wrow`). Returns False when no sample's kernel reaches ``x`` (or the
+    normals cancel); otherwise fills ``res`` (see the module docstring). Only the
+    upper triangle of ``A`` (6×6) is used.
     """
-    cap = nbr.shape[0]
     x0, x1, x2 = x[0], x[1], x[2]
-    i, j, k = point_cell(x, origin, inv_cell, dims)
-    ns = stencil_ranges(i, j, k, 1, dims, cell_keys, cell_start, ranges)
     wsum = 0.0
     mx = my = mz = 0.0
     hx = hy = hz = 0.0
     c00 = c01 = c02 = c11 = c12 = c22 = 0.0
     ssum = 0.0
     cnt = 0
-    for s in range(ns):
-        for a in range(ranges[s, 0], ranges[s, 1]):
-            dx = gp[a, 0] - x0
-            dy = gp[a, 1] - x1
-            dz = gp[a, 2] - x2
-            d2 = dx * dx + dy * dy + dz * dz
-            sa = gs[a]
-            w = _weight(d2, sa, cutoff, kernel)
-            if w <= 0.0:
-                continue
-            if cnt < cap:
-                nbr[cnt] = a
-                wbuf[cnt] = w
-            cnt += 1
-            wsum += w
-            mx += w * dx
-            my += w * dy
-            mz += w * dz
-            hx += w * gn[a, 0]
-            hy += w * gn[a, 1]
-            hz += w * gn[a, 2]
-            ssum += w * sa
-            if normal_mode == 1:
-                c00 += w * dx * dx
-                c01 += w * dx * dy
-                c02 += w * dx * dz
-                c11 += w * dy * dy
-                c12 += w * dy * dz
-                c22 += w * dz * dz
+    for m in range(ncand):
+        dx = cbuf[m, 0] - x0
+        dy = cbuf[m, 1] - x1
+        dz = cbuf[m, 2] - x2
+        w = _wrow(dx * dx + dy * dy + dz * dz, cbuf[m, 6], cbuf[m, 7], kernel)
+        if w <= 0.0:
+            continue
+        nbuf[cnt, 0] = dx
+        nbuf[cnt, 1] = dy
+        nbuf[cnt, 2] = dz
+        nbuf[cnt, 3] = w
+        cnt += 1
+        wsum += w
+        mx += w * dx
+        my += w * dy
+        mz += w * dz
+        hx += w * cbuf[m, 3]
+        hy += w * cbuf[m, 4]
+        hz += w * cbuf[m, 5]
+        ssum += w * cbuf[m, 8]
+        if normal_mode == 1:
+            c00 += w * dx * dx
+            c01 += w * dx * dy
+            c02 += w * dx * dz
+            c11 += w * dy * dy
+            c12 += w * dy * dz
+            c22 += w * dz * dz
     if cnt == 0 or not wsum > 0.0:
         return False
     inv = 1.0 / wsum
@@ -234,29 +374,12 @@ def local_fit(x, gp, gn, gs, cutoff, kernel, normal_mode, degree,
         nx, ny, nz = hx / hn, hy / hn, hz / hn
     # projection of x onto the plane through q with normal N: o = x + (N.(q - x)) N
     dn = nx * mx + ny * my + nz * mz
-    ox, oy, oz = x0 + dn * nx, x1 + dn * ny, x2 + dn * nz
+    ex, ey, ez = dn * nx, dn * ny, dn * nz
     fa = 0.0
-    fb = 0.0
-    fc = 0.0
+    nx2, ny2, nz2 = nx, ny, nz
     if degree == 2 and cnt >= 6:
-        t1, t2 = tangent_frame(nx, ny, nz)
-        for r in range(6):
-            rhs[r] = 0.0
-            for c in range(6):
-                A[r, c] = 0.0
         isl = 1.0 / sl
-        if cnt <= cap:
-            for m in range(cnt):
-                _add_quad(A, rhs, gp, nbr[m], wbuf[m], ox, oy, oz, nx, ny, nz, t1, t2, isl)
-        else:
-            for s in range(ns):
-                for a in range(ranges[s, 0], ranges[s, 1]):
-                    dx = gp[a, 0] - x0
-                    dy = gp[a, 1] - x1
-                    dz = gp[a, 2] - x2
-                    w = _weight(dx * dx + dy * dy + dz * dz, gs[a], cutoff, kernel)
-                    if w > 0.0:
-                        _add_quad(A, rhs, gp, a, w, ox, oy, oz, nx, ny, nz, t1, t2, isl)
+        t1, t2 = _quadratic(nbuf, cnt, ex, ey, ez, nx, ny, nz, isl, A, rhs)
         if solve_spd(A, rhs, 6):
             fa = rhs[0]
             fb = rhs[1] * isl
@@ -267,13 +390,9 @@ def local_fit(x, gp, gn, gs, cutoff, kernel, normal_mode, degree,
             pz = nz - fb * t1[2] - fc * t2[2]
             pn = 1.0 / math.sqrt(px * px + py * py + pz * pz)
             nx2, ny2, nz2 = px * pn, py * pn, pz * pn
-        else:
-            nx2, ny2, nz2 = nx, ny, nz
-    else:
-        nx2, ny2, nz2 = nx, ny, nz
-    res[0] = ox + fa * nx
-    res[1] = oy + fa * ny
-    res[2] = oz + fa * nz
+    res[0] = x0 + ex + fa * nx
+    res[1] = x1 + ey + fa * ny
+    res[2] = x2 + ez + fa * nz
     res[3] = nx2
     res[4] = ny2
     res[5] = nz2
@@ -287,8 +406,8 @@ def local_fit(x, gp, gn, gs, cutoff, kernel, normal_mode, degree,
 
 
 @njit(cache=True, parallel=True)
-def project_kernel(queries, gp, gn, gs, cutoff, kernel, normal_mode, degree,
-                   origin, inv_cell, dims, cell_keys, cell_start, max_iter, tol,
+def project_kernel(queries, gpack, kernel, normal_mode, degree, margin,
+                   lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, max_iter, tol,
                    out_p, out_n, status):
     """Iterated orthogonal projection of every query onto the MLS surface.
 
@@ -305,8 +424,9 @@ def project_kernel(queries, gp, gn, gs, cutoff, kernel, normal_mode, degree,
         A = np.empty((6, 6))
         rhs = np.empty(6)
         res = np.empty(12)
-        nbr = np.empty(_CAP, np.int64)
-        wbuf = np.empty(_CAP)
+        cand, cbuf, nbuf = work_buffers(_CAP)
+        centre = np.empty(3)
+        meta = np.zeros(2, np.int64)
         y = np.empty(3)
         for qi in range(blk * _BLOCK, min(nq, (blk + 1) * _BLOCK)):
             x0, x1, x2 = queries[qi, 0], queries[qi, 1], queries[qi, 2]
@@ -316,8 +436,9 @@ def project_kernel(queries, gp, gn, gs, cutoff, kernel, normal_mode, degree,
             st = NOT_CONVERGED
             nx = ny = nz = math.nan
             for it in range(max_iter):
-                ok = local_fit(y, gp, gn, gs, cutoff, kernel, normal_mode, degree,
-                               origin, inv_cell, dims, cell_keys, cell_start, ranges, A, rhs, res, nbr, wbuf)
+                cand, cbuf, nbuf = refresh(y, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys,
+                                           lv_start, ranges, cand, cbuf, nbuf, centre, meta)
+                ok = local_fit(y, kernel, normal_mode, degree, cbuf, meta[0], nbuf, A, rhs, res)
                 if not ok:
                     st = NO_NEIGHBORS if it == 0 else LOST
                     break
@@ -346,244 +467,41 @@ def project_kernel(queries, gp, gn, gs, cutoff, kernel, normal_mode, degree,
 
 
 @njit(cache=True, parallel=True)
-def fit_kernel(queries, gp, gn, gs, cutoff, kernel, normal_mode, degree,
-               origin, inv_cell, dims, cell_keys, cell_start, out):
-    """One local fit per query (no iteration): ``out[i] = res`` (12 values), NaN if none."""
-    nq = queries.shape[0]
+def interpolate_kernel(points, values, gpack, kernel, margin,
+                       lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, out, found):
+    """MLS-weighted average of per-sample ``values`` (N, k) (kernel order) at ``points`` (M, 3).
+
+    ``out[i] = Σ w_j(x_i) values[j] / Σ w_j(x_i)`` with the weights of the local fit
+    (3.10–3.12); ``found[i]`` is False (and ``out[i]`` zero) where no kernel reaches x_i.
+    """
+    nq = points.shape[0]
+    nk = values.shape[1]
     nblk = (nq + _BLOCK - 1) // _BLOCK
     for blk in prange(nblk):
         ranges = np.empty((9, 2), np.int64)
-        A = np.empty((6, 6))
-        rhs = np.empty(6)
-        res = np.empty(12)
-        nbr = np.empty(_CAP, np.int64)
-        wbuf = np.empty(_CAP)
+        cand, cbuf, nbuf = work_buffers(_CAP)
+        centre = np.empty(3)
+        meta = np.zeros(2, np.int64)
+        acc = np.empty(nk)
         for qi in range(blk * _BLOCK, min(nq, (blk + 1) * _BLOCK)):
-            ok = local_fit(queries[qi], gp, gn, gs, cutoff, kernel, normal_mode, degree,
-                           origin, inv_cell, dims, cell_keys, cell_start, ranges, A, rhs, res, nbr, wbuf)
-            for t in range(12):
-                out[qi, t] = res[t] if ok else math.nan
-
-
-# -- ray casting (Algorithm 3.1) ----------------------------------------------------------
-
-
-@njit(cache=True)
-def _scan_cell(ii, jj, kk, dims, keys, start, items, skip, use_skip, gp, gn, grho, o, d, tlo, thi, best):
-    """Ray–disc tests against the discs listed in ray-grid cell (ii, jj, kk).
-
-    Keeps the nearest hit with ``tlo <= t <= thi`` in ``best`` (``best[0]`` = t,
-    ``best[1]`` = sample index as float).
-    """
-    if ii < 0 or jj < 0 or kk < 0 or ii >= dims[0] or jj >= dims[1] or kk >= dims[2]:
-        return
-    if use_skip and skip[ii, jj, kk] != 0:
-        return
-    c = find_cell((ii * dims[1] + jj) * dims[2] + kk, keys)
-    if c < 0:
-        return
-    for m in range(start[c], start[c + 1]):
-        a = items[m]
-        den = gn[a, 0] * d[0] + gn[a, 1] * d[1] + gn[a, 2] * d[2]
-        if den == 0.0:
-            continue
-        cx = gp[a, 0] - o[0]
-        cy = gp[a, 1] - o[1]
-        cz = gp[a, 2] - o[2]
-        t = (gn[a, 0] * cx + gn[a, 1] * cy + gn[a, 2] * cz) / den
-        if t < tlo or t > thi or t >= best[0]:
-            continue
-        ex = t * d[0] - cx
-        ey = t * d[1] - cy
-        ez = t * d[2] - cz
-        if ex * ex + ey * ey + ez * ez <= grho[a] * grho[a]:
-            best[0] = t
-            best[1] = a
-
-
-@njit(cache=True)
-def first_disc(o, d, tlo, thi, gp, gn, grho, origin, cell, dims, keys, start, items, skip, use_skip, best):
-    """Nearest ray–disc hit with ``tlo <= t <= thi`` by a 3D-DDA walk through the ray grid.
-
-    Every sample is listed in each ray-grid cell its disc's bounding sphere
-    overlaps, so the disc hits inside a cell are all found by scanning that cell's
-    list, and a hit is final once it lies before the exit of the current cell.
-    Empty space is skipped with ``skip`` (when ``use_skip``): the Chebyshev distance
-    in cells from each cell to the nearest non-empty one; from a cell at distance
-    D >= 3 the ray jumps ``D − 2`` cells. Returns True and ``best = (t, sample)``
-    when found.
-    """
-    best[0] = math.inf
-    best[1] = -1.0
-    c = np.empty(3, np.int64)
-    tmaxs = np.empty(3)
-    tdel = np.empty(3)
-    step = np.empty(3, np.int64)
-    dmax = max(abs(d[0]), abs(d[1]), abs(d[2]))
-    # clip to the grid box
-    tcur = tlo
-    for ax in range(3):
-        lo = origin[ax]
-        hi = origin[ax] + dims[ax] * cell
-        if d[ax] == 0.0:
-            if o[ax] < lo or o[ax] > hi:
-                return False
-        else:
-            ta = (lo - o[ax]) / d[ax]
-            tb = (hi - o[ax]) / d[ax]
-            if ta > tb:
-                ta, tb = tb, ta
-            tcur = max(tcur, ta)
-            thi = min(thi, tb)
-    if not tcur <= thi:
-        return False
-    while True:
-        # (re)start the walk at tcur
-        for ax in range(3):
-            p = o[ax] + tcur * d[ax]
-            ci = math.floor((p - origin[ax]) / cell)
-            c[ax] = min(max(ci, 0), dims[ax] - 1)
-            if d[ax] > 0.0:
-                step[ax] = 1
-                tdel[ax] = cell / d[ax]
-                tmaxs[ax] = tcur + (origin[ax] + (c[ax] + 1) * cell - p) / d[ax]
-            elif d[ax] < 0.0:
-                step[ax] = -1
-                tdel[ax] = -cell / d[ax]
-                tmaxs[ax] = tcur + (origin[ax] + c[ax] * cell - p) / d[ax]
-            else:
-                step[ax] = 0
-                tdel[ax] = math.inf
-                tmaxs[ax] = math.inf
-        _scan_cell(c[0], c[1], c[2], dims, keys, start, items, skip, use_skip, gp, gn, grho, o, d, tlo, thi, best)
-        jumped = False
-        while True:
-            ax = 0
-            if tmaxs[1] < tmaxs[ax]:
-                ax = 1
-            if tmaxs[2] < tmaxs[ax]:
-                ax = 2
-            texit = tmaxs[ax]
-            if best[0] <= texit:
-                return True
-            if texit > thi:
-                return best[0] <= thi
-            if use_skip:
-                dist = skip[c[0], c[1], c[2]]
-                if dist >= 3:
-                    tj = min(texit + (dist - 2) * cell / dmax, best[0])
-                    if tj > thi:
-                        return best[0] <= thi
-                    if tj > tcur:
-                        tcur = tj
-                        jumped = True
-                        break
-            c[ax] += step[ax]
-            tmaxs[ax] += tdel[ax]
-            if c[ax] < 0 or c[ax] >= dims[ax]:
-                return best[0] <= thi
-            _scan_cell(c[0], c[1], c[2], dims, keys, start, items, skip, use_skip, gp, gn, grho, o, d,
-                       tlo, thi, best)
-        if not jumped:
-            return best[0] <= thi
-
-
-@njit(cache=True)
-def ray_iterate(o, d, t0, gp, gn, gs, cutoff, kernel, normal_mode, degree,
-                origin, inv_cell, dims, cell_keys, cell_start, max_iter, tol, reach_len,
-                ranges, A, rhs, res, nbr, wbuf, x):
-    """Algorithm 3.1 from ``x_0 = o + t0 d``: intersect the ray with the local fit plane until converged.
-
-    The plane at ``x_{k-1}`` passes through the foot point p with normal n; its
-    intersection with the ray is ``t_k = t_{k-1} + n·(p − x_{k-1}) / (n·d)``. Returns
-    ``(converged, t)``; fails when no kernel reaches an iterate, the ray is nearly
-    parallel to the plane, or the iterate drifts more than ``reach_len`` from the start.
-    """
-    dn = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    t = t0
-    for _ in range(max_iter):
-        for ax in range(3):
-            x[ax] = o[ax] + t * d[ax]
-        if not local_fit(x, gp, gn, gs, cutoff, kernel, normal_mode, degree,
-                         origin, inv_cell, dims, cell_keys, cell_start, ranges, A, rhs, res, nbr, wbuf):
-            return False, t
-        nd = res[3] * d[0] + res[4] * d[1] + res[5] * d[2]
-        if abs(nd) < 1e-3 * dn:
-            return False, t
-        tn = t + (res[3] * (res[0] - x[0]) + res[4] * (res[1] - x[1]) + res[5] * (res[2] - x[2])) / nd
-        if abs(tn - t0) * dn > reach_len:
-            return False, tn
-        if abs(tn - t) * dn <= tol * res[10]:
-            return True, tn
-        t = tn
-    return False, t
-
-
-@njit(cache=True, parallel=True)
-def intersect_kernel(origins, dirs, tmax, gp, gn, gs, grho, cutoff, kernel, normal_mode, degree,
-                     origin, inv_cell, dims, cell_keys, cell_start,
-                     rorigin, rcell, rdims, rkeys, rstart, ritems, skip, use_skip,
-                     max_iter, tol, eps2, max_attempts, out_t, out_hit, out_n):
-    """First intersection with t > 0 of every ray with the MLS surface (Algorithm 3.1).
-
-    For each ray: find the nearest surfel-disc hit (:func:`first_disc`, which culls
-    the ray against the ray grid's box) in ``[−ρ_max/|d|, tmax]`` as the start point; run
-    :func:`ray_iterate`; accept when it converges to ``t > 0`` with
-    ``‖q(x) − x‖ < eps2·σ`` (line 6 of Algorithm 3.1). Otherwise continue behind the
-    failed start (by the disc radius), at most ``max_attempts`` times.
-    """
-    nr = origins.shape[0]
-    support = 1.0 / inv_cell
-    rho_max = 0.0
-    for a in range(grho.shape[0]):
-        rho_max = max(rho_max, grho[a])
-    nblk = (nr + _BLOCK - 1) // _BLOCK
-    for blk in prange(nblk):
-        ranges = np.empty((9, 2), np.int64)
-        A = np.empty((6, 6))
-        rhs = np.empty(6)
-        res = np.empty(12)
-        nbr = np.empty(_CAP, np.int64)
-        wbuf = np.empty(_CAP)
-        x = np.empty(3)
-        best = np.empty(2)
-        o = np.empty(3)
-        d = np.empty(3)
-        for ri in range(blk * _BLOCK, min(nr, (blk + 1) * _BLOCK)):
-            out_t[ri] = math.inf
-            out_hit[ri] = False
-            for ax in range(3):
-                out_n[ri, ax] = math.nan
-                o[ax] = origins[ri, ax]
-                d[ax] = dirs[ri, ax]
-            dn = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-            # a disc may be hit slightly behind the origin with the surface in front of it
-            t0 = -rho_max / dn
-            t1 = tmax[ri]
-            tlo = t0
-            for _ in range(max_attempts):
-                if not first_disc(o, d, tlo, t1, gp, gn, grho, rorigin, rcell, rdims, rkeys, rstart, ritems,
-                                  skip, use_skip, best):
-                    break
-                th = best[0]
-                j = int(best[1])
-                ok, tc = ray_iterate(o, d, th, gp, gn, gs, cutoff, kernel, normal_mode, degree,
-                                     origin, inv_cell, dims, cell_keys, cell_start, max_iter, tol, support,
-                                     ranges, A, rhs, res, nbr, wbuf, x)
-                if ok and tc > 0.0:
-                    if tc > tmax[ri]:
-                        break
-                    # line 6 of Algorithm 3.1, with the fit of the last iterate (within tol·σ of x)
-                    e = 0.0
-                    for ax in range(3):
-                        e += (res[6 + ax] - (o[ax] + tc * d[ax])) ** 2
-                    if math.sqrt(e) < eps2 * res[10]:
-                        out_t[ri] = tc
-                        out_hit[ri] = True
-                        out_n[ri, 0] = res[3]
-                        out_n[ri, 1] = res[4]
-                        out_n[ri, 2] = res[5]
-                        break
-                tlo = th + grho[j] / dn
-                if tlo > t1:
-                    break
+            x = points[qi]
+            cand, cbuf, nbuf = refresh(x, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys,
+                                       lv_start, ranges, cand, cbuf, nbuf, centre, meta)
+            for t in range(nk):
+                acc[t] = 0.0
+            wsum = 0.0
+            for m in range(meta[0]):
+                dx = cbuf[m, 0] - x[0]
+                dy = cbuf[m, 1] - x[1]
+                dz = cbuf[m, 2] - x[2]
+                w = _wrow(dx * dx + dy * dy + dz * dz, cbuf[m, 6], cbuf[m, 7], kernel)
+                if w <= 0.0:
+                    continue
+                a = cand[m]
+                wsum += w
+                for t in range(nk):
+                    acc[t] += w * values[a, t]
+            ok = wsum > 0.0
+            found[qi] = ok
+            for t in range(nk):
+                out[qi, t] = acc[t] / wsum if ok else 0.0

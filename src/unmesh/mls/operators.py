@@ -21,11 +21,11 @@ import numpy as np
 from unmesh._validate import as_array, as_points, positive_scalar
 from unmesh.errors import InputError
 from unmesh.mls import _kernels as K
+from unmesh.mls import _ray_kernels as RK
 from unmesh.mls.surface import MLSSurface, as_surface
-from unmesh.spatial._kernels import compute_keys
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["inside", "intersect", "project"]
+__all__ = ["inside", "interpolate", "intersect", "project"]
 
 _CHUNK = 1 << 17
 
@@ -51,6 +51,14 @@ def _max_iter(value: Any) -> int:
     return int(value)
 
 
+def _sorted_chunks(surf: MLSSurface, x: np.ndarray, chunk_size: int, progress: bool, desc: str) -> Any:
+    """Yield ``(start, end, order)`` per chunk; ``order`` sorts the chunk by cell (memory locality)."""
+    q = len(x)
+    for s in _chunks(q, chunk_size, progress, desc):
+        e = min(q, s + chunk_size)
+        yield s, e, np.argsort(surf._locality_keys(x[s:e]), kind="stable")
+
+
 def _project_raw(surf: MLSSurface, x: np.ndarray, max_iter: int, tol: float, chunk_size: int,
                  progress: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     q = len(x)
@@ -58,11 +66,8 @@ def _project_raw(surf: MLSSurface, x: np.ndarray, max_iter: int, tol: float, chu
     normals = np.empty((q, 3))
     status = np.empty(q, np.int64)
     args = surf._kernel_args()
-    g = surf.grid
-    for s in _chunks(q, chunk_size, progress, "MLS projection"):
-        e = min(q, s + chunk_size)
-        # process the chunk in grid-cell order (memory locality), write back in input order
-        order = np.argsort(compute_keys(x[s:e], g.origin, g.inv_cell, g.dims), kind="stable")
+    for s, e, order in _sorted_chunks(surf, x, chunk_size, progress, "MLS projection"):
+        # process the chunk in grid-cell order, write back in input order
         p_c = np.empty((e - s, 3))
         n_c = np.empty((e - s, 3))
         st_c = np.empty(e - s, np.int64)
@@ -230,12 +235,15 @@ def intersect(
 ) -> tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """First intersection of rays ``o + t d`` (``0 < t <= tmax``) with the MLS surface (Algorithm 3.1).
 
-    Per ray: rays are culled against the bounding box of the samples (padded by the
-    kernel support); a start point near the surface is the nearest hit of the ray
-    with the surfel discs (radius ``max(r_i, σ_i)``, found by a 3D-DDA walk through
-    the cell grid); from there the ray is intersected with the local fit plane of
-    the current point until the step is below ``tol·σ`` (Algorithm 3.1, lines 1–5).
-    The hit is accepted when ``t > 0`` and ``‖q(x) − x‖ < eps2·σ`` (line 6: the
+    Per ray: a start point near the surface is the nearest hit of the ray with the
+    surfel discs (radius ``max(r_i, σ_i)``, found by 3D-DDA walks with empty-space
+    skipping through the ray grids of :meth:`MLSSurface.ray_grid`, one per
+    power-of-two band of disc radii); from there the ray is intersected with the
+    local fit plane of the current point until the step is below ``tol·σ``
+    (Algorithm 3.1, lines 1–5); where these plane steps oscillate (they can fall into a
+    2-cycle at creases and folds of scanned models, which left isolated unhit pixels),
+    two iterates with steps of opposite sign bracket the surface and the iteration
+    continues by regula falsi (Illinois) inside the bracket. The hit is accepted when ``t > 0`` and ``‖q(x) − x‖ < eps2·σ`` (line 6: the
     point is near its weighted mean, i.e. not on a plane extrapolated past the
     samples). Otherwise the search continues behind the failed start, at most
     ``max_attempts`` times. With the default ``degree=2`` the planes are the tangent
@@ -310,12 +318,92 @@ def intersect(
     t = np.empty(r)
     hit = np.empty(r, dtype=bool)
     nrm = np.empty((r, 3))
-    gp, gn, gs, grho = surf._arrays
+    args = surf._kernel_args()
+    grho = surf._arrays[1]
     ray_grid = surf.ray_grid()
     for s in _chunks(r, chunk_size, progress, "MLS ray casting"):
         e = min(r, s + chunk_size)
-        K.intersect_kernel(o[s:e], d[s:e], tm[s:e], gp, gn, gs, grho, *surf._kernel_args()[3:], *ray_grid,
+        RK.intersect_kernel(o[s:e], d[s:e], tm[s:e], *args, grho, float(grho.max()), surf.support, *ray_grid,
                            max_iter, tol, eps2, int(max_attempts), t[s:e], hit[s:e], nrm[s:e])
     if return_normals:
         return t, hit, nrm
     return t, hit
+
+
+def interpolate(
+    surface: SurfelCloud | MLSSurface,
+    points: Any,
+    values: Any,
+    *,
+    chunk_size: int = _CHUNK,
+    progress: bool = False,
+    **options: Any,
+) -> np.ndarray:
+    """MLS-weighted interpolation of per-surfel attributes at arbitrary points (eqs. 3.6, 3.10–3.12).
+
+    ``v(x) = Σ_i w_i(x) v_i / Σ_i w_i(x)`` with the weights ``w_i(x) = φ(‖x − x_i‖/σ_i)``
+    of the surface's local fit (the weights of the weighted mean q, eq. 3.6: clipped
+    Gaussian 3.10–3.11 or Wendland 3.12, support ``cutoff·σ_i``). Typical use: colours
+    or any other attribute at points on the MLS surface (ray hits, projected points).
+    Points that no kernel reaches take the value of their nearest surfel.
+
+    Parameters
+    ----------
+    surface : SurfelCloud or MLSSurface
+        The samples, or a prepared surface (then give no surface options).
+    points : array_like, shape (M, 3) or (3,)
+        Where to interpolate.
+    values : array_like, shape (N,) or (N, k)
+        One value (or row of k values) per surfel, in the cloud's order; converted to
+        float64.
+    chunk_size, progress, **options
+        As for :func:`project`.
+
+    Returns
+    -------
+    numpy.ndarray, shape (M,) or (M, k), float64
+        The interpolated values (the shape of ``values`` with N replaced by M).
+
+    Raises
+    ------
+    unmesh.errors.InputError
+        On bad arguments, e.g. ``values`` without one row per surfel.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from unmesh.surfels import SurfelCloud
+    >>> c = SurfelCloud([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, radii=[0.5, 0.5])
+    >>> interpolate(c, [[0.5, 0, 0], [0.1, 0, 0]], [[1.0, 0, 0], [0, 0, 1.0]]).round(3).tolist()
+    [[0.5, 0.0, 0.5], [0.69, 0.0, 0.31]]
+    >>> interpolate(c, [[9.0, 0, 0]], [10.0, 20.0]).tolist()  # out of reach: nearest surfel
+    [20.0]
+    """
+    surf = as_surface(surface, **options)
+    pts = as_points(points, "points")
+    n = len(surf.cloud)
+    try:
+        vals = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"values: expected a numeric array of shape ({n},) or ({n}, k), got {exc}") from None
+    if vals.ndim not in (1, 2) or len(vals) != n:
+        raise InputError(f"values: expected shape ({n},) or ({n}, k) (one row per surfel), got {vals.shape}")
+    flat = vals.ndim == 1
+    table = np.ascontiguousarray(vals.reshape(n, -1)[surf._order])
+    chunk_size = _chunk_size(chunk_size)
+    m = len(pts)
+    out = np.empty((m, table.shape[1]))
+    found = np.empty(m, dtype=bool)
+    args = surf._kernel_args()
+    for s, e, order in _sorted_chunks(surf, pts, chunk_size, progress, "MLS interpolation"):
+        o_c = np.empty((e - s, table.shape[1]))
+        f_c = np.empty(e - s, dtype=bool)
+        K.interpolate_kernel(np.ascontiguousarray(pts[s:e][order]), table, args[0], args[1], *args[4:], o_c, f_c)
+        out[s:e][order] = o_c
+        found[s:e][order] = f_c
+    if not found.all():
+        from unmesh.spatial import knn
+
+        _, idx = knn(surf.cloud.positions, 1, queries=pts[~found])
+        out[~found] = vals.reshape(n, -1)[idx[:, 0]]
+    return out[:, 0] if flat else out

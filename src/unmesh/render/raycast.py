@@ -4,8 +4,8 @@ Rays through the pixel centres are intersected with the MLS surface of the surfe
 :func:`unmesh.mls.intersect` (which also returns the MLS normals). Rays that cannot hit are
 skipped: a pixel is cast only when the splatted surfel discs (no screen filter) cover a pixel
 within ``margin`` pixels of it. The colour at a hit is the MLS-weighted average of the surfel
-colours, ``c(x) = sum_i w_i(x) c_i / sum_i w_i(x)`` with the clipped Gaussian weights of the
-MLS surface (3.10, 3.11; widths ``sigma_i`` of :class:`unmesh.mls.MLSSurface`). The result goes
+colours, ``c(x) = sum_i w_i(x) c_i / sum_i w_i(x)`` with the weights of the MLS surface
+(3.10-3.12, :func:`unmesh.mls.interpolate`). The result goes
 into the same G-buffer as every other renderer, so camera, shading and buffers are shared.
 
 Example
@@ -34,7 +34,7 @@ from unmesh.render.shading import GBuffer
 from unmesh.render.splat import SplatOptions, SplatRenderer
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["draw_mls", "mls_colors"]
+__all__ = ["draw_mls"]
 
 
 def _combined(clouds: Sequence[SurfelCloud], colors: np.ndarray | None) -> SurfelCloud:
@@ -44,45 +44,6 @@ def _combined(clouds: Sequence[SurfelCloud], colors: np.ndarray | None) -> Surfe
     if any(c.is_elliptical for c in clouds):
         return SurfelCloud(pos, nrm, axes=np.concatenate([c.tangent_axes() for c in clouds]), colors=col)
     return SurfelCloud(pos, nrm, radii=np.concatenate([np.asarray(c.radii) for c in clouds]), colors=col)
-
-
-def mls_colors(surface: Any, points: np.ndarray, colors: np.ndarray) -> np.ndarray:
-    """MLS-weighted colours (M,3) at surface points (M,3).
-
-    ``c(x) = sum_i w_i(x) c_i / sum_i w_i(x)`` with ``w_i(x) = exp(-|x - x_i|^2 / sigma_i^2)``
-    cut at ``cutoff * sigma_i`` (eqs. 3.10, 3.11), the weights of the MLS surface ``surface``
-    (an :class:`unmesh.mls.MLSSurface`). Points without neighbours get the nearest surfel's colour.
-
-    Example
-    -------
-    >>> from unmesh.mls import MLSSurface
-    >>> c = SurfelCloud([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, radii=[0.5, 0.5])
-    >>> s = MLSSurface(c)
-    >>> mls_colors(s, np.array([[0.5, 0, 0]]), np.array([[1.0, 0, 0], [0, 0, 1.0]])).round(3).tolist()
-    [[0.5, 0.0, 0.5]]
-    """
-    from unmesh.spatial import knn, radius_neighbors
-
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros((len(pts), 3))
-    if len(pts) == 0:
-        return out
-    cloud = surface.cloud
-    sig = np.asarray(surface.sigmas, dtype=np.float64)
-    offsets, idx = radius_neighbors(cloud.positions, surface.support, queries=pts)
-    q = np.repeat(np.arange(len(pts)), np.diff(offsets))
-    d2 = np.sum((cloud.positions[idx] - pts[q]) ** 2, axis=1)
-    s2 = sig[idx] ** 2
-    w = np.where(d2 < (surface.cutoff**2) * s2, np.exp(-d2 / s2), 0.0)
-    wsum = np.bincount(q, weights=w, minlength=len(pts))
-    for k in range(3):
-        out[:, k] = np.bincount(q, weights=w * colors[idx, k], minlength=len(pts))
-    ok = wsum > 0
-    out[ok] /= wsum[ok, None]
-    if not ok.all():
-        _, nearest = knn(cloud.positions, 1, queries=pts[~ok])
-        out[~ok] = colors[nearest[:, 0]]
-    return out
 
 
 def draw_mls(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], camera: Camera, colors: np.ndarray | None = None,
@@ -105,7 +66,8 @@ def draw_mls(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], camera: Camera, co
     progress : bool
         Show :func:`unmesh.mls.intersect`'s progress bar.
     """
-    from unmesh.mls import MLSSurface, intersect
+    from unmesh.mls import MLSSurface, interpolate, intersect
+    from unmesh.mls.surface import SURFACE_OPTIONS
 
     items = [c for c in clouds if len(c)]
     for i, c in enumerate(items):
@@ -115,7 +77,7 @@ def draw_mls(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], camera: Camera, co
         return
     cloud = _combined(items, colors)
     opts = dict(mls_options or {})
-    surf_keys = {"sigma", "sigma_factor", "cutoff", "kernel", "normal", "degree"}
+    surf_keys = set(SURFACE_OPTIONS)
     surface = MLSSurface(cloud, **{k: v for k, v in opts.items() if k in surf_keys})
     cast_opts = {k: v for k, v in opts.items() if k not in surf_keys}
     # which pixels can see the surface: splatted discs (no screen filter), dilated
@@ -141,6 +103,6 @@ def draw_mls(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], camera: Camera, co
     pts = o + t[:, None] * d
     gbuffer.depth[rows, cols] = z
     gbuffer.normal[rows, cols] = nrm
-    gbuffer.albedo[rows, cols] = np.clip(mls_colors(surface, pts, np.asarray(cloud.colors)), 0.0, 1.0)
+    gbuffer.albedo[rows, cols] = np.clip(interpolate(surface, pts, cloud.colors), 0.0, 1.0)
     gbuffer.coverage[rows, cols] = True
     gbuffer.weight[rows, cols] = 1.0
