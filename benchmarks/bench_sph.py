@@ -1,0 +1,255 @@
+"""Benchmark: particle-steps per second of a 3D dam break with about 60k particles.
+
+Measures, at 1 and 2 threads:
+
+* ``unmesh`` WCSPH, fluid only (density pass + force pass + sorting + integration);
+* ``unmesh`` with elasticity enabled (the same block as an elastic solid: lattice
+  assignment, shape matching, goal positions, exact torque correction, gather);
+* SPlisHSPlasH's WCSPH (``pip install pysplishsplash``) on the same setup (a water
+  column in a box, same particle count, Akinci boundary), run in a subprocess with
+  ``OMP_NUM_THREADS`` and ``LD_PRELOAD=libGLdispatch.so.0`` (its import needs it headless).
+
+Prints one table and the ratios the issue asks for (elastic/fluid, unmesh/SPlisHSPlasH).
+Timings are wall clock of the stepping only (compilation and set-up excluded).
+
+Then validates the shipped 3D dam break (``examples/sph/dam_break.toml``, a = 0.25 m,
+spacing a/20) against Martin & Moyce (1952), n² = 2: the surge front Z = x/a at the
+experiment's times T = t·√(2g/a), with the relative error per point and the largest error
+for T ≤ 3 (goal: 10 %). This part takes a few minutes; skip it with ``--no-validation``.
+
+Usage::
+
+    python benchmarks/bench_sph.py [--steps 60] [--spacing 0.01] [--no-splishsplash] [--no-validation]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+# The water column: width x height x depth (m) and tank, as in the dam-break scene.
+COLUMN = (0.35, 0.7, 0.18)
+TANK = (1.4, 0.9, 0.18)
+
+
+def unmesh_rate(spacing: float, steps: int, threads: int, elastic: bool) -> tuple[int, float, float, float]:
+    """(particles, particle-steps per wall second, per CPU second, mean neighbours) of the unmesh step."""
+    import numba
+
+    from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation, box_planes
+    from unmesh.sph.sampling import closest_packing
+
+    numba.set_num_threads(threads)
+    x = closest_packing([0, 0, 0], COLUMN, spacing, 3)
+    if elastic:
+        mat = Material("jelly", stiffness=2000.0, elastic_stiffness=1e6, xsph=0.1)
+        obj = SPHObject("jelly", x, "jelly", phase="solid")
+    else:
+        mat = Material("water", stiffness=2000.0)
+        obj = SPHObject("water", x, "water")
+    cfg = SPHConfig(dim=3, spacing=spacing, dt=1e-4, gravity=(0, -9.81, 0))
+    sim = SPHSimulation(cfg, {mat.name: mat}, [obj], planes=box_planes([0, 0, 0], TANK, 3, open_top=True))
+    for _ in range(3):  # compile and warm up
+        sim.step()
+    t0 = time.perf_counter()
+    c0 = time.process_time()
+    for _ in range(steps):
+        sim.step()
+    wall = time.perf_counter() - t0
+    cpu = time.process_time() - c0
+    return len(x), len(x) * steps / wall, len(x) * steps / cpu, float(sim.nnbr.mean())
+
+
+#: Martin & Moyce (1952), n² = 2, a = 2.25 in: surge front Z = x/a at T = t·√(2g/a) (issue 4).
+MARTIN_MOYCE_T = (0.832, 1.219, 1.997, 2.547, 3.345)
+MARTIN_MOYCE_Z = (1.217, 1.474, 2.292, 2.995, 4.134)
+
+
+def dam_break_validation(resolution: int = 20) -> None:
+    """Run the shipped dam break at spacing a/resolution and print the surge-front error."""
+    import numpy as np
+
+    from unmesh.scene import load_scene
+    from unmesh.scenes import path as scene_path
+    from unmesh.spatial import knn
+    from unmesh.sph.scene import build_simulation
+
+    a, g = 0.25, 9.81
+    spacing = a / resolution
+    sim, _ = build_simulation(load_scene(scene_path("sph/dam_break.toml"), {"simulation.spacing": spacing}))
+    t0 = time.perf_counter()
+    print(f"\nDam break vs Martin & Moyce (1952): 3D, a = {a} m, spacing a/{resolution}, {len(sim.x)} particles, "
+          "free-slip walls, instant release; front = largest x of a particle with a neighbour within 1.5 d")
+    errors = []
+    for big_t, z_exp in zip(MARTIN_MOYCE_T, MARTIN_MOYCE_Z, strict=True):
+        while sim.time < big_t / math.sqrt(2 * g / a):
+            sim.step()
+            reason = sim.check()
+            if reason:
+                raise RuntimeError(f"dam break unstable at t = {sim.time}: {reason}")
+        x = sim.particles().positions
+        dist, _ = knn(x, 2)
+        z = float(x[dist[:, 1] < 1.5 * spacing, 0].max()) / a
+        err = (z - z_exp) / z_exp
+        errors.append((big_t, err))
+        print(f"  T = {big_t:.3f}: experiment Z = {z_exp:.3f}, unmesh Z = {z:.3f}, error {100 * err:+.1f} %")
+    early = [abs(e) for t, e in errors if t <= 3.0]
+    print(f"  largest |error| for T <= 3: {100 * max(early):.1f} % (goal 10 %), mean {100 * np.mean(early):.1f} %; "
+          f"{sim.steps} steps in {time.perf_counter() - t0:.0f} s")
+
+
+_SPLISH_SCRIPT = textwrap.dedent("""
+    import json, sys, time
+    import pysplishsplash as sph
+    scene, stop = sys.argv[1], float(sys.argv[2])
+    base = sph.Exec.SimulatorBase()
+    base.init(sceneFile=scene, useCache=False, outputDir=sys.argv[3], initialPause=False, useGui=False,
+              stopAt=stop)
+    base.setValueBool(base.STATE_EXPORT, False)
+    steps = [0]
+    marks = {}
+    def cb():
+        steps[0] += 1
+        if steps[0] == 3:
+            marks["t0"] = time.perf_counter()
+            marks["c0"] = time.process_time()
+    base.setTimeStepCB(cb)
+    base.initSimulation()
+    sim = sph.Simulation.getCurrent()
+    n = sim.getFluidModel(0).numActiveParticles()
+    base.runSimulation()
+    wall = time.perf_counter() - marks["t0"]
+    cpu = time.process_time() - marks["c0"]
+    base.cleanup()
+    print(json.dumps({"particles": n, "steps": steps[0] - 3, "wall": wall, "cpu": cpu}))
+""")
+
+_BOX_OBJ = """v -0.5 -0.5 -0.5
+v 0.5 -0.5 -0.5
+v 0.5 0.5 -0.5
+v -0.5 0.5 -0.5
+v -0.5 -0.5 0.5
+v 0.5 -0.5 0.5
+v 0.5 0.5 0.5
+v -0.5 0.5 0.5
+f 1 3 2
+f 1 4 3
+f 5 6 7
+f 5 7 8
+f 1 2 6
+f 1 6 5
+f 4 7 3
+f 4 8 7
+f 1 5 8
+f 1 8 4
+f 2 3 7
+f 2 7 6
+"""
+
+
+def splishsplash_rate(spacing: float, steps: int, threads: int, particles: int) -> tuple[int, float, float] | None:
+    """(particles, particle-steps per wall second, per CPU second) of SPlisHSPlasH's WCSPH, or None.
+
+    ``particles`` is the count to match (the unmesh column's).
+    """
+    import importlib.util
+
+    if importlib.util.find_spec("pysplishsplash") is None:
+        return None
+    dt = 1e-4
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        (d / "UnitBox.obj").write_text(_BOX_OBJ)
+        # SPlisHSPlasH samples fluid blocks on a cubic grid of spacing 2r = spacing (1/d³ particles per
+        # volume, the closest packing of unmesh has √2/d³): the block fills the tank's depth and is sized
+        # in x and y (height twice the width where the tank allows) to hold the same number of particles
+        # (a block of extent (n + 1/2)·2r holds n particles along that axis)
+        nz = int((TANK[2] - 2 * spacing) / spacing - 0.5)
+        cells = particles / nz
+        ny = min(round(math.sqrt(2 * cells)), int((TANK[1] - 2 * spacing) / spacing - 0.5))
+        nx = round(cells / ny)
+        col = [(n + 0.5) * spacing for n in (nx, ny, nz)]
+        scene = {
+            "Configuration": {
+                "particleRadius": spacing / 2, "numberOfStepsPerRenderUpdate": 1, "density0": 1000,
+                "simulationMethod": 0, "gravitation": [0, -9.81, 0], "timeStepSize": dt, "cflMethod": 0,
+                "stiffness": 50000, "exponent": 7, "boundaryHandlingMethod": 0, "enableZSort": True,
+            },
+            "Materials": [{"id": "Fluid", "viscosity": 0.0, "viscosityMethod": 0}],
+            "RigidBodies": [{
+                "geometryFile": str(d / "UnitBox.obj"), "translation": [TANK[0] / 2, TANK[1] / 2, TANK[2] / 2],
+                "rotationAxis": [1, 0, 0], "rotationAngle": 0, "scale": list(TANK), "isDynamic": False,
+                "isWall": True, "mapInvert": True, "mapThickness": 0.0, "mapResolution": [40, 30, 15]}],
+            "FluidBlocks": [{"denseMode": 0, "start": [spacing, spacing, spacing],
+                             "end": [spacing + col[0], spacing + col[1], spacing + col[2]],
+                             "translation": [0, 0, 0], "scale": [1, 1, 1]}],
+        }
+        path = d / "dam.json"
+        path.write_text(json.dumps(scene))
+        env = dict(os.environ, OMP_NUM_THREADS=str(threads))
+        gl = "/usr/lib/x86_64-linux-gnu/libGLdispatch.so.0"
+        if Path(gl).exists():
+            env["LD_PRELOAD"] = gl
+        stop = (steps + 3) * dt * 1.0000001
+        res = subprocess.run([sys.executable, "-c", _SPLISH_SCRIPT, str(path), str(stop), str(d / "out")],
+                             capture_output=True, text=True, env=env, timeout=3600)
+        lines = [ln for ln in res.stdout.splitlines() if ln.startswith("{")]
+        if res.returncode != 0 or not lines:
+            print(f"SPlisHSPlasH failed (exit {res.returncode}): {res.stderr[-500:]}", file=sys.stderr)
+            return None
+        out = json.loads(lines[-1])
+        ps = out["particles"] * out["steps"]
+        return out["particles"], ps / out["wall"], ps / out["cpu"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=60, help="timed steps per run")
+    parser.add_argument("--spacing", type=float, default=0.01, help="particle spacing (0.01: about 62k particles)")
+    parser.add_argument("--threads", default="1,2", help="comma-separated thread counts")
+    parser.add_argument("--no-splishsplash", action="store_true")
+    parser.add_argument("--no-validation", action="store_true", help="skip the dam-break surge-front validation")
+    parser.add_argument("--validation-resolution", type=int, default=20, help="dam break spacing a/N (default 20)")
+    args = parser.parse_args()
+    threads = [int(t) for t in args.threads.split(",")]
+    rows = []
+    for t in threads:
+        fluid = unmesh_rate(args.spacing, args.steps, t, elastic=False)
+        rows.append(("unmesh WCSPH (fluid)", t, *fluid))
+        rows.append(("unmesh WCSPH + elasticity", t, *unmesh_rate(args.spacing, args.steps, t, elastic=True)))
+        if not args.no_splishsplash:
+            res = splishsplash_rate(args.spacing, args.steps, t, fluid[0])
+            if res is not None:
+                rows.append(("SPlisHSPlasH WCSPH", t, *res, float("nan")))
+    print(f"\n3D dam break, {args.steps} timed steps (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)")
+    print(f"{'method':32s} {'threads':>7s} {'particles':>9s} {'M particle-steps/s':>19s} {'per CPU-second':>15s} "
+          f"{'neighbours':>10s}")
+    for name, t, n, r, rc, nb in rows:
+        print(f"{name:32s} {t:7d} {n:9d} {r / 1e6:19.3f} {rc / 1e6:15.3f} {nb:10.1f}")
+    for t in threads:
+        by = {name: r for name, tt, _n, r, _rc, _nb in rows if tt == t}
+        fluid = by.get("unmesh WCSPH (fluid)")
+        el = by.get("unmesh WCSPH + elasticity")
+        sp = by.get("SPlisHSPlasH WCSPH")
+        line = f"{t} thread(s): elastic step costs {fluid / el:.2f}x the fluid step"
+        if sp:
+            line += f"; unmesh fluid / SPlisHSPlasH = {fluid / sp:.2f}"
+        print(line)
+    print("goal: >= 1 M particle-steps/s (fluid, 2 cores), elastic within 3x of fluid, faster than SPlisHSPlasH "
+          "at equal threads")
+    print("(neighbours: unmesh's mean count within h = 2d of its closest packing, as measured; SPlisHSPlasH samples a "
+          "cubic grid with support 2 spacings, about 30 neighbours)")
+    if not args.no_validation:
+        dam_break_validation(args.validation_resolution)
+
+
+if __name__ == "__main__":
+    main()

