@@ -9,6 +9,10 @@ Example
 
 from __future__ import annotations
 
+import contextlib
+import os
+import tempfile
+import warnings
 from typing import Any
 
 import numpy as np
@@ -205,11 +209,20 @@ def tetrahedralize(surface: Any, *, max_volume: float | None = None, quality: fl
     if max_volume is not None:
         extra = {"fixedvolume": True, "maxvolume": positive_scalar(max_volume, "max_volume")}
     gen = tetgen.TetGen(v, f)
-    try:
-        nodes, elems = gen.tetrahedralize(order=1, quality=True, minratio=float(quality), mindihedral=float(min_dihedral),
-                                          verbose=0, **extra)[:2]
-    except RuntimeError as exc:
-        raise InputError(f"surface: TetGen failed ({exc}); is the surface closed and free of self-intersections?") from None
+    # TetGen writes the facets it had to skip (self-intersections) to ``_skipped.*`` in the
+    # current directory and has no switch to disable that: run it in a private temporary
+    # directory and turn those files into a warning instead of litter in the user's directory.
+    with tempfile.TemporaryDirectory(prefix="unmesh-tetgen-") as tmp, contextlib.chdir(tmp):
+        try:
+            nodes, elems = gen.tetrahedralize(order=1, quality=True, minratio=float(quality),
+                                              mindihedral=float(min_dihedral), verbose=0, **extra)[:2]
+        except RuntimeError as exc:
+            raise InputError(f"surface: TetGen failed ({exc}); is the surface closed and free of "
+                             "self-intersections?") from None
+        skipped = sorted(os.listdir(tmp))
+    if skipped:
+        warnings.warn(f"surface: TetGen skipped parts of the input surface (it wrote {', '.join(skipped)}); "
+                      "the surface probably self-intersects", UserWarning, stacklevel=2)
     return tet_mesh(nodes, elems)
 
 

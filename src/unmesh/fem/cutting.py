@@ -38,11 +38,16 @@ import numpy as np
 
 from unmesh._validate import as_array, as_points, scalar
 from unmesh.errors import InputError
+from unmesh.fem._sides import PlaneSides
 from unmesh.fem.editor import EditResult, MeshEditor
 from unmesh.fem.mesh import PolyMesh
 
 __all__ = ["CutMissWarning", "Cutter", "PlaneCut", "PolygonCut", "apply_cuts", "cut_by_plane", "cut_by_polygon",
            "split_element"]
+
+#: Cut elements are convex within ``CONVEXITY_FACTOR * snap`` of their diameter (checked on commit).
+CONVEXITY_FACTOR = 4.0
+
 
 
 class CutMissWarning(UserWarning):
@@ -96,7 +101,7 @@ def _open_loop(cycles: list[list[int]]) -> list[int]:
     for a, b in he:
         if (b, a) not in he:
             if a in nxt:
-                raise InputError("degenerate cut: the cut section is not a simple polygon (try a larger snap)")
+                raise InputError("degenerate cut: the cut section is not a simple polygon")
             nxt[a] = b
     if not nxt:
         raise InputError("degenerate cut: the element has no open boundary on the cut plane")
@@ -109,29 +114,64 @@ def _open_loop(cycles: list[list[int]]) -> list[int]:
         if len(loop) > len(nxt):
             break
     if len(loop) != len(nxt) or len(loop) < 3:
-        raise InputError("degenerate cut: the cut section is not a single polygon (try a larger snap)")
+        raise InputError("degenerate cut: the cut section is not a single polygon")
     return loop
 
 
+def _sign_runs(cl: list[int]) -> list[list[int]]:
+    """Cyclic runs of equal non-zero sign (zeros ignored): lists of positions."""
+    nz = [i for i, c in enumerate(cl) if c != 0]
+    if not nz:
+        return []
+    runs: list[list[int]] = [[nz[0]]]
+    for i in nz[1:]:
+        if cl[i] == cl[runs[-1][-1]]:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    if len(runs) > 1 and cl[runs[0][0]] == cl[runs[-1][0]]:
+        runs[0] = runs.pop() + runs[0]
+    return runs
+
+
 def _split_cycle(cyc: list[int], cl: list[int]) -> tuple[list[int], list[int]]:
-    """Split a convex face cycle whose nodes are classified -1/0/+1 (no adjacent -1/+1)."""
+    """Split a face cycle classified -1/0/+1 into its (negative, positive) pieces.
+
+    Requires one run of each sign (zeros ignored) and no edge joining -1 and +1
+    (crossing edges are split first). The pieces share the chord between the zero
+    nodes bounding the negative run; both keep the face's orientation.
+    """
     n = len(cyc)
-    starts = [i for i in range(n) if cl[i] > 0 and cl[i - 1] <= 0]
-    if len(starts) != 1:
+    if len(_sign_runs(cl)) != 2:
         raise InputError("degenerate cut: a face is crossed more than twice (non-convex face?)")
-    i0 = starts[0]
+    i0 = next(i for i in range(n) if cl[i] > 0)
     rot = cyc[i0:] + cyc[:i0]
     clr = cl[i0:] + cl[:i0]
-    k = next(i for i in range(n) if clr[i] <= 0)
-    if clr[k] != 0 or clr[-1] != 0:
+    i1 = next(i for i in range(n) if clr[i] < 0)
+    i2 = max(i for i in range(n) if clr[i] < 0)
+    if clr[i1 - 1] != 0 or i2 + 1 >= n or clr[i2 + 1] != 0:
         raise InputError("internal error: crossing edge left unsplit")
-    pos = [rot[-1], *rot[:k], rot[k]]
-    neg = rot[k:]
+    neg = rot[i1 - 1:i2 + 2]
+    pos = rot[i2 + 1:] + rot[:i1]
     return neg, pos
+
+
+def _newell(p: np.ndarray) -> np.ndarray:
+    """Area vector (Newell normal times area) of a polygon (k,3)."""
+    c = p.mean(axis=0)
+    return 0.5 * np.cross(p - c, np.roll(p, -1, axis=0) - c).sum(axis=0)
 
 
 class Cutter:
     """Applies plane and polygon cuts to a :class:`MeshEditor` (commit once at the end).
+
+    Parameters
+    ----------
+    mesh : PolyMesh
+    snap : float
+        Snapping fraction (see :mod:`unmesh.fem._sides`): a node within ``snap`` times
+        its length scale (:meth:`PolyMesh.node_scales`, initially its longest edge) of
+        a cut plane is taken to lie on it.
 
     Example
     -------
@@ -147,90 +187,124 @@ class Cutter:
         self.snap = scalar(snap, "snap", minimum=0.0, maximum=0.25)
         self.ed = MeshEditor(mesh)
         self.mesh = mesh
-        #: global snapping distance: nodes this close to a cut plane count as on it, so no
-        #: edge shorter than this is created (needles, 9.2). Scaled with the longest edge, it
-        #: also covers the deviation of nodes snapped by the edge-relative rule, so a node once
-        #: snapped onto a plane is on it again for the next (coplanar) cut polygon.
-        self.snap_length = self.snap * mesh.max_edge_length()
+        #: widest snapping band of any node (a pre-filter for candidate elements)
+        self.max_band = self.snap * float(mesh.node_scales().max(initial=0.0))
         off, nodes = mesh.element_nodes()
         p = mesh.points[nodes]
-        self._elo = np.minimum.reduceat(p, off[:-1], axis=0)
-        self._ehi = np.maximum.reduceat(p, off[:-1], axis=0)
+        self._elo = np.minimum.reduceat(p, off[:-1], axis=0) if len(off) > 1 else np.zeros((0, 3))
+        self._ehi = np.maximum.reduceat(p, off[:-1], axis=0) if len(off) > 1 else np.zeros((0, 3))
         self.touched = False
+        #: nodes snapped onto a plane because a split would have left a degenerate half
+        self.forced = 0
+        #: straddling elements whose split would have been degenerate (their thin side was snapped)
+        self.degenerate = 0
 
-    # -- classification -----------------------------------------------------------------------
-    def _classifier(self, origin: np.ndarray, normal: np.ndarray):
-        """Node classification for one plane: (signed distance, -1/0/+1), consistent for the whole cut.
+    # -- nodes ---------------------------------------------------------------------------------
+    def length_scale(self, v: int) -> float:
+        """Snapping length scale of node v (:meth:`PolyMesh.node_scales`, carried over by cuts)."""
+        return self.ed.node_scale(v)
 
-        A node is *on* the plane (0) if it is within ``snap_length`` of it, or if a
-        crossing edge would get its new node within ``snap`` (relative to the edge) of
-        it: so no needle and no sliver thinner than ``snap`` of its size is created.
-        """
-        base_d = (self.mesh.points - origin) @ normal
-        ed = self.ed
-        dist: dict[int, float] = {}
-        cache: dict[int, tuple[float, int]] = {}
-        sl = self.snap_length
-
-        def d_of(v: int) -> float:
-            d = dist.get(v)
-            if d is None:
-                d = float(base_d[v]) if v < ed.n_base_nodes and v not in ed._moved else float((ed.point(v) - origin) @ normal)
-                dist[v] = d
-            return d
-
-        def classify(v: int) -> tuple[float, int]:
-            hit = cache.get(v)
-            if hit is not None:
-                return hit
-            d = d_of(v)
-            c = 0 if abs(d) <= sl else (1 if d > 0 else -1)
-            if c != 0 and self.snap > 0:
-                for f in ed.faces_of_node(v):
-                    cyc = ed.face(f)
-                    i = cyc.index(v)
-                    for w in (cyc[i - 1], cyc[(i + 1) % len(cyc)]):
-                        dw = d_of(w)
-                        if dw * d < 0 and abs(dw) > sl and abs(d) < self.snap * (abs(d) + abs(dw)):
-                            c = 0
-                            break
-                    if c == 0:
-                        break
-            cache[v] = (d, c)
-            return d, c
-
-        def force_zero(v: int) -> None:
-            cache[v] = (0.0, 0)
-            dist[v] = 0.0
-
-        return base_d, classify, force_zero
-
-    def _new_edge_node(self, a: int, b: int, da: float, db: float, force_zero) -> int:
+    def _new_edge_node(self, a: int, b: int, sides: PlaneSides) -> int:
+        da, db = sides.distance(a), sides.distance(b)
         t = da / (da - db)
         m = self.ed.split_edge(a, b, t)
-        force_zero(m)
+        sides.on_plane(m)
         return m
 
     # -- 9.3.1 element split ---------------------------------------------------------------------
-    def split(self, e: int, classify, force_zero, normal: np.ndarray) -> tuple[int, int] | None:
-        """Split element e by the plane of ``classify``; returns (negative, positive) halves."""
+    def _prepare(self, elems: list[int], sides: PlaneSides) -> list[int]:
+        """Make every element of ``elems`` that straddles the plane splittable; return those.
+
+        Snapping decisions are global per node, so a split is never refused: where a face
+        would be crossed more than twice (a slightly non-planar face) the nodes of the
+        shortest sign runs are snapped onto the plane, and where one half would be
+        degenerate (less than 1e-6 of the volume) its nodes are snapped onto the plane,
+        so the element lies on one side.
+        """
         ed = self.ed
-        cls = {v: classify(v)[1] for v in ed.elem_nodes(e)}
+        out: list[int] = []
+        for _sweep in range(20):
+            changed = False
+            out = []
+            for e in elems:
+                if e in ed.dead_elems:
+                    continue
+                nodes = ed.elem_nodes(e)
+                if not self._straddles(nodes, sides):
+                    continue
+                for f, _ in ed.elem(e):
+                    cyc = ed.face(f)
+                    cl = [sides.cls(v) for v in cyc]
+                    runs = _sign_runs(cl)
+                    while len(runs) > 2:
+                        worst = min(runs, key=lambda r: max(abs(sides.distance(cyc[i])) for i in r))
+                        for i in worst:
+                            changed |= sides.force(cyc[i])
+                            cl[i] = 0
+                        self.forced += len(worst)
+                        runs = _sign_runs(cl)
+                if not self._straddles(nodes, sides):
+                    continue
+                thin = self._thin_side(nodes, sides)
+                if thin == 0:
+                    vneg, vpos = self._half_volumes(e, sides)
+                    if min(vneg, vpos) <= 1e-6 * (vneg + vpos):
+                        thin = -1 if vneg < vpos else 1
+                        if vneg < 0 or vpos < 0:  # no valid split: snap the side closer to the plane
+                            reach = {s_: max((abs(sides.distance(v)) for v in nodes if sides.cls(v) == s_),
+                                             default=0.0) for s_ in (-1, 1)}
+                            thin = -1 if reach[-1] <= reach[1] else 1
+                        self.degenerate += 1
+                if thin != 0:
+                    for v in nodes:
+                        if sides.cls(v) == thin:
+                            changed |= sides.force(v)
+                            self.forced += 1
+                    continue
+                out.append(e)
+            if not changed:
+                return out
+        return out
+
+    @staticmethod
+    def _thin_side(nodes: list[int], sides: PlaneSides) -> int:
+        """A side (-1/+1) whose nodes lie within twice the height of the nodes snapped onto the
+        plane on that side (the half would be a folded sliver under its non-planar cap), else 0.
+
+        Only nodes within their own snapping band count as snapped here (not nodes forced
+        onto the plane), so forced distances stay below twice the band and cannot cascade.
+        """
+        top = {-1: 0.0, 1: 0.0}
+        cap = {-1: 0.0, 1: 0.0}
+        for v in nodes:
+            d, c = sides(v)
+            if c != 0:
+                top[c] = max(top[c], abs(d))
+            elif d != 0.0 and abs(d) <= sides.band(v) and v not in sides.forced:
+                s = 1 if d > 0 else -1
+                cap[s] = max(cap[s], abs(d))
+        for s in (-1, 1):
+            if 0.0 < top[s] <= 2.0 * cap[s]:
+                return s
+        return 0
+
+    @staticmethod
+    def _straddles(nodes: list[int], sides: PlaneSides) -> bool:
+        cs = {sides.cls(v) for v in nodes}
+        return 1 in cs and -1 in cs
+
+    def split(self, e: int, sides: PlaneSides) -> tuple[int, int] | None:
+        """Split element e by the plane of ``sides``; returns its (negative, positive) halves.
+
+        Call :meth:`_prepare` first (it guarantees non-degenerate halves). Faces
+        lying in the plane (all nodes on it) go with the half they bound: the one
+        on the side their outward normal points away from.
+        """
+        ed = self.ed
+        normal = sides.normal
+        cls = {v: sides.cls(v) for v in ed.elem_nodes(e)}
         if not (any(c < 0 for c in cls.values()) and any(c > 0 for c in cls.values())):
             return None
-        if any(all(cls[v] == 0 for v in ed.face(f)) for f, _ in ed.elem(e)):
-            # a face lies in the plane (up to snapping): by convexity the element is on one side.
-            # Known limitation: on curved progressive sweeps the previous step's plane can be
-            # snapped into this one, and such elements then keep the two sides connected.
-            return None
-        sec = self._section(e, classify)
-        pts = ed.points_of(list(cls))
-        diam = float(np.linalg.norm(np.ptp(pts, axis=0)))
-        if sec is None or _section_area(np.array(sec), normal) <= 1e-6 * diam * diam:
-            return None  # the plane only grazes the element: splitting would leave a flat half
-        vneg, vpos = self._half_volumes(e, classify, np.mean(sec, axis=0), normal)
-        if min(vneg, vpos) <= 1e-6 * (vneg + vpos):
-            return None  # one half would be (almost) flat
         edges = set()
         for f, _ in ed.elem(e):
             c = ed.face(f)
@@ -239,69 +313,104 @@ class Cutter:
                 if cls[a] * cls[b] < 0:
                     edges.add((min(a, b), max(a, b)))
         for a, b in sorted(edges):
-            m = self._new_edge_node(a, b, classify(a)[0], classify(b)[0], force_zero)
-            cls[m] = 0
+            cls[self._new_edge_node(a, b, sides)] = 0
         neg: list[tuple[int, int]] = []
         pos: list[tuple[int, int]] = []
         flat: list[tuple[int, int]] = []
         for f, s in list(ed.elem(e)):
             cyc = ed.face(f)
             cl = [cls[v] for v in cyc]
-            if all(c == 0 for c in cl):
-                flat.append((f, s))
-            elif all(c <= 0 for c in cl):
-                neg.append((f, s))
-            elif all(c >= 0 for c in cl):
-                pos.append((f, s))
-            else:
+            has_n = any(c < 0 for c in cl)
+            has_p = any(c > 0 for c in cl)
+            if has_n and has_p:
                 pn, pp = _split_cycle(cyc, cl)
                 f1, f2 = ed.split_face(f, pn, pp)
                 neg.append((f1, s))
                 pos.append((f2, s))
-        # faces (almost) in the cut plane go with the half whose faces share their edges
-        while flat:
-            def shared(side: list[tuple[int, int]], cyc: list[int]) -> int:
-                edges = {frozenset((a, cyc[(i + 1) % len(cyc)])) for i, a in enumerate(cyc)}
-                return sum(frozenset((a, c[(i + 1) % len(c)])) in edges
-                           for g, _ in side for c in (ed.face(g),) for i, a in enumerate(c))
-
-            scores = [(shared(neg, ed.face(f)), shared(pos, ed.face(f)), (f, s)) for f, s in flat]
-            sn, sp_, fs = max(scores, key=lambda t: abs(t[0] - t[1]))
-            if sn == sp_:
-                p = ed.points_of(ed.oriented(*fs))
-                nrm = np.cross(p - p.mean(axis=0), np.roll(p, -1, axis=0) - p.mean(axis=0)).sum(axis=0)
-                (pos if nrm @ normal < 0 else neg).append(fs)
+            elif has_n:
+                neg.append((f, s))
+            elif has_p:
+                pos.append((f, s))
             else:
-                (neg if sn > sp_ else pos).append(fs)
-            flat.remove(fs)
-        loop = _open_loop([ed.oriented(f, s) for f, s in neg])
+                flat.append((f, s))
+        loop = None
+        for attempt in ("geometry", "adjacency"):
+            n_side, p_side = list(neg), list(pos)
+            for fs in (flat if attempt == "geometry" else []):
+                (p_side if self._flat_side(ed.oriented(*fs), sides) > 0 else n_side).append(fs)
+            if attempt == "adjacency":
+                self._assign_by_adjacency(flat, n_side, p_side, normal)
+            try:
+                loop = _open_loop([ed.oriented(f, s) for f, s in n_side])
+            except InputError:
+                if not flat or attempt == "adjacency":
+                    raise
+                continue
+            break
+        assert loop is not None
+        if len(n_side) < 3 or len(p_side) < 3:
+            raise InputError("degenerate cut: a half of a split element has fewer than three faces")
         cap = [loop[0], *loop[:0:-1]]
         g = ed.new_face(cap, [])
-        ed.set_elem(e, [*neg, (g, 1)])
-        e2 = ed.new_elem([*pos, (g, -1)], parent=e)
+        ed.set_elem(e, [*n_side, (g, 1)])
+        e2 = ed.new_elem([*p_side, (g, -1)], parent=e)
         ed.set_refs(g, [(e, 1), (e2, -1)])
-        for f, s in pos:
+        for f, s in p_side:
             ed.set_refs(f, [(e2 if (a == e and sa == s) else a, sa) for a, sa in ed.refs(f)])
         self.touched = True
         return e, e2
+
+    def _flat_side(self, cyc: list[int], sides: PlaneSides) -> int:
+        """Half (+1/-1) that an element face lying in the plane (every node snapped onto it) bounds.
+
+        ``cyc`` is oriented outward for the element. A convex element lies behind each of
+        its faces, so a face in the plane bounds the half its outward normal points away
+        from. This holds also for a face that is slightly tilted against the plane (its
+        nodes snapped from one side): deciding by the side its nodes lie on instead would
+        give such a face to the half that is in front of it, and that half's cap would
+        then overlap it (an edge used by four faces of one element).
+        """
+        area = _newell(self.ed.points_of(cyc))
+        return 1 if area @ sides.normal < 0 else -1
+
+    def _assign_by_adjacency(self, flat: list[tuple[int, int]], neg: list[tuple[int, int]],
+                             pos: list[tuple[int, int]], normal: np.ndarray) -> None:
+        """Give each in-plane face to the half whose faces share more of its edges."""
+        ed = self.ed
+        todo = list(flat)
+
+        def shared(side: list[tuple[int, int]], cyc: list[int]) -> int:
+            edges = {frozenset((a, cyc[(i + 1) % len(cyc)])) for i, a in enumerate(cyc)}
+            return sum(frozenset((a, c[(i + 1) % len(c)])) in edges
+                       for g, _ in side for c in (ed.face(g),) for i, a in enumerate(c))
+
+        while todo:
+            scores = [(shared(neg, ed.face(f)), shared(pos, ed.face(f)), (f, s)) for f, s in todo]
+            sn, sp_, fs = max(scores, key=lambda t: abs(t[0] - t[1]))
+            if sn == sp_:
+                area = _newell(ed.points_of(ed.oriented(*fs)))
+                (pos if area @ normal < 0 else neg).append(fs)
+            else:
+                (neg if sn > sp_ else pos).append(fs)
+            todo.remove(fs)
 
     def plane(self, origin: Any, normal: Any, elements: Any | None = None) -> int:
         """Split every element the plane crosses (or only ``elements``); returns the number split."""
         o = as_array(origin, "origin", (3,))
         n = _unit(normal, "normal")
-        base_d, classify, force_zero = self._classifier(o, n)
+        sides = PlaneSides(self, o, n)
         ed = self.ed
         ed.reset_cache()
         if elements is None:
-            cand = self._candidates(base_d)
+            cand = self._candidates(sides.base_d)
         else:
             cand = [int(e) for e in np.atleast_1d(np.asarray(elements, dtype=np.int64))]
             bad = [e for e in cand if not 0 <= e < ed.n_elems or e in ed.dead_elems]
             if bad:
                 raise InputError(f"elements: no element {bad[0]} in the mesh")
         count = 0
-        for e in cand:
-            if self.split(e, classify, force_zero, n) is not None:
+        for e in self._prepare(cand, sides):
+            if self.split(e, sides) is not None:
                 count += 1
         return count
 
@@ -319,7 +428,24 @@ class Cutter:
 
     # -- 9.3.2 polygon cut ---------------------------------------------------------------------------
     def polygon(self, polygon: Any) -> int:
-        """Cut along a convex planar polygon (k,3); returns the number of duplicated nodes."""
+        """Cut along a convex planar polygon (k,3); returns the number of duplicated nodes.
+
+        1. Every element whose plane section overlaps the polygon and that has nodes on
+           both sides of the plane is split (9.3.1; never refused, see :meth:`_prepare`).
+        2. The *cut faces* are all faces lying in the plane (every node on it, up to
+           snapping) between elements on opposite sides - created by the splits or
+           already there - restricted to the polygon: faces crossing a polygon edge are
+           split along it.
+        3. Nodes of the cut faces are duplicated per part of their element star that the
+           cut faces separate (:meth:`_separate`); nodes on the polygon's boundary stay
+           shared, and cut faces without such a node get a node at their centroid first
+           (the pocket case).
+
+        Every path between the two sides inside the polygon crosses a cut face (an
+        element has nodes on one side only, so a face between opposite sides has all its
+        nodes on the plane), so a polygon covering the whole section separates the
+        material, whatever was snapped.
+        """
         P = as_points(polygon, "polygon")
         if len(P) < 3:
             raise InputError(f"polygon: expected at least 3 vertices, got {len(P)}")
@@ -344,39 +470,55 @@ class Cutter:
         if min(turns) < -1e-9 * size * size:
             raise InputError("polygon: expected a convex polygon (split non-convex cut shapes into convex ones)")
         ed = self.ed
-        base_d, classify, force_zero = self._classifier(c, n)
+        sides = PlaneSides(self, c, n)
 
         def to2(x: np.ndarray) -> np.ndarray:
             return np.array([(x - c) @ e1, (x - c) @ e2])
 
         eps = 1e-9 * size
-        # 1. split the crossed elements whose plane section overlaps the polygon
+        # 1. split the straddling elements whose plane section overlaps the polygon
         ed.reset_cache()
-        near = self._near(base_d, P)
+        near = self._near(sides.base_d, P)
+
+        def overlaps(e: int) -> bool:
+            sec = self._section(e, sides)
+            return sec is not None and _overlap(np.array([to2(x) for x in sec]), P2, eps)
+
+        crossing = [e for e in near if self._straddles(ed.elem_nodes(e), sides) and overlaps(e)]
+        for e in near:  # straddling without a section polygon: only collinear nodes cross the plane
+            nodes = ed.elem_nodes(e)
+            if self._straddles(nodes, sides) and self._section(e, sides) is None:
+                crossing.append(e)
         split_children: set[int] = set()
-        for e in near:
-            sec = self._section(e, classify)
-            if sec is None or not _overlap(np.array([to2(x) for x in sec]), P2, eps):
-                continue
-            r = self.split(e, classify, force_zero, n)
+        for e in self._prepare(crossing, sides):
+            r = self.split(e, sides)
             if r is not None:
                 split_children.update(r)
-        # 2. in-plane interior faces overlapping the polygon
-        cand_elems = set(split_children) | {e for e in near if self._has_zero(e, classify)}
+        # 2. in-plane faces between opposite sides overlapping the polygon
+        cand_elems = split_children | {e for e in near if e not in ed.dead_elems and self._has_zero(e, sides)}
         faces = set()
         for e in cand_elems:
             for f, _ in ed.elem(e):
                 faces.add(f)
+        side_of: dict[int, int] = {}
+
+        def side(e: int) -> int:
+            s = side_of.get(e)
+            if s is None:
+                s = side_of[e] = self._side(e, sides)
+            return s
+
         T = []
-        for f in faces:
+        for f in sorted(faces):
             if f in ed.dead_faces:
                 continue
-            cyc = ed.face(f)
             refs = ed.refs(f)
-            if len(refs) != 2 or any(classify(v)[1] != 0 for v in cyc):
+            if len(refs) != 2:
                 continue
-            sides = {self._side(a, classify) for a, _ in refs}
-            if sides != {-1, 1}:
+            cyc = ed.face(f)
+            if any(sides.cls(v) != 0 for v in cyc):
+                continue
+            if {side(a) for a, _ in refs} != {-1, 1}:
                 continue
             if _overlap(np.array([to2(ed.point(v)) for v in cyc]), P2, eps):
                 T.append(f)
@@ -385,7 +527,7 @@ class Cutter:
                           CutMissWarning, stacklevel=3)
             return 0
         # 3. split the in-plane faces along the polygon edges (each line only where its segment crosses)
-        side_cls = []
+        line_sides = []
         for j in range(len(P)):
             a3, b3 = P[j], P[(j + 1) % len(P)]
             a2, b2 = P2[j], P2[(j + 1) % len(P)]
@@ -394,8 +536,8 @@ class Cutter:
             if (c - a3) @ m > 0:
                 m = -m
             ed.reset_cache()
-            _, cls_j, zero_j = self._classifier(a3, m)
-            side_cls.append(cls_j)
+            ls = PlaneSides(self, a3, m)
+            line_sides.append(ls)
             newT = []
             for f in T:
                 cyc = ed.face(f)
@@ -403,26 +545,29 @@ class Cutter:
                 if not _segment_crosses(a2, b2, poly, eps):
                     newT.append(f)
                     continue
-                cl = {v: cls_j(v)[1] for v in cyc}
-                if not (any(x < 0 for x in cl.values()) and any(x > 0 for x in cl.values())):
+                cl = [ls.cls(v) for v in cyc]
+                runs = _sign_runs(cl)
+                if len(runs) < 2:
                     newT.append(f)
                     continue
+                while len(runs) > 2:  # a slightly non-convex face: snap the nodes of the shortest run
+                    worst = min(runs, key=lambda r: max(abs(ls.distance(cyc[i])) for i in r))
+                    for i in worst:
+                        ls.force(cyc[i])
+                        cl[i] = 0
+                    runs = _sign_runs(cl)
                 for i in range(len(cyc)):
                     a, b = cyc[i], cyc[(i + 1) % len(cyc)]
-                    if cl[a] * cl[b] < 0:
-                        mnode = self._new_edge_node(a, b, cls_j(a)[0], cls_j(b)[0], zero_j)
-                        force_zero(mnode)  # lies in the cut plane
+                    if cl[i] * cl[(i + 1) % len(cyc)] < 0:
+                        mnode = self._new_edge_node(a, b, ls)
+                        sides.on_plane(mnode)  # lies in the cut plane
                 cyc = ed.face(f)
-                pn, pp = _split_cycle(cyc, [cls_j(v)[1] for v in cyc])
+                pn, pp = _split_cycle(cyc, [ls.cls(v) for v in cyc])
                 newT.extend(ed.split_face(f, pn, pp))
             T = newT
         # 4. the cut faces: pieces inside the polygon, decided with the same (snapped) side
         #    classification as the splits, so a piece is never left between two polygons
-        inside = []
-        for f in T:
-            cyc = ed.face(f)
-            if all(max(cl(v)[1] for v in cyc) <= 0 for cl in side_cls):
-                inside.append(f)
+        inside = [f for f in T if all(max(ls.cls(v) for v in ed.face(f)) <= 0 for ls in line_sides)]
         if not inside:
             warnings.warn("cut polygon covers no in-plane face of the mesh; nothing cut", CutMissWarning, stacklevel=3)
             return 0
@@ -436,7 +581,7 @@ class Cutter:
         d = base_d[nodes]
         dlo = np.minimum.reduceat(d, off[:-1])
         dhi = np.maximum.reduceat(d, off[:-1])
-        tol = self.snap_length
+        tol = self.max_band
         box = np.all(self._elo <= hi + pad, axis=1) & np.all(self._ehi >= lo - pad, axis=1)
         base = np.flatnonzero(box & (dlo <= tol) & (dhi >= -tol)).tolist()
         ed = self.ed
@@ -448,43 +593,92 @@ class Cutter:
                 out.append(e)
         return out
 
-    def _has_zero(self, e: int, classify) -> bool:
-        return any(classify(v)[1] == 0 for v in self.ed.elem_nodes(e))
+    def _has_zero(self, e: int, sides: PlaneSides) -> bool:
+        return any(sides.cls(v) == 0 for v in self.ed.elem_nodes(e))
 
-    def _side(self, e: int, classify) -> int:
-        cs = {classify(v)[1] for v in self.ed.elem_nodes(e)}
-        if 1 in cs and -1 not in cs:
-            return 1
-        if -1 in cs and 1 not in cs:
+    def _side(self, e: int, sides: PlaneSides) -> int:
+        """+1 / -1 for an element on one side of the plane (0 if it straddles it); an element
+        lying in the plane (every node snapped onto it) takes the side of its centroid."""
+        nodes = self.ed.elem_nodes(e)
+        cs = {sides.cls(v) for v in nodes}
+        if 1 in cs:
+            return 0 if -1 in cs else 1
+        if -1 in cs:
             return -1
-        return 0
+        d = float((self.ed.points_of(nodes).mean(axis=0) - sides.origin) @ sides.normal)
+        return 1 if d >= 0 else -1
 
-    def _half_volumes(self, e: int, classify, origin: np.ndarray, normal: np.ndarray) -> tuple[float, float]:
-        """Volumes of the two halves the split would create (divergence theorem about a point on
-        the plane, so the cap contributes nothing), computed before any edit."""
+    def _half_volumes(self, e: int, sides: PlaneSides) -> tuple[float, float]:
+        """Volumes of the two halves the split would create, computed before any edit.
+
+        The halves are built virtually exactly as :meth:`split` builds them (crossing
+        points, face pieces, in-plane faces by orientation, the cap through the snapped
+        nodes), so a half left flat by snapped nodes shows up as (almost) zero volume.
+        A configuration the split could not close gives ``(-1, -1)``.
+        """
         ed = self.ed
-        out = [0.0, 0.0]
+        pts: dict[Any, np.ndarray] = {}
+
+        def point(k: Any) -> np.ndarray:
+            x = pts.get(k)
+            if x is None:
+                if isinstance(k, tuple):
+                    a, b = k
+                    da, db = sides.distance(a), sides.distance(b)
+                    t = da / (da - db)
+                    x = (1 - t) * ed.point(a) + t * ed.point(b)
+                else:
+                    x = ed.point(k)
+                pts[k] = x
+            return x
+
+        neg: list[list[Any]] = []
+        pos: list[list[Any]] = []
         for f, s in ed.elem(e):
             cyc = ed.oriented(f, s)
-            for k, sgn in enumerate((-1, 1)):
-                poly = []
-                for i, a in enumerate(cyc):
-                    b = cyc[(i + 1) % len(cyc)]
-                    da, ca = classify(a)
-                    db, cb = classify(b)
-                    if ca * sgn >= 0:
-                        poly.append(ed.point(a))
-                    if ca * cb < 0:
-                        t = da / (da - db)
-                        poly.append((1 - t) * ed.point(a) + t * ed.point(b))
-                if len(poly) < 3:
-                    continue
-                q = np.array(poly) - origin
-                area = 0.5 * np.cross(q, np.roll(q, -1, axis=0)).sum(axis=0)
-                out[k] += float(area @ q.mean(axis=0)) / 3.0
-        return out[0], out[1]
+            keys: list[Any] = []
+            cl: list[int] = []
+            for i, a in enumerate(cyc):
+                b = cyc[(i + 1) % len(cyc)]
+                ca, cb = sides.cls(a), sides.cls(b)
+                keys.append(a)
+                cl.append(ca)
+                if ca * cb < 0:
+                    keys.append((min(a, b), max(a, b)))
+                    cl.append(0)
+            has_n = any(c < 0 for c in cl)
+            has_p = any(c > 0 for c in cl)
+            if has_n and has_p:
+                try:
+                    pn, pp = _split_cycle(keys, cl)
+                except InputError:
+                    return -1.0, -1.0
+                neg.append(pn)
+                pos.append(pp)
+            elif has_n:
+                neg.append(keys)
+            elif has_p:
+                pos.append(keys)
+            else:
+                (pos if self._flat_side(cyc, sides) > 0 else neg).append(keys)
+        try:
+            loop = _open_loop(neg)
+        except InputError:
+            return -1.0, -1.0
+        o = point(loop[0])
 
-    def _section(self, e: int, classify) -> list[np.ndarray] | None:
+        def volume(polys: list[list[Any]]) -> float:
+            v = 0.0
+            for poly in polys:
+                q = [point(k) - o for k in poly]
+                for i in range(1, len(q) - 1):
+                    v += float(np.dot(q[0], np.cross(q[i], q[i + 1])))
+            return v / 6.0
+
+        cap = [loop[0], *loop[:0:-1]]
+        return volume([*neg, cap]), volume([*pos, loop])
+
+    def _section(self, e: int, sides: PlaneSides) -> list[np.ndarray] | None:
         """Points of the element's section by the plane (zero nodes and edge crossings)."""
         ed = self.ed
         pts = []
@@ -493,8 +687,8 @@ class Cutter:
             c = ed.face(f)
             for i, a in enumerate(c):
                 b = c[(i + 1) % len(c)]
-                da, ca = classify(a)
-                db, cb = classify(b)
+                da, ca = sides(a)
+                db, cb = sides(b)
                 if ca == 0 and a not in seen:
                     seen.add(a)
                     pts.append(ed.point(a))
@@ -585,16 +779,16 @@ class Cutter:
                 plan[v] = comps
         return plan
 
+
     def commit(self, check: bool = True) -> EditResult:
         """The edited mesh and the state maps.
 
-        Snapped nodes lie off the cut planes by up to ``snap_length`` or ``snap`` times
-        an incident edge, so the result is checked for convexity within ``4·snap`` of
-        the element size or ``2·snap`` times the longest edge (absolute).
+        Snapped nodes lie off the cut planes by at most ``snap`` times their longest
+        edge, so the result is checked for convexity within :data:`CONVEXITY_FACTOR`
+        ``· snap`` of each element's diameter (no absolute allowance).
         """
-        tol = max(self.mesh.tolerance, 4.0 * self.snap)
-        atol = max(self.mesh.abs_tolerance, 4.0 * self.snap_length, 2.0 * self.snap * self.mesh.max_edge_length())
-        return self.ed.commit(tolerance=tol, abs_tolerance=atol, check=check)
+        tol = max(self.mesh.tolerance, CONVEXITY_FACTOR * self.snap)
+        return self.ed.commit(tolerance=tol, abs_tolerance=0.0, check=check)
 
 
 def _face_weights(pts: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -87,6 +87,8 @@ class MeshEditor:
         self._extra: dict[int, set[int]] = {}
         self._edge_cache: dict[tuple[int, int], int] = {}
         self._moved: dict[int, np.ndarray] = {}
+        self._scale = mesh.node_scales()
+        self.scale_override: dict[int, float] = {}
 
     # -- nodes ------------------------------------------------------------------------------
     def point(self, v: int) -> np.ndarray:
@@ -105,6 +107,15 @@ class MeshEditor:
     def node_weights(self, v: int) -> dict[int, float]:
         """Interpolation weights of node v in terms of the original nodes."""
         return self.weights.get(v, {v: 1.0}) if v >= self.n_base_nodes else {v: 1.0}
+
+    def node_scale(self, v: int) -> float:
+        """Snapping length scale of node v (:meth:`PolyMesh.node_scales`; new nodes interpolate it)."""
+        got = self.scale_override.get(v)
+        if got is not None:
+            return got
+        if v < self.n_base_nodes:
+            return float(self._scale[v])
+        return float(sum(w * self._scale[k] for k, w in self.weights[v].items()))
 
     def add_node(self, x: np.ndarray, weights: dict[int, float]) -> int:
         """Append a node at rest position x with state weights (over original nodes)."""
@@ -402,8 +413,12 @@ class MeshEditor:
                 vals.append(np.fromiter(w.values(), np.float64, len(w)))
         W = sp.csr_array((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                          shape=(len(points), self.n_base_nodes))
+        scale = W @ self._scale
+        for v, h in self.scale_override.items():
+            if used[v]:
+                scale[nmap[v]] = h
         mesh = PolyMesh.from_arrays(points, face_nodes, face_offsets, ef, es, off, tolerance=tol, abs_tolerance=atol,
-                                    check=False)
+                                    check=False, node_scale=scale)
         pos = np.full(self.n_elems, -1, np.int64)
         pos[elem_ids] = np.arange(len(elem_ids))
         parent = elem_ids.copy()

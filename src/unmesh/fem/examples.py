@@ -9,7 +9,6 @@ in its own colour, so the element tessellation is visible.
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Any
@@ -51,15 +50,9 @@ def run_shipped_scene(ctx: ExampleContext, name: str, overrides: dict[str, Any])
     Used by the examples of this module, e.g.
     ``run_shipped_scene(ctx, "cantilever", {"simulation.duration": 20.0})``.
     """
-    from unmesh import scenes
     from unmesh.fem.scene import build_simulation
-    from unmesh.sim.cli import run_scene
 
-    out = ctx.path(name)
-    run_scene(scenes.path(f"fem/{name}.toml"), out, build_simulation, overrides=overrides, progress=ctx.progress)
-    summary = json.loads((out / "summary.json").read_text())
-    ctx.file(out / "summary.json", f"{name}: summary.json")
-    return out, summary
+    return ctx.run_scene(f"fem/{name}", build_simulation, overrides)
 
 
 def _render_run(ctx: ExampleContext, out: Path, summary: dict[str, Any], eye: Any, target: Any, picks: list[int],

@@ -71,6 +71,10 @@ class PolyMesh:
         to twice their snapping distance).
     check : bool, optional
         Validate closedness, orientation, convexity (default True).
+    node_scale : array_like, shape (n,), optional
+        Length scale of every node for the snapping of cuts (9.3.1): by default the
+        longest edge at the node. Cuts carry it over (interpolated to new nodes) so a
+        node's snapping distance never changes while the mesh is cut repeatedly.
 
     Raises
     ------
@@ -94,17 +98,18 @@ class PolyMesh:
     elem_offsets: np.ndarray
     tolerance: float
     abs_tolerance: float
+    node_scale: np.ndarray | None
 
     def __init__(self, points: Any, cells: Any, *, tolerance: float = 1e-6, abs_tolerance: float = 0.0,
-                 check: bool = True) -> None:
+                 check: bool = True, node_scale: Any | None = None) -> None:
         pts = as_points(points, "points")
         fn, fo, ef, es, eo = _parse_cells(cells, len(pts))
-        self._set(pts, fn, fo, ef, es, eo, tolerance, abs_tolerance, check)
+        self._set(pts, fn, fo, ef, es, eo, tolerance, abs_tolerance, check, node_scale)
 
     @classmethod
     def from_arrays(cls, points: Any, face_nodes: Any, face_offsets: Any, elem_faces: Any, elem_signs: Any,
                     elem_offsets: Any, *, tolerance: float = 1e-6, abs_tolerance: float = 0.0,
-                    check: bool = True) -> PolyMesh:
+                    check: bool = True, node_scale: Any | None = None) -> PolyMesh:
         """Build from the flat CSR arrays (see the module docstring).
 
         Example
@@ -121,14 +126,19 @@ class PolyMesh:
         ef = as_array(elem_faces, "elem_faces", (None,), np.int64)
         es = as_array(elem_signs, "elem_signs", (None,), np.int64)
         eo = as_array(elem_offsets, "elem_offsets", (None,), np.int64)
-        obj._set(pts, fn, fo, ef, es, eo, tolerance, abs_tolerance, check)
+        obj._set(pts, fn, fo, ef, es, eo, tolerance, abs_tolerance, check, node_scale)
         return obj
 
-    def _set(self, pts, fn, fo, ef, es, eo, tolerance, abs_tolerance, check) -> None:
+    def _set(self, pts, fn, fo, ef, es, eo, tolerance, abs_tolerance, check, node_scale=None) -> None:
         tol = scalar(tolerance, "tolerance", minimum=0.0)
         atol = scalar(abs_tolerance, "abs_tolerance", minimum=0.0)
+        if node_scale is not None:
+            node_scale = as_array(node_scale, "node_scale", (len(pts),))
+            if np.any(~(node_scale >= 0)):
+                raise InputError("node_scale: expected non-negative lengths")
         for name, value in (("points", pts), ("face_nodes", fn), ("face_offsets", fo), ("elem_faces", ef),
-                            ("elem_signs", es), ("elem_offsets", eo), ("tolerance", tol), ("abs_tolerance", atol)):
+                            ("elem_signs", es), ("elem_offsets", eo), ("tolerance", tol), ("abs_tolerance", atol),
+                            ("node_scale", node_scale)):
             object.__setattr__(self, name, value)
         _meshcheck.check_structure(self)
         if check:
@@ -318,6 +328,28 @@ class PolyMesh:
         ln = np.linalg.norm(self.points[e[:, 0]] - self.points[e[:, 1]], axis=1)
         return float(np.median(ln)), float(ln.max())
 
+    @cached_property
+    def _node_scales(self) -> np.ndarray:
+        if self.node_scale is not None:
+            return self.node_scale
+        e = self.edges()
+        ln = np.linalg.norm(self.points[e[:, 0]] - self.points[e[:, 1]], axis=1)
+        out = np.zeros(self.n_nodes)
+        np.maximum.at(out, e[:, 0], ln)
+        np.maximum.at(out, e[:, 1], ln)
+        return out
+
+    def node_scales(self) -> np.ndarray:
+        """Snapping length scale of every node (n,): ``node_scale`` if given, else its longest edge.
+
+        Example
+        -------
+        >>> from unmesh.fem import hex_grid
+        >>> hex_grid((2, 1, 1), size=(2, 1, 1)).node_scales()[:3].tolist()
+        [1.0, 1.0, 1.0]
+        """
+        return self._node_scales
+
     def median_edge_length(self) -> float:
         """Median length of the face edges (cached)."""
         return self._edge_stats[0]
@@ -351,7 +383,7 @@ class PolyMesh:
         """Same topology on new rest positions (validated when ``check``)."""
         return PolyMesh.from_arrays(points, self.face_nodes, self.face_offsets, self.elem_faces, self.elem_signs,
                                     self.elem_offsets, tolerance=self.tolerance, abs_tolerance=self.abs_tolerance,
-                                    check=check)
+                                    check=check, node_scale=self.node_scale)
 
     def check(self, tolerance: float | None = None, elements: Any | None = None) -> None:
         """Run the full validation again (raises :class:`InputError` naming the element).
@@ -383,7 +415,8 @@ class PolyMesh:
         for name, value in (("points", self.points), ("face_nodes", self.face_nodes),
                             ("face_offsets", self.face_offsets), ("elem_faces", self.elem_faces[idx]),
                             ("elem_signs", self.elem_signs[idx]), ("elem_offsets", np.r_[0, np.cumsum(sizes)]),
-                            ("tolerance", self.tolerance), ("abs_tolerance", self.abs_tolerance)):
+                            ("tolerance", self.tolerance), ("abs_tolerance", self.abs_tolerance),
+                            ("node_scale", self.node_scale)):
             object.__setattr__(obj, name, value)
         return obj
 
