@@ -127,6 +127,37 @@ def test_uniform_stretch_matches_analytic_energy(sheet):
     np.testing.assert_allclose(e_b, 0.0, atol=1e-20)
 
 
+def _sheet_energy_per_area(spacing, deform, ks, kb):
+    """Energy per unit area of the inner part of a 1 x 1 jittered sheet under ``deform``."""
+    n = round(1.0 / spacing) + 1
+    x, topo = grid_sheet(n, n, spacing=1.0 / (n - 1), jitter=0.2, seed=1)
+    state = FiberState.at_rest(x, topo)
+    e_s, e_b = elastic_energy(deform(x), topo, state, ks, kb, per_node=True)
+    inner = np.all((x[:, :2] > 0.25) & (x[:, :2] < 0.75), axis=1)
+    # energy per node area: the inner nodes share 0.25 of the area
+    return e_s[inner].sum() / 0.25, e_b[inner].sum() / 0.25
+
+
+def test_energy_per_area_scales_with_the_node_spacing_squared():
+    """The printed (7.7)/(7.11) store an energy per unit area that scales like h^2 for a given
+    strain or curvature (the sampling dependence of thesis 7.6; see unmesh.shells.energy)."""
+    stretch = lambda x: x * [1.02, 1.0, 1.0]  # noqa: E731
+    radius = 2.0
+
+    def bend(x):  # roll the sheet onto a cylinder of radius 2 about the y axis (isometric)
+        phi = (x[:, 0] - 0.5) / radius
+        return np.stack([radius * np.sin(phi) + 0.5, x[:, 1], radius * (np.cos(phi) - 1)], axis=1)
+
+    ratio = (12 / 36) ** 2
+    coarse = _sheet_energy_per_area(1 / 12, stretch, 100.0, 1.0)
+    fine = _sheet_energy_per_area(1 / 36, stretch, 100.0, 1.0)
+    assert fine[0] / coarse[0] == pytest.approx(ratio, rel=0.15)
+    coarse = _sheet_energy_per_area(1 / 12, bend, 100.0, 1.0)
+    fine = _sheet_energy_per_area(1 / 36, bend, 100.0, 1.0)
+    assert fine[1] / coarse[1] == pytest.approx(ratio, rel=0.15)
+    assert fine[0] < 0.01 * fine[1]     # rolling up is isometric: almost no membrane energy
+
+
 def test_scaling_fibers_per_node_does_not_change_stiffness(sphere, rng):
     """(7.6)/(7.16) normalise by m_i: duplicating every fiber r times leaves energy and forces unchanged."""
     x, topo = sphere
@@ -185,3 +216,25 @@ def test_kernel_fiber_measures_match_reference(sphere, rng):
     np.testing.assert_allclose(tk, tr, atol=1e-13)
     np.testing.assert_allclose(tg, tgr, atol=1e-11)
     np.testing.assert_allclose(tn, tnr, atol=1e-11)
+
+
+def test_parallel_force_kernel_matches_reference(sphere, rng, monkeypatch):
+    """The multi-threaded path of force_chunks (one private buffer per chunk, no write races)
+    gives the reference forces and energies, as the single-threaded path does."""
+    import numba
+
+    from unmesh.shells import forces
+
+    x, topo = sphere
+    state = random_state(x, topo, rng)
+    y = x + rng.normal(scale=0.05, size=x.shape)
+    f_ref, e_ref = elastic_forces_reference(y, topo, state, 25.0, 7.0)
+    monkeypatch.setattr(forces, "PARALLEL_MIN", 0)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    try:
+        r = elastic_forces(y, topo, state, 25.0, 7.0)
+    finally:
+        numba.set_num_threads(threads)
+    np.testing.assert_allclose(r.forces, f_ref, atol=1e-10 * np.abs(f_ref).max())
+    assert r.energy == pytest.approx(e_ref, rel=1e-12)

@@ -122,3 +122,34 @@ def test_torn_sheet_ends_in_two_pieces():
     assert disc.sum() == 2 * len(sim.cracks)
     n = surf.normals[disc].reshape(-1, 2, 3)
     np.testing.assert_allclose(np.einsum("ij,ij->i", n[:, 0], n[:, 1]), -1.0, atol=0.2)
+
+
+def test_crumbs_cut_off_from_every_fiber_follow_a_visible_piece():
+    """A node left on no fiber (a crumb between cracks) follows the nearest node it still sees
+    that lies on a fiber (rigidly translated), and is counted with that piece."""
+    from unmesh.shells.topology import ShellTopology
+
+    cloud = grid_cloud(41, 41, 0.025)
+    idx = grid_nodes(41, 41, 2)
+    sim = ShellSimulation(cloud, ShellMaterial(ks=100.0, kb=1.0, damping=1.0, fracture_stretch=10.0), 0.0005,
+                          node_indices=idx, gravity=(0, 0, 0), total_area=1.0)
+    rest, t = sim.rest, sim.topology
+    i = int(np.argmin(np.linalg.norm(rest, axis=1)))
+    keep = ~(t.fibers == i).any(axis=1)                 # cut node i off from every fiber
+    sim.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
+                                       t.fibers[keep], t.soft)
+    sim.fibers = sim.fibers.take(keep)
+    # a crack hides the nearest nodes on the +x side: the anchor must be on the -x side or in line
+    sim.cracks.add(rest[i] + [0.02, 0, 0], [1.0, 0, 0], 0.2, i, 0.0)
+    assert sim.topology.components()[0] == 2         # the bare fiber graph: i is a piece of its own
+    sim._anchor_crumbs(np.array([i]))
+    a = sim.anchor[i]
+    assert a >= 0 and rest[a, 0] < rest[i, 0] + 1e-9
+    assert np.linalg.norm(rest[a] - rest[i]) < 0.051  # the nearest visible node (spacing 0.05)
+    assert sim.pieces()[0] == 1                      # counted with the piece it follows
+    sim.acc = sim._accelerations()
+    sim.v[:] = (0.1, 0.0, 0.05)
+    for _ in range(20):
+        sim.step()
+    np.testing.assert_allclose(sim.x[i] - sim.x[a], rest[i] - rest[a], atol=1e-12)
+    np.testing.assert_allclose(sim.v[i], sim.v[a], atol=1e-12)

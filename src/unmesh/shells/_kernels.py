@@ -228,147 +228,187 @@ def umbrella(x, pairs, pair_offsets, out_s, out_normal):
             out_normal[i, 2] = 0.0
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH)
-def fiber_pass(x, s, soft, fibers, fiber_offsets, rest_length, rest_angle, stretch_scale, bend_scale,
-               ks, kb, weights, reference, node_offsets, out_length, out_angle, out_fgrad, out_gs, out_es, out_eb,
-               out_node, work_tgrad, work_ngrad):
-    """First pass (7.16): per centre node, fiber measures, node sums and per-fiber energy gradients.
+@njit(cache=True, fastmath=FASTMATH)
+def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast, sscale,
+                bscale, ks, kb, weights, ref, offs, buf, scr, out_len, out_ang, out_s, out_normal, out_node):
+    """Energy and force contributions of node ``i``'s umbrella and fibers (7.5-7.17).
 
-    The angle of a fiber centred at i uses the raw umbrella vector s_i as its normal with
-    regularisation soft[i]. out_fgrad (F, 3, 3) receives dE/d(x1, x, x2) of every fiber's share
-    of its centre's energy, out_gs (N, 3) the gradient dE/ds_i, out_es / out_eb
-    (N,) the membrane and bending energy of each node. Each angle is taken on the branch
-    (theta + 2 pi k) nearest to ``reference`` (the previous step's angle), so a fiber that
-    folds past 180 degrees keeps a continuous angle instead of jumping by 2 pi.
-    node_offsets (N, 2) shift the node terms: (A_i - A_i^0 - dA_i) and (H_i - H_i^0 - dH_i);
-    out_node (N, 4) receives A_i, A_i^0, H_i, H_i^0 (without offsets). work_tgrad (F, 3, 3) and
-    work_ngrad (F, 3) hold dtheta/dx and dtheta/ds between the two loops.
+    One pass per centre node: the umbrella vector ``s_i`` (normal of the tangent angles),
+    every fiber's ``l~`` and ``theta`` with gradients (kept in ``scr`` (cap, 7, 3)), the node
+    sums, then ``dE/dx`` of every node touched by the fibers and the umbrella scattered into
+    ``buf`` (N, 3) (``buf -= dE/dx``). Energies (per node ``i``, ``m`` fibers ``k``)::
+
+        E_s = K_s/2 [ mean(sigma) da^2 + (1/m) sum_k sigma_k (A_k - A_k^0)^2 ]      (7.7)
+        E_b = K_b/2 A_i^0 mean(beta) dh^2                                          (7.11)
+        da  = A_i - A_i^0 - offs[i, 0],   dh = H_i - H_i^0 - offs[i, 1]
+        H_i = sum_k beta_k theta_k / sum_k beta_k                                  (7.9)
+
+    (the printed forms; see :mod:`unmesh.shells.energy`). Each ``theta`` is taken on the
+    branch nearest ``ref[k]``.
+
+    Returns
+    -------
+    (es, eb, folds)
+        Membrane and bending energy of the node, and the number of its fibers whose angle
+        moved by more than pi/2 from ``ref``.
     """
-    n = x.shape[0]
+    xi0 = x[i, 0]
+    xi1 = x[i, 1]
+    xi2 = x[i, 2]
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    p0 = pstart[i]
+    for q in range(p0, p0 + pcount[i]):
+        a = pairs[q, 0]
+        b = pairs[q, 1]
+        c0, c1, c2 = _cross(x[a, 0] - xi0, x[a, 1] - xi1, x[a, 2] - xi2, x[b, 0] - xi0, x[b, 1] - xi1, x[b, 2] - xi2)
+        s0 += c0
+        s1 += c1
+        s2 += c2
+    out_s[i, 0] = s0
+    out_s[i, 1] = s1
+    out_s[i, 2] = s2
+    sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    if sn > 0.0:
+        out_normal[i, 0] = s0 / sn
+        out_normal[i, 1] = s1 / sn
+        out_normal[i, 2] = s2 / sn
+    else:
+        out_normal[i, 0] = 0.0
+        out_normal[i, 1] = 0.0
+        out_normal[i, 2] = 0.0
+    m = fcount[i]
+    if m == 0:
+        out_node[i, 0] = 0.0
+        out_node[i, 1] = 0.0
+        out_node[i, 2] = 0.0
+        out_node[i, 3] = 0.0
+        return 0.0, 0.0, 0
+    f0 = fstart[i]
+    sf = soft[i]
     q4 = math.pi / 4.0
     two_pi = 2.0 * math.pi
-    for i in prange(n):
-        lo = fiber_offsets[i]
-        hi = fiber_offsets[i + 1]
-        out_gs[i, 0] = 0.0
-        out_gs[i, 1] = 0.0
-        out_gs[i, 2] = 0.0
-        out_es[i] = 0.0
-        out_eb[i] = 0.0
-        m = hi - lo
-        if m == 0:
-            continue
-        area = 0.0
-        area0 = 0.0
-        sig = 0.0
-        bsum = 0.0
-        h = 0.0
-        h0 = 0.0
-        n0 = s[i, 0]
-        n1 = s[i, 1]
-        n2 = s[i, 2]
-        sf = soft[i]
-        for k in range(lo, hi):
-            j1 = fibers[k, 0]
-            j2 = fibers[k, 2]
-            ln = fiber_length(x, j1, i, j2, weights, out_fgrad[k], True)
-            th = fiber_angle(x, j1, i, j2, n0, n1, n2, sf, work_tgrad[k], work_ngrad[k], True)
-            th += two_pi * math.floor((reference[k] - th) / two_pi + 0.5)
-            out_length[k] = ln
-            out_angle[k] = th
-            area += q4 * ln * ln
-            area0 += q4 * rest_length[k] * rest_length[k]
-            sig += stretch_scale[k]
-            bsum += bend_scale[k]
-            h += bend_scale[k] * th
-            h0 += bend_scale[k] * rest_angle[k]
-        inv_m = 1.0 / m
-        area *= inv_m
-        area0 *= inv_m
-        sig *= inv_m
-        if bsum > 0.0:
-            h /= bsum
-            h0 /= bsum
-        out_node[i, 0] = area
-        out_node[i, 1] = area0
-        out_node[i, 2] = h
-        out_node[i, 3] = h0
-        da = area - area0 - node_offsets[i, 0]
-        dh = h - h0 - node_offsets[i, 1]
-        es = 0.0
-        g0 = 0.0
-        g1 = 0.0
-        g2 = 0.0
-        for k in range(lo, hi):
-            ln = out_length[k]
-            ak = q4 * ln * ln
-            ak0 = q4 * rest_length[k] * rest_length[k]
-            es += stretch_scale[k] * (ak - ak0) ** 2
-            de_dl = ks * inv_m * (sig * da + stretch_scale[k] * (ak - ak0)) * (math.pi / 2.0) * ln
-            de_dth = kb * area0 * bend_scale[k] * inv_m * dh
-            for r in range(3):
-                for c in range(3):
-                    out_fgrad[k, r, c] = de_dl * out_fgrad[k, r, c] + de_dth * work_tgrad[k, r, c]
-            g0 += de_dth * work_ngrad[k, 0]
-            g1 += de_dth * work_ngrad[k, 1]
-            g2 += de_dth * work_ngrad[k, 2]
-        out_es[i] = 0.5 * ks * (sig * da * da + es * inv_m)
-        out_eb[i] = 0.5 * kb * area0 * bsum * inv_m * dh * dh
-        out_gs[i, 0] = g0
-        out_gs[i, 1] = g1
-        out_gs[i, 2] = g2
+    area = 0.0
+    area0 = 0.0
+    sig = 0.0
+    bsum = 0.0
+    h = 0.0
+    h0 = 0.0
+    folds = 0
+    for q in range(m):
+        k = f0 + q
+        j1 = fibers[k, 0]
+        j2 = fibers[k, 2]
+        g = scr[q]
+        ln = fiber_length(x, j1, i, j2, weights, g[0:3], True)
+        th = fiber_angle(x, j1, i, j2, s0, s1, s2, sf, g[3:6], g[6], True)
+        r = ref[k]
+        th += two_pi * math.floor((r - th) / two_pi + 0.5)
+        if abs(th - r) > 0.5 * math.pi:
+            folds += 1
+        out_len[k] = ln
+        out_ang[k] = th
+        l0 = lorig[k] + lplast[k]
+        area += q4 * ln * ln
+        area0 += q4 * l0 * l0
+        sig += sscale[k]
+        bk = bscale[k]
+        bsum += bk
+        h += bk * th
+        h0 += bk * (aorig[k] + aplast[k])
+    inv_m = 1.0 / m
+    area *= inv_m
+    area0 *= inv_m
+    sig *= inv_m
+    if bsum > 0.0:
+        h /= bsum
+        h0 /= bsum
+    out_node[i, 0] = area
+    out_node[i, 1] = area0
+    out_node[i, 2] = h
+    out_node[i, 3] = h0
+    da = area - area0 - offs[i, 0]
+    dh = h - h0 - offs[i, 1]
+    esum = 0.0
+    gs0 = 0.0
+    gs1 = 0.0
+    gs2 = 0.0
+    half_pi = 0.5 * math.pi
+    for q in range(m):
+        k = f0 + q
+        g = scr[q]
+        ln = out_len[k]
+        l0 = lorig[k] + lplast[k]
+        ak0 = q4 * l0 * l0
+        dak = q4 * ln * ln - ak0
+        esum += sscale[k] * dak * dak
+        de_dl = ks * inv_m * (sig * da + sscale[k] * dak) * half_pi * ln
+        de_dth = kb * area0 * dh * bscale[k] * inv_m
+        j1 = fibers[k, 0]
+        j2 = fibers[k, 2]
+        for c in range(3):
+            buf[j1, c] -= de_dl * g[0, c] + de_dth * g[3, c]
+            buf[i, c] -= de_dl * g[1, c] + de_dth * g[4, c]
+            buf[j2, c] -= de_dl * g[2, c] + de_dth * g[5, c]
+        gs0 += de_dth * g[6, 0]
+        gs1 += de_dth * g[6, 1]
+        gs2 += de_dth * g[6, 2]
+    es = 0.5 * ks * (sig * da * da + esum * inv_m)
+    eb = 0.5 * kb * area0 * bsum * inv_m * dh * dh
+    if gs0 != 0.0 or gs1 != 0.0 or gs2 != 0.0:
+        # through the umbrella vector s_i = sum e_a x e_b: dE/dx_a = e_b x g, dE/dx_b = g x e_a
+        for q in range(p0, p0 + pcount[i]):
+            a = pairs[q, 0]
+            b = pairs[q, 1]
+            ga0, ga1, ga2 = _cross(x[b, 0] - xi0, x[b, 1] - xi1, x[b, 2] - xi2, gs0, gs1, gs2)
+            gb0, gb1, gb2 = _cross(gs0, gs1, gs2, x[a, 0] - xi0, x[a, 1] - xi1, x[a, 2] - xi2)
+            buf[a, 0] -= ga0
+            buf[a, 1] -= ga1
+            buf[a, 2] -= ga2
+            buf[b, 0] -= gb0
+            buf[b, 1] -= gb1
+            buf[b, 2] -= gb2
+            buf[i, 0] += ga0 + gb0
+            buf[i, 1] += ga1 + gb1
+            buf[i, 2] += ga2 + gb2
+    return es, eb, folds
 
 
 @njit(cache=True, parallel=True)
-def gather_forces(x, fgrad, fiber_inc_offsets, fiber_inc, gs, pairs, pair_offsets, pair_center,
-                  pair_inc_offsets, pair_inc, out_force):
-    """Second pass: F_p = -(sum of fiber gradient entries of p) - (umbrella-normal terms of p)."""
+def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
+                 sscale, bscale, ks, kb, weights, ref, offs, cap, buf, out_force, out_len, out_ang, out_s,
+                 out_normal, out_node, out_es, out_eb):
+    """Elastic forces of all nodes (7.16): ``chunks`` contiguous node ranges in parallel.
+
+    Every chunk scatters into its own buffer ``buf[c]`` (chunks, N, 3) -- no write races --
+    and the buffers are summed into ``out_force`` (N, 3). ``cap`` is the largest fiber count
+    of a node (scratch size).
+    """
     n = x.shape[0]
-    for p in prange(n):
+    for c in prange(chunks):
+        lo = c * n // chunks
+        hi = (c + 1) * n // chunks
+        b = buf[c]
+        b[:, :] = 0.0
+        scr = np.empty((max(cap, 1), 7, 3))
+        for i in range(lo, hi):
+            es, eb, _ = node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast,
+                                    aorig, aplast, sscale, bscale, ks, kb, weights, ref, offs, b, scr, out_len,
+                                    out_ang, out_s, out_normal, out_node)
+            out_es[i] = es
+            out_eb[i] = eb
+    for i in prange(n):
         f0 = 0.0
         f1 = 0.0
         f2 = 0.0
-        for e in range(fiber_inc_offsets[p], fiber_inc_offsets[p + 1]):
-            code = fiber_inc[e]
-            k = code // 3
-            r = code - 3 * k
-            f0 -= fgrad[k, r, 0]
-            f1 -= fgrad[k, r, 1]
-            f2 -= fgrad[k, r, 2]
-        # p as the centre of its own umbrella: dE/dx_p = -sum (e_b x g + g x e_a)
-        g0 = gs[p, 0]
-        g1 = gs[p, 1]
-        g2 = gs[p, 2]
-        if g0 != 0.0 or g1 != 0.0 or g2 != 0.0:
-            for q in range(pair_offsets[p], pair_offsets[p + 1]):
-                a = pairs[q, 0]
-                b = pairs[q, 1]
-                ba0, ba1, ba2 = _cross(x[b, 0] - x[p, 0], x[b, 1] - x[p, 1], x[b, 2] - x[p, 2], g0, g1, g2)
-                ab0, ab1, ab2 = _cross(g0, g1, g2, x[a, 0] - x[p, 0], x[a, 1] - x[p, 1], x[a, 2] - x[p, 2])
-                f0 += ba0 + ab0
-                f1 += ba1 + ab1
-                f2 += ba2 + ab2
-        # p as a member (a or b) of other umbrellas
-        for e in range(pair_inc_offsets[p], pair_inc_offsets[p + 1]):
-            code = pair_inc[e]
-            q = code // 2
-            role = code - 2 * q
-            i = pair_center[q]
-            h0 = gs[i, 0]
-            h1 = gs[i, 1]
-            h2 = gs[i, 2]
-            if role == 0:  # p = a: dE/dx_a = e_b x g
-                b = pairs[q, 1]
-                d0, d1, d2 = _cross(x[b, 0] - x[i, 0], x[b, 1] - x[i, 1], x[b, 2] - x[i, 2], h0, h1, h2)
-            else:  # p = b: dE/dx_b = g x e_a
-                a = pairs[q, 0]
-                d0, d1, d2 = _cross(h0, h1, h2, x[a, 0] - x[i, 0], x[a, 1] - x[i, 1], x[a, 2] - x[i, 2])
-            f0 -= d0
-            f1 -= d1
-            f2 -= d2
-        out_force[p, 0] = f0
-        out_force[p, 1] = f1
-        out_force[p, 2] = f2
+        for c in range(chunks):
+            f0 += buf[c, i, 0]
+            f1 += buf[c, i, 1]
+            f2 += buf[c, i, 2]
+        out_force[i, 0] = f0
+        out_force[i, 1] = f1
+        out_force[i, 2] = f2
 
 
 @njit(cache=True, parallel=True)

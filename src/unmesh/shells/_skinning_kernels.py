@@ -1,6 +1,13 @@
 """Numba kernels for the local-frame surface skinning (thesis 7.4, eqs. 7.26-7.30).
 
 Numpy reference: :func:`unmesh.shells.skinning.deform_reference`.
+
+The local coordinates ``y^i`` (7.27) of every passive point are computed once when the
+point is bound (:func:`local_coordinates`) and stored with it, as the thesis does; per
+frame, :func:`deform` only builds the deformed frames (7.26) and blends (7.28-7.29). With
+``N`` the (unit) plane normal and ``e1 = x_i - x_0``, ``L = |e1|``, the frame of (7.26) is
+``e2 = N x e1 / L``, ``e3 = e2 x e1 / L = e1 (N.e1) / L^2 - N``, so a point with local
+coordinates ``y`` maps to ``(y1 + y3 (N.e1)/L^2) e1 + (y2 / L) (N x e1) - y3 N``.
 """
 
 from __future__ import annotations
@@ -8,6 +15,9 @@ from __future__ import annotations
 import math
 
 from numba import njit, prange
+
+#: Doubles stored per frame: local coordinates of the offset p - x_0 and of the two tangent axes.
+COORDS = 9
 
 
 @njit(cache=True)
@@ -59,7 +69,11 @@ def smallest_eigenvector(c00, c01, c02, c11, c12, c22):
 
 @njit(cache=True)
 def plane_normal(x, normals, nodes):
-    """Least-squares plane normal through x[nodes] (7.26), oriented along the sum of normals[nodes]."""
+    """Least-squares plane normal through x[nodes] (7.26), oriented along the sum of normals[nodes].
+
+    Entries of ``nodes`` below 0 are skipped; with fewer than 3 nodes the normalised sum of
+    their normals is returned.
+    """
     cnt = 0
     mx = 0.0
     my = 0.0
@@ -116,104 +130,133 @@ def rest_plane_normals(x, normals, bind, out):
         out[s, 2] = c
 
 
-@njit(cache=True)
-def _frame(x, o, j, n0, n1, n2):
-    """e1 = x_j - x_o, e2 = N x e1 / |e1|, e3 = e2 x e1 / |e1| (7.26) as 9 scalars."""
-    e10 = x[j, 0] - x[o, 0]
-    e11 = x[j, 1] - x[o, 1]
-    e12 = x[j, 2] - x[o, 2]
-    ln = math.sqrt(e10 * e10 + e11 * e11 + e12 * e12)
-    if ln == 0.0:
-        ln = 1e-300
-    e20 = (n1 * e12 - n2 * e11) / ln
-    e21 = (n2 * e10 - n0 * e12) / ln
-    e22 = (n0 * e11 - n1 * e10) / ln
-    e30 = (e21 * e12 - e22 * e11) / ln
-    e31 = (e22 * e10 - e20 * e12) / ln
-    e32 = (e20 * e11 - e21 * e10) / ln
-    return e10, e11, e12, e20, e21, e22, e30, e31, e32
-
-
-@njit(cache=True)
-def _transfer(d0, d1, d2, f, g):
-    """Local coordinates of d in rest frame f (7.27), mapped to world with frame g (7.28)."""
-    out0 = 0.0
-    out1 = 0.0
-    out2 = 0.0
-    for k in range(3):
-        a0 = f[3 * k]
-        a1 = f[3 * k + 1]
-        a2 = f[3 * k + 2]
-        nn = a0 * a0 + a1 * a1 + a2 * a2
-        if nn > 0.0:
-            y = (d0 * a0 + d1 * a1 + d2 * a2) / nn
-            out0 += y * g[3 * k]
-            out1 += y * g[3 * k + 1]
-            out2 += y * g[3 * k + 2]
-    return out0, out1, out2
-
-
 @njit(cache=True, parallel=True)
-def deform(rest, cur, cur_normals, bind, weights, plane_rest, points, axes, orient, out_points, out_axes,
-           out_normals):
-    """Skin S points and their tangent axes from rest to current node positions (7.26-7.30).
+def local_coordinates(rest, bind, weights, plane, points, axes, out):
+    """Local coordinates (7.27) of each point offset and tangent axis in its rest frames (7.26).
 
-    bind (S, K+1): x0 first, then frame nodes (-1 = unused); weights (S, K) of the frames
-    x_1..x_K (7.30). Points without any weighted frame are translated with x0.
+    out (S, K, 9): for frame i (node ``bind[s, i + 1]``), ``y`` of ``points[s] - rest[x_0]``,
+    of ``axes[s, 0]`` and of ``axes[s, 1]``; zero for frames with weight 0.
     """
     for s in prange(bind.shape[0]):
         o = bind[s, 0]
-        n0, n1, n2 = plane_rest[s, 0], plane_rest[s, 1], plane_rest[s, 2]
+        n0 = plane[s, 0]
+        n1 = plane[s, 1]
+        n2 = plane[s, 2]
+        for i in range(weights.shape[1]):
+            for c in range(9):
+                out[s, i, c] = 0.0
+            j = bind[s, i + 1]
+            if weights[s, i] <= 0.0 or j < 0:
+                continue
+            e10 = rest[j, 0] - rest[o, 0]
+            e11 = rest[j, 1] - rest[o, 1]
+            e12 = rest[j, 2] - rest[o, 2]
+            ln = math.sqrt(e10 * e10 + e11 * e11 + e12 * e12)
+            if ln == 0.0:
+                ln = 1e-300
+            e20 = (n1 * e12 - n2 * e11) / ln
+            e21 = (n2 * e10 - n0 * e12) / ln
+            e22 = (n0 * e11 - n1 * e10) / ln
+            e30 = (e21 * e12 - e22 * e11) / ln
+            e31 = (e22 * e10 - e20 * e12) / ln
+            e32 = (e20 * e11 - e21 * e10) / ln
+            q1 = e10 * e10 + e11 * e11 + e12 * e12
+            q2 = e20 * e20 + e21 * e21 + e22 * e22
+            q3 = e30 * e30 + e31 * e31 + e32 * e32
+            for v in range(3):
+                if v == 0:
+                    d0 = points[s, 0] - rest[o, 0]
+                    d1 = points[s, 1] - rest[o, 1]
+                    d2 = points[s, 2] - rest[o, 2]
+                else:
+                    d0 = axes[s, v - 1, 0]
+                    d1 = axes[s, v - 1, 1]
+                    d2 = axes[s, v - 1, 2]
+                out[s, i, 3 * v] = (d0 * e10 + d1 * e11 + d2 * e12) / q1 if q1 > 0.0 else 0.0
+                out[s, i, 3 * v + 1] = (d0 * e20 + d1 * e21 + d2 * e22) / q2 if q2 > 0.0 else 0.0
+                out[s, i, 3 * v + 2] = (d0 * e30 + d1 * e31 + d2 * e32) / q3 if q3 > 0.0 else 0.0
+
+
+@njit(cache=True, parallel=True, fastmath={"nsz", "arcp", "contract", "reassoc"})
+def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, out_points, out_normals, out_radii):
+    """Skin S points and their tangent axes from rest to current node positions (7.26-7.30).
+
+    bind (S, K+1): x_0 first, then frame nodes (-1 = unused); weights (S, K) of the frames
+    (7.30); coords (S, K, 9) from :func:`local_coordinates`. Writes positions, unit normals
+    (``orient`` times the normalised cross product of the deformed axes) and radii (the
+    longer deformed axis). Points without any weighted frame are translated with x_0.
+    """
+    for s in prange(bind.shape[0]):
+        o = bind[s, 0]
         m0, m1, m2 = plane_normal(cur, cur_normals, bind[s])
-        d0 = points[s, 0] - rest[o, 0]
-        d1 = points[s, 1] - rest[o, 1]
-        d2 = points[s, 2] - rest[o, 2]
+        xo0 = cur[o, 0]
+        xo1 = cur[o, 1]
+        xo2 = cur[o, 2]
         wsum = 0.0
         p0 = p1 = p2 = 0.0
         a00 = a01 = a02 = a10 = a11 = a12 = 0.0
+        y3p = 0.0
+        y3a = 0.0
+        y3b = 0.0
         for i in range(weights.shape[1]):
             w = weights[s, i]
             j = bind[s, i + 1]
             if w <= 0.0 or j < 0:
                 continue
-            f = _frame(rest, o, j, n0, n1, n2)
-            g = _frame(cur, o, j, m0, m1, m2)
-            q0, q1, q2 = _transfer(d0, d1, d2, f, g)
-            p0 += w * q0
-            p1 += w * q1
-            p2 += w * q2
-            q0, q1, q2 = _transfer(axes[s, 0, 0], axes[s, 0, 1], axes[s, 0, 2], f, g)
-            a00 += w * q0
-            a01 += w * q1
-            a02 += w * q2
-            q0, q1, q2 = _transfer(axes[s, 1, 0], axes[s, 1, 1], axes[s, 1, 2], f, g)
-            a10 += w * q0
-            a11 += w * q1
-            a12 += w * q2
+            e0 = cur[j, 0] - xo0
+            e1 = cur[j, 1] - xo1
+            e2 = cur[j, 2] - xo2
+            l2 = e0 * e0 + e1 * e1 + e2 * e2
+            if l2 == 0.0:
+                l2 = 1e-300
+            inv_l = 1.0 / math.sqrt(l2)
+            ne = (m0 * e0 + m1 * e1 + m2 * e2) / l2
+            c0 = (m1 * e2 - m2 * e1) * inv_l
+            c1 = (m2 * e0 - m0 * e2) * inv_l
+            c2 = (m0 * e1 - m1 * e0) * inv_l
+            y = coords[s, i]
+            u = w * (y[0] + y[2] * ne)
+            t = w * y[1]
+            p0 += u * e0 + t * c0
+            p1 += u * e1 + t * c1
+            p2 += u * e2 + t * c2
+            y3p += w * y[2]
+            u = w * (y[3] + y[5] * ne)
+            t = w * y[4]
+            a00 += u * e0 + t * c0
+            a01 += u * e1 + t * c1
+            a02 += u * e2 + t * c2
+            y3a += w * y[5]
+            u = w * (y[6] + y[8] * ne)
+            t = w * y[7]
+            a10 += u * e0 + t * c0
+            a11 += u * e1 + t * c1
+            a12 += u * e2 + t * c2
+            y3b += w * y[8]
             wsum += w
         if wsum > 0.0:
-            p0 /= wsum
-            p1 /= wsum
-            p2 /= wsum
-            a00 /= wsum
-            a01 /= wsum
-            a02 /= wsum
-            a10 /= wsum
-            a11 /= wsum
-            a12 /= wsum
+            inv = 1.0 / wsum
+            p0 = (p0 - y3p * m0) * inv
+            p1 = (p1 - y3p * m1) * inv
+            p2 = (p2 - y3p * m2) * inv
+            a00 = (a00 - y3a * m0) * inv
+            a01 = (a01 - y3a * m1) * inv
+            a02 = (a02 - y3a * m2) * inv
+            a10 = (a10 - y3b * m0) * inv
+            a11 = (a11 - y3b * m1) * inv
+            a12 = (a12 - y3b * m2) * inv
         else:
-            p0, p1, p2 = d0, d1, d2
+            p0 = points[s, 0] - rest[o, 0]
+            p1 = points[s, 1] - rest[o, 1]
+            p2 = points[s, 2] - rest[o, 2]
             a00, a01, a02 = axes[s, 0, 0], axes[s, 0, 1], axes[s, 0, 2]
             a10, a11, a12 = axes[s, 1, 0], axes[s, 1, 1], axes[s, 1, 2]
-        out_points[s, 0] = cur[o, 0] + p0
-        out_points[s, 1] = cur[o, 1] + p1
-        out_points[s, 2] = cur[o, 2] + p2
-        out_axes[s, 0, 0] = a00
-        out_axes[s, 0, 1] = a01
-        out_axes[s, 0, 2] = a02
-        out_axes[s, 1, 0] = a10
-        out_axes[s, 1, 1] = a11
-        out_axes[s, 1, 2] = a12
+        out_points[s, 0] = xo0 + p0
+        out_points[s, 1] = xo1 + p1
+        out_points[s, 2] = xo2 + p2
+        r0 = a00 * a00 + a01 * a01 + a02 * a02
+        r1 = a10 * a10 + a11 * a11 + a12 * a12
+        out_radii[s] = math.sqrt(max(r0, r1))
         c0 = a01 * a12 - a02 * a11
         c1 = a02 * a10 - a00 * a12
         c2 = a00 * a11 - a01 * a10

@@ -15,11 +15,20 @@ Definitions (per node ``i`` with fibers ``k``, ``m_i`` of them; fiber ``k`` cent
 
       E_b,i = K_b/2 A_i^0 mean(beta) (H_i - H_i^0)^2
 
-With all scales 1 these are exactly (7.7) and (7.11); they only depend on means over a
-node's fibers, so duplicating every fiber changes nothing (7.6: "increasing the number of
-fibers per point does not increase material stiffness"). Rest values come from the rest
-length and angle of each fiber, ``l^0 = l_orig + l_plastic``, ``theta^0 = theta_orig +
-theta_plastic`` (7.19). The angles use the umbrella vector ``s_i`` of the centre node as
+These are the printed forms. With all scales 1 they are exactly (7.7) and (7.11); they only
+depend on means over a node's fibers, so duplicating every fiber changes nothing (7.6:
+"increasing the number of fibers per point does not increase material stiffness"). As the
+thesis says (7.6, Discussion), the material depends on the sampling: with node spacing
+``h`` (``A ~ h^2``, ``theta ~ kappa h``) the energy per unit area of a given strain or
+curvature scales like ``h^2``, so ``K_s``, ``K_b`` describe a material only together with a
+sampling density. A strain/curvature normalisation (``(A - A^0)/A^0`` integrated over
+``A_i^0``, ``theta / l^0``) removes that, but changes what a given ``K_s``, ``K_b`` means (by factors ``1/A^0`` and
+``1/l0^2``): on a unit sphere with 300 nodes the stable step for the F.1 values K_s = 1000,
+K_b = 10000 falls from 1.74 ms to 1.11 ms, below 1.5x the F.1 step of 1 ms, so the F.1
+parameters would no longer run at the F.1 time steps; it is therefore not used (see
+``docs/shell_scene.md``, design notes). Rest values come from
+the rest length and angle of each fiber, ``l^0 = l_orig + l_plastic``, ``theta^0 =
+theta_orig + theta_plastic`` (7.19). The angles use the umbrella vector ``s_i`` of the centre node as
 normal, regularised by ``topology.soft`` (:mod:`unmesh.shells.topology`). The forces are
 ``F = -grad E`` (7.12-7.17) including the dependence of ``s_i`` on the nodes.
 """
@@ -209,12 +218,13 @@ def _node_terms(x: np.ndarray, topology: ShellTopology, state: FiberState, ks: f
     bsafe = np.where(bsum > 0, bsum, 1.0)
     h = np.bincount(c, state.bend_scale * theta, n) / bsafe
     h0 = np.bincount(c, state.bend_scale * state.rest_angle(), n) / bsafe
-    e_s = 0.5 * ks * (sig_mean * (node_area - node_area0) ** 2
-                      + np.bincount(c, sig * (area - area0) ** 2, n) / msafe)
+    da = node_area - node_area0
+    dak = area - area0
+    e_s = 0.5 * ks * (sig_mean * da**2 + np.bincount(c, sig * dak**2, n) / msafe)
     e_b = 0.5 * kb * node_area0 * (bsum / msafe) * (h - h0) ** 2
     return dict(s=s, normals=normals, length=length, dlen=dlen, theta=theta, dtheta=dtheta, dnormal=dnormal,
-                m=msafe, area=area, area0=area0, node_area=node_area, node_area0=node_area0, sig_mean=sig_mean,
-                h=h, h0=h0, e_s=e_s, e_b=e_b)
+                m=msafe, area=area, area0=area0, dak=dak, da=da, node_area=node_area, node_area0=node_area0,
+                sig_mean=sig_mean, h=h, h0=h0, e_s=e_s, e_b=e_b)
 
 
 def elastic_energy(x: Any, topology: ShellTopology, state: FiberState, ks: float, kb: float,
@@ -285,8 +295,7 @@ def elastic_forces_reference(x: Any, topology: ShellTopology, state: FiberState,
     f = topology.fibers
     c = f[:, 1]
     m = t["m"][c]
-    de_da = ks / m * (t["sig_mean"][c] * (t["node_area"][c] - t["node_area0"][c])
-                      + state.stretch_scale * (t["area"] - t["area0"]))
+    de_da = ks / m * (t["sig_mean"][c] * t["da"][c] + state.stretch_scale * t["dak"])
     de_dl = de_da * np.pi / 2 * t["length"]
     de_dth = kb * t["node_area0"][c] * state.bend_scale / m * (t["h"][c] - t["h0"][c])
     grad = np.zeros_like(xx)

@@ -26,14 +26,9 @@ def run_shell_scene(ctx: ExampleContext, name: str, quick: dict[str, Any], durat
 
     Returns the output directory.
     """
-    from unmesh.scenes import path
     from unmesh.shells.scene import build_shell_simulation
-    from unmesh.sim.cli import run_scene
 
-    out = ctx.path(name)
-    run_scene(path(f"shells/{name}.toml"), out, build_shell_simulation, overrides=quick if ctx.quick else None,
-              duration=duration, progress=ctx.progress)
-    return out
+    return ctx.run_scene(f"shells/{name}", build_shell_simulation, quick if ctx.quick else None, duration)[0]
 
 
 def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path | None = None, size: int = 320,
@@ -182,7 +177,7 @@ def tearing_poster(ctx: ExampleContext) -> None:
 
 @example("shell-balloon", "A balloon inflated until it tears (Fig. 7.10)", SECTION)
 def balloon(ctx: ExampleContext) -> None:
-    """A sphere (F.1: K_s = K_b = 100, gamma_s = 0.04, D = 0.4, dt = 0.001) under rising
+    """A sphere (F.1: K_s = K_b = 100, D = 0.4, dt = 0.001; gamma_s = 0.3, see the scene file) under rising
     pressure grows until it tears; the air escapes and the shell relaxes."""
     out = run_shell_scene(ctx, "balloon", {"surface.nodes": 500, "surface.spacing": 0.4})
     s = _summary(out)

@@ -200,6 +200,8 @@ class ShellSimulation(Simulation):
         self.cracks = CrackSet()
         self.first_crack: float | None = None
         self.node_offsets = np.zeros((len(idx), 2))
+        # crumbs: nodes a crack cut off from every fiber follow a visible node of a piece (-1: free)
+        self.anchor = np.full(len(idx), -1, dtype=np.int64)
         self._reach = self._neighbor_reach()
         # state
         self.time = 0.0
@@ -309,6 +311,7 @@ class ShellSimulation(Simulation):
         self._kinematics(self.time)
         for c in self.colliders:
             c.resolve(self.x, self.v)
+        self._follow()
         self.material.plasticity.update(self.fibers, self._last.lengths, self._last.angles, dt)
         self.steps += 1
         t1 = _time.perf_counter()
@@ -339,6 +342,7 @@ class ShellSimulation(Simulation):
         self.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
                                            f[keep], t.soft)
         self.fibers = self.fibers.take(keep)
+        self._anchor_crumbs(np.arange(t.n_nodes))
         return True
 
     def _fracture(self) -> None:
@@ -378,11 +382,72 @@ class ShellSimulation(Simulation):
                                                           self.material.arc_samples)
         self._carry_angles(angles, origin)
         self._keep_node_terms(before, had, np.unique(near))
+        self._anchor_crumbs(np.arange(len(self.rest)))   # a rebuild can strip nodes outside `near` too
         self._reach = max(self._reach, self._neighbor_reach())
         self.surface.rebind_near(centers, rmax, self.cracks.blocked)
         self.surface.add_discontinuities(centers, [c[2] for c in chosen], [c[3] for c in chosen],
                                          self.rest_normals[[c[0] for c in chosen]], self.cracks.blocked)
         self.acc = self._accelerations()
+
+    def _anchor_crumbs(self, rows: np.ndarray) -> None:
+        """Let nodes that the cracks cut off from every fiber follow a neighbouring piece.
+
+        Such a crumb (a sliver between two nearly parallel crack discs) has no elastic
+        forces; left free it would drift off as a separate piece of one node. It follows,
+        rigidly translated, the nearest node that lies on a fiber and that it still sees
+        (7.3.2 visibility), else the nearest node on a fiber. Fixed nodes are never crumbs.
+        """
+        on_fiber = np.zeros(len(self.rest), dtype=bool)
+        on_fiber[self.topology.fibers.ravel()] = True
+        self.anchor[on_fiber] = -1                     # a rebuild gave it fibers again
+        lost = np.flatnonzero(self.anchor >= 0)
+        self.anchor[lost[~on_fiber[self.anchor[lost]]]] = -1   # its anchor lost its fibers: choose again
+        rows = np.union1d(rows, lost)
+        crumbs = rows[~on_fiber[rows] & (self.anchor[rows] < 0) & ~self.fixed[rows]]
+        if not len(crumbs):
+            return
+        from unmesh.spatial import knn
+
+        pool = np.flatnonzero(on_fiber)
+        if not len(pool):
+            return
+        k = int(min(12, len(pool)))
+        _, idx = knn(self.rest[pool], k, queries=self.rest[crumbs])
+        cand = pool[idx]                                            # (C, k) by distance
+        src = np.repeat(crumbs, k)
+        hidden = self.cracks.blocked(self.rest[src], self.rest[cand.ravel()]).reshape(cand.shape)
+        # the nearest visible one; a crumb walled in by cracks on all sides (an island of one
+        # node, an artifact of overlapping crack discs) follows its nearest node
+        first = np.where((~hidden).any(axis=1), np.argmax(~hidden, axis=1), 0)
+        self.anchor[crumbs] = cand[np.arange(len(crumbs)), first]
+
+    def _follow(self) -> None:
+        """Move the crumbs with their anchors (see :meth:`_anchor_crumbs`)."""
+        c = np.flatnonzero(self.anchor >= 0)
+        if len(c):
+            a = self.anchor[c]
+            self.x[c] = self.x[a] + (self.rest[c] - self.rest[a])
+            self.v[c] = self.v[a]
+
+    def pieces(self) -> tuple[int, np.ndarray]:
+        """Connected pieces of the fiber graph, crumbs counted with the piece they follow.
+
+        Returns
+        -------
+        count : int
+        labels : ndarray (N,) int64
+        """
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        f = self.topology.fibers
+        c = np.flatnonzero(self.anchor >= 0)
+        rows = np.concatenate([f[:, 0], f[:, 1], c])
+        cols = np.concatenate([f[:, 1], f[:, 2], self.anchor[c]])
+        n = len(self.rest)
+        count, labels = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
+                                             directed=False)
+        return int(count), labels.astype(np.int64)
 
     def _carry_angles(self, angles: np.ndarray, origin: np.ndarray) -> None:
         """Keep the continuous angle branch of surviving fibers across a topology change."""
@@ -480,7 +545,8 @@ class ShellSimulation(Simulation):
             "angular_momentum": ang.tolist(),
             "fibers": len(self.topology.fibers),
             "cracks": len(self.cracks),
-            "components": self.topology.components()[0],
+            "components": self.pieces()[0],
+            "crumbs": int((self.anchor >= 0).sum()),
             "force_seconds": self._timers["force"],
             "fracture_seconds": self._timers["fracture"],
             "surface_seconds": self._timers["surface"],
@@ -527,6 +593,7 @@ class ShellSimulation(Simulation):
             "first_crack": math.nan if self.first_crack is None else self.first_crack,
             "neighbor_offsets": t.neighbor_offsets, "neighbors": t.neighbors, "pairs": t.pairs,
             "pair_center": t.pair_center, "fibers": t.fibers, "soft": t.soft, "node_offsets": self.node_offsets,
+            "anchor": self.anchor,
         }
         state["angles"] = self._last.angles  # continuous (unwrapped) fiber angles
         state.update({f"fiber_{k}": v for k, v in self.fibers.as_dict().items()})
@@ -540,6 +607,7 @@ class ShellSimulation(Simulation):
         self.x = np.ascontiguousarray(state["x"], dtype=np.float64)
         self.v = np.ascontiguousarray(state["v"], dtype=np.float64)
         self.node_offsets = np.array(state["node_offsets"], dtype=np.float64).reshape(-1, 2)
+        self.anchor = np.array(state.get("anchor", np.full(len(self.rest), -1)), dtype=np.int64).reshape(-1)
         fc = float(state["first_crack"])
         self.first_crack = None if math.isnan(fc) else fc
         self.topology = ShellTopology.build(len(self.rest), state["neighbor_offsets"], state["neighbors"],

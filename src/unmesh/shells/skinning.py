@@ -36,6 +36,8 @@ __all__ = ["DEFAULT_SKIN_NODES", "SkinnedSurface", "bind_points", "deform_refere
 
 #: Nodes per passive point: x_0 and K further nodes (K - 1 weighted frames).
 DEFAULT_SKIN_NODES = 6
+#: Below this many passive points the skinning kernel runs on one thread (see forces.threads_for).
+SKIN_PARALLEL_MIN = 20000
 
 
 def skin_weight(r: np.ndarray) -> np.ndarray:
@@ -176,8 +178,47 @@ def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray,
     return out_p, out_a
 
 
+class _Passive:
+    """Arrays of a set of bound passive points (dense surfels or discontinuity surfels), growable."""
+
+    FIELDS = ("points", "axes", "orient", "colors", "bind", "weights", "plane", "coords")
+
+    def __init__(self, k: int) -> None:
+        self.n = 0
+        self.points = np.zeros((0, 3))
+        self.axes = np.zeros((0, 2, 3))
+        self.orient = np.zeros(0)
+        self.colors = np.zeros((0, 3))
+        self.bind = np.zeros((0, k + 1), dtype=np.int64)
+        self.weights = np.zeros((0, k))
+        self.plane = np.zeros((0, 3))
+        self.coords = np.zeros((0, k, _sk.COORDS))
+
+    def append(self, **arrays: np.ndarray) -> None:
+        """Append rows (capacity doubles, so many small appends cost O(total))."""
+        add = len(arrays["points"])
+        need = self.n + add
+        cap = len(self.points)
+        if need > cap:
+            new_cap = max(need, 2 * cap, 16)
+            for name in self.FIELDS:
+                old = getattr(self, name)
+                grown = np.zeros((new_cap, *old.shape[1:]), dtype=old.dtype)
+                grown[:self.n] = old[:self.n]
+                setattr(self, name, grown)
+        for name in self.FIELDS:
+            getattr(self, name)[self.n:need] = arrays[name]
+        self.n = need
+
+    def view(self, name: str) -> np.ndarray:
+        return getattr(self, name)[:self.n]
+
+
 class SkinnedSurface:
     """The dense surfel cloud of a shell, bound to its simulation nodes, plus crack surfels.
+
+    Every passive point stores its nodes, frame weights (7.30) and local coordinates (7.27)
+    once; :meth:`deform` then costs one frame construction per weighted frame (7.26, 7.28).
 
     Parameters
     ----------
@@ -210,23 +251,57 @@ class SkinnedSurface:
         self.node_normals = np.ascontiguousarray(node_normals, dtype=np.float64)
         self.k = int(skin_nodes)
         self.tree = KDTree(self.node_rest)
-        axes = cloud.tangent_axes()
-        self.points = np.ascontiguousarray(cloud.positions)
-        self.axes = np.ascontiguousarray(axes)
+        axes = np.ascontiguousarray(cloud.tangent_axes())
+        pts = np.ascontiguousarray(cloud.positions)
         cross = np.cross(axes[:, 0], axes[:, 1])
-        self.orient = np.where(np.einsum("ij,ij->i", cross, cloud.normals) >= 0, 1.0, -1.0)
-        self.colors = cloud.colors
-        self.discontinuity = np.zeros(len(cloud), dtype=np.uint8)
-        self.bind, self.weights = bind_points(self.points, self.node_rest, self.k, tree=self.tree)
-        self.plane = self._planes(self.bind)
-        self._reach = self._max_reach()
+        orient = np.where(np.einsum("ij,ij->i", cross, cloud.normals) >= 0, 1.0, -1.0)
+        bind, weights = bind_points(pts, self.node_rest, self.k, tree=self.tree)
+        plane = self._planes(bind)
+        self.dense = _Passive(self.k)
+        self.dense.append(points=pts, axes=axes, orient=orient, colors=cloud.colors, bind=bind, weights=weights,
+                          plane=plane, coords=self._coords(bind, weights, plane, pts, axes))
+        self.disc = _Passive(self.k)
+        self._reach = self._max_reach(self.dense.view("bind"), pts)
         from unmesh.shells.topology import csr_from_groups
 
         # surfels of the dense cloud grouped by their nearest node at rest (never changes)
-        self._owned_offsets, self._owned = csr_from_groups(self.bind[:, 0].copy(), len(self.node_rest))
+        self._owned_offsets, self._owned = csr_from_groups(bind[:, 0].copy(), len(self.node_rest))
+
+    # -- views (dense surfels first, then discontinuity surfels) --------------------------
+    def _cat(self, name: str) -> np.ndarray:
+        if self.disc.n == 0:
+            return self.dense.view(name)
+        return np.concatenate([self.dense.view(name), self.disc.view(name)])
+
+    @property
+    def points(self) -> np.ndarray:
+        """Rest positions (S, 3) of all passive points."""
+        return self._cat("points")
+
+    @property
+    def axes(self) -> np.ndarray:
+        """Rest tangent axes (S, 2, 3)."""
+        return self._cat("axes")
+
+    @property
+    def bind(self) -> np.ndarray:
+        """Bound nodes (S, K + 1): x_0, then the frame nodes by distance (-1 unused)."""
+        return self._cat("bind")
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Frame weights (S, K) of (7.30)."""
+        return self._cat("weights")
+
+    @property
+    def discontinuity(self) -> np.ndarray:
+        """(S,) uint8: 1 for the discontinuity surfels of the cracks."""
+        out = np.zeros(len(self), dtype=np.uint8)
+        out[self.dense.n:] = 1
+        return out
 
     def __len__(self) -> int:
-        return len(self.points)
+        return self.dense.n + self.disc.n
 
     def _planes(self, bind: np.ndarray) -> np.ndarray:
         out = np.empty((len(bind), 3))
@@ -234,40 +309,59 @@ class SkinnedSurface:
             _sk.rest_plane_normals(self.node_rest, self.node_normals, bind, out)
         return out
 
-    def _max_reach(self, rows: Any = None) -> float:
-        bind = self.bind if rows is None else self.bind[rows]
-        pts = self.points if rows is None else self.points[rows]
+    def _coords(self, bind: np.ndarray, weights: np.ndarray, plane: np.ndarray, points: np.ndarray,
+                axes: np.ndarray) -> np.ndarray:
+        out = np.empty((len(bind), self.k, _sk.COORDS))
+        if len(bind):
+            _sk.local_coordinates(self.node_rest, bind, weights, plane, np.ascontiguousarray(points),
+                                  np.ascontiguousarray(axes), out)
+        return out
+
+    def _max_reach(self, bind: np.ndarray, pts: np.ndarray) -> float:
         valid = bind >= 0
         if not valid.any():
             return 0.0
         d = np.where(valid, np.linalg.norm(self.node_rest[np.maximum(bind, 0)] - pts[:, None], axis=2), 0)
         return float(d.max())
 
+    def _rebind(self, part: _Passive, rows: np.ndarray, blocked: Any) -> None:
+        pts = part.points[rows]
+        axes = part.axes[rows]
+        b, w = bind_points(pts, self.node_rest, self.k, blocked=blocked, tree=self.tree)
+        plane = self._planes(b)
+        part.bind[rows], part.weights[rows], part.plane[rows] = b, w, plane
+        part.coords[rows] = self._coords(b, w, plane, pts, axes)
+        self._reach = max(self._reach, self._max_reach(b, pts))
+
     def rebind_near(self, centers: np.ndarray, radius: float, blocked: Any) -> int:
         """Bind again, with visibility, every point within reach of the given crack centres.
 
-        Returns the number of points re-bound.
+        Only the surfels owned by nodes near the centres are examined (no pass over the
+        whole cloud). Returns the number of points re-bound.
         """
-        if len(centers) == 0 or len(self.points) == 0:
+        if len(centers) == 0 or len(self) == 0:
             return 0
-        c = np.asarray(centers, dtype=np.float64)
+        c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
         reach = self._reach + radius
         # candidates: surfels owned by nodes within reach + (surfel-to-owner distance <= reach)
         _, near = self.tree.radius_neighbors(c, 2.0 * reach)
         near = np.unique(near)
-        rows = np.concatenate([self._owned[self._owned_offsets[i]:self._owned_offsets[i + 1]] for i in near]
-                              + [np.arange(len(self.cloud), len(self.points))])
-        if len(rows) == 0:
-            return 0
-        d = np.min(np.linalg.norm(self.points[rows][:, None, :] - c[None, :, :], axis=2), axis=1)
-        rows = np.unique(rows[d <= reach])
-        if len(rows) == 0:
-            return 0
-        b, w = bind_points(self.points[rows], self.node_rest, self.k, blocked=blocked, tree=self.tree)
-        self.bind[rows], self.weights[rows] = b, w
-        self.plane[rows] = self._planes(b)
-        self._reach = max(self._reach, self._max_reach(rows))
-        return len(rows)
+        count = 0
+        if len(near):
+            starts, stops = self._owned_offsets[near], self._owned_offsets[near + 1]
+            rows = self._owned[np.concatenate([np.arange(a, b) for a, b in zip(starts, stops, strict=True)])]
+            d = np.min(np.linalg.norm(self.dense.points[rows][:, None, :] - c[None, :, :], axis=2), axis=1)
+            rows = np.unique(rows[d <= reach])
+            if len(rows):
+                self._rebind(self.dense, rows, blocked)
+                count += len(rows)
+        if self.disc.n:
+            d = np.min(np.linalg.norm(self.disc.view("points")[:, None, :] - c[None, :, :], axis=2), axis=1)
+            rows = np.flatnonzero(d <= reach)
+            if len(rows):
+                self._rebind(self.disc, rows, blocked)
+                count += len(rows)
+        return count
 
     def add_discontinuity(self, center: np.ndarray, normal: np.ndarray, radius: float, surface_normal: np.ndarray,
                           blocked: Any) -> None:
@@ -295,21 +389,16 @@ class SkinnedSurface:
             facing += [-n, n]
             _, node = self.tree.knn(np.asarray(center, dtype=np.float64)[None], 1)
             owned = self._owned[self._owned_offsets[node[0, 0]]:self._owned_offsets[node[0, 0] + 1]]
-            colors += [self.colors[owned[0]] if len(owned) else self.colors[0]] * 2
+            colors += [self.dense.colors[owned[0]] if len(owned) else self.dense.colors[0]] * 2
         if not pts:
             return
         p, a = np.asarray(pts), np.asarray(axes)
         cross = np.cross(a[:, 0], a[:, 1])
         orient = np.where(np.einsum("ij,ij->i", cross, np.asarray(facing)) >= 0, 1.0, -1.0)
         b, w = bind_points(p, self.node_rest, self.k, blocked=blocked, tree=self.tree)
-        self.points = np.concatenate([self.points, p])
-        self.axes = np.concatenate([self.axes, a])
-        self.orient = np.concatenate([self.orient, orient])
-        self.colors = np.concatenate([self.colors, np.asarray(colors)])
-        self.discontinuity = np.concatenate([self.discontinuity, np.ones(len(p), dtype=np.uint8)])
-        self.bind = np.concatenate([self.bind, b])
-        self.weights = np.concatenate([self.weights, w])
-        self.plane = np.concatenate([self.plane, self._planes(b)])
+        plane = self._planes(b)
+        self.disc.append(points=p, axes=a, orient=orient, colors=np.asarray(colors), bind=b, weights=w, plane=plane,
+                         coords=self._coords(b, w, plane, p, a))
 
     def deform(self, node_positions: np.ndarray, node_normals: np.ndarray) -> SurfelCloud:
         """The deformed cloud for current node positions and (umbrella) normals.
@@ -320,16 +409,21 @@ class SkinnedSurface:
             Circular surfels (radius = longer deformed tangent axis) with the per-surfel
             attribute ``discontinuity`` (uint8, 1 for crack surfels).
         """
-        s = len(self.points)
+        s = len(self)
         out_p = np.empty((s, 3))
-        out_a = np.empty((s, 2, 3))
         out_n = np.empty((s, 3))
-        with threads_for(s // 4):
-            _sk.deform(self.node_rest, np.ascontiguousarray(node_positions), np.ascontiguousarray(node_normals),
-                       self.bind, self.weights, self.plane, self.points, self.axes, self.orient, out_p, out_a, out_n)
-        radii = np.linalg.norm(out_a, axis=2).max(axis=1)
-        radii = np.where(radii > 0, radii, 1e-9)
-        bad = ~(np.linalg.norm(out_n, axis=1) > 0)
+        out_r = np.empty(s)
+        cur = np.ascontiguousarray(node_positions, dtype=np.float64)
+        nrm = np.ascontiguousarray(node_normals, dtype=np.float64)
+        with threads_for(s, SKIN_PARALLEL_MIN):
+            for part, lo in ((self.dense, 0), (self.disc, self.dense.n)):
+                if part.n:
+                    hi = lo + part.n
+                    _sk.deform(self.node_rest, cur, nrm, part.view("bind"), part.view("weights"), part.view("coords"),
+                               part.view("points"), part.view("axes"), part.view("orient"), out_p[lo:hi],
+                               out_n[lo:hi], out_r[lo:hi])
+        out_r = np.where(out_r > 0, out_r, 1e-9)
+        bad = ~(np.abs(out_n).sum(axis=1) > 0)
         out_n[bad] = (0.0, 0.0, 1.0)
-        return SurfelCloud(out_p, out_n, radii=radii, colors=self.colors,
+        return SurfelCloud(out_p, out_n, radii=out_r, colors=self._cat("colors"),
                            attributes={"discontinuity": self.discontinuity})
