@@ -322,3 +322,20 @@ def test_supersampling_antialiases_silhouettes(sphere5k):
     assert blended.sum() > 20 and not (one.coverage & (np.abs(one.color - [0.2, 0.6, 0.4]).max(-1) > 1e-5)).any()
     assert np.allclose(np.linalg.norm(aa.normal[aa.coverage], axis=-1), 1.0)
     assert np.all(np.isinf(aa.depth[~aa.coverage]))
+
+
+def test_discontinuity_surfels_are_not_splatted():
+    """Crack markers (attribute ``discontinuity`` == 1, thin shells 7.4) do not change the image."""
+    from unmesh.render import Camera, render
+    from unmesh.shapes import Sphere
+
+    cloud = Sphere().surfels(0.1)
+    n = len(cloud)
+    marker = SurfelCloud([[0.0, 0.0, 1.5]], [[0.0, 0.0, 1.0]], radii=[0.3], colors=[[1.0, 0.0, 0.0]])
+    flagged = SurfelCloud.concatenate([cloud.replace(attributes={"discontinuity": np.zeros(n)}),
+                                       marker.replace(attributes={"discontinuity": np.ones(1)})])
+    cam = Camera((0, 0, 4), (0, 0, 0), width=64, height=64, ortho=2.5)
+    a = render(cloud, cam)
+    b = render(flagged, cam)
+    np.testing.assert_array_equal(a.color, b.color)
+    np.testing.assert_array_equal(a.depth, b.depth)

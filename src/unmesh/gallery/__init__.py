@@ -85,6 +85,45 @@ class ExampleContext:
         """Report a measured figure."""
         self.metrics.append((name, value, unit))
 
+    def run_scene(self, scene: str, build: Callable[..., Any], overrides: dict[str, Any] | None = None,
+                  duration: float | None = None) -> tuple[Path, dict[str, Any]]:
+        """Run a shipped scene ``examples/<scene>.toml`` with the shared simulation runner.
+
+        Parameters
+        ----------
+        scene : str
+            Scene name relative to the shipped scenes, e.g. ``"sph/dam_break"``.
+        build : callable
+            The capability's ``build(scene) -> (simulation, settings)`` (see :mod:`unmesh.sim.cli`).
+        overrides : dict, optional
+            Dotted-key scene overrides (as ``--set``), e.g. ``{"simulation.dt": 1e-4}``.
+        duration : float, optional
+            Simulated seconds (as ``--duration``).
+
+        Returns
+        -------
+        outdir : Path
+            ``ctx.outdir / <scene file stem>``, holding the run's frames and ``summary.json``.
+        summary : dict
+            The parsed ``summary.json``, also linked on the gallery page.
+
+        Example
+        -------
+        ``out, summary = ctx.run_scene("fem/cantilever", build_simulation, {"simulation.duration": 2.0})``
+        """
+        import json
+
+        from unmesh import scenes
+        from unmesh.sim.cli import run_scene
+
+        name = Path(scene).name
+        out = self.path(name)
+        run_scene(scenes.path(f"{scene}.toml"), out, build, overrides=overrides or None, duration=duration,
+                  progress=self.progress)
+        summary = json.loads((out / "summary.json").read_text())
+        self.file(out / "summary.json", f"{name}: summary.json")
+        return out, summary
+
 
 @dataclass(frozen=True)
 class Example:

@@ -60,8 +60,25 @@ class Scene:
         return [*self.clouds, *self.meshes, *self.particles]
 
 
+def _surface_samples(cloud: SurfelCloud) -> SurfelCloud:
+    """``cloud`` without its discontinuity surfels (attribute ``discontinuity`` == 1).
+
+    Thin-shell frames (thesis 7.4) carry pairs of such surfels along every crack; they mark the
+    crack edge for clipped splatting (section 4.3) and are not samples of the surface, so they are
+    not splatted.
+    """
+    flag = cloud.attributes.get("discontinuity")
+    if flag is None:
+        return cloud
+    keep = np.asarray(flag) == 0
+    return cloud if keep.all() else cloud.subset(keep)
+
+
 def collect(objects: Renderable | Iterable[Any] | None) -> Scene:
     """Sort a renderable or a (nested) list of them into a :class:`Scene`.
+
+    Surfels flagged by a ``discontinuity`` attribute equal to 1 are left out (crack-edge markers
+    of the thin-shell simulation, not surface samples).
 
     Example
     -------
@@ -73,7 +90,7 @@ def collect(objects: Renderable | Iterable[Any] | None) -> Scene:
 
     def add(obj: Any, where: str) -> None:
         if isinstance(obj, SurfelCloud):
-            scene.clouds.append(obj)
+            scene.clouds.append(_surface_samples(obj))
         elif isinstance(obj, TriangleMesh):
             scene.meshes.append(obj)
         elif isinstance(obj, Particles):
