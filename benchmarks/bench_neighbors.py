@@ -5,7 +5,9 @@ Measures, in one run:
 1. all-pairs radius neighbours of N = 10^6 uniform random points in the unit cube,
    radius chosen for ~30 neighbours per point:
    (a) ``scipy.spatial.cKDTree(points).query_pairs(r, output_type="ndarray")``,
-   (b) ``unmesh.spatial.radius_pairs`` (checked to equal (a) exactly),
+   (b) ``unmesh.spatial.radius_pairs`` (checked to equal (a) exactly), also with
+   ``sort=False`` (the same set, unordered like (a)); (a') the default ``query_pairs``
+   call (Python set of tuples) once, for reference,
    (c) ``unmesh.spatial.radius_neighbors`` (full CSR, both directions + self),
    with construction and query reported separately for the grid;
 2. ``unmesh.spatial.knn`` with k = 16 on the same points vs. raw ``cKDTree.query``;
@@ -119,6 +121,17 @@ def pairs_section(p, n, r, rng, args):
         f"vs query_pairs alone {t_kd_pairs / t_q_pairs:.2f}x")
     row("(b) radius_pairs total (public call)", t_pairs,
         f"{len(pairs)} pairs, identical to (a): {same}, speed-up vs (a) {t_kd / t_pairs:.2f}x")
+
+    t_uns, uns = best(lambda: radius_pairs(p, r, sort=False), args.repeat)
+    uns_same = uns.shape == kd_sorted.shape and bool(np.array_equal(uns[np.lexsort((uns[:, 1], uns[:, 0]))], kd_sorted))
+    row("(b') radius_pairs(sort=False), unordered as (a)", t_uns,
+        f"same set as (a): {uns_same}, speed-up vs (a) {t_kd / t_uns:.2f}x")
+    t_set = time.perf_counter()
+    n_set = len(cKDTree(p).query_pairs(r))
+    t_set = time.perf_counter() - t_set
+    row("(a') cKDTree build + query_pairs (default set output)", t_set,
+        f"{n_set} pairs; radius_pairs speed-up vs (a') {t_set / t_pairs:.1f}x")
+    del uns
 
     t_csr, (_, ind) = best(lambda: radius_neighbors(p, r), args.repeat)
     t_q_csr, _ = best(lambda: nb._grid_search(g, reach, None, r, False), args.repeat)

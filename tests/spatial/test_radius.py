@@ -177,3 +177,17 @@ def test_hypothesis_matches_brute_force(dim, n, nq, radius, method, data):
     assert_csr_equal(radius_neighbors(p, radius, method=method), brute_radius(p, radius))
     assert_csr_equal(radius_neighbors(p, radius, q, method=method), brute_radius(p, radius, q))
     np.testing.assert_array_equal(radius_pairs(p, radius, method=method).reshape(-1, 2), brute_pairs(p, radius))
+
+
+@pytest.mark.parametrize("method", ["grid", "kdtree", "auto"])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_unsorted_pairs_are_the_same_set(rng, method, dim):
+    pts = rng.random((3000, dim))
+    pts[100:110] = pts[0]  # duplicates
+    r = 0.05 if dim == 3 else 0.02
+    ref = brute_pairs(pts, r)
+    got = radius_pairs(pts, r, method=method, sort=False)
+    assert got.dtype == np.int64 and got.shape == ref.shape
+    assert (got[:, 0] < got[:, 1]).all()
+    np.testing.assert_array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], ref)
+    assert radius_pairs(pts[:1], r, sort=False).shape == (0, 2)

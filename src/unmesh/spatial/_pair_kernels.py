@@ -239,3 +239,19 @@ def sort_pair_rows(offsets, cols, out):
         for t in range(row.shape[0]):
             out[lo + t, 0] = v
             out[lo + t, 1] = row[t]
+
+
+@njit(cache=True, parallel=True)
+def compact_pairs(plo, phi, seg_start, seg_len, out):
+    """Copy the segments of ``plo`` / ``phi`` into the (P, 2) int64 array ``out`` (grid order,
+    the unsorted output of ``radius_pairs(..., sort=False)``)."""
+    nseg = seg_start.shape[0]
+    dst = np.zeros(nseg + 1, np.int64)
+    for s in range(nseg):
+        dst[s + 1] = dst[s] + seg_len[s]
+    for s in prange(nseg):
+        src = seg_start[s]
+        d = dst[s]
+        for t in range(seg_len[s]):
+            out[d + t, 0] = plo[src + t]
+            out[d + t, 1] = phi[src + t]

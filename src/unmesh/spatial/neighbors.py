@@ -282,7 +282,7 @@ def radius_neighbors(
         return _grid_search(grid, reach, q, r, False)
 
 
-def radius_pairs(points: object, radius: float, method: str = "auto") -> np.ndarray:
+def radius_pairs(points: object, radius: float, method: str = "auto", sort: bool = True) -> np.ndarray:
     """Unique pairs of points closer than ``radius`` (like ``cKDTree.query_pairs``).
 
     Parameters
@@ -292,11 +292,14 @@ def radius_pairs(points: object, radius: float, method: str = "auto") -> np.ndar
         Pairs with ``sum((x_i - x_j)**2) <= radius**2`` are returned.
     method : {"auto", "grid", "kdtree"}
         As in :func:`radius_neighbors`.
+    sort : bool
+        Sort the rows lexicographically (default). ``False`` returns the same set of rows in
+        an unspecified order, like ``cKDTree.query_pairs``, which saves the sorting pass.
 
     Returns
     -------
     ndarray, shape (P, 2), int64
-        Rows ``(i, j)`` with ``i < j``, sorted lexicographically.
+        Rows ``(i, j)`` with ``i < j``, sorted lexicographically when ``sort``.
 
     Example
     -------
@@ -314,6 +317,11 @@ def radius_pairs(points: object, radius: float, method: str = "auto") -> np.ndar
         grid, reach = _grid_for(pts, r)
         if method == "auto" and choose_method(pts, r, None, grid) == "kdtree":
             return KDTree(pts).radius_pairs(r)
+        if not sort:
+            plo, phi, seg_start, seg_len = _self_pairs(grid, reach, r)
+            out = np.empty((int(seg_len.sum()), 2), np.int64)
+            PK.compact_pairs(plo, phi, seg_start, seg_len, out)
+            return out
         return _grid_search(grid, reach, None, r, True)
 
 
