@@ -55,26 +55,26 @@ class LatticeState:
             "amat": np.zeros((n, 3, 3)), "ainv": np.zeros((n, 3, 3)), "gmat": np.zeros((n, 3, 3)),
             "bstr": np.zeros((n, 3, 3)), "omega": np.zeros((n, 3)), "cen": np.zeros((n, 3)),
             "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8), "mslot": np.full((n, cap), -1, np.int16),
-            "pairf": np.zeros((n, cap, 3)),
+            "slott": np.full((n, cap), -1, np.int16), "rev": np.full((n, cap), -1, np.int32),
         }
         o = self.out
+        assert EK.reverse_positions(self.nbr, self.nn, 4, o["rev"]) == 0
         EK.lattice_update(self.x, self.m, np.ones(n, np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
                           np.arange(n, dtype=np.int64), self.mats, self.nbr, self.nn, self.h, self.dim, self.d,
                           self.vecs, self.tmat, self.table, self.amat, self.ainv, self.occ, self.docked, self.lam,
-                          0, 0, 1e-4, 1, o["amat"], o["ainv"], o["gmat"], o["bstr"], o["omega"], o["cen"], o["fown"],
-                          o["valid"], o["mslot"], o["pairf"])
+                          0, 0, 1e-4, 1, o["rev"], o["amat"], o["ainv"], o["gmat"], o["bstr"], o["omega"], o["cen"], o["fown"],
+                          o["valid"], o["mslot"], o["slott"])
 
     def forces(self) -> np.ndarray:
         """Total elastic force on every particle, gathered as the force pass does."""
         self.run()
         o = self.out
         f = o["fown"].copy()
+        zeros = np.zeros(self.n, np.int32)
         for i in range(self.n):
             acc = np.zeros(3)
-            for t in range(self.nn[i]):
-                j = self.nbr[i, t]
-                if o["valid"][j]:
-                    EK.gather_member_force(i, j, self.nbr, self.nn, o["mslot"], o["pairf"], acc)
+            EK.gather_member_force(i, self.x, self.m, zeros, self.mats, self.nbr, self.nn, self.h, self.dim, self.d,
+                                   self.vecs, o["gmat"], o["bstr"], o["omega"], o["cen"], o["slott"], acc)
             f[i] += acc
         return f
 

@@ -8,9 +8,15 @@ simulation's cell-sorted order; lattice slots are identified across steps by the
 Pass ``lattice_update`` (one per solid particle ``i``, writes only row ``i``):
 assignment (8.21) with conflict resolution, docking (section 8.2.5), shape
 matching (8.23–8.24), goal matrix (8.29–8.30), strain stress (8.2.2), the forces
-the neighbourhood exerts on its members and the exact torque correction; it
-stores the per-neighbourhood data that the force pass needs to *gather* a
-member's share (``member_force``), so every particle writes only its own force.
+the neighbourhood exerts on its members and the exact torque correction. It
+keeps the per-neighbourhood data (goal matrix, ``V P M⁻¹``, ``ω``, centroid
+offset) and writes the slot of each member ``j`` into *j's* row, at the position
+of ``i`` in j's neighbour list (``slott[j, rev[i, t]]``, :func:`reverse_positions`):
+every entry belongs to exactly one pair ``(i, j)``, so the parallel writes never
+collide. The force pass then recomputes the force of neighbourhood ``j`` on ``i``
+from j's data and the slot (:func:`member_force`, the same arithmetic as here, so
+the result is bit-identical) while walking i's own row — no search, and no
+(N, cap, 3) pair-force array streamed through memory.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ SOLID = 1
 SIG_LO = 0.2
 SIG_HI = 5.0
 SIGMA_FLOOR = 0.05
-CHUNK = 32
+CHUNK = 64
 
 
 @njit(cache=True, inline="always")
@@ -360,40 +366,134 @@ def _position(row, count, value):
 
 
 @njit(cache=True, inline="always")
-def member_position(i, j, nbr, nnbr, mslot):
-    """Position of ``i`` in ``j``'s neighbour list if ``i`` is docked in ``j``'s lattice, else -1."""
-    u = _position(nbr[j], min(nnbr[j], nbr.shape[1]), i)
-    if u < 0 or mslot[j, u] < 0:
-        return -1
-    return u
+def _lower_bound(row, count, value):
+    """Number of entries of the ascending ``row[:count]`` that are below ``value``."""
+    lo = 0
+    hi = count
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if row[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, parallel=True)
+def reverse_positions(nbr, nnbr, nblocks, rev):
+    """Position of ``i`` in the neighbour list of each of its neighbours.
+
+    ``rev[i, t] = u`` with ``nbr[j, u] == i`` for ``j = nbr[i, t]`` (-1 when ``i``
+    is missing from j's list, which a symmetric neighbour relation never gives).
+    Rows must be ascending (as the density pass and ``radius_neighbors`` produce
+    them). The rows are split into ``nblocks`` contiguous blocks processed in
+    parallel; within a block, the entries of row ``j`` that belong to the block's
+    rows come in ascending order, so one cursor per ``j`` (started by a binary
+    search) finds every position in O(1): O(N·k) in all.
+
+    Returns the number of missing entries.
+    """
+    n = nbr.shape[0]
+    cap = nbr.shape[1]
+    nb = max(1, min(nblocks, n))
+    missing = 0
+    for blk in prange(nb):
+        r0 = blk * n // nb
+        r1 = (blk + 1) * n // nb
+        lo = n
+        hi = -1
+        for i in range(r0, r1):
+            c = min(nnbr[i], cap)
+            if c > 0:
+                lo = min(lo, nbr[i, 0])
+                hi = max(hi, nbr[i, c - 1])
+        if hi < lo:
+            continue
+        cur = np.full(hi - lo + 1, -1, np.int64)
+        for i in range(r0, r1):
+            c = min(nnbr[i], cap)
+            for t in range(c):
+                j = nbr[i, t]
+                cj = min(nnbr[j], cap)
+                k = cur[j - lo]
+                if k < 0:
+                    k = _lower_bound(nbr[j], cj, r0)
+                if k < cj and nbr[j, k] == i:
+                    rev[i, t] = k
+                    cur[j - lo] = k + 1
+                else:
+                    u = _position(nbr[j], cj, i)
+                    rev[i, t] = u
+                    if u < 0:
+                        missing += 1
+                    else:
+                        cur[j - lo] = u + 1
+    return missing
 
 
 @njit(cache=True, inline="always")
-def gather_member_force(i, j, nbr, nnbr, mslot, pairf, out):
-    """Add the force that the neighbourhood of ``j`` exerts on its member ``i`` to ``out``.
+def member_force(j, i, q, x, m, matid, mats, h, dim, spacing, slot_vecs, gmat, bstr, omega, cen):
+    """Force of the neighbourhood of ``i`` on its member ``j`` docked at slot ``q``.
 
-    :func:`lattice_update` stores, aligned with ``j``'s ascending neighbour list,
-    the slot (``mslot``, -1 if not docked) and the force on each member (``pairf``,
-    direct + strain + torque correction); the position of ``i`` in that list is
-    found by binary search. Returns True when ``i`` is a docked member.
+    Direct force (8.29–8.31) + strain force (8.2.2) + the exact torque correction
+    ``w_j ω_i × (r_ij − c_i)``, from the per-neighbourhood outputs of
+    :func:`lattice_update` (``gmat``, ``bstr``, ``omega``, ``cen`` = centroid offset
+    ``c_i``). The arithmetic is that of :func:`lattice_update`'s member loop.
     """
-    u = _position(nbr[j], min(nnbr[j], nbr.shape[1]), i)
-    if u < 0 or mslot[j, u] < 0:
-        return False
-    out[0] += pairf[j, u, 0]
-    out[1] += pairf[j, u, 1]
-    out[2] += pairf[j, u, 2]
-    return True
+    r0 = x[j, 0] - x[i, 0]
+    r1 = x[j, 1] - x[i, 1]
+    r2 = x[j, 2] - x[i, 2]
+    w = _w(r0 * r0 + r1 * r1 + r2 * r2, h, dim)
+    mt = matid[i]
+    coef = 0.5 * mats[mt, M.KE] * m[i] * m[j] / mats[mt, M.RHO0]
+    f0, f1, f2 = _member_force(r0, r1, r2, w, slot_vecs[q, 0] * spacing, slot_vecs[q, 1] * spacing,
+                               slot_vecs[q, 2] * spacing, coef, gmat[i], bstr[i])
+    wk = m[j] * w
+    y0 = r0 - cen[i, 0]
+    y1 = r1 - cen[i, 1]
+    y2 = r2 - cen[i, 2]
+    om0 = omega[i, 0]
+    om1 = omega[i, 1]
+    om2 = omega[i, 2]
+    return f0 + wk * (om1 * y2 - om2 * y1), f1 + wk * (om2 * y0 - om0 * y2), f2 + wk * (om0 * y1 - om1 * y0)
+
+
+@njit(cache=True, inline="always")
+def gather_member_force(i, x, m, matid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, gmat, bstr, omega, cen,
+                        slott, out):
+    """Add the elastic forces that the neighbourhoods of ``i``'s neighbours exert on ``i`` to ``out``.
+
+    :func:`lattice_update` stores in ``slott[i, t]`` the slot of ``i`` in the
+    lattice of ``j = nbr[i, t]`` (-1 when ``i`` is not docked there or j's
+    neighbourhood gives no forces); the forces are summed in neighbour order.
+    """
+    for t in range(min(nnbr[i], nbr.shape[1])):
+        q = slott[i, t]
+        if q >= 0:
+            f0, f1, f2 = member_force(i, nbr[i, t], q, x, m, matid, mats, h, dim, spacing, slot_vecs, gmat, bstr,
+                                      omega, cen)
+            out[0] += f0
+            out[1] += f1
+            out[2] += f2
 
 
 # -- the update pass ---------------------------------------------------------------------
 
 
+@njit(cache=True, inline="always")
+def _clear_slots(i, nbr, nnbr, rev, slott):
+    """Mark ``i``'s neighbours as non-members of its lattice in their rows (no forces from ``i``)."""
+    for t in range(min(nnbr[i], nbr.shape[1])):
+        ut = rev[i, t]
+        if ut >= 0:
+            slott[nbr[i, t], ut] = -1
+
+
 @njit(cache=True, parallel=True)
 def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing,
                    slot_vecs, tmat, table, amat, ainv, occ, docked, lam,
-                   seed, step, dt, prime,
-                   amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid, mslot, pairf):
+                   seed, step, dt, prime, rev,
+                   amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid, mslot, slott):
     """Lattice assignment, docking, shape matching and neighbourhood forces for every solid particle.
 
     Inputs are in cell-sorted order. ``occ`` (N, Q) int64 holds occupant ids (-1
@@ -403,8 +503,12 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     own share ``fown`` and ``valid`` (1 when the neighbourhood spans the space).
     ``prime`` (initial state) docks every assigned neighbour at once. ``mslot``
     (N, cap) int16 receives, aligned with ``nbr``, the slot of each docked neighbour
-    (-1 otherwise) and ``pairf`` (N, cap, 3) the force on it, for
-    :func:`gather_member_force`.
+    (-1 otherwise). ``rev`` (N, cap) are the :func:`reverse_positions` of ``nbr``;
+    ``slott`` (N, cap) int16 receives the transpose of ``mslot``: in
+    ``slott[j, rev[i, t]]`` the slot of ``j = nbr[i, t]`` in i's lattice, -1 when
+    ``j`` is not a member or i's neighbourhood gives no forces. ``cen`` is the
+    offset ``c_i`` of the weighted centroid from ``x_i``. The forces on the members
+    follow from these outputs (:func:`member_force`, :func:`gather_member_force`).
     """
     n = x.shape[0]
     nq = slot_vecs.shape[0]
@@ -425,7 +529,6 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
         b = np.empty((3, 3))
         pm = np.empty((3, 3))
         dg = np.empty(3)
-        fq = np.empty((nq, 3))
         wq = np.empty(nq)
         work = np.empty((4, 3, 3))
         for i in range(ch * CHUNK, min(n, (ch + 1) * CHUNK)):
@@ -435,7 +538,7 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             for p in range(3):
                 fown[i, p] = 0.0
                 omega[i, p] = 0.0
-                cen[i, p] = x[i, p]
+                cen[i, p] = 0.0
                 for q in range(3):
                     amat_out[i, p, q] = amat[i, p, q]
                     ainv_out[i, p, q] = ainv[i, p, q]
@@ -449,6 +552,7 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                 for q in range(nq):
                     occ[i, q] = -1
                     docked[i, q] = 0
+                _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
             rho0 = mats[mt, M.RHO0]
             # 1. assignment (8.21) with conflict resolution
@@ -542,10 +646,12 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                 mm[2, 2] = 1.0
                 bm[2, 2] = 1.0
             if count < dim:
+                _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
             tr = (mm[0, 0] + mm[1, 1] + (mm[2, 2] if dim == 3 else 0.0)) / dim
             det = _inv3(mm, minv)
             if not det > 1e-6 * tr ** dim:
+                _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
             for p in range(3):
                 for q in range(3):
@@ -620,9 +726,6 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                 coef = 0.5 * ke * m[i] * m[j] / rho0
                 f0, f1, f2 = _member_force(r0, r1, r2, w, slot_vecs[q, 0] * spacing, slot_vecs[q, 1] * spacing,
                                            slot_vecs[q, 2] * spacing, coef, g, b)
-                fq[q, 0] = f0
-                fq[q, 1] = f1
-                fq[q, 2] = f2
                 fs0 += f0
                 fs1 += f1
                 fs2 += f2
@@ -677,27 +780,16 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             omega[i, 0] = om0
             omega[i, 1] = om1
             omega[i, 2] = om2
-            cen[i, 0] = x[i, 0] + c0
-            cen[i, 1] = x[i, 1] + c1
-            cen[i, 2] = x[i, 2] + c2
+            cen[i, 0] = c0
+            cen[i, 1] = c1
+            cen[i, 2] = c2
             wi = m[i] * _w(0.0, h, dim)
             # own share: -sum of member forces + correction at y = -c
             fown[i, 0] = -fs0 + wi * (om1 * (-c2) - om2 * (-c1))
             fown[i, 1] = -fs1 + wi * (om2 * (-c0) - om0 * (-c2))
             fown[i, 2] = -fs2 + wi * (om0 * (-c1) - om1 * (-c0))
-            # members' shares: force + correction w_j ω × (r_j − c), stored along the neighbour list
-            for q in range(nq):
-                j = bestj[q]
-                if j < 0 or docked[i, q] == 0:
-                    continue
-                r0 = x[j, 0] - x[i, 0]
-                r1 = x[j, 1] - x[i, 1]
-                r2 = x[j, 2] - x[i, 2]
-                wk = m[j] * wq[q]
-                y0 = r0 - c0
-                y1 = r1 - c1
-                y2 = r2 - c2
-                t = bestt[q]
-                pairf[i, t, 0] = fq[q, 0] + wk * (om1 * y2 - om2 * y1)
-                pairf[i, t, 1] = fq[q, 1] + wk * (om2 * y0 - om0 * y2)
-                pairf[i, t, 2] = fq[q, 2] + wk * (om0 * y1 - om1 * y0)
+            # members' slots into the members' rows (the force pass recomputes the forces, member_force)
+            for t in range(cnt):
+                ut = rev[i, t]
+                if ut >= 0:
+                    slott[nbr[i, t], ut] = mslot[i, t]

@@ -25,7 +25,7 @@ from numba import njit, prange
 from unmesh.kernels._kernels import poly6_2d, poly6_3d, spiky_gradf_2d, spiky_gradf_3d
 from unmesh.spatial._kernels import point_cell, stencil_ranges
 from unmesh.sph import materials as M
-from unmesh.sph._elastic_kernels import member_position
+from unmesh.sph._elastic_kernels import member_force
 
 SOLID = 1
 #: Regularisation ε h² of the viscosity and heat-conduction denominators.
@@ -173,13 +173,15 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
 @njit(cache=True, parallel=True)
 def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
                bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-               grad_scale, elastic, mslot, pairf, valid, fown,
+               grad_scale, elastic, spacing, slot_vecs, gmat, bstr, omega, cen, slott, fown,
                acc, xsph, dtemp):
     """Accelerations, XSPH corrections and temperature rates of every particle.
 
     See the module docstring for the terms. ``elastic`` (bool) enables the gather
-    of lattice forces: ``fown`` plus the member forces ``pairf`` that every solid
-    neighbour of the same object stored for ``i`` (:func:`member_position`).
+    of lattice forces: ``fown`` plus the forces of the neighbourhoods of i's
+    neighbours ``j = nbr[i, t]`` in which ``i`` is docked at slot ``slott[i, t]``
+    (-1: not a member), recomputed from j's ``gmat``, ``bstr``, ``omega``, ``cen``
+    (:func:`unmesh.sph._elastic_kernels.member_force`; outputs of ``lattice_update``).
     ``wall_mirror`` scales the boundary pressure term (2: pressure mirroring
     ``p_b = p_i``; 1: Akinci et al. 2012, ``p_i/ρ_i²``). ``grad_scale`` multiplies the kernel
     gradient of particle pairs (the lattice correction, see
@@ -265,13 +267,16 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
             if difi > 0.0 and difj > 0.0:
                 dbar = 2.0 * difi * difj / (difi + difj)
                 dti += (2.0 * mj / (rhoi * rhoj)) * rho0 * dbar * (temp[i] - temp[j]) * gf * r2 / (r2 + eh2)
-            # elastic forces gathered from neighbourhood j
-            if elastic and solid_i and same and phase[j] == SOLID and valid[j] != 0:
-                u = member_position(i, j, nbr, nnbr, mslot)
-                if u >= 0:
-                    fe0 += pairf[j, u, 0]
-                    fe1 += pairf[j, u, 1]
-                    fe2 += pairf[j, u, 2]
+        # elastic forces of the neighbourhoods j in which i is docked (slot in i's own row)
+        if elastic and solid_i:
+            for t in range(cnt):
+                q = slott[i, t]
+                if q >= 0:
+                    f0, f1, f2 = member_force(i, nbr[i, t], q, x, m, matid, mats, h, dim, spacing, slot_vecs, gmat,
+                                              bstr, omega, cen)
+                    fe0 += f0
+                    fe1 += f1
+                    fe2 += f2
         # boundary particles (Akinci et al. 2012)
         bcnt = min(nbnbr[i], bcap)
         pb = max(p[i], 0.0) / (rhoi * rhoi) * wall_mirror
@@ -383,3 +388,18 @@ def diagnostics(x, v, acc, m, rho, matid, mats):
         if not (math.isfinite(v2) and math.isfinite(a2) and math.isfinite(x[i, 0] + x[i, 1] + x[i, 2])):
             bad += 1
     return ke, math.sqrt(vmax), math.sqrt(amax), derr, bad
+
+
+@njit(cache=True, parallel=True)
+def permute_rows(src, order, dst):
+    """``dst[a] = src[order[a]]`` for 2D row views (the re-sort of every per-particle array).
+
+    The caller passes any C-contiguous per-particle array as a (N, B) view of raw
+    words (``uint64`` or ``uint8``), so one compiled kernel copies all dtypes
+    bit-exactly, in parallel, into a reused buffer.
+    """
+    nb = src.shape[1]
+    for a in prange(order.shape[0]):
+        o = order[a]
+        for k in range(nb):
+            dst[a, k] = src[o, k]

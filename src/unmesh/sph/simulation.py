@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 
 from unmesh._validate import as_array, as_points
@@ -366,6 +367,7 @@ class SPHSimulation(Simulation):
         self.bnbr = np.zeros((n, 32 if len(self.boundary) else 1), np.int32)
         self.nbnbr = np.zeros(n, np.int64)
         self._scratch = None
+        self._spare: dict[str, np.ndarray] = {}  # re-sort buffers, reused every step
 
     def _check_layout(self) -> None:
         """Report overlapping objects and particles that start outside the boundaries."""
@@ -418,25 +420,41 @@ class SPHSimulation(Simulation):
 
         g = build_cell_grid(self.x, self.h)
         order = g.order
+        spare = self._spare
         for name in self._arrays():
             if name == "x":
                 self.x = np.ascontiguousarray(g.points)
-            else:
-                setattr(self, name, np.ascontiguousarray(getattr(self, name)[order]))
+                continue
+            src = np.ascontiguousarray(getattr(self, name))
+            dst = spare.get(name)
+            if (dst is None or dst.shape != src.shape or dst.dtype != src.dtype or dst is src
+                    or any(dst is buf for buf in (self._scratch or {}).values())):
+                dst = np.empty_like(src)
+            if len(src) and src.itemsize:
+                a = src.reshape(len(src), -1).view(np.uint8)
+                b = dst.reshape(len(dst), -1).view(np.uint8)
+                if a.shape[1] % 8 == 0:
+                    a = a.view(np.uint64)
+                    b = b.view(np.uint64)
+                K.permute_rows(a, order, b)
+            setattr(self, name, dst)
+            spare[name] = src  # the previous array becomes the next step's buffer
         self.grid = g
 
     def _ensure_scratch(self) -> None:
         n = len(self.x)
-        if self.elastic and self._scratch is not None and self._scratch["mslot"].shape[1] != self.nbr.shape[1]:
+        if self.elastic and self._scratch is not None and self._scratch["mslot"].shape != self.nbr.shape:
             self._scratch["mslot"] = np.full(self.nbr.shape, -1, np.int16)
-            self._scratch["pairf"] = np.zeros((*self.nbr.shape, 3))
+            self._scratch["slott"] = np.full(self.nbr.shape, -1, np.int16)
+            self._scratch["rev"] = np.full(self.nbr.shape, -1, np.int32)
         if self._scratch is None or self._scratch["fown"].shape[0] != n:
             self._scratch = {
                 "amat_out": np.zeros((n, 3, 3)), "ainv_out": np.zeros((n, 3, 3)), "gmat": np.zeros((n, 3, 3)),
                 "bstr": np.zeros((n, 3, 3)), "omega": np.zeros((n, 3)), "cen": np.zeros((n, 3)),
                 "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8),
                 "mslot": np.full(self.nbr.shape if self.elastic else (1, 1), -1, np.int16),
-                "pairf": np.zeros((*self.nbr.shape, 3) if self.elastic else (1, 1, 3)),
+                "slott": np.full(self.nbr.shape if self.elastic else (1, 1), -1, np.int16),
+                "rev": np.full(self.nbr.shape if self.elastic else (1, 1), -1, np.int32),
             }
 
     def _density(self) -> None:
@@ -461,16 +479,20 @@ class SPHSimulation(Simulation):
         self._ensure_scratch()
         s = self._scratch
         if self.elastic:
+            missing = EK.reverse_positions(self.nbr, self.nnbr, 8 * numba.get_num_threads(), s["rev"])
+            if missing:  # the density pass builds symmetric, ascending lists: a bug if this happens
+                raise RuntimeError(f"internal error: {missing} neighbour-list entries have no reverse entry")
             EK.lattice_update(self.x, self.m, self.phase, self.obj, self.mat, self.uid, self.mats, self.nbr, self.nnbr,
                               self.h, self.dim, self.spacing, self.slot_vecs, self.tmat, self.slot_table,
                               self.amat, self.ainv, self.occ, self.docked, self.lam, self.config.seed, self.steps,
-                              self.dt_last, 1 if prime else 0, s["amat_out"], s["ainv_out"], s["gmat"], s["bstr"],
-                              s["omega"], s["cen"], s["fown"], s["valid"], s["mslot"], s["pairf"])
+                              self.dt_last, 1 if prime else 0, s["rev"], s["amat_out"], s["ainv_out"], s["gmat"], s["bstr"],
+                              s["omega"], s["cen"], s["fown"], s["valid"], s["mslot"], s["slott"])
         K.force_pass(self.x, self.v, self.m, self.rho, self.p, self.temp, self.phase, self.obj, self.mat, self.uid,
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
                      self.corner_grad, self.config.wall_pressure, self.grad_scale,
-                     self.elastic, s["mslot"], s["pairf"], s["valid"], s["fown"], self.a, self.xsph, self.dtemp)
+                     self.elastic, self.spacing, self.slot_vecs, s["gmat"], s["bstr"], s["omega"], s["cen"], s["slott"],
+                     s["fown"], self.a, self.xsph, self.dtemp)
         if self.elastic:
             # the new lattice transformations become the previous ones of the next step
             self.amat, s["amat_out"] = s["amat_out"], self.amat
