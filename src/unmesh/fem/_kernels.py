@@ -140,3 +140,18 @@ def element_tri_volumes(points, elem_tri_ptr, elem_tris, centers):
             qz = points[c, 2] - cz
             out[t] = (ax * (by * qz - bz * qy) + ay * (bz * qx - bx * qz) + az * (bx * qy - by * qx)) / 6.0
     return out
+
+
+@njit(cache=True)
+def gather_rows(offsets, data, idx, new_offsets, out):
+    """``out[new_offsets[i]:new_offsets[i+1]] = data[offsets[idx[i]]:offsets[idx[i]+1]]``.
+
+    ``data`` and ``out`` are 2-D (rows, width) views; the numpy reference is
+    :func:`unmesh.fem.integration.gather_csr` with ``fast=False``.
+    """
+    for i in range(idx.shape[0]):
+        a = offsets[idx[i]]
+        o = new_offsets[i]
+        for r in range(offsets[idx[i] + 1] - a):
+            for c in range(data.shape[1]):
+                out[o + r, c] = data[a + r, c]

@@ -14,7 +14,10 @@ lagged, warped LU preconditioner (``solver="lu-pcg"``, default), block-Jacobi PC
 (``"cg"``) or a sparse LU factorisation per step (``"direct"``); see
 :mod:`unmesh.fem.solvers`. Fixed and moving nodes and ground contact (an active set
 of nodes whose normal velocity is prescribed so they land on the plane, released
-when the contact force would pull) are constraints of that solve.
+when the contact force would pull) are constraints of that solve; when the active set
+changes, the re-solve is warm-started from the previous solution. A cut keeps the
+factorised preconditioner (mapped through the cut's node weights, see
+:mod:`unmesh.fem.solvers`).
 
 Example
 -------
@@ -56,6 +59,8 @@ __all__ = ["Dynamics", "Ground", "Load", "Prescribed", "kernel_threads"]
 SERIAL_NODES = 30000
 #: ``solver="auto"``: block-Jacobi PCG iterations before switching to the factorised preconditioner.
 AUTO_CG_ITERATIONS = 150
+#: ``"lu-pcg"``: iterations with a lagged (or cut-remapped) factorisation before refactorising within the step.
+LAGGED_ITERATIONS = 200
 
 
 @contextlib.contextmanager
@@ -336,12 +341,13 @@ class Dynamics:
         mode = self.solver
         if mode == "auto":
             mode = "lu-pcg" if self._stiff else "cg"
-        prec = self._lu_preconditioner(R, cm, ck, info) if mode == "lu-pcg" else None
+        prec = self._lu_preconditioner(R, cm, ck, info, A) if mode == "lu-pcg" else None
         vnew = self.v
         worst = 0
         for _ in range(8):
             kind = np.where(fixed, 1, np.where(active, 2, 0)).astype(np.int64)
-            x0 = self.v.copy()
+            # warm start: the last velocity, then (contact set changed) the previous solution
+            x0 = vnew.copy()
             x0[fixed] = vfix[fixed]
             if active.any():
                 target = (self.ground.height - x[active] @ normal) / dt
@@ -355,10 +361,17 @@ class Dynamics:
                     info.iterations += int(its)
                     self._stiff = True
                     mode = "lu-pcg"
-                    prec = self._lu_preconditioner(R, cm, ck, info)
+                    prec = self._lu_preconditioner(R, cm, ck, info, A)
             if mode == "lu-pcg":
-                vnew, its, _res = pcg(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec,
-                                      self.cg_tol, self.cg_maxiter)
+                vnew, its, res = pcg(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec(kind, normal),
+                                     self.cg_tol, min(self.cg_maxiter, LAGGED_ITERATIONS))
+                if res > self.cg_tol and self.lagged.factorizations and not info.extra.get("factorized"):
+                    # the lagged preconditioner went bad: refactorise now and continue from there
+                    info.iterations += int(its)
+                    self.lagged.invalidate()
+                    prec = self._lu_preconditioner(R, cm, ck, info, A)
+                    vnew, its, res = pcg(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal,
+                                         prec(kind, normal), self.cg_tol, self.cg_maxiter)
             elif mode == "direct":
                 vnew, its = direct_solve(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal), 1
             info.iterations += int(its)
@@ -391,7 +404,7 @@ class Dynamics:
         self.last = info
         return info
 
-    def _lu_preconditioner(self, R: np.ndarray, cm: float, ck: float, info: StepInfo) -> Any:
+    def _lu_preconditioner(self, R: np.ndarray, cm: float, ck: float, info: StepInfo, A: np.ndarray) -> Any:
         coeffs = (cm, ck)
         if self.lagged.needs_factor(coeffs):
             if self._K0 is None:
@@ -401,7 +414,8 @@ class Dynamics:
             self.lagged.factor(self.pattern.indptr, self.pattern.indices, A0, coeffs)
             info.extra["factorized"] = True
         Q = node_rotations(R, self.integ.node_offsets, self.integ.nodes, self.integ.mu, self.mesh.n_nodes)
-        return self.lagged.preconditioner(Q)
+        pat = self.pattern
+        return lambda kind, normal: self.lagged.preconditioner(Q, pat.indptr, pat.indices, A, kind, normal)
 
     # -- topology changes -------------------------------------------------------------------
     def change_topology(self, mesh: PolyMesh, node_weights: sp.sparray, element_parent: np.ndarray,
@@ -435,7 +449,13 @@ class Dynamics:
             kept = np.where(ch, -1, parent)
         self.u = W @ self.u
         self.v = W @ self.v
-        self.lagged.invalidate()
+        # keep the factorised preconditioner: mapped through W, exact solve on the touched nodes
+        copy_rows = (np.diff(W.indptr) == 1) & (W.data[np.minimum(W.indptr[:-1], max(len(W.data) - 1, 0))] == 1.0)
+        dup = np.bincount(W.indices[np.repeat(copy_rows, np.diff(W.indptr))], minlength=W.shape[1]) > 1
+        touched = ~copy_rows | dup[W.indices[np.minimum(W.indptr[:-1], max(len(W.indices) - 1, 0))]]
+        eoff, enodes = mesh.element_nodes()
+        touched[enodes[np.repeat(ch, np.diff(eoff))]] = True
+        self.lagged.remap(W, touched)
         # membership (fixed groups, contact) follows pure copies only
         nnz = np.diff(W.indptr)
         first = W.indices[np.minimum(W.indptr[:-1], max(len(W.indices) - 1, 0))]
