@@ -22,7 +22,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["SERIAL_BELOW", "bin_boxes", "box_visits", "serial_if_small", "shade_pixels", "sphere_box", "tile_order"]
+__all__ = ["SERIAL_BELOW", "bin_boxes", "box_visits", "load_tile", "serial_if_small", "shade_pixels", "sphere_box",
+           "tile_order", "tile_rect"]
 
 #: Work items (primitives) below which kernels run on one thread: launching a parallel region
 #: costs more than it saves for small partial updates, and much more on a loaded machine.
@@ -149,6 +150,26 @@ def bin_boxes(box, group, ngroups, tile, ntx, nty, nchunks):
                     items[starts[c, q]] = i
                     starts[c, q] += 1
     return offsets, items
+
+
+@njit(cache=True, inline="always")
+def tile_rect(t, ntx, tile, W, H):
+    """Pixel rectangle ``(x0, y0, tw, th)`` of tile ``t`` in a row-major grid of ``ntx`` tiles per row."""
+    tyi = t // ntx
+    txi = t - tyi * ntx
+    x0 = txi * tile
+    y0 = tyi * tile
+    return x0, y0, min(tile, W - x0), min(tile, H - y0)
+
+
+@njit(cache=True, inline="always")
+def load_tile(image, x0, y0, tw, th):
+    """Copy of the (th, tw) block of a 2-D ``image`` at ``(y0, x0)``, flattened row by row."""
+    out = np.empty(tw * th)
+    for i in range(th):
+        for j in range(tw):
+            out[i * tw + j] = image[y0 + i, x0 + j]
+    return out
 
 
 def tile_order(ntiles: int) -> np.ndarray:

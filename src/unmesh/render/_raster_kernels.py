@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from unmesh.render._kernels import sphere_box
+from unmesh.render._kernels import load_tile, sphere_box, tile_rect
 
 __all__ = ["sphere_setup", "sphere_tiles", "triangle_setup", "triangle_tiles"]
 
@@ -201,17 +201,9 @@ def triangle_tiles(T, items, offsets, order, tile, W, H, f, cx, cy, ortho, near,
         b = offsets[t + 1]
         if a == b:
             continue
-        tyi = t // ntx
-        txi = t - tyi * ntx
-        x0 = txi * tile
-        y0 = tyi * tile
-        tw = min(tile, W - x0)
-        th = min(tile, H - y0)
+        x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
         m = tw * th
-        lz = np.empty(m)
-        for i in range(th):
-            for j in range(tw):
-                lz[i * tw + j] = depth[y0 + i, x0 + j]
+        lz = load_tile(depth, x0, y0, tw, th)
         lf = np.full(m, -1, dtype=np.int64)
         lu = np.zeros(m)
         lv = np.zeros(m)
@@ -345,17 +337,9 @@ def sphere_tiles(S, box, items, offsets, order, tile, W, H, f, cx, cy, ortho, ne
         b = offsets[t + 1]
         if a == b:
             continue
-        tyi = t // ntx
-        txi = t - tyi * ntx
-        x0 = txi * tile
-        y0 = tyi * tile
-        tw = min(tile, W - x0)
-        th = min(tile, H - y0)
+        x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
         m = tw * th
-        lz = np.empty(m)
-        for i in range(th):
-            for j in range(tw):
-                lz[i * tw + j] = depth[y0 + i, x0 + j]
+        lz = load_tile(depth, x0, y0, tw, th)
         lid = np.full(m, -1, dtype=np.int64)
         ln = np.zeros((m, 3))
         for k in range(a, b):

@@ -32,7 +32,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from unmesh.render._kernels import sphere_box
+from unmesh.render._kernels import load_tile, sphere_box, tile_rect
 
 __all__ = ["NPARAM", "fill_tiles", "gather_rows", "splat_resolve", "splat_setup", "splat_tiles"]
 
@@ -437,17 +437,9 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
         b = offsets[t + 1]
         if a == b:
             continue
-        tyi = t // ntx
-        txi = t - tyi * ntx
-        x0 = txi * tile
-        y0 = tyi * tile
-        tw = min(tile, W - x0)
-        th = min(tile, H - y0)
+        x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
         m = tw * th
-        lz = np.empty(m)
-        for i in range(th):
-            for j in range(tw):
-                lz[i * tw + j] = zvis[y0 + i, x0 + j]
+        lz = load_tile(zvis, x0, y0, tw, th)
         lw = np.zeros(m)
         lc = np.zeros((m, 3))
         ln = np.zeros((m, 3))
@@ -546,12 +538,7 @@ def fill_tiles(Pt, offsets, order, tile, W, H, out):
         b = offsets[t + 1]
         if a == b:
             continue
-        tyi = t // ntx
-        txi = t - tyi * ntx
-        x0 = txi * tile
-        y0 = tyi * tile
-        tw = min(tile, W - x0)
-        th = min(tile, H - y0)
+        x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
         lz = np.full(tw * th, np.inf)
         lw = np.zeros(tw * th)
         for mode in range(2):
