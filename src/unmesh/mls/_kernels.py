@@ -46,6 +46,7 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.spatial._kernels import point_cell, stencil_ranges
+from unmesh.surfels._kernels import smallest_eigenvector
 
 #: Status codes of :func:`project_kernel`.
 CONVERGED, NOT_CONVERGED, NO_NEIGHBORS, LOST = 0, 1, 2, 3
@@ -82,57 +83,6 @@ def tangent_frame(nx, ny, nz):
     a = -1.0 / (sign + nz)
     b = nx * ny * a
     return (1.0 + sign * nx * nx * a, sign * b, -sign * nx), (b, sign + ny * ny * a, -ny)
-
-
-@njit(cache=True)
-def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
-    """Unit eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix."""
-    scale = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
-    if scale <= 0.0:
-        return 0.0, 0.0, 1.0
-    a00 /= scale
-    a01 /= scale
-    a02 /= scale
-    a11 /= scale
-    a12 /= scale
-    a22 /= scale
-    # closed-form eigenvalues (trigonometric method)
-    p1 = a01 * a01 + a02 * a02 + a12 * a12
-    qm = (a00 + a11 + a22) / 3.0
-    p2 = (a00 - qm) ** 2 + (a11 - qm) ** 2 + (a22 - qm) ** 2 + 2.0 * p1
-    p = math.sqrt(p2 / 6.0)
-    if p < 1e-300:
-        return 0.0, 0.0, 1.0
-    b00 = (a00 - qm) / p
-    b11 = (a11 - qm) / p
-    b22 = (a22 - qm) / p
-    b01 = a01 / p
-    b02 = a02 / p
-    b12 = a12 / p
-    detb = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
-    r = min(1.0, max(-1.0, detb / 2.0))
-    phi = math.acos(r) / 3.0
-    lam = qm + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)  # smallest
-    # eigenvector: the largest cross product of two rows of (A - lam I)
-    r0x, r0y, r0z = a00 - lam, a01, a02
-    r1x, r1y, r1z = a01, a11 - lam, a12
-    r2x, r2y, r2z = a02, a12, a22 - lam
-    c0x, c0y, c0z = r0y * r1z - r0z * r1y, r0z * r1x - r0x * r1z, r0x * r1y - r0y * r1x
-    c1x, c1y, c1z = r0y * r2z - r0z * r2y, r0z * r2x - r0x * r2z, r0x * r2y - r0y * r2x
-    c2x, c2y, c2z = r1y * r2z - r1z * r2y, r1z * r2x - r1x * r2z, r1x * r2y - r1y * r2x
-    n0 = c0x * c0x + c0y * c0y + c0z * c0z
-    n1 = c1x * c1x + c1y * c1y + c1z * c1z
-    n2 = c2x * c2x + c2y * c2y + c2z * c2z
-    if n0 >= n1 and n0 >= n2:
-        vx, vy, vz, nn = c0x, c0y, c0z, n0
-    elif n1 >= n2:
-        vx, vy, vz, nn = c1x, c1y, c1z, n1
-    else:
-        vx, vy, vz, nn = c2x, c2y, c2z, n2
-    if nn < 1e-300:
-        return 0.0, 0.0, 1.0
-    inv = 1.0 / math.sqrt(nn)
-    return vx * inv, vy * inv, vz * inv
 
 
 @njit(cache=True)

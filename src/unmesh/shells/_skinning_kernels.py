@@ -16,55 +16,10 @@ import math
 
 from numba import njit, prange
 
+from unmesh.surfels._kernels import smallest_eigenvector
+
 #: Doubles stored per frame: local coordinates of the offset p - x_0 and of the two tangent axes.
 COORDS = 9
-
-
-@njit(cache=True)
-def smallest_eigenvector(c00, c01, c02, c11, c12, c22):
-    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (closed form)."""
-    p1 = c01 * c01 + c02 * c02 + c12 * c12
-    q = (c00 + c11 + c22) / 3.0
-    p2 = (c00 - q) ** 2 + (c11 - q) ** 2 + (c22 - q) ** 2 + 2.0 * p1
-    if p2 <= 0.0:
-        return 0.0, 0.0, 1.0
-    p = math.sqrt(p2 / 6.0)
-    b00 = (c00 - q) / p
-    b11 = (c11 - q) / p
-    b22 = (c22 - q) / p
-    b01 = c01 / p
-    b02 = c02 / p
-    b12 = c12 / p
-    det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
-    r = min(1.0, max(-1.0, det / 2.0))
-    phi = math.acos(r) / 3.0
-    lam = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
-    r00 = c00 - lam
-    r11 = c11 - lam
-    r22 = c22 - lam
-    # cross products of the rows of (C - lam I); take the longest
-    ax = c01 * c12 - c02 * r11
-    ay = c02 * c01 - r00 * c12
-    az = r00 * r11 - c01 * c01
-    bx = c01 * r22 - c02 * c12
-    by = c02 * c02 - r00 * r22
-    bz = r00 * c12 - c01 * c02
-    cx = r11 * r22 - c12 * c12
-    cy = c12 * c02 - c01 * r22
-    cz = c01 * c12 - r11 * c02
-    na = ax * ax + ay * ay + az * az
-    nb = bx * bx + by * by + bz * bz
-    nc = cx * cx + cy * cy + cz * cz
-    if na >= nb and na >= nc:
-        s = math.sqrt(na)
-        if s == 0.0:
-            return 0.0, 0.0, 1.0
-        return ax / s, ay / s, az / s
-    if nb >= nc:
-        s = math.sqrt(nb)
-        return bx / s, by / s, bz / s
-    s = math.sqrt(nc)
-    return cx / s, cy / s, cz / s
 
 
 @njit(cache=True)

@@ -338,93 +338,95 @@ def neighbour_covariances(points, nbrs):  # pragma: no cover - numba
     return cov
 
 
+@njit(cache=True)
+def smallest_eigenvector(a00, a01, a02, a11, a12, a22):  # pragma: no cover - numba
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (upper triangle).
+
+    Closed-form eigenvalues (trigonometric solution of the characteristic cubic) of the
+    matrix scaled to unit max-norm, then the eigenvector as the largest cross product of two
+    rows of ``A - l I``. Where that eigenspace is more than one-dimensional any unit vector in
+    it is returned; the zero matrix gives ``(0, 0, 1)``. Shared by normal estimation, MLS
+    (3.5) and shell skinning (7.26). Reference: ``numpy.linalg.eigh``.
+    """
+    s = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
+    if s == 0.0:
+        return 0.0, 0.0, 1.0
+    a00 /= s
+    a01 /= s
+    a02 /= s
+    a11 /= s
+    a12 /= s
+    a22 /= s
+    m = (a00 + a11 + a22) / 3.0
+    k00 = a00 - m
+    k11 = a11 - m
+    k22 = a22 - m
+    p = (k00 * k00 + k11 * k11 + k22 * k22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
+    q = 0.5 * (k00 * (k11 * k22 - a12 * a12) - a01 * (a01 * k22 - a12 * a02) + a02 * (a01 * a12 - k11 * a02))
+    sp = math.sqrt(max(p, 0.0))
+    phi = math.atan2(math.sqrt(max(p * p * p - q * q, 0.0)), q) / 3.0
+    lam = m + 2.0 * sp * math.cos(phi + 2.0 * math.pi / 3.0)
+    r0x, r0y, r0z = a00 - lam, a01, a02
+    r1x, r1y, r1z = a01, a11 - lam, a12
+    r2x, r2y, r2z = a02, a12, a22 - lam
+    c0x = r0y * r1z - r0z * r1y
+    c0y = r0z * r1x - r0x * r1z
+    c0z = r0x * r1y - r0y * r1x
+    c1x = r0y * r2z - r0z * r2y
+    c1y = r0z * r2x - r0x * r2z
+    c1z = r0x * r2y - r0y * r2x
+    c2x = r1y * r2z - r1z * r2y
+    c2y = r1z * r2x - r1x * r2z
+    c2z = r1x * r2y - r1y * r2x
+    n0 = c0x * c0x + c0y * c0y + c0z * c0z
+    n1 = c1x * c1x + c1y * c1y + c1z * c1z
+    n2 = c2x * c2x + c2y * c2y + c2z * c2z
+    l0 = r0x * r0x + r0y * r0y + r0z * r0z
+    l1 = r1x * r1x + r1y * r1y + r1z * r1z
+    l2 = r2x * r2x + r2y * r2y + r2z * r2z
+    lmax = max(l0, l1, l2)
+    # |cross| <= 1e-6 |row|^2: the rows are parallel (a repeated smallest eigenvalue).
+    tiny = 1e-12 * lmax * lmax + 1e-300
+    if n0 >= n1 and n0 >= n2 and n0 > tiny:
+        vx, vy, vz, nn = c0x, c0y, c0z, n0
+    elif n1 >= n2 and n1 > tiny:
+        vx, vy, vz, nn = c1x, c1y, c1z, n1
+    elif n2 > tiny:
+        vx, vy, vz, nn = c2x, c2y, c2z, n2
+    else:
+        # rank <= 1: any vector orthogonal to the largest row of A - l I
+        if l0 >= l1 and l0 >= l2:
+            bx, by, bz, bl = r0x, r0y, r0z, l0
+        elif l1 >= l2:
+            bx, by, bz, bl = r1x, r1y, r1z, l1
+        else:
+            bx, by, bz, bl = r2x, r2y, r2z, l2
+        if bl <= 1e-30:
+            return 0.0, 0.0, 1.0
+        if abs(bx) <= abs(by) and abs(bx) <= abs(bz):
+            vx, vy, vz = 0.0, -bz, by
+        elif abs(by) <= abs(bz):
+            vx, vy, vz = bz, 0.0, -bx
+        else:
+            vx, vy, vz = -by, bx, 0.0
+        nn = vx * vx + vy * vy + vz * vz
+    inv = 1.0 / math.sqrt(nn)
+    return vx * inv, vy * inv, vz * inv
+
+
 @njit(cache=True, parallel=True)
 def smallest_eigenvectors(cov):  # pragma: no cover - numba
-    """Unit eigenvector (N,3) of the smallest eigenvalue of each symmetric 3x3 matrix (N,3,3).
-
-    Closed-form eigenvalues (trigonometric solution of the characteristic cubic),
-    then the eigenvector as the largest cross product of two rows of ``A - l I``.
-    Where that eigenspace is more than one-dimensional any unit vector in it is
-    returned. Reference: ``numpy.linalg.eigh``.
+    """Unit eigenvector (N,3) of the smallest eigenvalue of each symmetric 3x3 matrix (N,3,3)
+    (:func:`smallest_eigenvector` per matrix). Reference: ``numpy.linalg.eigh``.
     """
     n = cov.shape[0]
     out = np.empty((n, 3))
     for i in prange(n):
-        s = 0.0
-        for r in range(3):
-            for c in range(3):
-                s = max(s, abs(cov[i, r, c]))
-        if s == 0.0:
-            out[i, 0] = 0.0
-            out[i, 1] = 0.0
-            out[i, 2] = 1.0
-            continue
-        a00 = cov[i, 0, 0] / s
-        a01 = cov[i, 0, 1] / s
-        a02 = cov[i, 0, 2] / s
-        a11 = cov[i, 1, 1] / s
-        a12 = cov[i, 1, 2] / s
-        a22 = cov[i, 2, 2] / s
-        m = (a00 + a11 + a22) / 3.0
-        k00 = a00 - m
-        k11 = a11 - m
-        k22 = a22 - m
-        p = (k00 * k00 + k11 * k11 + k22 * k22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
-        q = 0.5 * (k00 * (k11 * k22 - a12 * a12) - a01 * (a01 * k22 - a12 * a02) + a02 * (a01 * a12 - k11 * a02))
-        sp = math.sqrt(max(p, 0.0))
-        phi = math.atan2(math.sqrt(max(p * p * p - q * q, 0.0)), q) / 3.0
-        lam = m + 2.0 * sp * math.cos(phi + 2.0 * math.pi / 3.0)
-        r0x, r0y, r0z = a00 - lam, a01, a02
-        r1x, r1y, r1z = a01, a11 - lam, a12
-        r2x, r2y, r2z = a02, a12, a22 - lam
-        c0x = r0y * r1z - r0z * r1y
-        c0y = r0z * r1x - r0x * r1z
-        c0z = r0x * r1y - r0y * r1x
-        c1x = r0y * r2z - r0z * r2y
-        c1y = r0z * r2x - r0x * r2z
-        c1z = r0x * r2y - r0y * r2x
-        c2x = r1y * r2z - r1z * r2y
-        c2y = r1z * r2x - r1x * r2z
-        c2z = r1x * r2y - r1y * r2x
-        n0 = c0x * c0x + c0y * c0y + c0z * c0z
-        n1 = c1x * c1x + c1y * c1y + c1z * c1z
-        n2 = c2x * c2x + c2y * c2y + c2z * c2z
-        l0 = r0x * r0x + r0y * r0y + r0z * r0z
-        l1 = r1x * r1x + r1y * r1y + r1z * r1z
-        l2 = r2x * r2x + r2y * r2y + r2z * r2z
-        lmax = max(l0, l1, l2)
-        # |cross| <= 1e-6 |row|^2: the rows are parallel (a repeated smallest eigenvalue).
-        tiny = 1e-12 * lmax * lmax + 1e-300
-        if n0 >= n1 and n0 >= n2 and n0 > tiny:
-            vx, vy, vz, nn = c0x, c0y, c0z, n0
-        elif n1 >= n2 and n1 > tiny:
-            vx, vy, vz, nn = c1x, c1y, c1z, n1
-        elif n2 > tiny:
-            vx, vy, vz, nn = c2x, c2y, c2z, n2
-        else:
-            # rank <= 1: any vector orthogonal to the largest row of A - l I
-            if l0 >= l1 and l0 >= l2:
-                bx, by, bz, bl = r0x, r0y, r0z, l0
-            elif l1 >= l2:
-                bx, by, bz, bl = r1x, r1y, r1z, l1
-            else:
-                bx, by, bz, bl = r2x, r2y, r2z, l2
-            if bl <= 1e-30:
-                out[i, 0] = 0.0
-                out[i, 1] = 0.0
-                out[i, 2] = 1.0
-                continue
-            if abs(bx) <= abs(by) and abs(bx) <= abs(bz):
-                vx, vy, vz = 0.0, -bz, by
-            elif abs(by) <= abs(bz):
-                vx, vy, vz = bz, 0.0, -bx
-            else:
-                vx, vy, vz = -by, bx, 0.0
-            nn = vx * vx + vy * vy + vz * vz
-        inv = 1.0 / math.sqrt(nn)
-        out[i, 0] = vx * inv
-        out[i, 1] = vy * inv
-        out[i, 2] = vz * inv
+        c = cov[i]
+        vx, vy, vz = smallest_eigenvector(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2])
+        out[i, 0] = vx
+        out[i, 1] = vy
+        out[i, 2] = vz
     return out
 
 
