@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
+from unmesh._linalg_kernels import jacobi_eigh
 from unmesh._validate import as_array, as_points
 
 __all__ = ["horn_matrix", "horn_rotations", "jacobi_eigh4", "quaternion_to_matrix"]
@@ -43,44 +44,8 @@ def jacobi_eigh4(N):
     [1.0, 2.0, 3.0, 4.0]
     """
     A = N.copy()
-    V = np.eye(4)
-    scale = 0.0
-    for i in range(4):
-        for j in range(4):
-            scale = max(scale, abs(A[i, j]))
-    if scale == 0.0:
-        return np.zeros(4), V
-    for _sweep in range(30):
-        off = 0.0
-        for p in range(4):
-            for q in range(p + 1, 4):
-                off += A[p, q] * A[p, q]
-        if off <= (1e-17 * scale) ** 2:
-            break
-        for p in range(3):
-            for q in range(p + 1, 4):
-                apq = A[p, q]
-                if abs(apq) <= 1e-300:
-                    continue
-                theta = (A[q, q] - A[p, p]) / (2.0 * apq)
-                t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1.0))
-                c = 1.0 / np.sqrt(t * t + 1.0)
-                s = t * c
-                for k in range(4):
-                    akp = A[k, p]
-                    akq = A[k, q]
-                    A[k, p] = c * akp - s * akq
-                    A[k, q] = s * akp + c * akq
-                for k in range(4):
-                    apk = A[p, k]
-                    aqk = A[q, k]
-                    A[p, k] = c * apk - s * aqk
-                    A[q, k] = s * apk + c * aqk
-                for k in range(4):
-                    vkp = V[k, p]
-                    vkq = V[k, q]
-                    V[k, p] = c * vkp - s * vkq
-                    V[k, q] = s * vkp + c * vkq
+    V = np.empty((4, 4))
+    jacobi_eigh(A, V)
     w = np.empty(4)
     for i in range(4):
         w[i] = A[i, i]

@@ -26,6 +26,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from unmesh._linalg_kernels import jacobi_eigh
 from unmesh.kernels._kernels import poly6_2d, poly6_3d
 from unmesh.sph import materials as M
 from unmesh.sph._rng import STREAM_DOCK, uniform
@@ -58,39 +59,7 @@ def sym_eig3(a, vec, val, b):
     for p in range(3):
         for q in range(3):
             b[p, q] = a[p, q]
-    for p in range(3):
-        for q in range(3):
-            vec[p, q] = 1.0 if p == q else 0.0
-    for _sweep in range(30):
-        off = b[0, 1] * b[0, 1] + b[0, 2] * b[0, 2] + b[1, 2] * b[1, 2]
-        diag = b[0, 0] * b[0, 0] + b[1, 1] * b[1, 1] + b[2, 2] * b[2, 2]
-        if off <= 1e-32 * diag or off == 0.0:
-            break
-        for p, q in ((0, 1), (0, 2), (1, 2)):
-            apq = b[p, q]
-            if apq == 0.0:
-                continue
-            theta = (b[q, q] - b[p, p]) / (2.0 * apq)
-            t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
-            if theta < 0.0:
-                t = -t
-            c = 1.0 / math.sqrt(t * t + 1.0)
-            s = t * c
-            for k in range(3):  # b = b J
-                bkp = b[k, p]
-                bkq = b[k, q]
-                b[k, p] = c * bkp - s * bkq
-                b[k, q] = s * bkp + c * bkq
-            for k in range(3):  # b = J^T b
-                bpk = b[p, k]
-                bqk = b[q, k]
-                b[p, k] = c * bpk - s * bqk
-                b[q, k] = s * bpk + c * bqk
-            for k in range(3):
-                vkp = vec[k, p]
-                vkq = vec[k, q]
-                vec[k, p] = c * vkp - s * vkq
-                vec[k, q] = s * vkp + c * vkq
+    jacobi_eigh(b, vec)
     for k in range(3):
         val[k] = b[k, k]
     # sort descending
