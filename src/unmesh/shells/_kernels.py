@@ -198,34 +198,42 @@ def fiber_angle_batch(x, fibers, normals, soft, out_theta, out_grad, out_gnormal
         out_gnormal[k] = gn
 
 
+@njit(cache=True, inline="always")
+def umbrella_at(i, x, pairs, q0, q1, out_s, out_normal):
+    """Umbrella vector ``s_i = sum (x_a - x_i) x (x_b - x_i)`` over ``pairs[q0:q1]`` and its unit
+    normal (zero without pairs) into row ``i`` of ``out_s`` / ``out_normal`` (7.10)."""
+    xi0 = x[i, 0]
+    xi1 = x[i, 1]
+    xi2 = x[i, 2]
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for q in range(q0, q1):
+        a = pairs[q, 0]
+        b = pairs[q, 1]
+        c0, c1, c2 = _cross(x[a, 0] - xi0, x[a, 1] - xi1, x[a, 2] - xi2, x[b, 0] - xi0, x[b, 1] - xi1, x[b, 2] - xi2)
+        s0 += c0
+        s1 += c1
+        s2 += c2
+    out_s[i, 0] = s0
+    out_s[i, 1] = s1
+    out_s[i, 2] = s2
+    sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    if sn > 0.0:
+        out_normal[i, 0] = s0 / sn
+        out_normal[i, 1] = s1 / sn
+        out_normal[i, 2] = s2 / sn
+    else:
+        out_normal[i, 0] = 0.0
+        out_normal[i, 1] = 0.0
+        out_normal[i, 2] = 0.0
+
+
 @njit(cache=True, parallel=True)
 def umbrella(x, pairs, pair_offsets, out_s, out_normal):
     """Umbrella vectors s_i = sum (x_a - x_i) x (x_b - x_i) and unit normals (zero if no pairs)."""
-    n = x.shape[0]
-    for i in prange(n):
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        for q in range(pair_offsets[i], pair_offsets[i + 1]):
-            a = pairs[q, 0]
-            b = pairs[q, 1]
-            c0, c1, c2 = _cross(x[a, 0] - x[i, 0], x[a, 1] - x[i, 1], x[a, 2] - x[i, 2],
-                                x[b, 0] - x[i, 0], x[b, 1] - x[i, 1], x[b, 2] - x[i, 2])
-            s0 += c0
-            s1 += c1
-            s2 += c2
-        out_s[i, 0] = s0
-        out_s[i, 1] = s1
-        out_s[i, 2] = s2
-        nn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        if nn > 0.0:
-            out_normal[i, 0] = s0 / nn
-            out_normal[i, 1] = s1 / nn
-            out_normal[i, 2] = s2 / nn
-        else:
-            out_normal[i, 0] = 0.0
-            out_normal[i, 1] = 0.0
-            out_normal[i, 2] = 0.0
+    for i in prange(x.shape[0]):
+        umbrella_at(i, x, pairs, pair_offsets[i], pair_offsets[i + 1], out_s, out_normal)
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -255,29 +263,11 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
     xi0 = x[i, 0]
     xi1 = x[i, 1]
     xi2 = x[i, 2]
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
     p0 = pstart[i]
-    for q in range(p0, p0 + pcount[i]):
-        a = pairs[q, 0]
-        b = pairs[q, 1]
-        c0, c1, c2 = _cross(x[a, 0] - xi0, x[a, 1] - xi1, x[a, 2] - xi2, x[b, 0] - xi0, x[b, 1] - xi1, x[b, 2] - xi2)
-        s0 += c0
-        s1 += c1
-        s2 += c2
-    out_s[i, 0] = s0
-    out_s[i, 1] = s1
-    out_s[i, 2] = s2
-    sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    if sn > 0.0:
-        out_normal[i, 0] = s0 / sn
-        out_normal[i, 1] = s1 / sn
-        out_normal[i, 2] = s2 / sn
-    else:
-        out_normal[i, 0] = 0.0
-        out_normal[i, 1] = 0.0
-        out_normal[i, 2] = 0.0
+    umbrella_at(i, x, pairs, p0, p0 + pcount[i], out_s, out_normal)
+    s0 = out_s[i, 0]
+    s1 = out_s[i, 1]
+    s2 = out_s[i, 2]
     m = fcount[i]
     if m == 0:
         out_node[i, 0] = 0.0
