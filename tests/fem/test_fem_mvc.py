@@ -27,10 +27,23 @@ def test_partition_of_unity_linear_precision_positivity(seed, n, flat):
     np.testing.assert_allclose(phi.sum(axis=1), 1.0, atol=1e-12)
     np.testing.assert_allclose(phi @ v, x, atol=1e-12 * np.ptp(v))
     assert phi.min() > 0
-    # gradients of the same identities: Σ∇φ = 0 and Σ x_i ∇φ_iᵀ = I
-    np.testing.assert_allclose(grad.sum(axis=1), 0.0, atol=1e-9 / np.ptp(v[:, 2]))
-    np.testing.assert_allclose(np.einsum("ia,pib->pab", v, grad), np.broadcast_to(np.eye(3), (len(x), 3, 3)),
-                               atol=1e-9)
+    # gradients of the same identities: Σ∇φ = 0 and Σ x_i ∇φ_iᵀ = I, to 1e-9 away from edges;
+    # within h of an edge the known limit of the edge normals is ~eps·diam/h (module docstring of
+    # unmesh.fem._mvc_kernels; hypothesis seed=2622 put a point ~1e-7 from an edge)
+    slack = 1e-14 * np.ptp(v) / _edge_distance(v, f, x)
+    sum_err = np.abs(grad.sum(axis=1)).max(axis=1)
+    assert (sum_err <= 1e-9 / np.ptp(v[:, 2]) + slack / np.ptp(v[:, 2])).all(), sum_err.max()
+    lin_err = np.abs(np.einsum("ia,pib->pab", v, grad) - np.eye(3)).max(axis=(1, 2))
+    assert (lin_err <= 1e-9 + slack).all(), lin_err.max()
+
+
+def _edge_distance(v, f, x):
+    """Distance (P,) of each point to the nearest edge of the triangles ``f``."""
+    e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+    a, b = v[e[:, 0]], v[e[:, 1]]
+    ab = b - a
+    t = np.clip(np.einsum("pea,ea->pe", x[:, None] - a, ab) / (ab * ab).sum(axis=1), 0.0, 1.0)
+    return np.linalg.norm(x[:, None] - (a + t[..., None] * ab), axis=2).min(axis=1)
 
 
 def test_tetrahedron_gives_barycentric_coordinates(rng):
