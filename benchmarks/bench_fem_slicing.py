@@ -109,7 +109,8 @@ def main() -> None:
               f"the refactorisation)")
     if (~cutting).any():
         print(f"per frame without a cut: {a[~cutting, 0].mean():.2f} s")
-    print(f"nodes {mesh.n_nodes} -> {int(a[-1, 5])}, elements {mesh.n_elements} -> {int(a[-1, 6])}")
+    print(f"nodes {mesh.n_nodes} -> {int(a[-1, 5])}, elements {mesh.n_elements} -> {int(a[-1, 6])}, "
+          f"{getattr(dyn, 'n_solid_pieces', '?')} pieces at the end")
     lag = dyn.lagged
     print(f"solver {args.solver}: {lag.factorizations} LU factorisations in {args.frames} steps, the factorisation "
           f"kept across {lag.remaps} cuts; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")

@@ -213,3 +213,16 @@ def test_static_solve_of_uniaxial_tension():
     u = solve_static(m, Y, nu, left, f, displacements=exact)
     np.testing.assert_allclose(u, exact, atol=1e-12)
     assert isinstance(K, sp.csr_array)
+
+
+def test_block_pattern_kernel_matches_numpy_reference():
+    from unmesh.fem.cutting import PolygonCut, apply_cuts
+
+    foam = voronoi_foam(12, seed=4)
+    cut = apply_cuts(foam, [PolygonCut(np.array([[-1, 0.5, -1], [0.6, 0.5, -1], [0.6, 0.5, 2], [-1, 0.5, 2.0]]))]).mesh
+    for mesh in (foam, cut, hex_grid((3, 2, 1))):
+        off, nodes = mesh.element_nodes()
+        fast = BlockPattern.build(off, nodes, mesh.n_nodes)
+        ref = BlockPattern.build(off, nodes, mesh.n_nodes, fast=False)
+        for name in ("indptr", "indices", "block_map", "diag"):
+            np.testing.assert_array_equal(getattr(fast, name), getattr(ref, name), err_msg=name)

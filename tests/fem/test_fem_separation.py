@@ -192,9 +192,7 @@ def _sweep(mesh: PolyMesh, blade: BladeEvent, steps: int, snap: float = 0.02) ->
     return mesh
 
 
-@pytest.mark.parametrize("shape", ["sphere", pytest.param("blob", marks=pytest.mark.xfail(
-    strict=True, reason="known defect (issue 5 open): a curved sweep through the blob's tet mesh leaves a "
-    "node hinge near the bend of the blade path, 3 pieces instead of 4"))])
+@pytest.mark.parametrize("shape", ["sphere", "blob"])
 def test_curved_blade_sweep_through_tet_mesh_separates(shape):
     mesh = _sphere() if shape == "sphere" else _blob()
     lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
@@ -212,6 +210,60 @@ def test_curved_blade_sweep_through_tet_mesh_separates(shape):
 
     assert actual_pieces(cut) == expected_pieces(mesh, side)
     assert actual_pieces(cut) >= 2
+
+
+# 13 tetrahedra of the blob mesh (``_blob()``) around the bend of the curved blade path of
+# the test above, with the node length scales of the full mesh (which set the snapping bands).
+_BEND_POINTS = np.array([
+    [-3.7989476363991859e-01, 8.0071560514657358e-01, 1.0523636008152870e-04],
+    [-3.7989476363991859e-01, 7.5374533488757312e-01, 1.6010523636008145e-01],
+    [-2.1989476363991867e-01, 8.3960096306820975e-01, 1.0523636008152870e-04],
+    [-2.1989476363991867e-01, 7.9765486947681019e-01, 1.6010523636008145e-01],
+    [-4.2286189359296666e-01, 7.4911621611647106e-01, 8.6454680982062881e-02],
+    [-2.9989476363991863e-01, 7.2942528562382736e-01, 2.1438127703188772e-01],
+    [-2.9989476363991863e-01, 7.7570010218219165e-01, 1.6010523636008145e-01],
+    [-3.1777884914331989e-01, 6.4756563973078285e-01, 7.9654896876885248e-02],
+    [-9.1851424482397470e-02, 6.0508902943493170e-01, 1.4962153803374312e-01],
+    [-2.3713291932334540e-01, 6.6771042445155659e-01, 2.1160055957541729e-01],
+    [-3.4212715541596395e-01, 6.5924767692721298e-01, 1.9930837357797451e-01],
+    [-4.2912980370532777e-01, 6.6533518126971036e-01, 1.4424291994576929e-01]])
+_BEND_TETS = [[5, 6, 7, 9], [0, 4, 6, 7], [0, 3, 6, 7], [3, 7, 8, 9], [0, 2, 3, 7], [5, 6, 7, 10], [1, 4, 7, 11],
+              [1, 7, 10, 11], [2, 3, 7, 8], [5, 7, 9, 10], [1, 6, 7, 10], [1, 4, 6, 7], [3, 6, 7, 9]]
+_BEND_SCALES = np.array([0.22629486981113847, 0.16675193038823724, 0.3065382366795456, 0.23148781260411963,
+                         0.1525064588435553, 0.15865698739638873, 0.1806260650863019, 0.35660323729563836,
+                         0.33734380017871424, 0.2219792440051121, 0.1560813126014115, 0.13364806510712507])
+
+
+def test_blade_bend_does_not_snap_the_far_side_onto_the_cut_plane():
+    """Regression for the hinge of the curved blob sweep (issue 5), on 13 tetrahedra.
+
+    At the bend the new blade plane meets the previous one; a face the previous step
+    cut, next to the bend line, lies within the snapping band of the new plane, so an
+    element above it cannot be split (its in-plane face bounds neither half). The old
+    fallback snapped the side closer to the plane: a node on the far side of the cut
+    surface, 9 snapping bands off the plane. The element then bridged the cut (one
+    piece instead of two). Now the element stays behind its in-plane face and the
+    nodes snapped are those beyond the bend, outside the cut polygon.
+    """
+    from unmesh.fem import tet_mesh
+
+    t = tet_mesh(_BEND_POINTS, _BEND_TETS)
+    mesh = PolyMesh.from_arrays(t.points, t.face_nodes, t.face_offsets, t.elem_faces, t.elem_signs, t.elem_offsets,
+                                node_scale=_BEND_SCALES)
+    lo = np.array([-0.7480824856921311, 0.016309295904857024, -0.3561594159270203])
+    hi = np.array([0.7999855051424705, 1.3800480106884274, 0.3561594159270203])
+    z0 = 0.5 * (lo[2] + hi[2]) + 0.05
+    ys = [hi[1] + 0.1, 0.5 * (lo[1] + hi[1]), lo[1] - 0.1]
+    zs = [z0 - 0.15, z0 + 0.05, z0 - 0.1]
+    path = np.array([[[lo[0] - 0.2, y, z], [hi[0] + 0.2, y, z]] for y, z in zip(ys, zs, strict=True)])
+    cut = _sweep(mesh, BladeEvent(0.0, 1.0, path), 24)
+    _check_mesh(cut, mesh.volume())
+
+    def side(x: np.ndarray) -> np.ndarray:
+        return x[:, 2] - np.interp(-x[:, 1], [-y for y in ys], zs)
+
+    assert expected_pieces(mesh, side) == 2
+    assert actual_pieces(cut) == 2
 
 
 def test_straight_blade_sweep_in_many_steps_separates():

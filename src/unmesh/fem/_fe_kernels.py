@@ -218,3 +218,97 @@ def warped_forces(points_rest, x, node_off, nodes, k_off, ke, rots, n_nodes):
                 fe[n0 + a, i] = -(R[i, 0] * fa[0] + R[i, 1] * fa[1] + R[i, 2] * fa[2])
         energy[e] = en
     return fe, energy
+
+
+@njit(cache=True)
+def block_pattern(node_off, nodes, n_nodes):
+    """Node-coupling pattern of the element node lists: ``(indptr, indices, block_map, diag)``.
+
+    Row i lists, sorted, every node sharing an element with node i; ``block_map[k]``
+    is the global block of element block k (element order, ``a·n_e + b`` within an
+    element), ``diag[i]`` the position of block (i, i) (-1 for a node of no element).
+    Serial, O(Σ_e n_e²) with one marker array (no global sort). The numpy reference
+    is :meth:`unmesh.fem.assembly.BlockPattern.build` with ``fast=False``.
+    """
+    ne = node_off.shape[0] - 1
+    # node -> (element, local index) incidence
+    cnt = np.zeros(n_nodes + 1, np.int64)
+    for k in range(nodes.shape[0]):
+        cnt[nodes[k] + 1] += 1
+    inc_off = np.cumsum(cnt)
+    fill = inc_off[:-1].copy()
+    inc_e = np.empty(nodes.shape[0], np.int64)
+    inc_a = np.empty(nodes.shape[0], np.int64)
+    for e in range(ne):
+        for a in range(node_off[e + 1] - node_off[e]):
+            i = nodes[node_off[e] + a]
+            inc_e[fill[i]] = e
+            inc_a[fill[i]] = a
+            fill[i] += 1
+    bstart = np.empty(ne + 1, np.int64)
+    bstart[0] = 0
+    for e in range(ne):
+        m = node_off[e + 1] - node_off[e]
+        bstart[e + 1] = bstart[e] + m * m
+    mark = np.full(n_nodes, -1, np.int64)
+    pos = np.zeros(n_nodes, np.int64)
+    # pass 1: row lengths
+    indptr = np.zeros(n_nodes + 1, np.int64)
+    for i in range(n_nodes):
+        c = 0
+        for t in range(inc_off[i], inc_off[i + 1]):
+            e = inc_e[t]
+            for k in range(node_off[e], node_off[e + 1]):
+                j = nodes[k]
+                if mark[j] != i:
+                    mark[j] = i
+                    c += 1
+        indptr[i + 1] = indptr[i] + c
+    indices = np.empty(indptr[n_nodes], np.int64)
+    block_map = np.empty(bstart[ne], np.int64)
+    diag = np.full(n_nodes, -1, np.int64)
+    mark[:] = -1
+    for i in range(n_nodes):
+        p = indptr[i]
+        for t in range(inc_off[i], inc_off[i + 1]):
+            e = inc_e[t]
+            for k in range(node_off[e], node_off[e + 1]):
+                j = nodes[k]
+                if mark[j] != i:
+                    mark[j] = i
+                    indices[p] = j
+                    p += 1
+        row = np.sort(indices[indptr[i]:indptr[i + 1]])
+        for q in range(row.shape[0]):
+            indices[indptr[i] + q] = row[q]
+            pos[row[q]] = indptr[i] + q
+            if row[q] == i:
+                diag[i] = indptr[i] + q
+        for t in range(inc_off[i], inc_off[i + 1]):
+            e = inc_e[t]
+            a = inc_a[t]
+            m = node_off[e + 1] - node_off[e]
+            for b in range(m):
+                block_map[bstart[e] + a * m + b] = pos[nodes[node_off[e] + b]]
+    return indptr, indices, block_map, diag
+
+
+@njit(cache=True)
+def merge_rows(off_a, data_a, off_b, data_b, from_b, idx, new_off, out):
+    """Row i of ``out`` (2-D views) = row ``idx[i]`` of b if ``from_b[i]`` else of a.
+
+    The numpy reference is :func:`unmesh.fem.integration.merge_csr` with ``fast=False``.
+    """
+    for i in range(idx.shape[0]):
+        o = new_off[i]
+        j = idx[i]
+        if from_b[i]:
+            s = off_b[j]
+            for r in range(off_b[j + 1] - s):
+                for c in range(data_b.shape[1]):
+                    out[o + r, c] = data_b[s + r, c]
+        else:
+            s = off_a[j]
+            for r in range(off_a[j + 1] - s):
+                for c in range(data_a.shape[1]):
+                    out[o + r, c] = data_a[s + r, c]

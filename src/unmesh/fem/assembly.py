@@ -163,8 +163,17 @@ class BlockPattern:
     diag: np.ndarray
 
     @classmethod
-    def build(cls, node_offsets: np.ndarray, nodes: np.ndarray, n_nodes: int) -> BlockPattern:
-        """Pattern of the element node lists (CSR)."""
+    def build(cls, node_offsets: np.ndarray, nodes: np.ndarray, n_nodes: int, *, fast: bool = True) -> BlockPattern:
+        """Pattern of the element node lists (CSR).
+
+        ``fast`` builds it with a numba kernel (:func:`unmesh.fem._fe_kernels.block_pattern`,
+        no global sort: it is rebuilt after every cut); ``fast=False`` is the numpy reference.
+        """
+        if fast and len(nodes):
+            indptr, indices, block_map, diag = FK.block_pattern(np.ascontiguousarray(node_offsets, dtype=np.int64),
+                                                                np.ascontiguousarray(nodes, dtype=np.int64),
+                                                                int(n_nodes))
+            return cls(int(n_nodes), indptr, indices, block_map, diag)
         n = np.diff(node_offsets)
         e = np.repeat(np.arange(len(n)), n * n)
         start = np.repeat(node_offsets[:-1], n * n)

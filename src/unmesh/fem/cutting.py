@@ -31,6 +31,7 @@ Example
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -212,14 +213,17 @@ class Cutter:
         return m
 
     # -- 9.3.1 element split ---------------------------------------------------------------------
-    def _prepare(self, elems: list[int], sides: PlaneSides) -> list[int]:
+    def _prepare(self, elems: list[int], sides: PlaneSides,
+                 outside: Callable[[int], bool] | None = None) -> list[int]:
         """Make every element of ``elems`` that straddles the plane splittable; return those.
 
         Snapping decisions are global per node, so a split is never refused: where a face
         would be crossed more than twice (a slightly non-planar face) the nodes of the
         shortest sign runs are snapped onto the plane, and where one half would be
         degenerate (less than 1e-6 of the volume) its nodes are snapped onto the plane,
-        so the element lies on one side.
+        so the element lies on one side. ``outside(v)`` tells whether node v lies outside
+        the cut polygon (beyond its snapping band; ``None`` for a plane cut), see
+        :meth:`_unsplittable_side`.
         """
         ed = self.ed
         out: list[int] = []
@@ -250,10 +254,8 @@ class Cutter:
                     vneg, vpos = self._half_volumes(e, sides)
                     if min(vneg, vpos) <= 1e-6 * (vneg + vpos):
                         thin = -1 if vneg < vpos else 1
-                        if vneg < 0 or vpos < 0:  # no valid split: snap the side closer to the plane
-                            reach = {s_: max((abs(sides.distance(v)) for v in nodes if sides.cls(v) == s_),
-                                             default=0.0) for s_ in (-1, 1)}
-                            thin = -1 if reach[-1] <= reach[1] else 1
+                        if vneg < 0 or vpos < 0:  # no valid split
+                            thin = self._unsplittable_side(e, nodes, sides, outside)
                         self.degenerate += 1
                 if thin != 0:
                     for v in nodes:
@@ -265,6 +267,39 @@ class Cutter:
             if not changed:
                 return out
         return out
+
+    def _unsplittable_side(self, e: int, nodes: list[int], sides: PlaneSides,
+                           outside: Callable[[int], bool] | None) -> int:
+        """The side (-1/+1) to snap onto the plane for a straddling element whose halves
+        do not close.
+
+        The halves fail to close when a face of the element that lies in the plane
+        (every node snapped onto it) does not bound the half :meth:`_flat_side` gives it
+        to: the face is only snapped, and in truth tilted against the plane - typically
+        a face of an earlier cut next to the bend line of a curved blade, where the
+        previous blade plane meets the current one within the snapping band.
+
+        For a polygon cut (``outside`` given): if the in-plane faces all say that the
+        element is on side ``s`` (a convex element lies behind its faces) and every
+        node on the other side lies outside the polygon, those nodes are snapped. They
+        lie beyond the bend, where this plane does not cut, so snapping them changes
+        how the element is subdivided there but not what the cut separates.
+        Otherwise (and always for a plane cut) the side closer to the plane is snapped.
+        Doing that in the case above snaps a node from the far side of the cut surface
+        onto the plane: the element then bridges the cut, a hinge that keeps the two
+        pieces together (issue 5, the curved blade sweep through the blob).
+        """
+        if outside is not None:
+            ed = self.ed
+            behind = {self._flat_side(cyc, sides) for f, s in ed.elem(e) for cyc in (ed.oriented(f, s),)
+                      if all(sides.cls(v) == 0 for v in cyc)}
+            if len(behind) == 1:
+                s = behind.pop()
+                if all(outside(v) for v in nodes if sides.cls(v) == -s):
+                    return -s
+        reach = {s_: max((abs(sides.distance(v)) for v in nodes if sides.cls(v) == s_), default=0.0)
+                 for s_ in (-1, 1)}
+        return -1 if reach[-1] <= reach[1] else 1
 
     @staticmethod
     def _thin_side(nodes: list[int], sides: PlaneSides) -> int:
@@ -490,7 +525,11 @@ class Cutter:
             if self._straddles(nodes, sides) and self._section(e, sides) is None:
                 crossing.append(e)
         split_children: set[int] = set()
-        for e in self._prepare(crossing, sides):
+
+        def outside(v: int) -> bool:
+            return _outside(to2(ed.point(v)), P2, sides.band(v))
+
+        for e in self._prepare(crossing, sides, outside):
             r = self.split(e, sides)
             if r is not None:
                 split_children.update(r)
@@ -614,7 +653,8 @@ class Cutter:
         The halves are built virtually exactly as :meth:`split` builds them (crossing
         points, face pieces, in-plane faces by orientation, the cap through the snapped
         nodes), so a half left flat by snapped nodes shows up as (almost) zero volume.
-        A configuration the split could not close gives ``(-1, -1)``.
+        A configuration the split could not close gives ``(-1, -1)`` (:meth:`_prepare` then
+        snaps the element to one side, :meth:`_unsplittable_side`).
         """
         ed = self.ed
         pts: dict[Any, np.ndarray] = {}
@@ -865,6 +905,17 @@ def _inside(p: np.ndarray, P: np.ndarray, eps: float) -> bool:
         if sgn * _cross2(d, p - P[i]) / max(np.linalg.norm(d), 1e-300) <= eps:
             return False
     return True
+
+
+def _outside(p: np.ndarray, P: np.ndarray, margin: float) -> bool:
+    """Does the 2D point p lie outside the convex polygon P by more than ``margin``?"""
+    k = len(P)
+    sgn = np.sign(sum(_cross2(P[i], P[(i + 1) % k]) for i in range(k)))
+    for i in range(k):
+        d = P[(i + 1) % k] - P[i]
+        if sgn * _cross2(d, p - P[i]) / max(np.linalg.norm(d), 1e-300) < -margin:
+            return True
+    return False
 
 
 def _segment_crosses(a: np.ndarray, b: np.ndarray, poly: np.ndarray, eps: float) -> bool:

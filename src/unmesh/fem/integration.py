@@ -32,7 +32,7 @@ import numpy as np
 from unmesh.fem import _fe_kernels as FK
 from unmesh.fem.mesh import PolyMesh
 
-__all__ = ["ElementIntegration", "gather_csr", "integrate_elements"]
+__all__ = ["ElementIntegration", "gather_csr", "integrate_elements", "merge_csr"]
 
 
 def gather_csr(offsets: np.ndarray, data: np.ndarray, idx: np.ndarray, *,
@@ -63,15 +63,56 @@ def gather_csr(offsets: np.ndarray, data: np.ndarray, idx: np.ndarray, *,
     return new_off, data[pos]
 
 
-def _local_triangles(mesh: PolyMesh) -> tuple[np.ndarray, np.ndarray]:
+def merge_csr(off_a: np.ndarray, data_a: np.ndarray, off_b: np.ndarray, data_b: np.ndarray, from_b: np.ndarray,
+              idx: np.ndarray, *, fast: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Rows picked from two CSR arrays: row i is row ``idx[i]`` of b if ``from_b[i]``, else of a.
+
+    ``off_a`` (Ra+1,), ``off_b`` (Rb+1,) int; ``data_a``, ``data_b`` of equal dtype and
+    trailing shape; ``from_b`` (k,) bool; ``idx`` (k,) int. Returns ``(new_offsets (k+1,),
+    new_data)``. One copy of the rows (the re-integration after a cut merges the kept
+    elements' data with the re-integrated ones); ``fast=False`` is the numpy reference.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> merge_csr(np.array([0, 2]), np.array([5, 6]), np.array([0, 1]), np.array([7]),
+    ...           np.array([True, False]), np.array([0, 0]))[1].tolist()
+    [7, 5, 6]
+    """
+    off_a = np.asarray(off_a, dtype=np.int64)
+    off_b = np.asarray(off_b, dtype=np.int64)
+    from_b = np.asarray(from_b, dtype=bool)
+    idx = np.asarray(idx, dtype=np.int64)
+    lens = np.where(from_b, off_b[np.where(from_b, idx, 0) + 1] - off_b[np.where(from_b, idx, 0)],
+                    off_a[np.where(from_b, 0, idx) + 1] - off_a[np.where(from_b, 0, idx)])
+    new_off = np.r_[0, np.cumsum(lens)].astype(np.int64)
+    if (fast and new_off[-1] > 0 and data_a.size and data_b.size and data_a.flags.c_contiguous
+            and data_b.flags.c_contiguous):
+        out = np.empty((int(new_off[-1]), *data_a.shape[1:]), dtype=data_a.dtype)
+        FK.merge_rows(off_a, data_a.reshape(len(data_a), -1), off_b, data_b.reshape(len(data_b), -1), from_b, idx,
+                      new_off, out.reshape(len(out), -1))
+        return new_off, out
+    both = np.concatenate([data_a, data_b])
+    start = np.where(from_b, off_b[np.where(from_b, idx, 0)] + len(data_a), off_a[np.where(from_b, 0, idx)])
+    pos = np.repeat(start - new_off[:-1], lens) + np.arange(new_off[-1])
+    return new_off, both[pos]
+
+
+def _local_triangles(mesh: PolyMesh, elements: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Node CSR and boundary triangles in local node numbers of ``elements`` (default all)."""
     noff, nodes = mesh.element_nodes()
     toff, tris = mesh.element_triangles()
+    if elements is not None:
+        noff, nodes = gather_csr(noff, nodes, elements)
+        toff, tris = gather_csr(toff, tris, elements)
+    ne = len(noff) - 1
     n1 = np.int64(mesh.n_nodes + 1)
-    eid_n = np.repeat(np.arange(mesh.n_elements, dtype=np.int64), np.diff(noff))
+    eid_n = np.repeat(np.arange(ne, dtype=np.int64), np.diff(noff))
     keys = eid_n * n1 + nodes
-    eid_t = np.repeat(np.arange(mesh.n_elements, dtype=np.int64), np.diff(toff))
+    eid_t = np.repeat(np.arange(ne, dtype=np.int64), np.diff(toff))
     loc = np.searchsorted(keys, eid_t[:, None] * n1 + tris) - noff[eid_t][:, None]
-    return toff, np.ascontiguousarray(loc.astype(np.int64))
+    return noff, nodes, toff, np.ascontiguousarray(loc.astype(np.int64))
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,12 +216,8 @@ def integrate_elements(mesh: PolyMesh, correction: bool = True, elements: np.nda
     >>> integ.sample_offsets.tolist()  # 8 vertex + 12 triangle samples
     [0, 20]
     """
-    noff, nodes = mesh.element_nodes()
-    toff, tris = _local_triangles(mesh)
-    if elements is not None:
-        idx = np.asarray(elements, dtype=np.int64)
-        noff, nodes = gather_csr(noff, nodes, idx)
-        toff, tris = gather_csr(toff, tris, idx)
+    idx = None if elements is None else np.asarray(elements, dtype=np.int64)
+    noff, nodes, toff, tris = _local_triangles(mesh, idx)
     counts = FK.sample_counts(noff, toff)
     soff = np.r_[0, np.cumsum(counts)].astype(np.int64)
     goff = np.r_[0, np.cumsum(counts * np.diff(noff))].astype(np.int64)

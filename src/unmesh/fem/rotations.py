@@ -29,7 +29,7 @@ from numba import njit, prange
 from unmesh._linalg_kernels import jacobi_eigh
 from unmesh._validate import as_array, as_points
 
-__all__ = ["horn_matrix", "horn_rotations", "jacobi_eigh4", "quaternion_to_matrix"]
+__all__ = ["horn_matrix", "horn_rotations", "jacobi_eigh4", "piece_rotations", "polar_rotations", "quaternion_to_matrix"]
 
 
 @njit(cache=True)
@@ -158,3 +158,83 @@ def horn_rotations(rest: Any, current: Any, node_offsets: Any, nodes: Any, weigh
     nd = as_array(nodes, "nodes", (None,), np.int64)
     w = np.ones(len(nd)) if weights is None else as_array(weights, "weights", (len(nd),))
     return _horn_all(X, x, off, nd, w)
+
+
+def piece_rotations(rest: Any, current: Any, weights: Any, labels: Any, n_pieces: int) -> np.ndarray:
+    """Best-fit rotation of each connected piece from its rest to its current node positions.
+
+    For piece p, the rotation R_p maximising ``Σ_i w_i (x_i - c)·R_p (X_i - C)`` over
+    its nodes (weighted centroids c, C): the rotation factor of the polar decomposition
+    of the weighted cross-covariance ``F = Σ_i w_i (x_i - c)(X_i - C)ᵀ`` (the same
+    absolute-orientation problem as Horn's method, solved here by one SVD per piece).
+    It is the rotation of the preconditioner of the implicit solve
+    (:mod:`unmesh.fem.solvers`): a rigid motion of a piece is rotated exactly, and
+    the rotation is constant on each piece, so the translations of the current
+    configuration stay in the near-null space of the rotated rest-frame matrix.
+
+    Parameters
+    ----------
+    rest, current : (n, 3) float64
+        Rest and current node positions.
+    weights : (n,) float64
+        Node weights (masses); pieces of zero total weight get the identity.
+    labels : (n,) int
+        Piece of each node, ``0 <= labels < n_pieces``.
+    n_pieces : int
+
+    Returns
+    -------
+    (n_pieces, 3, 3) float64
+        Proper rotations (det +1).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    >>> c, s = np.cos(0.5), np.sin(0.5)
+    >>> R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    >>> Q = piece_rotations(X, X @ R.T + 2.0, np.ones(4), np.zeros(4, int), 1)
+    >>> bool(np.allclose(Q[0], R))
+    True
+    """
+    X = as_points(rest, "rest")
+    x = as_array(current, "current", X.shape)
+    w = as_array(weights, "weights", (len(X),))
+    lab = np.asarray(labels, dtype=np.int64)
+    npc = int(n_pieces)
+    tot = np.bincount(lab, weights=w, minlength=npc)
+    safe = np.where(tot > 0, tot, 1.0)
+    cen_x = np.stack([np.bincount(lab, weights=w * x[:, k], minlength=npc) for k in range(3)], axis=1) / safe[:, None]
+    cen_X = np.stack([np.bincount(lab, weights=w * X[:, k], minlength=npc) for k in range(3)], axis=1) / safe[:, None]
+    dx = x - cen_x[lab]
+    dX = X - cen_X[lab]
+    F = np.empty((npc, 3, 3))
+    for a in range(3):
+        wa = w * dx[:, a]
+        for b in range(3):
+            F[:, a, b] = np.bincount(lab, weights=wa * dX[:, b], minlength=npc)
+    q = polar_rotations(F)
+    q[~(tot > 0) | ~np.isfinite(q).all(axis=(1, 2))] = np.eye(3)
+    return q
+
+
+def polar_rotations(F: np.ndarray) -> np.ndarray:
+    """Proper rotation factors of the polar decompositions of a stack of 3×3 matrices.
+
+    ``F`` (k, 3, 3) float64 → (k, 3, 3): the rotation R closest to each ``F`` in the
+    Frobenius norm with det R = +1 (``U Vᵀ`` of the SVD, the last singular direction
+    flipped where ``det U Vᵀ < 0``).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> polar_rotations(np.diag([2.0, 3.0, -1.0])[None]).round(12).tolist()
+    [[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]]
+    """
+    u, _, vt = np.linalg.svd(F)
+    q = u @ vt
+    flip = np.linalg.det(q) < 0
+    if flip.any():
+        u[flip, :, 2] *= -1
+        q[flip] = u[flip] @ vt[flip]
+    return q

@@ -10,10 +10,16 @@ and per-node constraints (fixed, or normal-constrained ground contact):
 - ``"lu-pcg"``: filtered PCG warm-started from the last velocity,
   preconditioned by a *lagged, warped* sparse LU factorisation: the unwarped
   matrix ``A₀ = c_m M + c_k K`` is factorised (SuperLU, minimum-degree ordering of
-  A+Aᵀ) and reused for later steps as ``Q A₀⁻¹ Qᵀ`` with per-node rotations Q (so
-  rigidly rotated parts are preconditioned exactly); it is refactorised after a
-  topology change (cut), a change of the step size, or when a solve needed more
-  than ``refactor_iterations`` iterations (large relative rotations).
+  A+Aᵀ) and reused for later steps as ``Q A₀⁻¹ Qᵀ`` with Q the best-fit rotation of
+  each connected piece (:func:`unmesh.fem.rotations.piece_rotations`), so rigidly
+  rotated pieces are preconditioned exactly. One rotation per piece, not per node:
+  a node-to-node varying rotation maps the translations of the current configuration
+  (eigenvalue ~ mass, 1/4800 of the stiffness scale on the bunny benchmark) outside the
+  near-null space of ``Q A₀ Qᵀ``; on the bunny-slicing benchmark node-averaged rotations
+  needed 64-76 iterations where the piece rotation needs 23. It is refactorised after
+  a change of the step size, when a cut separates a new piece (the remapped factorisation
+  would still couple the pieces, which then rotate independently), or when a solve needed
+  more than ``refactor_iterations`` iterations.
   A cut does not refactorise: the old factorisation is kept and mapped to the new
   nodes through the cut's node weights W (new state = W old state), and the nodes
   the cut touched (new nodes, duplicated nodes, nodes of re-integrated elements,
@@ -29,6 +35,13 @@ and per-node constraints (fixed, or normal-constrained ground contact):
   nodes or a solve needs more than 1.5 ``refactor_iterations``: on the bunny-slicing
   benchmark the iterations grow from ~20 to ~120 as the touched part reaches 14%.
 - ``"direct"``: exact sparse LU of the constrained system in every step.
+
+The rounds of the contact active-set iteration (:mod:`unmesh.fem.dynamics`) are solved
+to a relative residual of 10⁻³ and the final active set is confirmed by a solve to
+``cg_tol``. A sparse Cholesky (CHOLMOD through ``cholespy``, the only CHOLMOD wheel on
+PyPI; scikit-sparse has none) was measured slower than SuperLU here (1.7 s against 1.5 s
+for the 49k-DOF bunny), and ordering by the node graph did not reduce SuperLU's fill,
+so SuperLU stays.
 
 Example
 -------
@@ -49,6 +62,7 @@ import scipy.sparse as sp
 
 from unmesh.errors import InputError
 from unmesh.fem import _solve_kernels as SK
+from unmesh.fem.rotations import polar_rotations
 
 __all__ = ["SOLVERS", "LaggedLU", "direct_solve", "pcg"]
 
@@ -161,6 +175,7 @@ class LaggedLU:
         self.weights: sp.csr_array | None = None  # current nodes -> factorised nodes (None: identity)
         self.touched: np.ndarray | None = None  # (n,) bool, nodes changed by cuts since the factorisation
         self.remaps = 0
+        self.pieces: int | None = None  # connected pieces of the mesh at the factorisation
 
     def invalidate(self) -> None:
         """Drop the factorisation (e.g. after a change of material)."""
@@ -168,8 +183,16 @@ class LaggedLU:
         self.weights = None
         self.touched = None
 
-    def needs_factor(self, coeffs: tuple[float, float]) -> bool:
-        """Whether to (re)factorise before the next solve."""
+    def needs_factor(self, coeffs: tuple[float, float], pieces: int | None = None) -> bool:
+        """Whether to (re)factorise before the next solve.
+
+        ``pieces`` (the number of connected pieces of the mesh) triggers a refactorisation
+        when it differs from the count at the last factorisation: a cut-remapped
+        factorisation still couples the pieces a cut has just separated, which then rotate
+        independently (measured: 300 iterations per step on the bunny-slicing benchmark).
+        """
+        if pieces is not None and self.pieces is not None and pieces != self.pieces:
+            return True
         limit = self.refactor_iterations
         if self.touched is not None:
             # the Schwarz preconditioner converges a little slower than a fresh factorisation
@@ -198,8 +221,9 @@ class LaggedLU:
         self.weights = W if self.weights is None else sp.csr_array(W @ self.weights)
         self.remaps += 1
 
-    def factor(self, indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, coeffs: tuple[float, float]) -> None:
-        """Factorise the unwarped matrix A₀ (3×3 blocks) with SuperLU."""
+    def factor(self, indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, coeffs: tuple[float, float],
+               pieces: int | None = None) -> None:
+        """Factorise the unwarped matrix A₀ (3×3 blocks) with SuperLU (``pieces``: see :meth:`needs_factor`)."""
         from scipy.sparse.linalg import splu
 
         n = len(indptr) - 1
@@ -211,6 +235,7 @@ class LaggedLU:
         except RuntimeError as exc:
             raise InputError(f"the implicit system is singular ({exc}); check masses and materials") from None
         self.coeffs = coeffs
+        self.pieces = pieces
         self.factorizations += 1
         self.last_iterations = 0
         self.weights = None
@@ -222,7 +247,8 @@ class LaggedLU:
         """The preconditioner ``r -> z`` for (n,3) residuals of the filtered system.
 
         Without a cut since the factorisation and without constrained nodes it is
-        ``Q A₀⁻¹ Qᵀ r`` (Q: per-node rotations). Otherwise it is the symmetric
+        ``Q A₀⁻¹ Qᵀ r`` (``node_rot`` (n,3,3): Q per node; the dynamics pass the rotation
+        of each node's piece). Otherwise it is the symmetric
         multiplicative Schwarz combination (module docstring) of that with an exact
         solve on the local set: the nodes touched by cuts since the factorisation plus
         the constrained nodes (``kind`` 1 fixed, 2 normal ``normal`` prescribed), whose
@@ -253,9 +279,7 @@ class LaggedLU:
         from scipy.sparse.linalg import splu
 
         n = len(indptr) - 1
-        A = sp.bsr_array((blocks.reshape(-1, 3, 3), indices, indptr), shape=(3 * n, 3 * n)).tocsr()
-        t_dofs = (3 * t_nodes[:, None] + np.arange(3)).ravel()
-        Att = sp.csr_array(A[t_dofs][:, t_dofs])
+        Att = _sub_blocks(indptr, indices, blocks, t_nodes)
         kt = np.zeros(len(t_nodes), np.int64) if kind is None else np.ascontiguousarray(kind[t_nodes])
         nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.asarray(normal, np.float64)
         proj = np.broadcast_to(np.eye(3), (len(t_nodes), 3, 3)).copy()
@@ -290,6 +314,24 @@ class LaggedLU:
         return apply_schwarz
 
 
+def _sub_blocks(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray) -> sp.csr_array:
+    """The (3m, 3m) CSR submatrix of a 3×3-block CSR matrix on the sorted node set ``nodes`` (m,).
+
+    Picks the blocks directly (no conversion of the whole matrix, which cost more than
+    the local factorisation on the bunny benchmark).
+    """
+    n = len(indptr) - 1
+    local = np.full(n, -1, np.int64)
+    local[nodes] = np.arange(len(nodes))
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    keep = (local[rows] >= 0) & (local[indices] >= 0)
+    lr, lc = local[rows[keep]], local[indices[keep]]
+    m = len(nodes)
+    sub_ptr = np.r_[0, np.cumsum(np.bincount(lr, minlength=m))].astype(np.int64)
+    sub = sp.bsr_array((blocks[keep].reshape(-1, 3, 3), lc, sub_ptr), shape=(3 * m, 3 * m))
+    return sp.csr_array(sub.tocsr())
+
+
 def node_rotations(rots: np.ndarray, node_offsets: np.ndarray, nodes: np.ndarray, weights: np.ndarray,
                    n_nodes: int) -> np.ndarray:
     """Per-node rotations: weighted average of incident element rotations, made orthogonal (polar)."""
@@ -301,10 +343,4 @@ def node_rotations(rots: np.ndarray, node_offsets: np.ndarray, nodes: np.ndarray
     acc = acc.reshape(n_nodes, 3, 3)
     empty = np.abs(acc).sum(axis=(1, 2)) == 0
     acc[empty] = np.eye(3)
-    u, _, vt = np.linalg.svd(acc)
-    q = u @ vt
-    flip = np.linalg.det(q) < 0
-    if flip.any():
-        u[flip, :, 2] *= -1
-        q[flip] = u[flip] @ vt[flip]
-    return q
+    return polar_rotations(acc)
