@@ -63,7 +63,7 @@ def measure(figure: str, frames: int) -> dict:
     sim, _settings = build_shell_simulation(load_scene(path(f"shells/{name}.toml"), over))
     setup = time.perf_counter() - t0
     steps = round(1.0 / FPS / sim.dt)
-    for _ in range(steps):  # load the compiled kernels (numba cache) before timing
+    for _ in range(max(steps, 12)):  # load the compiled kernels (numba cache), choose threads, before timing
         sim.step()
     sim.deformed_surface()
     sim.frame_record()
@@ -90,8 +90,12 @@ def measure(figure: str, frames: int) -> dict:
             t = time.perf_counter()
             sim.write_frame(tmp, k)
             io_time = time.perf_counter() - t
+    from unmesh.shells.forces import _TUNERS
+
+    tuner = _TUNERS.get(("forces", len(sim.topology.fibers).bit_length()))
+    threads = "-" if tuner is None else ("1" if tuner.serial else "all")
     r = np.array(rows) * 1000.0
-    return {"figure": figure, "scene": name, "nodes": len(sim.rest), "points": len(sim.cloud),
+    return {"threads": threads, "figure": figure, "scene": name, "nodes": len(sim.rest), "points": len(sim.cloud),
             "fibers": len(sim.topology.fibers), "steps_per_frame": steps, "dt": sim.dt, "setup_s": setup,
             "forces": r[:, 0].mean(), "fracture": r[:, 1].mean(), "surface": r[:, 2].mean(), "total": r[:, 3].mean(),
             "io": io_time * 1000.0, "cracks": len(sim.cracks), "cpu": 1000.0 * cpu / frames}
@@ -105,7 +109,8 @@ def main() -> None:
     print(f"Thin shells, per rendered frame at {FPS:g} fps (steps per frame = (1/fps)/dt, dt from F.1);")
     print("forces = forces + integration, fracture = testing + rebuild, surface = dense-surface skinning.\n")
     head = (f"{'fig':>5} {'nodes':>6} {'points':>7} {'fibers':>7} {'steps':>5} | {'forces':>8} {'fract.':>8} "
-            f"{'surface':>8} {'total':>8} | {'thesis':>7} {'speed-up':>8} | {'cpu':>7} | {'write':>6} {'setup':>6}")
+            f"{'surface':>8} {'total':>8} | {'thesis':>7} {'speed-up':>8} | {'cpu':>7} | {'write':>6} {'setup':>6} "
+            f"{'thr':>4}")
     print(head)
     print("-" * len(head))
     for fig in [s.strip() for s in args.rows.split(",") if s.strip()]:
@@ -114,10 +119,11 @@ def main() -> None:
         print(f"{fig:>5} {m['nodes']:6d} {m['points']:7d} {m['fibers']:7d} {m['steps_per_frame']:5d} | "
               f"{m['forces']:7.1f}  {m['fracture']:7.1f}  {m['surface']:7.1f}  {m['total']:7.1f}  | "
               f"{th:6d}  {th / m['total']:7.1f}x | {m['cpu']:7.1f} | {m['io']:5.0f}  {m['setup_s']:5.1f}s"
-              + (f"   ({m['cracks']} cracks)" if m["cracks"] else ""))
+              + f"  {m['threads']:>3}" + (f"   ({m['cracks']} cracks)" if m["cracks"] else ""))
     print("\nAll times in ms (setup in s): wall-clock averages per frame. 'cpu' is the process CPU time per")
     print("frame (all threads; less sensitive to other load). 'write' is the time to write one frame's files")
-    print("(not in 'total').")
+    print("(not in 'total'). 'thr': threads the force pass chose by timing (1, or all of numba's threads;")
+    print("'-' = below forces.PARALLEL_MIN or one thread only); the results do not depend on it.")
 
 
 if __name__ == "__main__":

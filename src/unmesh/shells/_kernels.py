@@ -440,16 +440,16 @@ def segments_blocked(p, q, centers, normals, radii, out):
         out[k] = hit
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def fracture_scan(x, fibers, lengths, angles, rest_length, rest_angle, gamma_s, gamma_b, degenerate):
     """Cheap per-step test: (fibers over a fracture threshold (7.24), degenerate fibers).
 
     degenerate is the squared ratio below which an end tangent counts as vanished relative to
-    the centre tangent (0 disables that test).
+    the centre tangent (0 disables that test). Parallel over fibers (integer reductions).
     """
     over = 0
     bad = 0
-    for k in range(fibers.shape[0]):
+    for k in prange(fibers.shape[0]):
         if lengths[k] > rest_length[k] * (1.0 + gamma_s[k]) or abs(angles[k] - rest_angle[k]) > gamma_b[k]:
             over += 1
         if degenerate > 0.0:
@@ -469,3 +469,47 @@ def fracture_scan(x, fibers, lengths, angles, rest_length, rest_angle, gamma_s, 
             if min(s0, s1) < degenerate * sc:
                 bad += 1
     return over, bad
+
+
+@njit(cache=True)
+def group_order(groups, count, out_offsets, out_order):
+    """Stable counting sort of entries by key: CSR offsets (count + 1,) and entry order (M,).
+
+    Same result as ``np.argsort(groups, kind="stable")`` with ``bincount`` offsets, in O(M).
+    """
+    out_offsets[:] = 0
+    for e in range(groups.shape[0]):
+        out_offsets[groups[e] + 1] += 1
+    for g in range(count):
+        out_offsets[g + 1] += out_offsets[g]
+    fill = out_offsets[:-1].copy()
+    for e in range(groups.shape[0]):
+        g = groups[e]
+        out_order[fill[g]] = e
+        fill[g] += 1
+
+
+@njit(cache=True)
+def node_terms_rows(rows, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
+                    sscale, bscale, weights, ref, cap, out_node):
+    """``A_i, A_i^0, H_i, H_i^0`` (7.6, 7.9) of the listed nodes only, into ``out_node[r]`` (R, 4).
+
+    Runs :func:`node_forces` (same arithmetic as :func:`force_chunks`) on each listed node
+    with scratch outputs; the forces are discarded.
+    """
+    n = x.shape[0]
+    nf = fibers.shape[0]
+    buf = np.zeros((n, 3))
+    scr = np.empty((max(cap, 1), 7, 3))
+    ln = np.empty(nf)
+    ang = np.empty(nf)
+    s = np.empty((n, 3))
+    nrm = np.empty((n, 3))
+    node = np.zeros((n, 4))
+    offs = np.zeros((n, 2))
+    for r in range(rows.shape[0]):
+        i = rows[r]
+        node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast, sscale,
+                    bscale, 1.0, 1.0, weights, ref, offs, buf, scr, ln, ang, s, nrm, node)
+        for c in range(4):
+            out_node[r, c] = node[i, c]

@@ -154,14 +154,22 @@ class FiberState:
         """``theta^0 = theta_orig + theta_plastic`` (7.19), (F,)."""
         return self.angle_orig + self.angle_plastic
 
+    @classmethod
+    def _checked(cls, arrays: Any) -> FiberState:
+        """A state from arrays taken from valid states (no validation; each array is new)."""
+        state = object.__new__(cls)
+        for name, arr in zip(_FIELDS, arrays, strict=True):
+            object.__setattr__(state, name, np.ascontiguousarray(arr, dtype=np.float64))
+        return state
+
     def take(self, index: Any) -> FiberState:
         """The fibers selected by ``index`` (mask or indices), as a new state."""
-        return FiberState(*(getattr(self, name)[index] for name in _FIELDS))
+        return FiberState._checked(getattr(self, name)[index] for name in _FIELDS)
 
     @classmethod
     def concatenate(cls, states: list[FiberState]) -> FiberState:
         """Join states in order."""
-        return cls(*(np.concatenate([getattr(s, name) for s in states]) for name in _FIELDS))
+        return cls._checked(np.concatenate([getattr(s, name) for s in states]) for name in _FIELDS)
 
     def as_dict(self) -> dict[str, np.ndarray]:
         """Arrays by field name (for checkpoints)."""

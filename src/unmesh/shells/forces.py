@@ -9,6 +9,8 @@ fracture (7.24) and the pressure force reuse without recomputing them.
 from __future__ import annotations
 
 import functools
+import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,23 +20,65 @@ from unmesh.shells.energy import FiberState
 from unmesh.shells.fibers import ARC_SAMPLES
 from unmesh.shells.topology import ShellTopology
 
-__all__ = ["ForceResult", "arc_weights", "elastic_forces", "threads_for"]
+__all__ = ["ForceResult", "arc_weights", "elastic_forces", "node_terms", "threads_for"]
 
-#: Below this many work items the kernels run on one thread. Measured on 2 shared cores: a
-#: balloon step (10 166 fibers) cost 3.3 ms of CPU on one thread and 16 ms on two (thread
-#: wake-up and spinning); at 97 864 fibers both cost the same CPU, so two threads halve it.
-PARALLEL_MIN = 50000
+#: Below this many work items the kernels always run on one thread (waking a second thread
+#: costs more than it saves). Above it, :class:`threads_for` times both ways and keeps the
+#: faster: on 2 idle cores two threads nearly halve a force pass of 7 600 fibers (1.9 -> 1.0 ms),
+#: while on 2 cores shared with other busy processes two threads can be several times slower
+#: (a balloon step of 10 166 fibers: 3.3 ms on one thread, 16 ms on two).
+PARALLEL_MIN = 4000
+
+#: Fixed number of node ranges of the force pass, each with its own force buffer: the
+#: summation order, and so the result bit for bit, does not depend on the number of threads.
+FORCE_CHUNKS = 8
+
+
+class _Tuner:
+    """Chooses one thread or all threads for a kernel by timing both now and then."""
+
+    PROBE = 3       # calls per mode in a probe round
+    PERIOD = 250    # calls from one probe round to the next
+
+    def __init__(self) -> None:
+        self.calls = 0
+        self.best = {True: math.inf, False: math.inf}
+        self.serial = False
+
+    def choose_serial(self) -> bool:
+        c = self.calls % self.PERIOD
+        return c % 2 == 0 if c < 2 * self.PROBE else self.serial
+
+    def record(self, serial: bool, seconds: float) -> None:
+        c = self.calls % self.PERIOD
+        if c < 2 * self.PROBE:
+            if c == 0:
+                self.best = {True: math.inf, False: math.inf}
+            self.best[serial] = min(self.best[serial], seconds)
+            if c == 2 * self.PROBE - 1:
+                self.serial = self.best[True] <= self.best[False]
+        self.calls += 1
+
+
+_TUNERS: dict[tuple[str, int], _Tuner] = {}
 
 
 class threads_for:
-    """Run numba kernels on one thread for small problems (``with threads_for(n): ...``).
+    """Run numba kernels on one thread or on all (``with threads_for(n, key): ...``).
+
+    Below ``minimum`` work items always on one thread; above it, the block is timed and the
+    faster choice kept, per ``key`` and size class (probed again every few hundred calls, so
+    the choice follows the machine's load). Kernels run this way must give the same result
+    on any number of threads (e.g. :data:`FORCE_CHUNKS`).
 
     Parameters
     ----------
     items : int
         Size of the work (fibers, surfels).
     minimum : int
-        Smallest size that runs on all of numba's threads (default :data:`PARALLEL_MIN`).
+        Smallest size that may run on all of numba's threads (default :data:`PARALLEL_MIN`).
+    key : str
+        Name of the kernel (each has its own timings).
 
     Example
     -------
@@ -42,8 +86,14 @@ class threads_for:
     ...     pass
     """
 
-    def __init__(self, items: int, minimum: int | None = None) -> None:
+    def __init__(self, items: int, minimum: int | None = None, key: str = "forces") -> None:
+        import numba
+
         self.serial = items < (PARALLEL_MIN if minimum is None else minimum)
+        self.tuner = None
+        if not self.serial and numba.get_num_threads() > 1:
+            self.tuner = _TUNERS.setdefault((key, int(items).bit_length()), _Tuner())
+            self.serial = self.tuner.choose_serial()
 
     def __enter__(self) -> None:
         import numba
@@ -51,12 +101,16 @@ class threads_for:
         if self.serial:
             self.previous = numba.get_num_threads()
             numba.set_num_threads(1)
+        self.start = time.perf_counter()
 
     def __exit__(self, *exc: object) -> None:
         import numba
 
+        elapsed = time.perf_counter() - self.start
         if self.serial:
             numba.set_num_threads(self.previous)
+        if self.tuner is not None and exc[0] is None:
+            self.tuner.record(self.serial, elapsed)
 
 
 @functools.lru_cache(maxsize=16)
@@ -154,11 +208,9 @@ def elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, ks
 
 def _elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, ks: float, kb: float, samples: int,
                     reference: np.ndarray | None, node_offsets: np.ndarray | None) -> ForceResult:
-    import numba
-
     n = topology.n_nodes
     nf = len(topology.fibers)
-    chunks = max(1, numba.get_num_threads())
+    chunks = FORCE_CHUNKS
     s = np.empty((n, 3))
     normals = np.empty((n, 3))
     lengths = np.empty(nf)
@@ -178,3 +230,51 @@ def _elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, k
                           float(kb), arc_weights(int(samples)), ref, offsets, cap, np.empty((chunks, n, 3)), forces,
                           lengths, angles, s, normals, node, es, eb)
     return ForceResult(forces, es, eb, lengths, angles, normals, s, node)
+
+
+def node_terms(x: np.ndarray, topology: ShellTopology, state: FiberState, rows: np.ndarray,
+               samples: int = ARC_SAMPLES, reference: np.ndarray | None = None) -> np.ndarray:
+    """Node terms ``A_i, A_i^0, H_i, H_i^0`` (7.6, 7.9) of the nodes ``rows`` only.
+
+    Equal, bit for bit, to ``elastic_forces(x, topology, state, ..., reference).node_terms[rows]``
+    (same kernel per node), at the cost of the listed nodes' fibers only: fracture uses it
+    to keep the node terms of rebuilt nodes continuous.
+
+    Parameters
+    ----------
+    x : ndarray (N, 3) float64
+    topology : ShellTopology
+    state : FiberState
+    rows : ndarray (R,) int64
+        Node indices.
+    samples : int
+        Arc-length samples per segment.
+    reference : ndarray (F,), optional
+        Angle branch reference, as for :func:`elastic_forces`.
+
+    Returns
+    -------
+    ndarray (R, 4)
+
+    Example
+    -------
+    >>> from unmesh.shells.nodes import grid_sheet
+    >>> x, topo = grid_sheet(5, 5)
+    >>> state = FiberState.at_rest(x, topo)
+    >>> full = elastic_forces(x * 1.01, topo, state, 1.0, 1.0).node_terms
+    >>> bool(np.array_equal(node_terms(x * 1.01, topo, state, np.array([3, 7])), full[[3, 7]]))
+    True
+    """
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    out = np.zeros((len(rows), 4))
+    if not len(rows):
+        return out
+    counts = np.diff(topology.fiber_offsets)
+    cap = int(counts.max()) if topology.n_nodes else 0
+    ref = state.rest_angle() if reference is None else np.ascontiguousarray(reference, dtype=np.float64)
+    _kernels.node_terms_rows(rows, np.ascontiguousarray(x, dtype=np.float64), topology.pairs,
+                             topology.pair_offsets[:-1], np.diff(topology.pair_offsets), topology.soft,
+                             topology.fibers, topology.fiber_offsets[:-1], counts, state.length_orig,
+                             state.length_plastic, state.angle_orig, state.angle_plastic, state.stretch_scale,
+                             state.bend_scale, arc_weights(int(samples)), ref, cap, out)
+    return out

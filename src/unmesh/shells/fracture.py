@@ -21,13 +21,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from unmesh.shells import _kernels
 from unmesh.shells.energy import FiberState
 from unmesh.shells.nodes import create_fibers, node_neighborhoods, umbrella_pairs, umbrella_softening
-from unmesh.shells.topology import ShellTopology
+from unmesh.shells.topology import ShellTopology, csr_from_groups
 
 __all__ = ["CrackSet", "fracture_candidates", "rebuild_near", "select_cracks"]
 
@@ -198,7 +199,7 @@ def _replace_rows(offsets: np.ndarray, values: np.ndarray, rows: np.ndarray, new
 def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopology, state: FiberState,
                  cracks: CrackSet, affected: np.ndarray, neighbors: int, min_angle: float,
                  fiber_material: FiberMaterial, current: np.ndarray | None = None,
-                 samples: int = 4) -> tuple[ShellTopology, FiberState, np.ndarray]:
+                 samples: int = 4, tree: Any = None) -> tuple[ShellTopology, FiberState, np.ndarray]:
     """Recompute neighbourhoods, umbrella pairs and fibers of the ``affected`` nodes with visibility.
 
     Parameters
@@ -225,6 +226,8 @@ def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopo
         rebuild then adds elastic energy, and in our tests tears shattered.)
     samples : int
         Arc-length samples (B.4).
+    tree : unmesh.spatial.KDTree, optional
+        Tree over ``rest`` to reuse for the neighbour queries (same result).
 
     Returns
     -------
@@ -234,16 +237,16 @@ def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopo
         (F,) int64 gives each fiber's index before the rebuild, -1 for new fibers.
     """
     rows = np.unique(np.asarray(affected, dtype=np.int64))
-    noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows)
+    noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
     off, idx = _replace_rows(topology.neighbor_offsets, topology.neighbors, rows, noff, nbr)
     # umbrella pairs of the affected nodes (computed on all nodes' CSR, kept for the rows)
     new_pairs, new_centers = umbrella_pairs(rest, rest_normals, noff, nbr, nodes=rows)
-    keep_pairs = ~np.isin(topology.pair_center, rows)
+    is_aff = np.zeros(topology.n_nodes, dtype=bool)
+    is_aff[rows] = True
+    keep_pairs = ~is_aff[topology.pair_center]
     pairs = np.concatenate([topology.pairs[keep_pairs], new_pairs])
     centers = np.concatenate([topology.pair_center[keep_pairs], new_centers])
     # fibers: drop those centred at affected nodes, create them again
-    is_aff = np.zeros(topology.n_nodes, dtype=bool)
-    is_aff[rows] = True
     old = topology.fibers
     keep = ~is_aff[old[:, 1]]
     new = create_fibers(rest, noff, nbr, min_angle, nodes=rows)
@@ -278,7 +281,7 @@ def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopo
     if loose.any():
         reuse_full = reuse_full[attached]
         origin = origin[attached]
-    order = np.argsort(fibers[:, 1], kind="stable")
+    _, order = csr_from_groups(fibers[:, 1], topology.n_nodes)   # stable: as argsort(kind="stable")
     fibers, merged, origin = fibers[order], merged.take(order), origin[order]
     if loose.any():
         # a detached node is nobody's neighbour any more (its motion must not steer the
@@ -297,7 +300,7 @@ def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopo
     sel = redo_soft[centers]
     fresh_soft = umbrella_softening(rest, pairs[sel], centers[sel])
     soft[redo_soft] = fresh_soft[redo_soft]
-    topo = ShellTopology.build(topology.n_nodes, off, idx, pairs, centers, fibers, soft)
+    topo = ShellTopology.build(topology.n_nodes, off, idx, pairs, centers, fibers, soft, validate=False)
     # rest measures of the fibers at affected centres (new fibers, and new umbrella normals)
     redo = np.flatnonzero(is_aff[topo.fibers[:, 1]])
     merged.length_orig[redo], merged.angle_orig[redo] = FiberState.measure(rest, topo, samples, redo)
@@ -316,5 +319,5 @@ def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopo
         merged.angle_plastic[fr[ok]] = now_a[ok] - merged.angle_orig[fr[ok]]
         if drop.any():
             fibers, merged, origin = fibers[~drop], merged.take(~drop), origin[~drop]
-            topo = ShellTopology.build(topology.n_nodes, off, idx, pairs, centers, fibers, soft)
+            topo = ShellTopology.build(topology.n_nodes, off, idx, pairs, centers, fibers, soft, validate=False)
     return topo, merged, origin

@@ -108,7 +108,8 @@ def _padded(offsets: np.ndarray, indices: np.ndarray) -> np.ndarray:
 
 
 def node_neighborhoods(rest: Any, k: int = DEFAULT_NEIGHBORS, blocked: Blocker | None = None,
-                       nodes: Any = None, candidates: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                       nodes: Any = None, candidates: int | None = None,
+                       tree: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` nearest other nodes of each node, in rest positions, nearest first.
 
     Parameters
@@ -125,6 +126,8 @@ def node_neighborhoods(rest: Any, k: int = DEFAULT_NEIGHBORS, blocked: Blocker |
         Only compute the neighbourhoods of these nodes (default all).
     candidates : int, optional
         Nearest nodes examined when ``blocked`` is given (default ``3 k``).
+    tree : unmesh.spatial.KDTree, optional
+        A tree over ``rest`` to reuse (the same result as without).
 
     Returns
     -------
@@ -148,7 +151,7 @@ def node_neighborhoods(rest: Any, k: int = DEFAULT_NEIGHBORS, blocked: Blocker |
     cand = want if blocked is None else int(min(candidates or 3 * want, len(x) - 1))
     if len(q) == 0 or want < 1:
         return np.zeros(len(q) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    _, idx = knn(x, cand + 1, queries=x[q])
+    _, idx = knn(x, cand + 1, queries=x[q]) if tree is None else tree.knn(x[q], cand + 1)
     idx = idx[:, : cand + 1]
     keep = (idx != q[:, None]) & (idx >= 0)
     if blocked is not None:

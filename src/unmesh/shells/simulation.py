@@ -23,7 +23,7 @@ from unmesh.errors import InputError
 from unmesh.shells import _kernels
 from unmesh.shells.dynamics import Gravity, Handle, Pressure, Pull, damping_force
 from unmesh.shells.energy import FiberState, umbrella_normals
-from unmesh.shells.forces import ForceResult, elastic_forces
+from unmesh.shells.forces import ForceResult, elastic_forces, node_terms, threads_for
 from unmesh.shells.fracture import CrackSet, fracture_candidates, rebuild_near, select_cracks
 from unmesh.shells.material import ShellMaterial
 from unmesh.shells.nodes import DEFAULT_MIN_ANGLE, DEFAULT_NEIGHBORS, build_topology, select_nodes
@@ -198,6 +198,7 @@ class ShellSimulation(Simulation):
             Pull(_select(p["region"], self.rest, f"pulls[{i}]"), p["force"], float(p.get("ramp", 0.0)),
                  float(p.get("start", 0.0)), float(p.get("stop", math.inf))) for i, p in enumerate(pulls))
         self.cracks = CrackSet()
+        self._pending_cracks: list[int] = []   # cracks not yet bound into the skinned surface
         self.first_crack: float | None = None
         self.node_offsets = np.zeros((len(idx), 2))
         # crumbs: nodes a crack cut off from every fiber follow a visible node of a piece (-1: free)
@@ -245,12 +246,24 @@ class ShellSimulation(Simulation):
                 f"{np.round(self.rest[bad[0]], 4).tolist()}): the surface is non-manifold, inconsistently oriented, "
                 "or thinner than the node spacing; use more nodes or fix the input")
 
-    def _neighbor_reach(self) -> float:
+    def _neighbor_reach(self, nodes: np.ndarray | None = None) -> float:
+        """Longest rest distance from a node to a neighbour (of the listed ``nodes``, default all).
+
+        After a rebuild only the rebuilt nodes' neighbourhoods can have grown (the others
+        only lose neighbours), so ``max(reach, _neighbor_reach(rebuilt))`` equals
+        ``max(reach, _neighbor_reach())``.
+        """
         t = self.topology
-        rows = np.repeat(np.arange(t.n_nodes), np.diff(t.neighbor_offsets))
-        if len(rows) == 0:
+        if nodes is None:
+            nodes = np.arange(t.n_nodes)
+        nodes = np.asarray(nodes, dtype=np.int64)
+        counts = t.neighbor_offsets[nodes + 1] - t.neighbor_offsets[nodes]
+        if counts.sum() == 0:
             return 0.0
-        return float(np.linalg.norm(self.rest[t.neighbors] - self.rest[rows], axis=1).max())
+        rows = np.repeat(nodes, counts)
+        starts = np.repeat(t.neighbor_offsets[nodes] - np.cumsum(counts) + counts, counts)
+        nbr = t.neighbors[starts + np.arange(len(rows))]
+        return float(np.linalg.norm(self.rest[nbr] - self.rest[rows], axis=1).max())
 
     # -- dynamics -----------------------------------------------------------------
     def _external(self, t: float, res: ForceResult) -> np.ndarray:
@@ -340,16 +353,17 @@ class ShellSimulation(Simulation):
         self._carry_angles(self._last.angles, np.flatnonzero(keep))
         t = self.topology
         self.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
-                                           f[keep], t.soft)
+                                           f[keep], t.soft, validate=False)
         self.fibers = self.fibers.take(keep)
         self._anchor_crumbs(np.arange(t.n_nodes))
         return True
 
     def _fracture(self) -> None:
         st = self.fibers
-        over, bad = _kernels.fracture_scan(self.x, self.topology.fibers, self._last.lengths, self._last.angles,
-                                           st.rest_length(), st.rest_angle(), st.fracture_stretch, st.fracture_bend,
-                                           DEGENERATE_RATIO**2)
+        with threads_for(len(st), key="fracture_scan"):
+            over, bad = _kernels.fracture_scan(self.x, self.topology.fibers, self._last.lengths, self._last.angles,
+                                               st.rest_length(), st.rest_angle(), st.fracture_stretch,
+                                               st.fracture_bend, DEGENERATE_RATIO**2)
         if over == 0 and bad == 0:
             return
         cand, _ = fracture_candidates(self.fibers, self._last.lengths, self._last.angles)
@@ -364,30 +378,55 @@ class ShellSimulation(Simulation):
         chosen = select_cracks(cand, self.topology, self.rest, self.rest_normals, self.cracks, self.max_cracks)
         if not chosen:
             return
-        from unmesh.spatial import radius_neighbors
-
         for node, center, normal, radius in chosen:
             self.cracks.add(center, normal, radius, node, self.time)
         if self.first_crack is None:
             self.first_crack = self.time
         centers = np.stack([c for _, c, _, _ in chosen])
         rmax = max(r for _, _, _, r in chosen)
-        _, near = radius_neighbors(self.rest, self._reach + rmax, queries=centers)
+        _, near = self._rest_tree().radius_neighbors(centers, self._reach + rmax)
         before = self._last.node_terms
         had = np.diff(self.topology.fiber_offsets) > 0
         angles = self._last.angles
         self.topology, self.fibers, origin = rebuild_near(self.rest, self.rest_normals, self.topology, self.fibers,
                                                           self.cracks, np.unique(near), self.neighbors,
                                                           self.min_angle, self.material.fiber_material, self.x,
-                                                          self.material.arc_samples)
+                                                          self.material.arc_samples, tree=self._rest_tree())
         self._carry_angles(angles, origin)
-        self._keep_node_terms(before, had, np.unique(near))
+        rebuilt = np.unique(near)
+        self._keep_node_terms(before, had, rebuilt)
         self._anchor_crumbs(np.arange(len(self.rest)))   # a rebuild can strip nodes outside `near` too
-        self._reach = max(self._reach, self._neighbor_reach())
-        self.surface.rebind_near(centers, rmax, self.cracks.blocked)
-        self.surface.add_discontinuities(centers, [c[2] for c in chosen], [c[3] for c in chosen],
-                                         self.rest_normals[[c[0] for c in chosen]], self.cracks.blocked)
+        self._reach = max(self._reach, self._neighbor_reach(rebuilt))
+        # the dense surface is re-bound once per rendered frame (_update_surface), not per event
+        self._pending_cracks.extend(len(self.cracks) - len(chosen) + np.arange(len(chosen)))
         self.acc = self._accelerations()
+
+    def _rest_tree(self) -> Any:
+        """KD-tree over the rest node positions (built once; the rest positions never change)."""
+        if getattr(self, "_tree", None) is None:
+            from unmesh.spatial import KDTree
+
+            self._tree = KDTree(self.rest)
+        return self._tree
+
+    def _update_surface(self) -> None:
+        """Bind the dense surface to the cracks that appeared since the last rendered frame.
+
+        Re-binding (7.3.2 visibility) is local: a surfel farther than the skinning reach plus
+        a crack's radius from the crack centre sees all its bound nodes, so its binding is
+        the same with or without that crack. Doing it once per frame for all the frame's
+        cracks (with the crack set at the end of the frame) therefore gives the binding a
+        global re-bind with all cracks gives (``tests/shells/test_speed_paths.py``), as
+        :meth:`load_state_dict` does; the skinning is used only for the output surface.
+        """
+        if not self._pending_cracks:
+            return
+        new = np.asarray(self._pending_cracks, dtype=np.int64)
+        self._pending_cracks = []
+        c = self.cracks
+        self.surface.rebind_near(c.centers[new], float(c.radii[new].max()), c.blocked)
+        self.surface.add_discontinuities(c.centers[new], c.normals[new], c.radii[new], self.rest_normals[c.nodes[new]],
+                                         c.blocked)
 
     def _anchor_crumbs(self, rows: np.ndarray) -> None:
         """Let nodes that the cracks cut off from every fiber follow a neighbouring piece.
@@ -470,13 +509,13 @@ class ShellSimulation(Simulation):
         m = self.material
         ref = getattr(self, "_resume_angles", None)
         ref = ref if ref is not None and len(ref) == len(self.topology.fibers) else None
-        after = elastic_forces(self.x, self.topology, self.fibers, m.ks, m.kb, m.arc_samples, ref).node_terms
         has = np.diff(self.topology.fiber_offsets) > 0
         r = rows[had[rows] & has[rows]]
+        after = node_terms(self.x, self.topology, self.fibers, r, m.arc_samples, ref)   # rows r only
         old_da = before[r, 0] - before[r, 1] - self.node_offsets[r, 0]
         old_dh = before[r, 2] - before[r, 3] - self.node_offsets[r, 1]
-        self.node_offsets[r, 0] = after[r, 0] - after[r, 1] - old_da
-        self.node_offsets[r, 1] = after[r, 2] - after[r, 3] - old_dh
+        self.node_offsets[r, 0] = after[:, 0] - after[:, 1] - old_da
+        self.node_offsets[r, 1] = after[:, 2] - after[:, 3] - old_dh
         gone = rows[~has[rows]]
         self.node_offsets[gone] = 0.0
 
@@ -527,8 +566,11 @@ class ShellSimulation(Simulation):
         """The dense surfel cloud of the current state (cached per step; timed as surface time)."""
         if self._surface_cache is None or self._surface_cache[0] != self.steps:
             t0 = _time.perf_counter()
+            self._update_surface()
+            t1 = _time.perf_counter()
+            self._timers["fracture"] += t1 - t0
             cloud = self.surface.deform(self.x, self._last.normals)
-            self._timers["surface"] += _time.perf_counter() - t0
+            self._timers["surface"] += _time.perf_counter() - t1
             self._surface_cache = (self.steps, cloud)
         return self._surface_cache[1]
 
@@ -622,6 +664,7 @@ class ShellSimulation(Simulation):
         self.cracks.nodes = self.cracks.nodes.astype(np.int64)
         self._reach = max(self._reach, self._neighbor_reach())
         self.surface = SkinnedSurface(self.cloud, self.rest, self.rest_normals, self.surface.k)
+        self._pending_cracks = []
         if len(self.cracks):
             self.surface.rebind_near(self.cracks.centers, float(self.cracks.radii.max()), self.cracks.blocked)
             self.surface.add_discontinuities(self.cracks.centers, self.cracks.normals, self.cracks.radii,

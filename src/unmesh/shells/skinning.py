@@ -37,7 +37,7 @@ __all__ = ["DEFAULT_SKIN_NODES", "SkinnedSurface", "bind_points", "deform_refere
 #: Nodes per passive point: x_0 and K further nodes (K - 1 weighted frames).
 DEFAULT_SKIN_NODES = 6
 #: Below this many passive points the skinning kernel runs on one thread (see forces.threads_for).
-SKIN_PARALLEL_MIN = 20000
+SKIN_PARALLEL_MIN = 4000
 
 
 def skin_weight(r: np.ndarray) -> np.ndarray:
@@ -415,7 +415,7 @@ class SkinnedSurface:
         out_r = np.empty(s)
         cur = np.ascontiguousarray(node_positions, dtype=np.float64)
         nrm = np.ascontiguousarray(node_normals, dtype=np.float64)
-        with threads_for(s, SKIN_PARALLEL_MIN):
+        with threads_for(s, SKIN_PARALLEL_MIN, key="skinning"):
             for part, lo in ((self.dense, 0), (self.disc, self.dense.n)):
                 if part.n:
                     hi = lo + part.n

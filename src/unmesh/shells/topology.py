@@ -50,11 +50,29 @@ def csr_from_groups(groups: np.ndarray, count: int) -> tuple[np.ndarray, np.ndar
     offsets : ndarray, shape (count + 1,) int64
     order : ndarray, shape (M,) int64
         Entry indices sorted by key (stable); entries of group g are
-        ``order[offsets[g]:offsets[g + 1]]``.
+        ``order[offsets[g]:offsets[g + 1]]``. A counting sort (numba, O(M)); equal to
+        :func:`csr_from_groups_reference`.
 
     Example
     -------
     >>> csr_from_groups(np.array([1, 0, 1]), 3)
+    (array([0, 1, 3, 3]), array([1, 0, 2]))
+    """
+    from unmesh.shells import _kernels
+
+    keys = np.ascontiguousarray(groups, dtype=np.int64)
+    offsets = np.empty(int(count) + 1, dtype=np.int64)
+    order = np.empty(len(keys), dtype=np.int64)
+    _kernels.group_order(keys, int(count), offsets, order)
+    return offsets, order
+
+
+def csr_from_groups_reference(groups: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Numpy reference of :func:`csr_from_groups` (stable ``argsort`` and ``bincount``).
+
+    Example
+    -------
+    >>> csr_from_groups_reference(np.array([1, 0, 1]), 3)
     (array([0, 1, 3, 3]), array([1, 0, 2]))
     """
     order = np.argsort(groups, kind="stable").astype(np.int64)
@@ -117,7 +135,7 @@ class ShellTopology:
 
     @classmethod
     def build(cls, n_nodes: int, neighbor_offsets: object, neighbors: object, pairs: object, pair_center: object,
-              fibers: object, soft: object = None) -> ShellTopology:
+              fibers: object, soft: object = None, validate: bool = True) -> ShellTopology:
         """Validate the primary arrays, sort fibers and pairs by centre and derive incidence lists.
 
         Parameters
@@ -132,12 +150,23 @@ class ShellTopology:
             ``(j, i, j')`` with the centre in the middle column.
         soft : array_like (N,), optional
             Per-node regularisation (default 0).
+        validate : bool
+            ``False`` skips the checks, for arrays derived from a valid topology (the fracture
+            rebuild); the result is the same.
 
         Returns
         -------
         ShellTopology
         """
         n = int(n_nodes)
+        if not validate:
+            def ints(a: object, shape: tuple[int, ...]) -> np.ndarray:
+                return np.ascontiguousarray(a, dtype=np.int64).reshape(shape)
+
+            fib = ints(fibers, (-1, 3))
+            return cls._derive(n, ints(neighbor_offsets, (n + 1,)), ints(neighbors, (-1,)), ints(pairs, (-1, 2)),
+                               ints(pair_center, (-1,)), fib,
+                               np.zeros(n) if soft is None else np.ascontiguousarray(soft, dtype=np.float64))
         noff = as_indices(neighbor_offsets, "neighbor_offsets", (n + 1,))
         nbr = as_indices(neighbors, "neighbors", (None,), upper=n)
         if noff[0] != 0 or noff[-1] != len(nbr) or np.any(np.diff(noff) < 0):
@@ -147,15 +176,21 @@ class ShellTopology:
         fib = as_indices(fibers, "fibers", (None, 3), upper=n)
         if len(fib) and np.any((fib[:, 0] == fib[:, 1]) | (fib[:, 2] == fib[:, 1]) | (fib[:, 0] == fib[:, 2])):
             raise InputError("fibers: expected three distinct nodes per fiber")
+        sf = np.zeros(n) if soft is None else as_array(soft, "soft", (n,))
+        if np.any(sf < 0):
+            raise InputError("soft: expected values >= 0")
+        return cls._derive(n, noff, nbr, pr, pc, fib, sf)
+
+    @classmethod
+    def _derive(cls, n: int, noff: np.ndarray, nbr: np.ndarray, pr: np.ndarray, pc: np.ndarray, fib: np.ndarray,
+                sf: np.ndarray) -> ShellTopology:
+        """Sort pairs and fibers by centre and build the incidence lists (arrays already checked)."""
         poff, porder = csr_from_groups(pc, n)
         pr, pc = np.ascontiguousarray(pr[porder]), np.ascontiguousarray(pc[porder])
         foff, forder = csr_from_groups(fib[:, 1], n)
         fib = np.ascontiguousarray(fib[forder])
         pio, pin = csr_from_groups(pr.reshape(-1), n)  # entry e = 2 * pair + role
         fio, fin = csr_from_groups(fib.reshape(-1), n)  # entry e = 3 * fiber + role
-        sf = np.zeros(n) if soft is None else as_array(soft, "soft", (n,))
-        if np.any(sf < 0):
-            raise InputError("soft: expected values >= 0")
         return cls(n, noff, nbr, pr, poff, pc, pio, pin, fib, foff, fio, fin, sf)
 
     def fiber_counts(self) -> np.ndarray:

@@ -1,0 +1,134 @@
+"""Fast paths of the shell simulation (issue 6) against the plain computations they replace."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tests.shells.conftest import Box, grid_cloud, grid_nodes
+from unmesh.shells import ShellMaterial, ShellSimulation
+from unmesh.shells.forces import elastic_forces, node_terms
+from unmesh.shells.skinning import bind_points
+from unmesh.shells.topology import csr_from_groups, csr_from_groups_reference
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.integers(0, 9), max_size=60), st.integers(0, 5))
+def test_counting_sort_groups_equal_stable_argsort(keys, extra):
+    groups = np.array(keys, dtype=np.int64)
+    count = (int(groups.max()) + 1 if len(groups) else 0) + extra
+    off, order = csr_from_groups(groups, count)
+    ref_off, ref_order = csr_from_groups_reference(groups, count)
+    np.testing.assert_array_equal(off, ref_off)
+    np.testing.assert_array_equal(order, ref_order)
+
+
+@pytest.fixture(scope="module")
+def torn_strip():
+    """A strip pulled apart until it has cracked several times (as in test_fracture)."""
+    from unmesh.shells import MaterialRegion
+
+    cloud = grid_cloud(61, 21, 0.02)
+    idx = grid_nodes(61, 21, 2)
+    mat = ShellMaterial(ks=1000.0, kb=100.0, damping=2.0, density=2.0, fracture_stretch=0.03,
+                        regions=(MaterialRegion(Box([-0.03, -1, -1], [0.03, 1, 1]), fracture=0.5),
+                                 MaterialRegion(Box([-1, -1, -1], [-0.4, 1, 1]), fracture=5.0),
+                                 MaterialRegion(Box([0.4, -1, -1], [1, 1, 1]), fracture=5.0)))
+    sim = ShellSimulation(cloud, mat, 0.0005, node_indices=idx, gravity=(0, 0, 0), total_area=1.2 * 0.4,
+                          handles=[{"region": Box([-1, -1, -1], [-0.55, 1, 1]), "velocity": (-0.2, 0, 0)},
+                                   {"region": Box([0.55, -1, -1], [1, 1, 1]), "velocity": (0.2, 0, 0)}])
+    frames = 0
+    for step in range(3000):
+        sim.step()
+        assert sim.check() is None
+        if step % 40 == 39:        # a rendered frame every 40 steps: cracks of several events pile up
+            sim.deformed_surface()
+            frames += 1
+        if len(sim.cracks) >= 6 and not sim._pending_cracks:
+            break
+    assert len(sim.cracks) >= 6
+    return sim
+
+
+def test_node_terms_of_listed_nodes_equal_the_full_pass(torn_strip):
+    sim = torn_strip
+    m = sim.material
+    full = elastic_forces(sim.x, sim.topology, sim.fibers, m.ks, m.kb, m.arc_samples, sim._last.angles).node_terms
+    rows = np.unique(np.random.default_rng(1).integers(0, len(sim.rest), 50))
+    got = node_terms(sim.x, sim.topology, sim.fibers, rows, m.arc_samples, sim._last.angles)
+    np.testing.assert_array_equal(got, full[rows])
+
+
+def test_per_frame_skin_rebind_equals_global_rebind(torn_strip):
+    """Binding the surface once per frame to that frame's cracks gives the binding of a global
+    re-bind of every surfel with all cracks (visibility, 7.3.2)."""
+    sim = torn_strip
+    sim.deformed_surface()
+    surf = sim.surface
+    pts = surf.dense.view("points")
+    b, w = bind_points(pts, sim.rest, surf.k, blocked=sim.cracks.blocked)
+    assert (bind_points(pts, sim.rest, surf.k)[0] != b).any(axis=1).sum() > 10   # the cracks matter
+    np.testing.assert_array_equal(surf.dense.view("bind"), b)
+    np.testing.assert_array_equal(surf.dense.view("weights"), w)
+    db, dw = bind_points(surf.disc.view("points"), sim.rest, surf.k, blocked=sim.cracks.blocked)
+    np.testing.assert_array_equal(surf.disc.view("bind"), db)
+    np.testing.assert_array_equal(surf.disc.view("weights"), dw)
+    assert surf.disc.n == 2 * len(sim.cracks)
+
+
+def test_neighbor_reach_of_rebuilt_nodes_bounds_the_global_reach(torn_strip):
+    sim = torn_strip
+    assert sim._reach >= sim._neighbor_reach()
+
+
+def test_force_pass_is_the_same_on_one_and_on_two_threads(torn_strip, monkeypatch):
+    """The force pass sums a fixed number of chunk buffers, so the result does not depend on the
+    number of threads (the thread choice of ``threads_for`` follows the machine's load)."""
+    import numba
+
+    from unmesh.shells import forces
+
+    sim = torn_strip
+    m = sim.material
+    monkeypatch.setattr(forces, "PARALLEL_MIN", 10**12)       # one thread
+    one = elastic_forces(sim.x, sim.topology, sim.fibers, m.ks, m.kb, m.arc_samples, sim._last.angles)
+    monkeypatch.setattr(forces, "PARALLEL_MIN", 0)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    try:
+        for _ in range(8):                                      # both choices of the tuner
+            two = elastic_forces(sim.x, sim.topology, sim.fibers, m.ks, m.kb, m.arc_samples, sim._last.angles)
+            np.testing.assert_array_equal(two.forces, one.forces)
+            np.testing.assert_array_equal(two.stretch_energy, one.stretch_energy)
+    finally:
+        numba.set_num_threads(threads)
+
+
+def test_thread_tuner_keeps_the_faster_choice():
+    from unmesh.shells.forces import _Tuner
+
+    t = _Tuner()
+    for _ in range(2 * t.PROBE):
+        serial = t.choose_serial()
+        t.record(serial, 1.0 if serial else 3.0)
+    assert t.choose_serial() is True
+    for _ in range(t.PERIOD - 2 * t.PROBE):
+        assert t.choose_serial() is True
+        t.record(True, 1.0)
+    for _ in range(2 * t.PROBE):                                # the next probe round: load changed
+        serial = t.choose_serial()
+        t.record(serial, 5.0 if serial else 2.0)
+    assert t.choose_serial() is False
+
+
+def test_unvalidated_topology_build_equals_the_validated_one(torn_strip):
+    from unmesh.shells.topology import ShellTopology
+
+    t = torn_strip.topology
+    args = (t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs[::-1], t.pair_center[::-1], t.fibers[::-1], t.soft)
+    a, b = ShellTopology.build(*args), ShellTopology.build(*args, validate=False)
+    for name in ("neighbor_offsets", "neighbors", "pairs", "pair_offsets", "pair_center", "pair_incidence_offsets",
+                 "pair_incidence", "fibers", "fiber_offsets", "fiber_incidence_offsets", "fiber_incidence", "soft"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
