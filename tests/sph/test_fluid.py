@@ -5,12 +5,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from unmesh.kernels import poly6, spiky, spiky_gradient
+from unmesh.kernels import poly6, spiky, spiky_derivative, spiky_gradient
 from unmesh.scene import load_scene
 from unmesh.scenes import path as scene_path
 from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation
 from unmesh.sph import _kernels as K
-from unmesh.sph.boundary import corner_tables, wall_tables
+from unmesh.sph.boundary import (
+    BoundaryParticles,
+    Plane,
+    boundary_volumes,
+    corner_tables,
+    wall_friction_tables,
+    wall_tables,
+)
 from unmesh.sph.fluid import acceleration_reference, density_reference, pressure, xsph_reference
 from unmesh.sph.sampling import closest_packing
 from unmesh.sph.scene import build_simulation
@@ -131,6 +138,101 @@ def test_wall_tables_match_half_space_sums(dim):
         assert abs(rho - np.interp(dist, z, rho_t)) < 5e-3
         g = spiky_gradient(rel[np.linalg.norm(rel, axis=1) > 0], h).sum(axis=0) * dv
         assert abs(-g[1] - np.interp(dist, z, grad_t)) < 2e-2 * max(1.0, np.interp(dist, z, grad_t))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_wall_friction_tables_match_half_space_sums(dim):
+    """No-slip planes: M(d) = ∫_wall s sᵀ ŵ'(r)/(r (r² + 0.01h²)) equals a brute-force lattice sum,
+    diagonal in the wall frame (tangential Mt, normal Mn), and the two agree on the wall (d = 0)."""
+    h = 1.0
+    tab = wall_friction_tables(h, dim)
+    z = np.linspace(-h, h, tab.shape[1])
+    assert np.all(tab <= 0.0) and np.all(tab[:, -1] == 0.0)
+    assert np.isclose(np.interp(0.0, z, tab[0]), np.interp(0.0, z, tab[1]), rtol=1e-6)
+    step = 0.01 if dim == 2 else 0.02
+    pts, dv = _grid(dim, h, step, 0.0)  # cell faces on the wall plane (last axis = 0)
+    wall = pts[pts[:, -1] < 0.0]
+    for dist in (-0.3, 0.0, 0.25, 0.5):
+        s = -wall.copy()
+        s[:, -1] += dist
+        r = np.linalg.norm(s, axis=1)
+        ok = (r > 0) & (r < h)
+        s, r = s[ok], r[ok]
+        g = np.asarray(spiky_derivative(r, h, dim)) / r / (r * r + 0.01 * h * h)
+        m = np.einsum("pi,pj,p->ij", s, s, g) * dv
+        mt, mn = np.interp(dist, z, tab[0]), np.interp(dist, z, tab[1])
+        assert np.allclose(m, np.diag([mt] * (dim - 1) + [mn]), rtol=0, atol=1e-2 * abs(mn))
+
+
+def _channel(no_slip: bool, res: int = 20) -> tuple[SPHSimulation, np.ndarray]:
+    """A 2D slab of fluid sliding at 0.1 m/s between the walls y = 0 and y = H = 0.4 m (no gravity)."""
+    height, length, d = 0.4, 1.6, 0.4 / res
+    x = closest_packing([0, 0, 0], [length, height, 0], d, 2)
+    mat = Material("w", density=1000.0, stiffness=4000.0, viscosity=10.0, artificial_viscosity=0.0)  # ν = 0.01 m²/s
+    walls = [Plane((0, 0, 0), (0, 1, 0), no_slip), Plane((0, height, 0), (0, -1, 0), no_slip)]
+    sim = SPHSimulation(SPHConfig(dim=2, spacing=d, dt=1e-2, cfl=0.5, gravity=(0, 0, 0)), {"w": mat},
+                        [SPHObject("w", x, "w", velocity=(0.1, 0, 0))], planes=walls)
+    return sim, np.abs(x[:, 0] - 0.5 * length) < 0.3
+
+
+def test_no_slip_walls_match_channel_decay():
+    """Wall friction against the analytic solution: a slab sliding between two no-slip walls decays as
+    ū(t)/u0 = Σ_odd 8/(k²π²) exp(−k²π²νt/H²) (diffusion with u = 0 on the walls). Measured at H/d = 20:
+    +6.5 % at t = 0.2 s, +9.0 % at 0.4 s (the Akinci wall at rest has a slip length of about 0.3 d and
+    the SPH viscosity of (8.18) at h = 2d is 6-14 % weaker than ν). Free-slip walls do not slow it."""
+    for no_slip in (True, False):
+        sim, mid = _channel(no_slip)
+        k = np.arange(1, 200, 2)
+        for t_end in (0.2, 0.4):
+            while sim.time < t_end:
+                sim.step()
+                assert sim.check() is None
+            ubar = sim.particles().velocities[mid, 0].mean() / 0.1
+            ref = np.sum(8 / (k * k * np.pi**2) * np.exp(-(k * k) * np.pi**2 * 0.01 * sim.time / 0.16))
+            if no_slip:
+                assert 0.0 < ubar / ref - 1.0 < 0.12, (sim.time, ubar, ref)
+            else:
+                assert abs(ubar - 1.0) < 1e-3
+
+
+def test_no_slip_boundary_particles_match_channel_decay():
+    """The same channel with walls of boundary particles (Akinci et al. 2012) marked no-slip: the pair sum
+    of the wall viscosity decays the slab within 10 % of the analytic series (measured +5.4 %, +4.9 %)."""
+    height, length, d = 0.4, 1.6, 0.02
+    x = closest_packing([0, 0, 0], [length, height, 0], d, 2)
+    xs = np.arange(-0.2, length + 0.2, d / 2)
+    wall = np.concatenate([np.stack([xs, np.full_like(xs, y), 0 * xs], axis=1) for y in (0.0, height)])
+    mat = Material("w", density=1000.0, stiffness=4000.0, viscosity=10.0, artificial_viscosity=0.0)
+    sim = SPHSimulation(SPHConfig(dim=2, spacing=d, dt=1e-2, cfl=0.5, gravity=(0, 0, 0)), {"w": mat},
+                        [SPHObject("w", x, "w", velocity=(0.1, 0, 0))],
+                        boundary=BoundaryParticles(wall, boundary_volumes(wall, 2 * d, 2), no_slip=True))
+    mid = np.abs(x[:, 0] - 0.5 * length) < 0.3
+    k = np.arange(1, 200, 2)
+    while sim.time < 0.4:
+        sim.step()
+        assert sim.check() is None
+    ubar = sim.particles().velocities[mid, 0].mean() / 0.1
+    ref = np.sum(8 / (k * k * np.pi**2) * np.exp(-(k * k) * np.pi**2 * 0.01 * sim.time / 0.16))
+    assert 0.0 < ubar / ref - 1.0 < 0.10, (ubar, ref)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_dense_and_sparse_cell_search_agree(dim, monkeypatch):
+    """The per-particle cell scan (dense cell starts) and the sparse cell-list fallback (large, sparse
+    grids) find the same neighbour lists and densities."""
+    x = _disordered(dim, 3)
+    mat = Material("w", stiffness=100.0)
+    sim = SPHSimulation(SPHConfig(dim=dim, spacing=0.05, dt=1e-4), {"w": mat}, [SPHObject("w", x, "w")])
+    sim._update()
+    assert len(K.cell_starts(sim.grid)) > 0
+    nbr, nnbr, rho = sim.nbr.copy(), sim.nnbr.copy(), sim.rho.copy()
+    monkeypatch.setattr(K, "DENSE_CELLS_PER_PARTICLE", -10**9)
+    assert len(K.cell_starts(sim.grid)) == 0
+    sim._update()
+    assert np.array_equal(nnbr, sim.nnbr)
+    for i in range(len(x)):
+        assert np.array_equal(nbr[i, : nnbr[i]], sim.nbr[i, : nnbr[i]])
+    assert np.allclose(rho, sim.rho, rtol=1e-13)
 
 
 def test_corner_tables_inclusion_exclusion():

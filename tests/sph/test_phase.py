@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.sph.test_materials import components, run_scene
 from unmesh.shapes import Box
+from unmesh.spatial import knn
 from unmesh.sph import FLUID, SOLID, HeatSource, Material, SPHConfig, SPHObject, SPHSimulation
 from unmesh.sph._rng import STREAM_MELT, uniform, uniform_np
 from unmesh.sph.phase import freezing_rate, melting_rate, transition_probability
@@ -115,3 +117,24 @@ def test_random_processes_are_seeded_and_counter_based():
     u = uniform_np(9, 4, np.arange(5000), 0, STREAM_MELT)
     assert uniform(9, 4, 17, 0, STREAM_MELT) == u[17]
     assert abs(u.mean() - 0.5) < 0.02 and abs(u.var() - 1 / 12) < 0.01
+
+
+def test_melting_blob_ends_as_one_puddle_on_the_heated_floor():
+    """Fig. 8.4 (coarse): the blob melts completely and the melt forms one puddle on the floor.
+
+    Criteria: every particle fluid; > 95 % have their nearest neighbour within 1.5 spacings
+    and the neighbour graph at 1.5 spacings is one piece (no scattered particles or clumps);
+    all particles above the heated floor's footprint (|x|, |z| ≤ 0.4) and lower than two
+    spacings. ``K_e ∝ 1/d²`` keeps the shipped jelly at the coarse spacing.
+    """
+    d = 0.03
+    sim, _ = run_scene("melting_blob", {"simulation.spacing": d, "materials.jelly.elastic_stiffness": 5e6 * (0.01 / d) ** 2},
+                       2.0)
+    s = sim.particles()
+    x = s.positions
+    assert np.all(s.phases == FLUID)
+    nearest = knn(x, 2)[0][:, 1]
+    assert np.mean(nearest < 1.5 * d) > 0.95
+    assert components(x, 1.5 * d) == 1
+    assert np.all(np.abs(x[:, [0, 2]]) <= 0.4)
+    assert x[:, 1].max() < 2 * d

@@ -17,6 +17,14 @@ collide. The force pass then recomputes the force of neighbourhood ``j`` on ``i`
 from j's data and the slot (:func:`member_force`, the same arithmetic as here, so
 the result is bit-identical) while walking i's own row — no search, and no
 (N, cap, 3) pair-force array streamed through memory.
+
+Speed notes: one pass over the neighbours assigns slots (in 3D the map
+``T A⁻¹/d`` to D3 coordinates is formed once per particle, so each neighbour costs
+one 3×3 product and one rounding); one pass over the slots docks, records the
+members and accumulates the shape-matching sums in scalars; the members' offsets and
+weights are kept for the force pass over them; the 3×3 eigenproblem of the SVD runs
+in registers (:func:`jacobi3`, bit-identical to the shared
+:func:`unmesh._linalg_kernels.jacobi_eigh`).
 """
 
 from __future__ import annotations
@@ -62,7 +70,12 @@ def sym_eig3(a, vec, val, b):
     jacobi_eigh(b, vec)
     for k in range(3):
         val[k] = b[k, k]
-    # sort descending
+    _sort_desc(vec, val)
+
+
+@njit(cache=True, inline="always")
+def _sort_desc(vec, val):
+    """Sort eigenvalues descending (columns of ``vec`` along) and make ``det vec = +1``."""
     for i in range(2):
         best = i
         for j in range(i + 1, 3):
@@ -100,6 +113,93 @@ def _orthonormal_to(u, col, ref):
     n = math.sqrt(n2)
     for k in range(3):
         u[k, col] /= n
+
+
+@njit(cache=True, inline="always")
+def _rot2(c, s, a, b):
+    """Plane rotation of the pair ``(a, b)``: ``(c a − s b, s a + c b)``."""
+    return c * a - s * b, s * a + c * b
+
+
+@njit(cache=True, inline="always")
+def _angle(bpp, bqq, apq):
+    """Cosine and sine of the Jacobi rotation that annihilates ``apq`` (as :func:`jacobi_eigh`)."""
+    theta = (bqq - bpp) / (2.0 * apq)
+    t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
+    if theta < 0.0:
+        t = -t
+    c = 1.0 / math.sqrt(t * t + 1.0)
+    return c, t * c
+
+
+@njit(cache=True)
+def jacobi3(b00, b01, b02, b10, b11, b12, b20, b21, b22):
+    """Cyclic Jacobi eigen-decomposition of a symmetric 3×3 matrix held in scalars.
+
+    The same rotations, in the same order and with the same floating-point
+    operations as :func:`unmesh._linalg_kernels.jacobi_eigh` (at most 30 sweeps, stop
+    when the off-diagonal mass is below ``1e-32`` of the diagonal's), unrolled so the
+    matrix stays in registers: the results are bit-identical.
+
+    Returns
+    -------
+    tuple of 12 floats
+        Eigenvalues ``l0, l1, l2`` (unsorted) and the eigenvector matrix ``V`` row by row
+        (column ``k`` is the eigenvector of ``l_k``).
+
+    Example
+    -------
+    >>> jacobi3(2.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 1.0)[:3]
+    (2.0, 3.0, 1.0)
+    """
+    v00 = 1.0
+    v01 = 0.0
+    v02 = 0.0
+    v10 = 0.0
+    v11 = 1.0
+    v12 = 0.0
+    v20 = 0.0
+    v21 = 0.0
+    v22 = 1.0
+    for _sweep in range(30):
+        diag = b00 * b00 + b11 * b11 + b22 * b22
+        off = b01 * b01 + b02 * b02 + b12 * b12
+        if off <= 1e-32 * diag or off == 0.0:
+            break
+        if b01 != 0.0:  # (p, q) = (0, 1)
+            c, s = _angle(b00, b11, b01)
+            b00, b01 = _rot2(c, s, b00, b01)
+            b10, b11 = _rot2(c, s, b10, b11)
+            b20, b21 = _rot2(c, s, b20, b21)
+            b00, b10 = _rot2(c, s, b00, b10)
+            b01, b11 = _rot2(c, s, b01, b11)
+            b02, b12 = _rot2(c, s, b02, b12)
+            v00, v01 = _rot2(c, s, v00, v01)
+            v10, v11 = _rot2(c, s, v10, v11)
+            v20, v21 = _rot2(c, s, v20, v21)
+        if b02 != 0.0:  # (0, 2)
+            c, s = _angle(b00, b22, b02)
+            b00, b02 = _rot2(c, s, b00, b02)
+            b10, b12 = _rot2(c, s, b10, b12)
+            b20, b22 = _rot2(c, s, b20, b22)
+            b00, b20 = _rot2(c, s, b00, b20)
+            b01, b21 = _rot2(c, s, b01, b21)
+            b02, b22 = _rot2(c, s, b02, b22)
+            v00, v02 = _rot2(c, s, v00, v02)
+            v10, v12 = _rot2(c, s, v10, v12)
+            v20, v22 = _rot2(c, s, v20, v22)
+        if b12 != 0.0:  # (1, 2)
+            c, s = _angle(b11, b22, b12)
+            b01, b02 = _rot2(c, s, b01, b02)
+            b11, b12 = _rot2(c, s, b11, b12)
+            b21, b22 = _rot2(c, s, b21, b22)
+            b10, b20 = _rot2(c, s, b10, b20)
+            b11, b21 = _rot2(c, s, b11, b21)
+            b12, b22 = _rot2(c, s, b12, b22)
+            v01, v02 = _rot2(c, s, v01, v02)
+            v11, v12 = _rot2(c, s, v11, v12)
+            v21, v22 = _rot2(c, s, v21, v22)
+    return b00, b11, b22, v00, v01, v02, v10, v11, v12, v20, v21, v22
 
 
 @njit(cache=True)
@@ -150,7 +250,10 @@ def svd_rot(a, dim, u, s, v, work):
                 acc += a[k, i] * a[k, j]
             ata[i, j] = acc
     lam = work[1, 0]
-    sym_eig3(ata, v, lam, work[2])
+    (lam[0], lam[1], lam[2], v[0, 0], v[0, 1], v[0, 2], v[1, 0], v[1, 1], v[1, 2], v[2, 0], v[2, 1],
+     v[2, 2]) = jacobi3(ata[0, 0], ata[0, 1], ata[0, 2], ata[1, 0], ata[1, 1], ata[1, 2], ata[2, 0], ata[2, 1],
+                        ata[2, 2])
+    _sort_desc(v, lam)
     av = work[3]
     for i in range(3):
         for j in range(3):
@@ -208,11 +311,11 @@ def _inv3(m, out):
 # -- lattice look-up -------------------------------------------------------------------
 
 
-#: D3 basis (columns) and its inverse: the FCC lattice of eq. (8.20) is the checkerboard lattice
+#: D3 basis (columns): the FCC lattice of eq. (8.20) is the checkerboard lattice
 #: D3 = {z in Z^3, sum even} up to a rotation and the scale sqrt(2) (all bases have 60 degree angles).
 _D3 = np.array([[1.0, 1.0, 0.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]])
-_D3_INV = np.linalg.inv(_D3)
 _SQ3 = math.sqrt(3.0)
+_EYE = np.eye(3)
 
 
 def d3_transform(bmat: np.ndarray) -> np.ndarray:
@@ -265,7 +368,7 @@ def nearest_slot(y0, y1, y2, tmat, table, dim):
         r0 = math.floor(z0 + 0.5)
         r1 = math.floor(z1 + 0.5)
         r2 = math.floor(z2 + 0.5)
-        if (int(r0) + int(r1) + int(r2)) % 2 != 0:
+        if (int(r0) + int(r1) + int(r2)) & 1:
             d0 = abs(z0 - r0)
             d1 = abs(z1 - r1)
             d2 = abs(z2 - r2)
@@ -276,14 +379,46 @@ def nearest_slot(y0, y1, y2, tmat, table, dim):
             else:
                 r2 = _round_away(z2, r2)
         best = 0.5 * ((z0 - r0) ** 2 + (z1 - r1) ** 2 + (z2 - r2) ** 2)
-        # back to lattice-basis integers: n = D3^-1 z
-        i0 = math.floor(_D3_INV[0, 0] * r0 + _D3_INV[0, 1] * r1 + _D3_INV[0, 2] * r2 + 0.5)
-        i1 = math.floor(_D3_INV[1, 0] * r0 + _D3_INV[1, 1] * r1 + _D3_INV[1, 2] * r2 + 0.5)
-        i2 = math.floor(_D3_INV[2, 0] * r0 + _D3_INV[2, 1] * r1 + _D3_INV[2, 2] * r2 + 0.5)
+        # back to lattice-basis integers: n = D3^-1 z = ½ (z0+z1−z2, z0−z1+z2, −z0+z1+z2), exact as the sum is even
+        k0 = int(r0)
+        k1 = int(r1)
+        k2 = int(r2)
+        i0 = (k0 + k1 - k2) >> 1
+        i1 = (k0 - k1 + k2) >> 1
+        i2 = (k1 + k2 - k0) >> 1
     half = table.shape[0] // 2
     i0 += half
     i1 += half
     i2 += half
+    if i0 < 0 or i1 < 0 or i2 < 0 or i0 >= table.shape[0] or i1 >= table.shape[0] or i2 >= table.shape[0]:
+        return -1, best
+    return table[i0, i1, i2], best
+
+
+@njit(cache=True, inline="always")
+def _nearest_d3(z0, z1, z2, table):
+    """:func:`nearest_slot` (3D) for a point given in D3 coordinates ``z = T y``."""
+    r0 = math.floor(z0 + 0.5)
+    r1 = math.floor(z1 + 0.5)
+    r2 = math.floor(z2 + 0.5)
+    if (int(r0) + int(r1) + int(r2)) & 1:
+        d0 = abs(z0 - r0)
+        d1 = abs(z1 - r1)
+        d2 = abs(z2 - r2)
+        if d0 >= d1 and d0 >= d2:
+            r0 = _round_away(z0, r0)
+        elif d1 >= d2:
+            r1 = _round_away(z1, r1)
+        else:
+            r2 = _round_away(z2, r2)
+    best = 0.5 * ((z0 - r0) ** 2 + (z1 - r1) ** 2 + (z2 - r2) ** 2)
+    k0 = int(r0)
+    k1 = int(r1)
+    k2 = int(r2)
+    half = table.shape[0] // 2
+    i0 = ((k0 + k1 - k2) >> 1) + half
+    i1 = ((k0 - k1 + k2) >> 1) + half
+    i2 = ((k1 + k2 - k0) >> 1) + half
     if i0 < 0 or i1 < 0 or i2 < 0 or i0 >= table.shape[0] or i1 >= table.shape[0] or i2 >= table.shape[0]:
         return -1, best
     return table[i0, i1, i2], best
@@ -483,12 +618,16 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     nq = slot_vecs.shape[0]
     cap = nbr.shape[1]
     nchunk = (n + CHUNK - 1) // CHUNK
+    w_self = _w(0.0, h, dim)
     for ch in prange(nchunk):
         bestd = np.empty(nq)
         bestj = np.empty(nq, np.int64)
         bestt = np.empty(nq, np.int64)
-        mm = np.empty((3, 3))
-        bm = np.empty((3, 3))
+        # the docked members of the current neighbourhood, in slot order
+        mq = np.empty(nq, np.int64)
+        mj = np.empty(nq, np.int64)
+        mr = np.empty((nq, 3))
+        mw = np.empty(nq)
         minv = np.empty((3, 3))
         a = np.empty((3, 3))
         u = np.empty((3, 3))
@@ -496,13 +635,12 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
         sg = np.empty(3)
         g = np.empty((3, 3))
         b = np.empty((3, 3))
-        pm = np.empty((3, 3))
-        dg = np.empty(3)
-        wq = np.empty(nq)
+        mm = np.empty((3, 3))
         work = np.empty((4, 3, 3))
         for i in range(ch * CHUNK, min(n, (ch + 1) * CHUNK)):
             valid[i] = 0
-            for t in range(min(nnbr[i], cap)):
+            cnt = min(nnbr[i], cap)
+            for t in range(cnt):
                 mslot[i, t] = -1
             for p in range(3):
                 fown[i, p] = 0.0
@@ -524,146 +662,201 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                 _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
             rho0 = mats[mt, M.RHO0]
-            # 1. assignment (8.21) with conflict resolution
+            xi0 = x[i, 0]
+            xi1 = x[i, 1]
+            xi2 = x[i, 2]
+            oi = obj[i]
+            # world offset -> lattice frame in units of d (A^(t-1)^-1 / d), in 3D straight on to D3 coordinates
+            tm = tmat if dim == 3 else _EYE
+            p00 = (tm[0, 0] * ainv[i, 0, 0] + tm[0, 1] * ainv[i, 1, 0] + tm[0, 2] * ainv[i, 2, 0]) / spacing
+            p01 = (tm[0, 0] * ainv[i, 0, 1] + tm[0, 1] * ainv[i, 1, 1] + tm[0, 2] * ainv[i, 2, 1]) / spacing
+            p02 = (tm[0, 0] * ainv[i, 0, 2] + tm[0, 1] * ainv[i, 1, 2] + tm[0, 2] * ainv[i, 2, 2]) / spacing
+            p10 = (tm[1, 0] * ainv[i, 0, 0] + tm[1, 1] * ainv[i, 1, 0] + tm[1, 2] * ainv[i, 2, 0]) / spacing
+            p11 = (tm[1, 0] * ainv[i, 0, 1] + tm[1, 1] * ainv[i, 1, 1] + tm[1, 2] * ainv[i, 2, 1]) / spacing
+            p12 = (tm[1, 0] * ainv[i, 0, 2] + tm[1, 1] * ainv[i, 1, 2] + tm[1, 2] * ainv[i, 2, 2]) / spacing
+            p20 = (tm[2, 0] * ainv[i, 0, 0] + tm[2, 1] * ainv[i, 1, 0] + tm[2, 2] * ainv[i, 2, 0]) / spacing
+            p21 = (tm[2, 0] * ainv[i, 0, 1] + tm[2, 1] * ainv[i, 1, 1] + tm[2, 2] * ainv[i, 2, 1]) / spacing
+            p22 = (tm[2, 0] * ainv[i, 0, 2] + tm[2, 1] * ainv[i, 1, 2] + tm[2, 2] * ainv[i, 2, 2]) / spacing
+            # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
             for q in range(nq):
                 bestd[q] = 1e300
                 bestj[q] = -1
-            cnt = min(nnbr[i], cap)
             for t in range(cnt):
                 j = nbr[i, t]
-                if phase[j] != SOLID or obj[j] != obj[i]:
+                if phase[j] != SOLID or obj[j] != oi:
                     continue
-                r0 = x[j, 0] - x[i, 0]
-                r1 = x[j, 1] - x[i, 1]
-                r2 = x[j, 2] - x[i, 2]
-                y0 = (ainv[i, 0, 0] * r0 + ainv[i, 0, 1] * r1 + ainv[i, 0, 2] * r2) / spacing
-                y1 = (ainv[i, 1, 0] * r0 + ainv[i, 1, 1] * r1 + ainv[i, 1, 2] * r2) / spacing
-                y2 = (ainv[i, 2, 0] * r0 + ainv[i, 2, 1] * r1 + ainv[i, 2, 2] * r2) / spacing
-                if dim == 2:
-                    y2 = 0.0
-                q, d2 = nearest_slot(y0, y1, y2, tmat, table, dim)
+                r0 = x[j, 0] - xi0
+                r1 = x[j, 1] - xi1
+                r2 = x[j, 2] - xi2
+                y0 = p00 * r0 + p01 * r1 + p02 * r2
+                y1 = p10 * r0 + p11 * r1 + p12 * r2
+                if dim == 3:
+                    q, d2 = _nearest_d3(y0, y1, p20 * r0 + p21 * r1 + p22 * r2, table)
+                else:
+                    q, d2 = nearest_slot(y0, y1, 0.0, tmat, table, dim)
                 if q >= 0 and d2 < bestd[q]:
                     bestd[q] = d2
                     bestj[q] = j
                     bestt[q] = t
-            # 2. docking (section 8.2.5)
+            # 2. docking (section 8.2.5), 3. shape matching sums (8.23) over the docked members
             lmax = mats[mt, M.DOCK_MAX]
             gain = mats[mt, M.DOCK_GAIN]
             loss = mats[mt, M.DOCK_LOSS]
             frac = mats[mt, M.FRACTURE]
+            m00 = 0.0
+            m01 = 0.0
+            m02 = 0.0
+            m10 = 0.0
+            m11 = 0.0
+            m12 = 0.0
+            m20 = 0.0
+            m21 = 0.0
+            m22 = 0.0
+            b00 = 0.0
+            b01 = 0.0
+            b02 = 0.0
+            b10 = 0.0
+            b11 = 0.0
+            b12 = 0.0
+            b20 = 0.0
+            b21 = 0.0
+            b22 = 0.0
+            count = 0
             for q in range(nq):
                 j = bestj[q]
                 newocc = uid[j] if j >= 0 else -1
                 if newocc != occ[i, q]:
                     occ[i, q] = newocc
                     docked[i, q] = 0
+                lq = lam[i, q]
                 if j >= 0:
-                    lam[i, q] = min(lam[i, q] + gain * dt, lmax) if gain < np.inf else lmax
+                    lnew = min(lq + gain * dt, lmax) if gain < np.inf else lmax
                 else:
-                    lam[i, q] = max(lam[i, q] - loss * dt, 0.0) if loss < np.inf else 0.0
-                if j >= 0 and prime:
+                    lnew = max(lq - loss * dt, 0.0) if loss < np.inf else 0.0
+                if lnew != lq:  # a settled rate is not rewritten (no dirty cache lines)
+                    lam[i, q] = lnew
+                if j < 0:
+                    continue
+                r0 = x[j, 0] - xi0
+                r1 = x[j, 1] - xi1
+                r2 = x[j, 2] - xi2
+                if prime:
                     docked[i, q] = 1
-                if j >= 0 and docked[i, q] == 0 and lam[i, q] > 0.0:
+                if docked[i, q] == 0 and lam[i, q] > 0.0:
                     uu = uniform(seed, step, uid[i], q, STREAM_DOCK)
                     if lam[i, q] == np.inf or uu < 1.0 - math.exp(-lam[i, q] * dt):
                         docked[i, q] = 1
-                if j >= 0 and docked[i, q] == 1 and frac < np.inf:
-                    r0 = x[j, 0] - x[i, 0]
-                    r1 = x[j, 1] - x[i, 1]
-                    r2 = x[j, 2] - x[i, 2]
+                if docked[i, q] == 1 and frac < np.inf:
                     rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
                     if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > (1.0 + frac) * rest:
                         docked[i, q] = 0
                         lam[i, q] = 0.0
-            for q in range(nq):
-                if bestj[q] >= 0 and docked[i, q] == 1:
-                    mslot[i, bestt[q]] = q
-            # 3. shape matching (8.23)
-            for p in range(3):
-                for q in range(3):
-                    mm[p, q] = 0.0
-                    bm[p, q] = 0.0
-            count = 0
-            for q in range(nq):
-                j = bestj[q]
-                if j < 0 or docked[i, q] == 0:
+                if docked[i, q] == 0:
                     continue
-                r0 = x[j, 0] - x[i, 0]
-                r1 = x[j, 1] - x[i, 1]
-                r2 = x[j, 2] - x[i, 2]
+                mslot[i, bestt[q]] = q
                 w = _w(r0 * r0 + r1 * r1 + r2 * r2, h, dim)
-                wq[q] = w
                 l0 = slot_vecs[q, 0] * spacing
                 l1 = slot_vecs[q, 1] * spacing
                 l2 = slot_vecs[q, 2] * spacing
-                for p in range(3):
-                    lp = l0 if p == 0 else (l1 if p == 1 else l2)
-                    rp = r0 if p == 0 else (r1 if p == 1 else r2)
-                    mm[p, 0] += w * lp * l0
-                    mm[p, 1] += w * lp * l1
-                    mm[p, 2] += w * lp * l2
-                    bm[p, 0] += w * rp * l0
-                    bm[p, 1] += w * rp * l1
-                    bm[p, 2] += w * rp * l2
+                wl0 = w * l0
+                wl1 = w * l1
+                wl2 = w * l2
+                wr0 = w * r0
+                wr1 = w * r1
+                wr2 = w * r2
+                m00 += wl0 * l0
+                m01 += wl0 * l1
+                m02 += wl0 * l2
+                m10 += wl1 * l0
+                m11 += wl1 * l1
+                m12 += wl1 * l2
+                m20 += wl2 * l0
+                m21 += wl2 * l1
+                m22 += wl2 * l2
+                b00 += wr0 * l0
+                b01 += wr0 * l1
+                b02 += wr0 * l2
+                b10 += wr1 * l0
+                b11 += wr1 * l1
+                b12 += wr1 * l2
+                b20 += wr2 * l0
+                b21 += wr2 * l1
+                b22 += wr2 * l2
+                mq[count] = q
+                mj[count] = j
+                mr[count, 0] = r0
+                mr[count, 1] = r1
+                mr[count, 2] = r2
+                mw[count] = w
                 count += 1
             if dim == 2:
-                for p in range(3):
-                    mm[2, p] = 0.0
-                    mm[p, 2] = 0.0
-                    bm[2, p] = 0.0
-                    bm[p, 2] = 0.0
-                mm[2, 2] = 1.0
-                bm[2, 2] = 1.0
+                m02 = m12 = m20 = m21 = 0.0
+                b02 = b12 = b20 = b21 = 0.0
+                m22 = 1.0
+                b22 = 1.0
+            mm[0, 0] = m00
+            mm[0, 1] = m01
+            mm[0, 2] = m02
+            mm[1, 0] = m10
+            mm[1, 1] = m11
+            mm[1, 2] = m12
+            mm[2, 0] = m20
+            mm[2, 1] = m21
+            mm[2, 2] = m22
             if count < dim:
                 _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
-            tr = (mm[0, 0] + mm[1, 1] + (mm[2, 2] if dim == 3 else 0.0)) / dim
+            tr = (m00 + m11 + (m22 if dim == 3 else 0.0)) / dim
             det = _inv3(mm, minv)
             if not det > 1e-6 * tr ** dim:
                 _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
             for p in range(3):
+                bp0 = b00 if p == 0 else (b10 if p == 1 else b20)
+                bp1 = b01 if p == 0 else (b11 if p == 1 else b21)
+                bp2 = b02 if p == 0 else (b12 if p == 1 else b22)
                 for q in range(3):
-                    a[p, q] = bm[p, 0] * minv[0, q] + bm[p, 1] * minv[1, q] + bm[p, 2] * minv[2, q]
+                    a[p, q] = bp0 * minv[0, q] + bp1 * minv[1, q] + bp2 * minv[2, q]
             svd_rot(a, dim, u, sg, v, work)
             valid[i] = 1
+            is0 = min(max(sg[0], SIG_LO), SIG_HI)
+            is1 = min(max(sg[1], SIG_LO), SIG_HI)
+            is2 = min(max(sg[2], SIG_LO), SIG_HI)
             for p in range(3):
                 for q in range(3):
                     amat_out[i, p, q] = a[p, q]
-                    acc = 0.0
-                    for k in range(3):
-                        acc += v[p, k] * u[q, k] / min(max(sg[k], SIG_LO), SIG_HI)
-                    ainv_out[i, p, q] = acc
+                    ainv_out[i, p, q] = v[p, 0] * u[q, 0] / is0 + v[p, 1] * u[q, 1] / is1 + v[p, 2] * u[q, 2] / is2
             # 4. goal matrix (8.29-8.30)
             s = mats[mt, M.GOAL]
-            prod = 1.0
-            dg[2] = 1.0
-            for k in range(dim):
-                dg[k] = s * max(sg[k], SIGMA_FLOOR) + (1.0 - s)
-                prod *= dg[k]
-            norm = prod ** (1.0 / dim)
-            for k in range(dim):
-                dg[k] /= norm
-            for p in range(3):
-                for q in range(3):
-                    g[p, q] = u[p, 0] * dg[0] * v[q, 0] + u[p, 1] * dg[1] * v[q, 1] + u[p, 2] * dg[2] * v[q, 2]
-                    gmat[i, p, q] = g[p, q]
+            dg0 = s * max(sg[0], SIGMA_FLOOR) + (1.0 - s)
+            dg1 = s * max(sg[1], SIGMA_FLOOR) + (1.0 - s)
+            if dim == 3:
+                dg2 = s * max(sg[2], SIGMA_FLOOR) + (1.0 - s)
+                norm = (dg0 * dg1 * dg2) ** (1.0 / 3.0)
+                dg2 /= norm
+            else:
+                dg2 = 1.0
+                norm = (dg0 * dg1) ** 0.5
+            dg0 /= norm
+            dg1 /= norm
             # 5. strain stress: b = V_i P M^-1, P = 2mu (A - R) + lam tr(R^T A - I) R
-            trs = 0.0
-            for k in range(dim):
-                trs += sg[k] - 1.0
+            trs = (sg[0] - 1.0) + (sg[1] - 1.0)
+            if dim == 3:
+                trs += sg[2] - 1.0
             for p in range(3):
                 for q in range(3):
+                    g[p, q] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
+                    gmat[i, p, q] = g[p, q]
                     rpq = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
-                    pm[p, q] = 2.0 * lmu * (a[p, q] - rpq) + llam * trs * rpq
+                    mm[p, q] = 2.0 * lmu * (a[p, q] - rpq) + llam * trs * rpq
             if dim == 2:
                 for p in range(3):
-                    pm[2, p] = 0.0
-                    pm[p, 2] = 0.0
+                    mm[2, p] = 0.0
+                    mm[p, 2] = 0.0
             vol = m[i] / rho0
             for p in range(3):
                 for q in range(3):
-                    b[p, q] = vol * (pm[p, 0] * minv[0, q] + pm[p, 1] * minv[1, q] + pm[p, 2] * minv[2, q])
+                    b[p, q] = vol * (mm[p, 0] * minv[0, q] + mm[p, 1] * minv[1, q] + mm[p, 2] * minv[2, q])
                     if dim == 2 and (p == 2 or q == 2):
                         b[p, q] = 0.0
                     bstr[i, p, q] = b[p, q]
@@ -674,7 +867,8 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             t0 = 0.0
             t1 = 0.0
             t2 = 0.0
-            wsum = m[i] * _w(0.0, h, dim)
+            wi = m[i] * w_self
+            wsum = wi
             c0 = 0.0
             c1 = 0.0
             c2 = 0.0
@@ -684,15 +878,15 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             i11 = 0.0
             i12 = 0.0
             i22 = 0.0
-            for q in range(nq):
-                j = bestj[q]
-                if j < 0 or docked[i, q] == 0:
-                    continue
-                r0 = x[j, 0] - x[i, 0]
-                r1 = x[j, 1] - x[i, 1]
-                r2 = x[j, 2] - x[i, 2]
-                w = wq[q]
-                coef = 0.5 * ke * m[i] * m[j] / rho0
+            chalf = 0.5 * ke * m[i]
+            for k in range(count):
+                q = mq[k]
+                j = mj[k]
+                r0 = mr[k, 0]
+                r1 = mr[k, 1]
+                r2 = mr[k, 2]
+                w = mw[k]
+                coef = chalf * m[j] / rho0
                 f0, f1, f2 = _member_force(r0, r1, r2, w, slot_vecs[q, 0] * spacing, slot_vecs[q, 1] * spacing,
                                            slot_vecs[q, 2] * spacing, coef, g, b)
                 fs0 += f0
@@ -752,7 +946,6 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             cen[i, 0] = c0
             cen[i, 1] = c1
             cen[i, 2] = c2
-            wi = m[i] * _w(0.0, h, dim)
             # own share: -sum of member forces + correction at y = -c
             fown[i, 0] = -fs0 + wi * (om1 * (-c2) - om2 * (-c1))
             fown[i, 1] = -fs1 + wi * (om2 * (-c0) - om0 * (-c2))

@@ -1,7 +1,8 @@
 """Numba kernels of the weakly compressible SPH fluid (thesis section 8.1).
 
-Particles are sorted by grid cell (``unmesh.spatial`` cell grid of edge ``h``);
-every pass is parallel over cells or particles and writes only its own rows.
+Particles are sorted by grid cell (``unmesh.spatial`` cell grid of edge ``h/2``,
+:data:`CELL_FRACTION`); each particle scans only the cells that intersect its
+support. Every pass is parallel over particles and writes only its own rows.
 Numpy references: :mod:`unmesh.sph.fluid`.
 
 Pass 1 ``density_pass``: neighbour lists (fixed capacity rows, self excluded),
@@ -46,6 +47,19 @@ def kernel_gradf(r, h, dim):
     if dim == 3:
         return spiky_gradf_3d(r, h)
     return spiky_gradf_2d(r, h)
+
+
+@njit(cache=True, inline="always")
+def poly6_coef(h, dim):
+    """``c`` with ``W(r) = c (h² − r²)³`` for ``r < h`` (poly6, C.1/C.4): no division per pair."""
+    h2 = h * h
+    return kernel_w(0.0, h, dim) / (h2 * h2 * h2)
+
+
+@njit(cache=True, inline="always")
+def spiky_coef(h, dim):
+    """``c`` with ``w'(r)/r = c (h − r)²/r`` for ``0 < r < h`` (spiky, C.8/C.11)."""
+    return 2.0 * kernel_gradf(0.5 * h, h, dim) / h
 
 
 @njit(cache=True, inline="always")
@@ -98,35 +112,124 @@ def pressure_eos(rho, rho0, k, gamma, zeta):
     return p
 
 
+#: Cell edge of the particle grid in units of ``h``: with ``h/2`` cells the per-particle
+#: stencil of :func:`density_pass` visits about a third of the points of the 27 cells of edge ``h``.
+CELL_FRACTION = 0.5
+#: Largest virtual grid (cells per particle) for which :func:`dense_starts` is built.
+DENSE_CELLS_PER_PARTICLE = 32
+
+
 @njit(cache=True, parallel=True)
-def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, nbr, nnbr,
+def dense_starts(cell_keys, cell_start, nkeys, out):
+    """Start of every virtual cell: ``out[key]`` = first sorted point with cell key ``>= key``.
+
+    ``cell_keys`` (C,) / ``cell_start`` (C+1,) are the grid's non-empty cells; ``out``
+    (nkeys+1,) int64, so the points of cells ``key0..key1`` are ``out[key0]:out[key1 + 1]``.
+    """
+    nc = cell_keys.shape[0]
+    for c in prange(nc + 1):
+        lo = cell_keys[c - 1] + 1 if c > 0 else 0
+        hi = cell_keys[c] if c < nc else nkeys
+        val = cell_start[c]
+        for key in range(lo, hi + 1):
+            out[key] = val
+
+
+@njit(cache=True, inline="always")
+def _cell_index(t, n):
+    """``floor(t)`` clamped to ``[0, n - 1]`` (as :func:`unmesh.spatial._kernels.point_cell`)."""
+    if not t > 0.0:
+        return 0
+    if t >= n - 1:
+        return n - 1
+    return int(t)
+
+
+@njit(cache=True, inline="always")
+def _gap(x, k, origin, cell, n):
+    """Distance from coordinate ``x`` to cell slab ``k`` (0 inside; edge cells are unbounded)."""
+    if k > 0:
+        lo = origin + k * cell
+        if x < lo:
+            return lo - x
+    if k < n - 1:
+        hi = origin + (k + 1) * cell
+        if x > hi:
+            return x - hi
+    return 0.0
+
+
+@njit(cache=True, parallel=True)
+def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, nbr, nnbr,
                  bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
                  plane_p, plane_n, wall_rho, corners, corner_rho, rho, p):
     """Neighbour lists, density (8.4) and pressure (8.15–8.16) of every particle.
 
-    ``x`` (N, 3) must be the grid's sorted points (z = 0 in 2D). ``nbr`` (N, cap)
-    int32 receives the neighbours within ``h`` (self excluded), ``nnbr`` the true
-    counts (may exceed ``cap``: the caller grows ``nbr`` and repeats). ``bnbr`` /
-    ``nbnbr`` the same for boundary particles ``bx`` (static grid ``b*``).
+    ``x`` (N, 3) must be the grid's sorted points (z = 0 in 2D); any cell size works.
+    With ``dense`` (:func:`dense_starts`; empty: use the sparse cell list) each particle
+    visits only the cells that intersect its support sphere: along every grid row
+    ``(i, j)`` in reach, the run of cells within ``√(h² − d_ij²)`` in z, one contiguous
+    slice of the sorted points. ``nbr`` (N, cap) int32 receives the neighbours within
+    ``h`` (self excluded, ascending), ``nnbr`` the true counts (may exceed ``cap``: the
+    caller grows ``nbr`` and repeats). ``bnbr`` / ``nbnbr`` the same for boundary
+    particles ``bx`` (static grid ``b*``).
     """
+    n = x.shape[0]
     h2 = h * h
+    hr = h * (1.0 + 1e-9)  # conservative reach (round-off of the cell bounds)
+    hr2 = hr * hr
+    cell = 1.0 / inv_cell
     cap = nbr.shape[1]
     bcap = bnbr.shape[1]
     nb = bx.shape[0]
     w0 = kernel_w(0.0, h, dim)
-    for c in prange(cell_keys.shape[0]):
-        ranges = np.empty((9, 2), np.int64)
-        branges = np.empty((9, 2), np.int64)
-        a0 = cell_start[c]
-        a1 = cell_start[c + 1]
-        ci, cj, ck = point_cell(x[a0], origin, inv_cell, dims)
-        ns = stencil_ranges(ci, cj, ck, 1, dims, cell_keys, cell_start, ranges)
-        for a in range(a0, a1):
-            xa0 = x[a, 0]
-            xa1 = x[a, 1]
-            xa2 = x[a, 2]
-            rho_a = m[a] * w0
-            cnt = 0
+    c6 = poly6_coef(h, dim)
+    use_dense = dense.shape[0] > 0
+    reach = math.ceil(hr * inv_cell)
+    rows = (2 * reach + 1) * (2 * reach + 1)
+    d0_, d1_, d2_ = dims[0], dims[1], dims[2]
+    o0, o1, o2 = origin[0], origin[1], origin[2]
+    for a in prange(n):
+        xa0 = x[a, 0]
+        xa1 = x[a, 1]
+        xa2 = x[a, 2]
+        rho_a = m[a] * w0
+        cnt = 0
+        if use_dense:
+            ilo = _cell_index((xa0 - hr - o0) * inv_cell, d0_)
+            ihi = _cell_index((xa0 + hr - o0) * inv_cell, d0_)
+            for ii in range(ilo, ihi + 1):
+                gx = _gap(xa0, ii, o0, cell, d0_)
+                rem = hr2 - gx * gx
+                if rem < 0.0:
+                    continue
+                ry = math.sqrt(rem)
+                jlo = _cell_index((xa1 - ry - o1) * inv_cell, d1_)
+                jhi = _cell_index((xa1 + ry - o1) * inv_cell, d1_)
+                for jj in range(jlo, jhi + 1):
+                    gy = _gap(xa1, jj, o1, cell, d1_)
+                    rem2 = rem - gy * gy
+                    if rem2 < 0.0:
+                        continue
+                    rz = math.sqrt(rem2)
+                    klo = _cell_index((xa2 - rz - o2) * inv_cell, d2_)
+                    khi = _cell_index((xa2 + rz - o2) * inv_cell, d2_)
+                    base = (ii * d1_ + jj) * d2_
+                    for b in range(dense[base + klo], dense[base + khi + 1]):
+                        d0 = xa0 - x[b, 0]
+                        d1 = xa1 - x[b, 1]
+                        d2 = xa2 - x[b, 2]
+                        r2 = d0 * d0 + d1 * d1 + d2 * d2
+                        if r2 < h2 and b != a:
+                            t6 = h2 - r2
+                            rho_a += m[b] * (c6 * t6 * t6 * t6)
+                            if cnt < cap:
+                                nbr[a, cnt] = b
+                            cnt += 1
+        else:
+            ranges = np.empty((rows, 2), np.int64)
+            ci, cj, ck = point_cell(x[a], origin, inv_cell, dims)
+            ns = stencil_ranges(ci, cj, ck, reach, dims, cell_keys, cell_start, ranges)
             for s in range(ns):
                 for b in range(ranges[s, 0], ranges[s, 1]):
                     d0 = xa0 - x[b, 0]
@@ -134,46 +237,69 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
                     d2 = xa2 - x[b, 2]
                     r2 = d0 * d0 + d1 * d1 + d2 * d2
                     if r2 < h2 and b != a:
-                        rho_a += m[b] * kernel_w(r2, h, dim)
+                        t6 = h2 - r2
+                        rho_a += m[b] * (c6 * t6 * t6 * t6)
                         if cnt < cap:
                             nbr[a, cnt] = b
                         cnt += 1
-            nnbr[a] = cnt
-            mt = matid[a]
-            rho0 = mats[mt, M.RHO0]
-            bcnt = 0
-            if nb > 0:
-                bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
-                nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
-                for s in range(nbs):
-                    for b in range(branges[s, 0], branges[s, 1]):
-                        d0 = xa0 - bx[b, 0]
-                        d1 = xa1 - bx[b, 1]
-                        d2 = xa2 - bx[b, 2]
-                        r2 = d0 * d0 + d1 * d1 + d2 * d2
-                        if r2 < h2:
-                            rho_a += rho0 * bvol[b] * kernel_w(r2, h, dim)
-                            if bcnt < bcap:
-                                bnbr[a, bcnt] = b
-                            bcnt += 1
-            nbnbr[a] = bcnt
-            for k in range(plane_p.shape[0]):
-                dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
-                if dist < h:
-                    rho_a += rho0 * _table(wall_rho, dist, h)
-            for k in range(corners.shape[0]):
-                da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
-                db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
-                if da < h and db < h:
-                    rho_a -= rho0 * _table2(corner_rho, da, db, h)
-            rho[a] = rho_a
-            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+        nnbr[a] = cnt
+        mt = matid[a]
+        rho0 = mats[mt, M.RHO0]
+        bcnt = 0
+        if nb > 0:
+            branges = np.empty((9, 2), np.int64)
+            bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
+            nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
+            for s in range(nbs):
+                for b in range(branges[s, 0], branges[s, 1]):
+                    d0 = xa0 - bx[b, 0]
+                    d1 = xa1 - bx[b, 1]
+                    d2 = xa2 - bx[b, 2]
+                    r2 = d0 * d0 + d1 * d1 + d2 * d2
+                    if r2 < h2:
+                        rho_a += rho0 * bvol[b] * kernel_w(r2, h, dim)
+                        if bcnt < bcap:
+                            bnbr[a, bcnt] = b
+                        bcnt += 1
+        nbnbr[a] = bcnt
+        for k in range(plane_p.shape[0]):
+            dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
+            if dist < h:
+                rho_a += rho0 * _table(wall_rho, dist, h)
+        for k in range(corners.shape[0]):
+            da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
+            db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
+            if da < h and db < h:
+                rho_a -= rho0 * _table2(corner_rho, da, db, h)
+        rho[a] = rho_a
+        p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+
+
+def cell_starts(grid, buffer=None):
+    """:func:`dense_starts` of an ``unmesh.spatial`` cell grid, or an empty array when the
+    virtual grid has more than ``DENSE_CELLS_PER_PARTICLE`` cells per point (sparse fallback).
+
+    ``buffer``: a previous result to reuse when large enough. Returns int64 (nkeys+1,) or (0,).
+
+    Example
+    -------
+    >>> from unmesh.spatial import build_cell_grid
+    >>> g = build_cell_grid(np.array([[0.0, 0, 0], [0.25, 0, 0], [0.26, 0, 0]]), 0.1)
+    >>> cell_starts(g).tolist()
+    [0, 1, 1, 3]
+    """
+    nkeys = int(grid.dims[0]) * int(grid.dims[1]) * int(grid.dims[2])
+    if nkeys > DENSE_CELLS_PER_PARTICLE * len(grid.points) + 4096:
+        return np.zeros(0, np.int64)
+    out = buffer[: nkeys + 1] if buffer is not None and buffer.shape[0] >= nkeys + 1 else np.empty(nkeys + 1, np.int64)
+    dense_starts(grid.cell_keys, grid.cell_start, nkeys, out)
+    return out
 
 
 @njit(cache=True, parallel=True)
 def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
                bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-               grad_scale, elastic, spacing, slot_vecs, gmat, bstr, omega, cen, slott, fown,
+               plane_noslip, wall_visc, bnoslip, grad_scale, elastic, spacing, slot_vecs, gmat, bstr, omega, cen, slott, fown,
                acc, xsph, dtemp):
     """Accelerations, XSPH corrections and temperature rates of every particle.
 
@@ -183,7 +309,11 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     (-1: not a member), recomputed from j's ``gmat``, ``bstr``, ``omega``, ``cen``
     (:func:`unmesh.sph._elastic_kernels.member_force`; outputs of ``lattice_update``).
     ``wall_mirror`` scales the boundary pressure term (2: pressure mirroring
-    ``p_b = p_i``; 1: Akinci et al. 2012, ``p_i/ρ_i²``). ``grad_scale`` multiplies the kernel
+    ``p_b = p_i``; 1: Akinci et al. 2012, ``p_i/ρ_i²``). ``plane_noslip`` (P,) and ``bnoslip``
+    (NB,) uint8 mark no-slip walls: they apply the viscous term of (8.18) with the fluid's
+    effective shear viscosity ``ν = μ/ρ0 + αch/(4(n+2))`` to the wall at rest (Akinci et al.
+    2012, eq. 11; :mod:`unmesh.sph.boundary`), for planes through the half-space integrals
+    ``wall_visc`` (2, S) of :func:`unmesh.sph.boundary.wall_friction_tables`. ``grad_scale`` multiplies the kernel
     gradient of particle pairs (the lattice correction, see
     :func:`unmesh.sph.sampling.gradient_moment`).
     """
@@ -192,6 +322,15 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     bcap = bnbr.shape[1]
     visc_c = 2.0 * (dim + 2)
     eh2 = EPS * h * h
+    h2 = h * h
+    c6 = poly6_coef(h, dim)
+    cg = spiky_coef(h, dim)
+    # per-particle p/ρ² and 1/ρ: no divisions by neighbour quantities in the pair loop
+    pr = np.empty(n)
+    rinv = np.empty(n)
+    for i in prange(n):
+        rinv[i] = 1.0 / rho[i]
+        pr[i] = p[i] / (rho[i] * rho[i])
     for i in prange(n):
         fe0 = 0.0
         fe1 = 0.0
@@ -203,7 +342,8 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
         vi1 = v[i, 1]
         vi2 = v[i, 2]
         rhoi = rho[i]
-        pi_ = p[i] / (rhoi * rhoi)
+        rinv_i = rinv[i]
+        pi_ = pr[i]
         mt = matid[i]
         mui = mats[mt, M.VISC]
         xii = mats[mt, M.XI]
@@ -227,7 +367,10 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
             d2 = xi2 - x[j, 2]
             r2 = d0 * d0 + d1 * d1 + d2 * d2
             r = math.sqrt(r2)
-            gf = kernel_gradf(r, h, dim)
+            gf = 0.0
+            if r > 0.0:
+                hr = h - r
+                gf = cg * hr * hr / r  # spiky w'(r)/r
             mj = m[j]
             rhoj = rho[j]
             mtj = matid[j]
@@ -237,15 +380,14 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
             vx = vij0 * d0 + vij1 * d1 + vij2 * d2
             mu = 0.5 * (mui + mats[mtj, M.VISC])
             # pressure (8.17) + viscosity (8.18), both along x_ij
-            bracket = -(pi_ + p[j] / (rhoj * rhoj))
+            bracket = -(pi_ + pr[j])
+            ire = 1.0 / (r2 + eh2)
             if mu > 0.0:
-                bracket += visc_c * mu / (rhoi * rhoj) * vx / (r2 + eh2)
-            if vx < 0.0:
-                # Monaghan's artificial viscosity, approaching pairs only
-                alpha = 0.5 * (alphai + mats[mtj, M.ALPHA])
-                if alpha > 0.0:
-                    cbar = 0.5 * (ci + mats[mtj, M.SOUND])
-                    bracket += alpha * cbar * h * vx / (0.5 * (rhoi + rhoj) * (r2 + eh2))
+                bracket += visc_c * mu * rinv_i * rinv[j] * vx * ire
+            # Monaghan's artificial viscosity, approaching pairs only (branch-free: min(v_ij·x_ij, 0))
+            alpha = 0.5 * (alphai + mats[mtj, M.ALPHA])
+            cbar = 0.5 * (ci + mats[mtj, M.SOUND])
+            bracket += alpha * cbar * h * min(vx, 0.0) * ire * 2.0 / (rhoi + rhoj)
             coef = mj * bracket * gf * grad_scale
             same = obj[i] == obj[j]
             if not same and (solid_i or phase[j] == SOLID):
@@ -255,7 +397,8 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
             else:
                 # XSPH (8.19) within one body
                 if xii > 0.0:
-                    wx = xii * 2.0 * mj / (rhoi + rhoj) * kernel_w(r2, h, dim)
+                    t6 = h2 - r2
+                    wx = xii * 2.0 * mj / (rhoi + rhoj) * (c6 * t6 * t6 * t6)
                     xs0 -= wx * vij0
                     xs1 -= wx * vij1
                     xs2 -= wx * vij2
@@ -280,6 +423,8 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
         # boundary particles (Akinci et al. 2012)
         bcnt = min(nbnbr[i], bcap)
         pb = max(p[i], 0.0) / (rhoi * rhoi) * wall_mirror
+        # no-slip walls: the fluid's effective shear viscosity (physical + artificial)
+        nu_wall = visc_c * (mui / rho0 + alphai * ci * h / (2.0 * visc_c)) / rhoi
         for t in range(bcnt):
             b = bnbr[i, t]
             d0 = xi0 - bx[b, 0]
@@ -290,12 +435,16 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
             gf = kernel_gradf(r, h, dim)
             psi = rho0 * bvol[b]
             bracket = -pb
-            if mui > 0.0:
+            noslip = bnoslip[b] != 0
+            if mui > 0.0 and not noslip:
                 vx = vi0 * d0 + vi1 * d1 + vi2 * d2
                 bracket += visc_c * mui / (rhoi * rho0) * vx / (r2 + eh2)
             coef = psi * bracket * gf * grad_scale
             if coef < 0.0:
                 coef = 0.0
+            if noslip:
+                vx = vi0 * d0 + vi1 * d1 + vi2 * d2
+                coef += psi * nu_wall * vx / (r2 + eh2) * gf * grad_scale
             ai0 += coef * d0
             ai1 += coef * d1
             ai2 += coef * d2
@@ -304,6 +453,14 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
             dist = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, k)
             if dist < h:
                 s = rho0 * pb * _table(wall_grad, dist, h)
+                if plane_noslip[k] != 0:
+                    # no-slip: ν ρ0/ρ_i (Mt v_t + Mn v_n n)
+                    mtan = rho0 * nu_wall * _table(wall_visc[0], dist, h)
+                    vn = vi0 * plane_n[k, 0] + vi1 * plane_n[k, 1] + vi2 * plane_n[k, 2]
+                    s += (rho0 * nu_wall * _table(wall_visc[1], dist, h) - mtan) * vn
+                    ai0 += mtan * vi0
+                    ai1 += mtan * vi1
+                    ai2 += mtan * vi2
                 ai0 += s * plane_n[k, 0]
                 ai1 += s * plane_n[k, 1]
                 ai2 += s * plane_n[k, 2]

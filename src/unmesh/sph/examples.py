@@ -143,6 +143,18 @@ def elastic_cube(ctx: ExampleContext) -> None:
     _momentum_metrics(ctx, summary)
 
 
+def _pieces(x: np.ndarray, radius: float) -> int:
+    """Connected components of the neighbour graph ``|x_i − x_j| ≤ radius``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from unmesh.spatial import radius_pairs
+
+    pairs = radius_pairs(x, radius)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(x), len(x)))
+    return int(connected_components(graph, directed=False)[0])
+
+
 def _rigid_deviation(x0: np.ndarray, x: np.ndarray) -> float:
     c0, c = x0.mean(axis=0), x.mean(axis=0)
     u, _, vt = np.linalg.svd((x - c).T @ (x0 - c0))
@@ -158,14 +170,17 @@ def plastic_cube(ctx: ExampleContext) -> None:
     from unmesh import io
 
     # K_e ∝ 1/d² keeps the same clay at the coarser quick spacing (see the fracture example)
-    ov = {"simulation.spacing": 0.02, "simulation.duration": 0.5, "materials.clay.elastic_stiffness": 5e5} \
+    ov = {"simulation.spacing": 0.02, "simulation.duration": 1.2, "materials.clay.elastic_stiffness": 2.5e5} \
         if ctx.quick else {"simulation.spacing": 0.01, "simulation.duration": 1.5}
     out, summary = run_shipped_scene(ctx, "plastic_cube_2d", ov)
     _render(ctx, out, "plastic_cube_2d", "plastic cube (colour: pressure)", "pressure", 2)
     frames = _frames(out)
+    first, last = io.load(frames[0]).positions, io.load(frames[-1]).positions
     ctx.metric("permanent deformation (rigid-fit deviation)",
-               f"{100 * _rigid_deviation(io.load(frames[0]).positions, io.load(frames[-1]).positions) / 0.2:.1f}",
-               "% of the edge")
+               f"{100 * _rigid_deviation(first, last) / 0.2:.1f}", "% of the edge")
+    aspect = [float(np.ptp(p[:, 0]) / np.ptp(p[:, 1])) for p in (first, last)]
+    ctx.metric("aspect ratio width/height (start → rest)", f"{aspect[0]:.2f} → {aspect[1]:.2f}")
+    ctx.metric("pieces at rest (neighbours within 1.5 spacings)", _pieces(last[:, :2], 1.5 * ov["simulation.spacing"]))
     _momentum_metrics(ctx, summary)
 
 
@@ -183,11 +198,22 @@ def fracture(ctx: ExampleContext) -> None:
 @example("sph-melting", "Blob melting on a heated floor (Fig. 8.4)", _SECTION)
 def melting(ctx: ExampleContext) -> None:
     """An elastic blob drops on a heated floor, conducts heat and melts into a puddle (8.35)."""
-    ov = {"simulation.spacing": 0.025 if ctx.quick else 0.01, "simulation.duration": 0.6 if ctx.quick else 3.0}
+    from unmesh import io
+    from unmesh.spatial import knn
+
+    # quick: coarse, but long enough to melt completely; K_e ∝ 1/d² keeps the same jelly
+    ov = {"simulation.spacing": 0.025, "simulation.duration": 2.0, "materials.jelly.elastic_stiffness": 8e5} \
+        if ctx.quick else {"simulation.spacing": 0.01, "simulation.duration": 3.0}
     out, summary = run_shipped_scene(ctx, "melting_blob", ov)
     _render(ctx, out, "melting_blob", "melting blob (colour: temperature)", "temperature", 3, color_range=(20, 100))
     last = summary["frames"][-1]["phase_counts"]
     ctx.metric("melted fraction at the end", round(last["fluid"] / (last["fluid"] + last["solid"]), 3))
+    p = io.load(_frames(out)[-1]).positions
+    d = ov["simulation.spacing"]
+    ctx.metric("puddle: particles with a neighbour within 1.5 spacings",
+               f"{100 * float(np.mean(knn(p, 2)[0][:, 1] < 1.5 * d)):.1f}", "%")
+    ctx.metric("puddle: pieces", _pieces(p, 1.5 * d))
+    ctx.metric("puddle: radius / height", f"{float(np.hypot(p[:, 0], p[:, 2]).max()):.3f} m / {float(p[:, 1].max()):.3f} m")
     _momentum_metrics(ctx, summary)
 
 

@@ -92,16 +92,18 @@ def _boundaries(scene: Table, dim: int, spacing: float, h: float) -> tuple[list[
         kind = b.string("type", choices=("box", "plane", "particles"))
         try:
             if kind == "box":
-                planes += box_planes(b.vector("min", 3), b.vector("max", 3), dim, open_top=b.boolean("open_top", False))
+                planes += box_planes(b.vector("min", 3), b.vector("max", 3), dim, open_top=b.boolean("open_top", False),
+                                     no_slip=b.boolean("no_slip", False))
             elif kind == "plane":
                 normal = b.vector("normal", 3)
                 if dim == 2 and normal[2] != 0:
                     raise b.error("normal", "expected z = 0 in a 2D scene")
-                planes.append(Plane(b.vector("point", 3), normal))
+                planes.append(Plane(b.vector("point", 3), normal, b.boolean("no_slip", False)))
             else:
                 shape = b.shape("shape")
                 inside = b.string("side", default="outside", choices=("outside", "inside")) == "inside"
-                parts.append(sample_boundary(shape, b.number("spacing", default=spacing, positive=True), h, dim))
+                parts.append(sample_boundary(shape, b.number("spacing", default=spacing, positive=True), h, dim,
+                                             b.boolean("no_slip", False)))
                 shapes.append((shape, inside))
         except InputError as exc:
             raise b.error(None, str(exc)) from None
@@ -113,7 +115,7 @@ def _boundaries(scene: Table, dim: int, spacing: float, h: float) -> tuple[list[
             from unmesh.sph.boundary import boundary_volumes
 
             vol = boundary_volumes(pos, h, dim)
-        boundary = BoundaryParticles(pos, vol)
+        boundary = BoundaryParticles(pos, vol, np.concatenate([p.no_slip for p in parts]))
     return planes, boundary, shapes
 
 

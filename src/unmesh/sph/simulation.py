@@ -49,7 +49,7 @@ from unmesh.sph import _elastic_kernels as EK
 from unmesh.sph import _kernels as K
 from unmesh.sph import _phase_kernels as PK
 from unmesh.sph import materials as MT
-from unmesh.sph.boundary import BoundaryParticles, Plane, corner_pairs, corner_tables, wall_tables
+from unmesh.sph.boundary import BoundaryParticles, Plane, corner_pairs, corner_tables, wall_friction_tables, wall_tables
 from unmesh.sph.materials import Material, material_table
 from unmesh.sph.phase import HeatSource
 from unmesh.sph.sampling import gradient_moment, lattice_basis, lattice_frame, lattice_slots
@@ -265,6 +265,8 @@ class SPHSimulation(Simulation):
         self.plane_n = np.ascontiguousarray(np.array([p.normal for p in planes]).reshape(-1, 3))
         self.wall_rho, self.wall_grad = wall_tables(self.h, self.dim)
         self.corners = corner_pairs(self.planes)
+        self.plane_noslip = np.array([p.no_slip for p in self.planes], np.uint8)
+        self.wall_visc = wall_friction_tables(self.h, self.dim) if self.plane_noslip.any() else np.zeros((2, 2))
         if len(self.corners):
             self.corner_rho, self.corner_grad = corner_tables(self.h, self.dim)
         else:
@@ -404,10 +406,12 @@ class SPHSimulation(Simulation):
             g = build_cell_grid(self.boundary.positions, self.h)
             self.bx = np.ascontiguousarray(g.points)
             self.bvol = np.ascontiguousarray(self.boundary.volumes[g.order])
+            self.bnoslip = np.ascontiguousarray(self.boundary.no_slip[g.order])
             self.bgrid = (g.origin, g.inv_cell, g.dims, g.cell_keys, g.cell_start)
         else:
             self.bx = np.zeros((0, 3))
             self.bvol = np.zeros(0)
+            self.bnoslip = np.zeros(0, np.uint8)
             self.bgrid = (np.zeros(3), 1.0, np.ones(3, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64))
 
     # -- the step ---------------------------------------------------------------------
@@ -418,7 +422,7 @@ class SPHSimulation(Simulation):
         """Re-sort every per-particle array by grid cell; returns the grid."""
         from unmesh.spatial import build_cell_grid
 
-        g = build_cell_grid(self.x, self.h)
+        g = build_cell_grid(self.x, K.CELL_FRACTION * self.h)
         order = g.order
         spare = self._spare
         for name in self._arrays():
@@ -460,9 +464,10 @@ class SPHSimulation(Simulation):
     def _density(self) -> None:
         g = self.grid
         bo, binv, bd, bk, bs = self.bgrid
+        self._dense = dense = K.cell_starts(g, getattr(self, "_dense", None))
         while True:
             K.density_pass(self.x, self.m, self.mat, self.mats, self.h, self.dim, g.origin, g.inv_cell, g.dims,
-                           g.cell_keys, g.cell_start, self.nbr, self.nnbr, self.bx, self.bvol, bo, binv, bd, bk, bs,
+                           g.cell_keys, g.cell_start, dense, self.nbr, self.nnbr, self.bx, self.bvol, bo, binv, bd, bk, bs,
                            self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho, self.corners,
                            self.corner_rho, self.rho, self.p)
             need = int(self.nnbr.max()) if len(self.nnbr) else 0
@@ -490,7 +495,8 @@ class SPHSimulation(Simulation):
         K.force_pass(self.x, self.v, self.m, self.rho, self.p, self.temp, self.phase, self.obj, self.mat, self.uid,
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
-                     self.corner_grad, self.config.wall_pressure, self.grad_scale,
+                     self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.bnoslip,
+                     self.grad_scale,
                      self.elastic, self.spacing, self.slot_vecs, s["gmat"], s["bstr"], s["omega"], s["cen"], s["slott"],
                      s["fown"], self.a, self.xsph, self.dtemp)
         if self.elastic:
