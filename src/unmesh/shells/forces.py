@@ -20,7 +20,7 @@ from unmesh.shells.energy import FiberState
 from unmesh.shells.fibers import ARC_SAMPLES
 from unmesh.shells.topology import ShellTopology
 
-__all__ = ["ForceResult", "arc_weights", "elastic_forces", "node_terms", "threads_for"]
+__all__ = ["ForceResult", "arc_gram", "arc_weights", "elastic_forces", "node_terms", "threads_for"]
 
 #: Below this many work items the kernels always run on one thread (waking a second thread
 #: costs more than it saves). Above it, :class:`threads_for` times both ways and keeps the
@@ -130,6 +130,24 @@ def arc_weights(samples: int) -> np.ndarray:
     return w
 
 
+@functools.lru_cache(maxsize=16)
+def arc_gram(samples: int) -> np.ndarray:
+    """Gram-form speed table (2n, 6) of :func:`arc_weights` used by the kernels (B.4-B.6).
+
+    Columns ``alpha^2, 2 alpha gamma, gamma^2, alpha^2/n, alpha gamma/n, gamma^2/n``, where ``alpha``, ``gamma`` are the weights of ``x1``, ``x2`` (see
+    :mod:`unmesh.shells._fiber_kernels`).
+
+    Example
+    -------
+    >>> arc_gram(1)[:, :3]
+    array([[1.12890625, 0.1328125 , 0.00390625],
+           [0.00390625, 0.1328125 , 1.12890625]])
+    """
+    g = _kernels.gram_weights(arc_weights(samples))
+    g.setflags(write=False)
+    return g
+
+
 @dataclass(frozen=True, eq=False)
 class ForceResult:
     """Output of :func:`elastic_forces`.
@@ -206,8 +224,12 @@ def elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, ks
         return _elastic_forces(x, topology, state, ks, kb, samples, reference, node_offsets)
 
 
+_NO_MASK = np.zeros(0, dtype=np.bool_)
+
+
 def _elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, ks: float, kb: float, samples: int,
-                    reference: np.ndarray | None, node_offsets: np.ndarray | None) -> ForceResult:
+                    reference: np.ndarray | None, node_offsets: np.ndarray | None,
+                    only: np.ndarray = _NO_MASK) -> ForceResult:
     n = topology.n_nodes
     nf = len(topology.fibers)
     chunks = FORCE_CHUNKS
@@ -223,12 +245,13 @@ def _elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, k
     counts = np.diff(topology.fiber_offsets)
     cap = int(counts.max()) if n else 0
     ref = state.rest_angle() if reference is None else np.ascontiguousarray(reference, dtype=np.float64)
+    buf = np.empty((chunks, n, 3)) if len(only) == 0 else np.empty((chunks, 0, 3))
     _kernels.force_chunks(chunks, np.ascontiguousarray(x, dtype=np.float64), topology.pairs,
                           topology.pair_offsets[:-1], np.diff(topology.pair_offsets), topology.soft, topology.fibers,
                           topology.fiber_offsets[:-1], counts, state.length_orig, state.length_plastic,
                           state.angle_orig, state.angle_plastic, state.stretch_scale, state.bend_scale, float(ks),
-                          float(kb), arc_weights(int(samples)), ref, offsets, cap, np.empty((chunks, n, 3)), forces,
-                          lengths, angles, s, normals, node, es, eb)
+                          float(kb), arc_gram(int(samples)), ref, offsets, cap, buf, forces, lengths, angles, s,
+                          normals, node, es, eb, only)
     return ForceResult(forces, es, eb, lengths, angles, normals, s, node)
 
 
@@ -237,8 +260,8 @@ def node_terms(x: np.ndarray, topology: ShellTopology, state: FiberState, rows: 
     """Node terms ``A_i, A_i^0, H_i, H_i^0`` (7.6, 7.9) of the nodes ``rows`` only.
 
     Equal, bit for bit, to ``elastic_forces(x, topology, state, ..., reference).node_terms[rows]``
-    (same kernel per node), at the cost of the listed nodes' fibers only: fracture uses it
-    to keep the node terms of rebuilt nodes continuous.
+    (the same kernel on the same blocks of nodes), at the cost of the blocks holding the
+    listed nodes only: fracture uses it to keep the node terms of rebuilt nodes continuous.
 
     Parameters
     ----------
@@ -266,15 +289,10 @@ def node_terms(x: np.ndarray, topology: ShellTopology, state: FiberState, rows: 
     True
     """
     rows = np.ascontiguousarray(rows, dtype=np.int64)
-    out = np.zeros((len(rows), 4))
     if not len(rows):
-        return out
-    counts = np.diff(topology.fiber_offsets)
-    cap = int(counts.max()) if topology.n_nodes else 0
-    ref = state.rest_angle() if reference is None else np.ascontiguousarray(reference, dtype=np.float64)
-    _kernels.node_terms_rows(rows, np.ascontiguousarray(x, dtype=np.float64), topology.pairs,
-                             topology.pair_offsets[:-1], np.diff(topology.pair_offsets), topology.soft,
-                             topology.fibers, topology.fiber_offsets[:-1], counts, state.length_orig,
-                             state.length_plastic, state.angle_orig, state.angle_plastic, state.stretch_scale,
-                             state.bend_scale, arc_weights(int(samples)), ref, cap, out)
-    return out
+        return np.zeros((0, 4))
+    only = np.zeros(topology.n_nodes, dtype=np.bool_)
+    only[rows] = True
+    with threads_for(len(topology.fibers)):
+        res = _elastic_forces(x, topology, state, 1.0, 1.0, samples, reference, None, only)
+    return res.node_terms[rows]

@@ -20,7 +20,7 @@ import numpy as np
 
 from unmesh._validate import as_array, positive_scalar
 from unmesh.errors import InputError
-from unmesh.shells import _kernels
+from unmesh.shells import _kernels, _step_kernels
 from unmesh.shells.dynamics import Gravity, Handle, Pressure, Pull, damping_force
 from unmesh.shells.energy import FiberState, umbrella_normals
 from unmesh.shells.forces import ForceResult, elastic_forces, node_terms, threads_for
@@ -38,6 +38,7 @@ __all__ = ["ShellSimulation", "node_areas", "stable_time_step"]
 MIN_NODES = 10
 #: With fracture, a fiber whose end tangent falls below this fraction of its centre tangent is torn.
 DEGENERATE_RATIO = 0.3
+_NO_ANGLES = np.zeros(0)
 
 
 def node_areas(cloud: SurfelCloud, owner: np.ndarray, n_nodes: int, total_area: float | None = None,
@@ -138,6 +139,8 @@ class ShellSimulation(Simulation):
     """
 
     name = "shell"
+    #: Take the one-kernel step (:mod:`unmesh.shells.stepping`); False: :meth:`step_plain`.
+    fused = True
     frame_patterns = ("frames/frame_*.ply", "nodes/frame_*.ply", "fibers/frame_*.npz")
 
     def __init__(self, cloud: SurfelCloud, material: ShellMaterial, dt: float, *, nodes: int | None = None,
@@ -214,6 +217,7 @@ class ShellSimulation(Simulation):
         self._timers = {"force": 0.0, "fracture": 0.0, "surface": 0.0}
         self._energy_hist: collections.deque[float] = collections.deque(maxlen=40)
         self._energy_window = (0.0, 0.0)  # max energy of the previous / current block of 1000 steps
+        self._energy_floor: float | None = None
         self._prev_angles: np.ndarray | None = None
         self._prev_topology: ShellTopology | None = None
         self._surface_cache: tuple[int, SurfelCloud] | None = None
@@ -277,24 +281,34 @@ class ShellSimulation(Simulation):
             f += p.force(t, self.x, self.v, self.mass, self.area, res.normals, self.first_crack)
         return f
 
-    def _fan_ratio(self, res: ForceResult) -> np.ndarray:
+    def _fan0_of_topology(self) -> np.ndarray:
+        """``|s_i|`` at rest of the current topology (cached per topology)."""
         if getattr(self, "_fan0_topo", None) is not self.topology:
             s0, _ = umbrella_normals(self.rest, self.topology)
             self._fan0 = np.linalg.norm(s0, axis=1)
             self._fan0_topo = self.topology
+        return self._fan0
+
+    def _fan_ratio(self, res: ForceResult) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore"):
-            r = np.linalg.norm(res.umbrella, axis=1) / self._fan0
+            r = np.linalg.norm(res.umbrella, axis=1) / self._fan0_of_topology()
         return np.where(np.isfinite(r), r, 1.0)
+
+    def _reference_angles(self) -> np.ndarray:
+        """Angle branch reference of the next force pass: the last angles on this topology, else
+        the angles carried over a topology change (once), else the rest angles."""
+        last = getattr(self, "_last", None)
+        if last is not None and getattr(self, "_last_topology", None) is self.topology:
+            return last.angles
+        if getattr(self, "_resume_angles", None) is not None and len(self._resume_angles) == len(self.topology.fibers):
+            ref = self._resume_angles
+            self._resume_angles = None
+            return np.ascontiguousarray(ref, dtype=np.float64)
+        return self.fibers.rest_angle()
 
     def _accelerations(self) -> np.ndarray:
         m = self.material
-        last = getattr(self, "_last", None)
-        ref = None
-        if last is not None and getattr(self, "_last_topology", None) is self.topology:
-            ref = last.angles
-        elif getattr(self, "_resume_angles", None) is not None and len(self._resume_angles) == len(self.topology.fibers):
-            ref = self._resume_angles
-            self._resume_angles = None
+        ref = self._reference_angles()
         res = elastic_forces(self.x, self.topology, self.fibers, m.ks, m.kb, m.arc_samples, ref, self.node_offsets)
         self._last = res
         self._last_topology = self.topology
@@ -312,7 +326,40 @@ class ShellSimulation(Simulation):
         self.v[pinned] = 0.0
 
     def step(self) -> float:
-        """One velocity-Verlet step of (7.18), then plasticity (7.19-7.23) and fracture (7.24)."""
+        """One velocity-Verlet step of (7.18), then plasticity (7.19-7.23) and fracture (7.24).
+
+        Runs in one kernel call (:mod:`unmesh.shells.stepping`); :meth:`step_plain` is the
+        same step with numpy and separate kernels (its reference, and the path taken for
+        colliders the kernel does not know or when ``fused`` is False).
+        """
+        stepper = self._stepper()
+        if stepper is None:
+            return self.step_plain()
+        t0 = _time.perf_counter()
+        over, bad = stepper.step(self)
+        self.steps += 1
+        t1 = _time.perf_counter()
+        self._timers["force"] += t1 - t0
+        if over or bad:
+            self._fracture_events(bad > 0)
+            self._timers["fracture"] += _time.perf_counter() - t1
+        return self.dt
+
+    def _stepper(self) -> Any:
+        """The one-kernel step for the current set-up (rebuilt when kinematic nodes or colliders change)."""
+        if not self.fused:
+            return None
+        st = getattr(self, "_fused", None)
+        if (st is None or st[0][0] is not self.handles or st[0][1] is not self.colliders
+                or not np.array_equal(st[1], self.fixed)):
+            from unmesh.shells.stepping import FusedStep
+
+            fs = FusedStep(self, DEGENERATE_RATIO**2)
+            st = self._fused = ((self.handles, self.colliders), self.fixed.copy(), fs if fs.supported else None)
+        return st[2]
+
+    def step_plain(self) -> float:
+        """:meth:`step` with numpy and separate kernels (the reference of the one-kernel step)."""
         t0 = _time.perf_counter()
         dt = self.dt
         self.v += 0.5 * dt * self.acc
@@ -366,8 +413,12 @@ class ShellSimulation(Simulation):
                                                st.fracture_bend, DEGENERATE_RATIO**2)
         if over == 0 and bad == 0:
             return
+        self._fracture_events(bad > 0)
+
+    def _fracture_events(self, degenerate: bool) -> None:
+        """Drop degenerate fibers, place cracks at overloaded fibers and rebuild around them (7.3.2)."""
         cand, _ = fracture_candidates(self.fibers, self._last.lengths, self._last.angles)
-        if bad and self._drop_degenerate():
+        if degenerate and self._drop_degenerate():
             before = self._last.node_terms
             had = np.ones(self.topology.n_nodes, bool)
             self._keep_node_terms(before, had, np.unique(self.topology.fibers[:, 1]))
@@ -436,6 +487,7 @@ class ShellSimulation(Simulation):
         rigidly translated, the nearest node that lies on a fiber and that it still sees
         (7.3.2 visibility), else the nearest node on a fiber. Fixed nodes are never crumbs.
         """
+        self._crumb_cache = None
         on_fiber = np.zeros(len(self.rest), dtype=bool)
         on_fiber[self.topology.fibers.ravel()] = True
         self.anchor[on_fiber] = -1                     # a rebuild gave it fibers again
@@ -462,11 +514,19 @@ class ShellSimulation(Simulation):
 
     def _follow(self) -> None:
         """Move the crumbs with their anchors (see :meth:`_anchor_crumbs`)."""
-        c = np.flatnonzero(self.anchor >= 0)
+        c, a = self._crumbs
         if len(c):
-            a = self.anchor[c]
             self.x[c] = self.x[a] + (self.rest[c] - self.rest[a])
             self.v[c] = self.v[a]
+
+    @property
+    def _crumbs(self) -> tuple[np.ndarray, np.ndarray]:
+        """Crumb nodes and their anchors (cached; :meth:`_anchor_crumbs` and restores refresh it)."""
+        cached = getattr(self, "_crumb_cache", None)
+        if cached is None or cached[0] is not self.anchor:
+            c = np.flatnonzero(self.anchor >= 0)
+            cached = self._crumb_cache = (self.anchor, c, np.ascontiguousarray(self.anchor[c]))
+        return cached[1], cached[2]
 
     def pieces(self) -> tuple[int, np.ndarray]:
         """Connected pieces of the fiber graph, crumbs counted with the piece they follow.
@@ -530,12 +590,20 @@ class ShellSimulation(Simulation):
 
     def check(self) -> str | None:
         """NaN, runaway energy, a fiber folding over in one step, or nodes jumping half the object."""
-        if not (np.isfinite(self.x).all() and np.isfinite(self.v).all()):
+        angles = self._last.angles
+        prev = self._prev_angles
+        same = prev is not None and len(prev) == len(angles) and self._prev_topology is self.topology and len(angles)
+        finite, ke, vmax2, jumps = _step_kernels.check_stats(self.x, self.v, self.mass, angles,
+                                                             prev if same else _NO_ANGLES)
+        if not finite:
             return "NaN or infinity in the node positions or velocities"
-        e = self.kinetic_energy() + self.elastic_energy()
+        e = ke + self.elastic_energy()
         if not math.isfinite(e):
             return "non-finite energy"
-        floor = float(self.mass.sum()) * (np.linalg.norm(self.gravity.g) + 1.0) * max(self.size, 1e-12)
+        if self._energy_floor is None:
+            self._energy_floor = float(self.mass.sum()) * (np.linalg.norm(self.gravity.g) + 1.0) * max(self.size,
+                                                                                                      1e-12)
+        floor = self._energy_floor
         hist = self._energy_hist
         hist.append(e)
         if len(hist) == hist.maxlen and e > 1e4 * max(hist[0], floor):
@@ -547,17 +615,13 @@ class ShellSimulation(Simulation):
         ref = max(self._energy_window[0], floor)
         if self._energy_window[0] > 0 and e > 100 * ref:
             return f"energy grew from at most {ref:.3g} to {e:.3g} within 2000 steps"
-        angles = self._last.angles
-        prev = self._prev_angles
-        if prev is not None and len(prev) == len(angles) and self._prev_topology is self.topology and len(angles):
-            jumps = np.abs(angles - prev) > 0.5 * np.pi
-            # a few flips at crack edges are tolerated; many at once mean the state is breaking up
-            if jumps.sum() > max(3, len(angles) // 500):
-                return (f"{int(jumps.sum())} fibers folded over in one step (tangent angle jumps of more than "
-                        "90 degrees): the deformation per step is too large for the node spacing")
+        # a few flips at crack edges are tolerated; many at once mean the state is breaking up
+        if same and jumps > max(3, len(angles) // 500):
+            return (f"{jumps} fibers folded over in one step (tangent angle jumps of more than "
+                    "90 degrees): the deformation per step is too large for the node spacing")
         self._prev_angles = angles
         self._prev_topology = self.topology
-        vmax = float(np.sqrt(np.einsum("ij,ij->i", self.v, self.v).max())) if len(self.v) else 0.0
+        vmax = math.sqrt(vmax2)
         if vmax * self.dt > 0.5 * self.size:
             return f"nodes moved {vmax * self.dt:.3g} in one step, more than half the object size"
         return None
