@@ -92,7 +92,7 @@ def measure(figure: str, frames: int) -> dict:
             io_time = time.perf_counter() - t
     from unmesh.shells.forces import _TUNERS
 
-    tuner = _TUNERS.get(("forces", len(sim.topology.fibers).bit_length()))
+    tuner = _TUNERS.get(("step", len(sim.topology.fibers).bit_length()))
     threads = "-" if tuner is None else ("1" if tuner.serial else "all")
     r = np.array(rows) * 1000.0
     return {"threads": threads, "figure": figure, "scene": name, "nodes": len(sim.rest), "points": len(sim.cloud),

@@ -132,3 +132,48 @@ def test_unvalidated_topology_build_equals_the_validated_one(torn_strip):
     for name in ("neighbor_offsets", "neighbors", "pairs", "pair_offsets", "pair_center", "pair_incidence_offsets",
                  "pair_incidence", "fibers", "fiber_offsets", "fiber_incidence_offsets", "fiber_incidence", "soft"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_branch_free_plane_eigenvector_matches_eigh():
+    """The vectorisable smallest eigenvector of the skinning (7.26) against numpy, also for
+    degenerate matrices (rank one, repeated eigenvalues, zero)."""
+    from numba import njit
+
+    from unmesh.shells._skinning_kernels import smallest_eigenvector_sel
+
+    @njit(error_model="numpy")           # as the skinning kernel (a division by zero gives inf)
+    def run(c, out):
+        for k in range(c.shape[0]):
+            out[k] = smallest_eigenvector_sel(c[k, 0, 0], c[k, 0, 1], c[k, 0, 2], c[k, 1, 1], c[k, 1, 2], c[k, 2, 2])
+
+    rng = np.random.default_rng(5)
+    pts = rng.normal(size=(4000, 7, 3)) * [1.0, 0.7, 0.01]               # nearly planar node sets
+    rot = np.linalg.qr(rng.normal(size=(4000, 3, 3)))[0]
+    pts = np.einsum("nij,nkj->nki", rot, pts) + rng.normal(size=(4000, 1, 3)) * 20
+    d = pts - pts.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", d, d)
+    out = np.empty((len(cov), 3))
+    run(cov, out)
+    ref = np.linalg.eigh(cov)[1][:, :, 0]
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", out, ref)), 1.0, atol=1e-12)
+    special = np.array([np.zeros((3, 3)), np.outer([1.0, 2, 3], [1.0, 2, 3]), np.diag([2.0, 1, 1]), np.eye(3),
+                        np.diag([1.0, 1, 3])])
+    out = np.empty((len(special), 3))
+    run(special, out)
+    np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0, atol=1e-14)
+    lam = np.linalg.eigvalsh(special)[:, 0]
+    resid = np.einsum("nij,nj->ni", special, out) - lam[:, None] * out     # an eigenvector of the smallest eigenvalue
+    np.testing.assert_allclose(resid, 0.0, atol=1e-12)
+    np.testing.assert_allclose(out[0], [0.0, 0.0, 1.0])
+
+
+def test_skinned_cloud_skips_only_the_validation(torn_strip):
+    from unmesh.surfels import SurfelCloud
+
+    out = torn_strip.surface.deform(torn_strip.x, torn_strip._last.normals)
+    checked = SurfelCloud(out.positions, out.normals, radii=out.radii, colors=out.colors, attributes=out.attributes)
+    for name in ("positions", "normals", "radii", "colors"):
+        np.testing.assert_allclose(getattr(out, name), getattr(checked, name), rtol=0, atol=1e-15, err_msg=name)
+    assert out.axes is None and checked.axes is None
+    np.testing.assert_array_equal(out.attributes["discontinuity"], checked.attributes["discontinuity"])
+    assert out.attributes["discontinuity"].sum() == 2 * len(torn_strip.cracks)

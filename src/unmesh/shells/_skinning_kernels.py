@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
+from unmesh.shells._fiber_kernels import FASTMATH, atan2
 from unmesh.surfels._kernels import smallest_eigenvector
 
 #: Doubles stored per frame: local coordinates of the offset p - x_0 and of the two tangent axes.
@@ -132,18 +134,178 @@ def local_coordinates(rest, bind, weights, plane, points, axes, out):
                 out[s, i, 3 * v + 2] = (d0 * e30 + d1 * e31 + d2 * e32) / q3 if q3 > 0.0 else 0.0
 
 
-@njit(cache=True, parallel=True, fastmath={"nsz", "arcp", "contract", "reassoc"})
-def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, out_points, out_normals, out_radii):
-    """Skin S points and their tangent axes from rest to current node positions (7.26-7.30).
+#: Surfels per block of the vectorised :func:`deform` (one row of its scratch).
+SBLK = 64
+#: Scratch rows: node count (0), sum of node normals (1-3), covariance (4-9), plane normal (10-12).
+SROWS = 13
+_CNT, _NSUM, _COV, _M = 0, 1, 4, 10
 
-    bind (S, K+1): x_0 first, then frame nodes (-1 = unused); weights (S, K) of the frames
-    (7.30); coords (S, K, 9) from :func:`local_coordinates`. Writes positions, unit normals
-    (``orient`` times the normalised cross product of the deformed axes) and radii (the
-    longer deformed axis). Points without any weighted frame are translated with x_0.
+#: Taylor coefficients (-1)^k / (2k)! of cos, k = 0 .. 9 (exact to round-off on [0, pi/3]).
+_COS = (1.0, -0.5, 1.0 / 24, -1.0 / 720, 1.0 / 40320, -1.0 / 3628800, 1.0 / 479001600, -1.0 / 87178291200,
+        1.0 / 20922789888000, -1.0 / 6402373705728000)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
+def _cos_small(y):
+    """cos(y) for |y| <= pi/3 (Taylor polynomial to y^18)."""
+    c0, c1, c2, c3, c4, c5, c6, c7, c8, c9 = _COS
+    z = y * y
+    return c0 + z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * (c6 + z * (c7 + z * (c8 + z * c9))))))))
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
+def smallest_eigenvector_sel(a00, a01, a02, a11, a12, a22):
+    """:func:`unmesh.surfels._kernels.smallest_eigenvector` with selects instead of branches (vectorisable).
+
+    Same method (trigonometric roots of the characteristic cubic, then the largest cross
+    product of two rows of ``A - l I``); atan2 and cos are polynomial (within round-off).
     """
-    for s in prange(bind.shape[0]):
+    s = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
+    inv_s0 = 1.0 / s
+    inv_s = inv_s0 if s > 0.0 else 0.0
+    a00 *= inv_s
+    a01 *= inv_s
+    a02 *= inv_s
+    a11 *= inv_s
+    a12 *= inv_s
+    a22 *= inv_s
+    m = (a00 + a11 + a22) * (1.0 / 3.0)
+    k00 = a00 - m
+    k11 = a11 - m
+    k22 = a22 - m
+    p = (k00 * k00 + k11 * k11 + k22 * k22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) * (1.0 / 6.0)
+    q = 0.5 * (k00 * (k11 * k22 - a12 * a12) - a01 * (a01 * k22 - a12 * a02) + a02 * (a01 * a12 - k11 * a02))
+    sp = math.sqrt(max(p, 0.0))
+    phi = atan2(math.sqrt(max(p * p * p - q * q, 0.0)), q) * (1.0 / 3.0)
+    lam = m - 2.0 * sp * _cos_small(math.pi / 3.0 - phi)          # cos(phi + 2 pi/3) = -cos(pi/3 - phi)
+    r0x, r0y, r0z = a00 - lam, a01, a02
+    r1x, r1y, r1z = a01, a11 - lam, a12
+    r2x, r2y, r2z = a02, a12, a22 - lam
+    c0x = r0y * r1z - r0z * r1y
+    c0y = r0z * r1x - r0x * r1z
+    c0z = r0x * r1y - r0y * r1x
+    c1x = r0y * r2z - r0z * r2y
+    c1y = r0z * r2x - r0x * r2z
+    c1z = r0x * r2y - r0y * r2x
+    c2x = r1y * r2z - r1z * r2y
+    c2y = r1z * r2x - r1x * r2z
+    c2z = r1x * r2y - r1y * r2x
+    n0 = c0x * c0x + c0y * c0y + c0z * c0z
+    n1 = c1x * c1x + c1y * c1y + c1z * c1z
+    n2 = c2x * c2x + c2y * c2y + c2z * c2z
+    l0 = r0x * r0x + r0y * r0y + r0z * r0z
+    l1 = r1x * r1x + r1y * r1y + r1z * r1z
+    l2 = r2x * r2x + r2y * r2y + r2z * r2z
+    lmax = max(l0, l1, l2)
+    tiny = 1e-12 * lmax * lmax + 1e-300
+    pick0 = n0 >= n1 and n0 >= n2 and n0 > tiny
+    pick1 = not pick0 and n1 >= n2 and n1 > tiny
+    pick2 = not pick0 and not pick1 and n2 > tiny
+    # rank <= 1: a vector orthogonal to the largest row of A - l I
+    big0 = l0 >= l1 and l0 >= l2
+    big1 = not big0 and l1 >= l2
+    bx = r0x if big0 else (r1x if big1 else r2x)
+    by = r0y if big0 else (r1y if big1 else r2y)
+    bz = r0z if big0 else (r1z if big1 else r2z)
+    bl = l0 if big0 else (l1 if big1 else l2)
+    ax = abs(bx)
+    ay = abs(by)
+    az = abs(bz)
+    ox = ax <= ay and ax <= az
+    oy = not ox and ay <= az
+    wx = 0.0 if ox else (bz if oy else -by)
+    wy = -bz if ox else (0.0 if oy else bx)
+    wz = by if ox else (-bx if oy else 0.0)
+    flat = not (pick0 or pick1 or pick2)
+    vx = c0x if pick0 else (c1x if pick1 else (c2x if pick2 else wx))
+    vy = c0y if pick0 else (c1y if pick1 else (c2y if pick2 else wy))
+    vz = c0z if pick0 else (c1z if pick1 else (c2z if pick2 else wz))
+    none = s == 0.0 or (flat and bl <= 1e-30)
+    vx = 0.0 if none else vx
+    vy = 0.0 if none else vy
+    vz = 1.0 if none else vz
+    inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
+    return vx * inv, vy * inv, vz * inv
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
+def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes, orient, rest, blk, out_points,
+                  out_normals, out_radii):
+    """:func:`deform` of the surfels ``s0 .. s0 + nb`` (nb <= SBLK): node sums per surfel, the plane
+    normals of the whole block (vectorised), then frames and blending per surfel."""
+    B = SBLK
+    kk = bind.shape[1]
+    for t in range(nb):                               # mean, covariance and normal sum of the bound nodes
+        s = s0 + t
+        cnt = 0.0
+        mx = 0.0
+        my = 0.0
+        mz = 0.0
+        ox = 0.0
+        oy = 0.0
+        oz = 0.0
+        for a in range(kk):
+            j = bind[s, a]
+            if j >= 0:
+                cnt += 1.0
+                mx += cur[j, 0]
+                my += cur[j, 1]
+                mz += cur[j, 2]
+                ox += cur_normals[j, 0]
+                oy += cur_normals[j, 1]
+                oz += cur_normals[j, 2]
+        inv = 1.0 / max(cnt, 1.0)
+        mx *= inv
+        my *= inv
+        mz *= inv
+        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+        for a in range(kk):
+            j = bind[s, a]
+            if j >= 0:
+                dx = cur[j, 0] - mx
+                dy = cur[j, 1] - my
+                dz = cur[j, 2] - mz
+                c00 += dx * dx
+                c01 += dx * dy
+                c02 += dx * dz
+                c11 += dy * dy
+                c12 += dy * dz
+                c22 += dz * dz
+        blk[_CNT * B + t] = cnt
+        blk[(_NSUM + 0) * B + t] = ox
+        blk[(_NSUM + 1) * B + t] = oy
+        blk[(_NSUM + 2) * B + t] = oz
+        blk[(_COV + 0) * B + t] = c00
+        blk[(_COV + 1) * B + t] = c01
+        blk[(_COV + 2) * B + t] = c02
+        blk[(_COV + 3) * B + t] = c11
+        blk[(_COV + 4) * B + t] = c12
+        blk[(_COV + 5) * B + t] = c22
+    for t in range(nb):                               # the least-squares plane normals (7.26)
+        vx, vy, vz = smallest_eigenvector_sel(blk[(_COV + 0) * B + t], blk[(_COV + 1) * B + t],
+                                              blk[(_COV + 2) * B + t], blk[(_COV + 3) * B + t],
+                                              blk[(_COV + 4) * B + t], blk[(_COV + 5) * B + t])
+        ox = blk[(_NSUM + 0) * B + t]
+        oy = blk[(_NSUM + 1) * B + t]
+        oz = blk[(_NSUM + 2) * B + t]
+        flip = vx * ox + vy * oy + vz * oz < 0.0
+        vx = -vx if flip else vx
+        vy = -vy if flip else vy
+        vz = -vz if flip else vz
+        # fewer than 3 nodes: the normalised sum of their normals
+        few = blk[_CNT * B + t] < 3.0
+        on = math.sqrt(ox * ox + oy * oy + oz * oz)
+        ion0 = 1.0 / on
+        ion = ion0 if on > 0.0 else 0.0
+        blk[(_M + 0) * B + t] = (ox * ion if on > 0.0 else 0.0) if few else vx
+        blk[(_M + 1) * B + t] = (oy * ion if on > 0.0 else 0.0) if few else vy
+        blk[(_M + 2) * B + t] = (oz * ion if on > 0.0 else 1.0) if few else vz
+    for t in range(nb):                               # frames (7.26) and blending (7.28, 7.29)
+        s = s0 + t
         o = bind[s, 0]
-        m0, m1, m2 = plane_normal(cur, cur_normals, bind[s])
+        m0 = blk[(_M + 0) * B + t]
+        m1 = blk[(_M + 1) * B + t]
+        m2 = blk[(_M + 2) * B + t]
         xo0 = cur[o, 0]
         xo1 = cur[o, 1]
         xo2 = cur[o, 2]
@@ -161,33 +323,31 @@ def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, 
             e0 = cur[j, 0] - xo0
             e1 = cur[j, 1] - xo1
             e2 = cur[j, 2] - xo2
-            l2 = e0 * e0 + e1 * e1 + e2 * e2
-            if l2 == 0.0:
-                l2 = 1e-300
+            l20 = e0 * e0 + e1 * e1 + e2 * e2
+            l2 = l20 if l20 > 0.0 else 1e-300
             inv_l = 1.0 / math.sqrt(l2)
-            ne = (m0 * e0 + m1 * e1 + m2 * e2) / l2
+            ne = (m0 * e0 + m1 * e1 + m2 * e2) * (inv_l * inv_l)
             c0 = (m1 * e2 - m2 * e1) * inv_l
             c1 = (m2 * e0 - m0 * e2) * inv_l
             c2 = (m0 * e1 - m1 * e0) * inv_l
-            y = coords[s, i]
-            u = w * (y[0] + y[2] * ne)
-            t = w * y[1]
-            p0 += u * e0 + t * c0
-            p1 += u * e1 + t * c1
-            p2 += u * e2 + t * c2
-            y3p += w * y[2]
-            u = w * (y[3] + y[5] * ne)
-            t = w * y[4]
-            a00 += u * e0 + t * c0
-            a01 += u * e1 + t * c1
-            a02 += u * e2 + t * c2
-            y3a += w * y[5]
-            u = w * (y[6] + y[8] * ne)
-            t = w * y[7]
-            a10 += u * e0 + t * c0
-            a11 += u * e1 + t * c1
-            a12 += u * e2 + t * c2
-            y3b += w * y[8]
+            u = w * (coords[s, i, 0] + coords[s, i, 2] * ne)
+            v = w * coords[s, i, 1]
+            p0 += u * e0 + v * c0
+            p1 += u * e1 + v * c1
+            p2 += u * e2 + v * c2
+            y3p += w * coords[s, i, 2]
+            u = w * (coords[s, i, 3] + coords[s, i, 5] * ne)
+            v = w * coords[s, i, 4]
+            a00 += u * e0 + v * c0
+            a01 += u * e1 + v * c1
+            a02 += u * e2 + v * c2
+            y3a += w * coords[s, i, 5]
+            u = w * (coords[s, i, 6] + coords[s, i, 8] * ne)
+            v = w * coords[s, i, 7]
+            a10 += u * e0 + v * c0
+            a11 += u * e1 + v * c1
+            a12 += u * e2 + v * c2
+            y3b += w * coords[s, i, 8]
             wsum += w
         if wsum > 0.0:
             inv = 1.0 / wsum
@@ -200,7 +360,7 @@ def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, 
             a10 = (a10 - y3b * m0) * inv
             a11 = (a11 - y3b * m1) * inv
             a12 = (a12 - y3b * m2) * inv
-        else:
+        else:                                         # no weighted frame: translated with x_0
             p0 = points[s, 0] - rest[o, 0]
             p1 = points[s, 1] - rest[o, 1]
             p2 = points[s, 2] - rest[o, 2]
@@ -211,16 +371,44 @@ def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, 
         out_points[s, 2] = xo2 + p2
         r0 = a00 * a00 + a01 * a01 + a02 * a02
         r1 = a10 * a10 + a11 * a11 + a12 * a12
-        out_radii[s] = math.sqrt(max(r0, r1))
+        rad = math.sqrt(max(r0, r1))
+        out_radii[s] = rad if rad > 0.0 else 1e-9
         c0 = a01 * a12 - a02 * a11
         c1 = a02 * a10 - a00 * a12
         c2 = a00 * a11 - a01 * a10
         cn = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
         if cn > 0.0:
-            out_normals[s, 0] = orient[s] * c0 / cn
-            out_normals[s, 1] = orient[s] * c1 / cn
-            out_normals[s, 2] = orient[s] * c2 / cn
-        else:
+            f = orient[s] / cn
+            out_normals[s, 0] = c0 * f
+            out_normals[s, 1] = c1 * f
+            out_normals[s, 2] = c2 * f
+        elif abs(m0) + abs(m1) + abs(m2) > 0.0:
             out_normals[s, 0] = m0
             out_normals[s, 1] = m1
             out_normals[s, 2] = m2
+        else:
+            out_normals[s, 0] = 0.0
+            out_normals[s, 1] = 0.0
+            out_normals[s, 2] = 1.0
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
+def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, out_points, out_normals, out_radii):
+    """Skin S points and their tangent axes from rest to current node positions (7.26-7.30).
+
+    bind (S, K+1): x_0 first, then frame nodes (-1 = unused); weights (S, K) of the frames
+    (7.30); coords (S, K, 9) from :func:`local_coordinates`. Writes positions, unit normals
+    (``orient`` times the normalised cross product of the deformed axes; the plane normal
+    where that vanishes, (0, 0, 1) where both do) and radii (the longer deformed axis,
+    1e-9 where zero). Points without any weighted frame are translated with x_0. The
+    surfels are done in blocks of :data:`SBLK` with the loops over the bound nodes outside
+    the loops over the surfels (vectorised); the plane normal is that of :func:`plane_normal`.
+    """
+    n = bind.shape[0]
+    nblocks = (n + SBLK - 1) // SBLK
+    for c in prange((nblocks + 7) // 8):
+        blk = np.empty(SROWS * SBLK)
+        for bb in range(8 * c, min(8 * c + 8, nblocks)):
+            s0 = bb * SBLK
+            _deform_block(s0, min(SBLK, n - s0), cur, cur_normals, bind, weights, coords, points, axes, orient, rest,
+                          blk, out_points, out_normals, out_radii)
