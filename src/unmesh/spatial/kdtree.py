@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 from unmesh._validate import as_points, positive_scalar
 from unmesh.errors import InputError
 from unmesh.spatial import _kernels as K
-from unmesh.spatial._threads import serial_if_small
+from unmesh.spatial._threads import SERIAL_BELOW, serial_if_small
 
 __all__ = ["KDTree"]
 
@@ -130,7 +130,9 @@ class KDTree:
         return dist, idx
 
     def _query(self, q: np.ndarray, kk: int) -> tuple[np.ndarray, np.ndarray]:
-        d, i = self._tree.query(q, k=kk, workers=-1)
+        # SciPy starts its worker threads on every call: for small queries that costs more than the search
+        workers = -1 if len(q) * kk >= SERIAL_BELOW else 1
+        d, i = self._tree.query(q, k=kk, workers=workers)
         return d.reshape(len(q), kk), np.ascontiguousarray(i.reshape(len(q), kk), dtype=np.int64)
 
     def _finish(self, q: np.ndarray, cand: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
