@@ -389,3 +389,52 @@ def test_sub_blocks_equals_scipy_submatrix(rng):
     t = np.flatnonzero(rng.random(n) < 0.3)
     d = (3 * t[:, None] + np.arange(3)).ravel()
     np.testing.assert_array_equal(_sub_blocks(p.indptr, p.indices, B, t).toarray(), A[d][:, d].toarray())
+
+
+def _filtered_blocks_reference(indptr, indices, blocks, kind, normal):
+    n = len(indptr) - 1
+    P = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    P[kind == 1] = 0.0
+    P[kind == 2] -= np.outer(normal, normal)
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    out = P[rows] @ blocks.reshape(-1, 3, 3) @ P[indices]
+    d = rows == indices
+    out[d] += np.eye(3) - P[rows[d]]
+    return out.reshape(-1, 9)
+
+
+def test_filter_blocks_kernel_matches_the_projected_matrix(rng):
+    sim = Dynamics(voronoi_foam(10, seed=4), 50.0, 0.3, 1.0)
+    p, n = sim.pattern, sim.mesh.n_nodes
+    K = FK.scatter_blocks(p.block_map, sim.kstiff.data.reshape(-1, 9), len(p.indices))
+    A = SK.add_diagonal(K, p.diag, 1e-3, sim.masses, 1.0)
+    kind = rng.integers(0, 3, n).astype(np.int64)
+    normal = np.array([0.3, 0.9, -0.1]) / np.linalg.norm([0.3, 0.9, -0.1])
+    got = SK.filter_blocks(p.indptr, p.indices, A, kind, normal)
+    np.testing.assert_allclose(got, _filtered_blocks_reference(p.indptr, p.indices, A, kind, normal), atol=1e-12)
+
+
+@pytest.mark.parametrize("metis", [True, False])
+def test_lagged_lu_with_factorised_constraints_is_exact_for_them(rng, monkeypatch, metis):
+    """Nested-dissection (or SuperLU's own) order, constraints factorised: the unrotated
+    preconditioner is the exact inverse of the filtered matrix, so PCG takes one iteration."""
+    import unmesh.fem.solvers as SV
+    from unmesh.fem.solvers import LaggedLU, grow, pcg
+
+    if not metis:
+        monkeypatch.setattr(SV, "nested_dissection", lambda indptr, indices: None)
+    sim = Dynamics(voronoi_foam(12, seed=5), 50.0, 0.3, 1.0)
+    p, n = sim.pattern, sim.mesh.n_nodes
+    K = FK.scatter_blocks(p.block_map, sim.kstiff.data.reshape(-1, 9), len(p.indices))
+    A = SK.add_diagonal(K, p.diag, 1e-3, sim.masses, 1.0)
+    kind = np.where(rng.random(n) < 0.1, 1, np.where(rng.random(n) < 0.2, 2, 0)).astype(np.int64)
+    normal = np.array([0.0, 1.0, 0.0])
+    lag = LaggedLU()
+    lag.factor(p.indptr, p.indices, A, (1.0, 1e-3), kind=kind, normal=normal)
+    assert (lag.perm is not None) == (metis and SV.nested_dissection(p.indptr, p.indices) is not None)
+    b = rng.normal(size=(n, 3))
+    Q = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    _, its, res = pcg(p.indptr, p.indices, A, b, np.zeros((n, 3)), kind, normal,
+                      lag.preconditioner(Q, p.indptr, p.indices, A, kind, normal), 1e-10, 50)
+    assert its <= 2 and res < 1e-10
+    assert grow(p.indptr, p.indices, kind != 0, 1).sum() > (kind != 0).sum()

@@ -200,3 +200,15 @@ def test_surface_is_closed_and_outward():
     s = m.surface()
     assert len(s.boundary_edges()) == 0
     assert s.volume() == pytest.approx(1.0, abs=1e-9)
+
+
+def test_element_node_kernel_matches_the_numpy_reference():
+    from unmesh.fem.cutting import PlaneCut, apply_cuts
+
+    for mesh in (voronoi_foam(12, seed=3), hex_grid((3, 2, 2))):
+        cut = apply_cuts(mesh, [PlaneCut((0.41, 0.5, 0.5), (1.0, 0.2, 0.1))]).mesh
+        for m in (mesh, cut):
+            off, nodes = K.element_node_sets(m.elem_offsets, m.elem_faces, m.face_offsets, m.face_nodes, m.n_nodes)
+            ref_off, ref_nodes = m._elem_nodes_reference()
+            np.testing.assert_array_equal(off, ref_off)
+            np.testing.assert_array_equal(nodes, ref_nodes)

@@ -155,3 +155,46 @@ def gather_rows(offsets, data, idx, new_offsets, out):
         for r in range(offsets[idx[i] + 1] - a):
             for c in range(data.shape[1]):
                 out[o + r, c] = data[a + r, c]
+
+
+@njit(cache=True)
+def element_node_sets(elem_offsets, elem_faces, face_offsets, face_nodes, n_nodes):
+    """CSR ``(offsets, nodes)`` of each element's distinct nodes, ascending.
+
+    One marker array, no global sort (the mesh is rebuilt after every cut). The numpy
+    reference is :meth:`unmesh.fem.mesh.PolyMesh.element_nodes` with a global unique.
+    """
+    ne = elem_offsets.shape[0] - 1
+    mark = np.full(n_nodes, -1, np.int64)
+    offsets = np.zeros(ne + 1, np.int64)
+    for e in range(ne):
+        c = 0
+        for k in range(elem_offsets[e], elem_offsets[e + 1]):
+            f = elem_faces[k]
+            for q in range(face_offsets[f], face_offsets[f + 1]):
+                v = face_nodes[q]
+                if mark[v] != e:
+                    mark[v] = e
+                    c += 1
+        offsets[e + 1] = offsets[e] + c
+    nodes = np.empty(offsets[ne], np.int64)
+    mark[:] = -1
+    for e in range(ne):
+        p = offsets[e]
+        for k in range(elem_offsets[e], elem_offsets[e + 1]):
+            f = elem_faces[k]
+            for q in range(face_offsets[f], face_offsets[f + 1]):
+                v = face_nodes[q]
+                if mark[v] != e:
+                    mark[v] = e
+                    nodes[p] = v
+                    p += 1
+        # insertion sort (a few nodes per element)
+        for i in range(offsets[e] + 1, p):
+            x = nodes[i]
+            j = i - 1
+            while j >= offsets[e] and nodes[j] > x:
+                nodes[j + 1] = nodes[j]
+                j -= 1
+            nodes[j + 1] = x
+    return offsets, nodes

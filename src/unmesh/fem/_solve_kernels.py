@@ -168,3 +168,44 @@ def cg_direction(z, d, beta):
     for i in range(d.shape[0]):
         for k in range(3):
             d[i, k] = z[i, k] + beta * d[i, k]
+
+
+@njit(cache=True)
+def filter_blocks(indptr, indices, blocks, kind, normal):
+    """Blocks (nnz, 9) of ``S A S + (I - S)``: the matrix with the constraints of ``kind`` eliminated.
+
+    ``S_i`` is 0 (kind 1), ``I - n nᵀ`` (kind 2) or I (kind 0); the numpy reference is in the tests.
+    """
+    n = indptr.shape[0] - 1
+    P = np.zeros((n, 3, 3))
+    for i in range(n):
+        for a in range(3):
+            for b in range(3):
+                if kind[i] == 0:
+                    P[i, a, b] = 1.0 if a == b else 0.0
+                elif kind[i] == 2:
+                    P[i, a, b] = (1.0 if a == b else 0.0) - normal[a] * normal[b]
+    out = np.empty_like(blocks)
+    for i in range(n):
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            if kind[i] == 0 and kind[j] == 0:
+                for q in range(9):
+                    out[k, q] = blocks[k, q]
+                continue
+            T = np.zeros((3, 3))
+            for a in range(3):
+                for b in range(3):
+                    s = 0.0
+                    for c in range(3):
+                        s += blocks[k, 3 * a + c] * P[j, c, b]
+                    T[a, b] = s
+            for a in range(3):
+                for b in range(3):
+                    s = 0.0
+                    for c in range(3):
+                        s += P[i, a, c] * T[c, b]
+                    if i == j:
+                        s += (1.0 if a == b else 0.0) - P[i, a, b]
+                    out[k, 3 * a + b] = s
+    return out

@@ -705,14 +705,25 @@ class Cutter:
             loop = _open_loop(neg)
         except InputError:
             return -1.0, -1.0
-        o = point(loop[0])
+        ox, oy, oz = point(loop[0]).tolist()
+        flat: dict[Any, tuple[float, float, float]] = {}
 
         def volume(polys: list[list[Any]]) -> float:
+            # scalar arithmetic: np.cross on 3-vectors cost most of the cut (issue 5)
             v = 0.0
             for poly in polys:
-                q = [point(k) - o for k in poly]
+                q = []
+                for k in poly:
+                    t = flat.get(k)
+                    if t is None:
+                        x, y, z = point(k).tolist()
+                        t = flat[k] = (x - ox, y - oy, z - oz)
+                    q.append(t)
+                ax, ay, az = q[0]
                 for i in range(1, len(q) - 1):
-                    v += float(np.dot(q[0], np.cross(q[i], q[i + 1])))
+                    bx, by, bz = q[i]
+                    cx, cy, cz = q[i + 1]
+                    v += ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
             return v / 6.0
 
         cap = [loop[0], *loop[:0:-1]]

@@ -347,12 +347,17 @@ class Dynamics:
         fixed, vfix = self._prescribed(self.time)
         normal = self.ground.unit_normal() if self.ground is not None else np.array([0.0, 1.0, 0.0])
         active = self.contact & ~fixed if self.ground is not None else np.zeros(n, bool)
-        pinv = SK.block_jacobi(A, self.pattern.diag) if self.solver in ("cg", "auto") else None
-        prec = None
         mode = self.solver
         if mode == "auto":
             mode = "lu-pcg" if self._stiff else "cg"
-        prec = self._lu_preconditioner(R, cm, ck, info, A) if mode == "lu-pcg" else None
+        pinv = SK.block_jacobi(A, self.pattern.diag) if mode == "cg" else None
+        # constraints for a factorisation made in this step: the active set and the nodes a free fall
+        # would take below the ground (so a body that starts on the ground is factorised in contact)
+        fall = active.copy()
+        if self.ground is not None:
+            fall |= ~fixed & self._used & ((x + dt * (self.v + dt * self.gravity)) @ normal < self.ground.height)
+        kind0 = np.where(fixed, 1, np.where(fall, 2, 0)).astype(np.int64)
+        prec = self._lu_preconditioner(R, cm, ck, info, A, kind0, normal) if mode == "lu-pcg" else None
         vnew = self.v
         worst = 0
         # contact active-set rounds are solved to CONTACT_TOL; once the set is stable (or after
@@ -379,7 +384,7 @@ class Dynamics:
                     info.iterations += int(its)
                     self._stiff = True
                     mode = "lu-pcg"
-                    prec = self._lu_preconditioner(R, cm, ck, info, A)
+                    prec = self._lu_preconditioner(R, cm, ck, info, A, kind, normal)
             if mode == "lu-pcg":
                 vnew, its, res = pcg(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec(kind, normal),
                                      tol, min(self.cg_maxiter, LAGGED_ITERATIONS))
@@ -387,7 +392,7 @@ class Dynamics:
                     # the lagged preconditioner went bad: refactorise now and continue from there
                     info.iterations += int(its)
                     self.lagged.invalidate()
-                    prec = self._lu_preconditioner(R, cm, ck, info, A)
+                    prec = self._lu_preconditioner(R, cm, ck, info, A, kind, normal)
                     vnew, its, res = pcg(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal,
                                          prec(kind, normal), tol, self.cg_maxiter)
             elif mode == "direct":
@@ -426,20 +431,31 @@ class Dynamics:
         self.last = info
         return info
 
-    def _lu_preconditioner(self, R: np.ndarray, cm: float, ck: float, info: StepInfo, A: np.ndarray) -> Any:
+    def _lu_preconditioner(self, R: np.ndarray, cm: float, ck: float, info: StepInfo, A: np.ndarray, kind0: np.ndarray,
+                           normal: np.ndarray) -> Any:
         coeffs = (cm, ck)
         if self.lagged.needs_factor(coeffs, self.n_solid_pieces):
             if self._K0 is None:
                 self._K0 = FK.scatter_blocks(self.pattern.block_map, self.kstiff.data.reshape(-1, 9),
                                              len(self.pattern.indices))
             A0 = SK.add_diagonal(self._K0, self.pattern.diag, ck, self.masses, cm)
-            self.lagged.factor(self.pattern.indptr, self.pattern.indices, A0, coeffs, self.n_solid_pieces)
+            # the constraints of the step's first contact round are factorised (module docstring of solvers)
+            self.lagged.factor(self.pattern.indptr, self.pattern.indices, A0, coeffs, self.n_solid_pieces, kind0, normal)
             info.extra["factorized"] = True
         # one rotation per connected piece (not per node: a rotation varying from node to node
         # does not keep the translations in the near-null space, measured 3x the iterations)
         Q = piece_rotations(self.mesh.points, self.positions(), self.masses, self.piece, self.n_pieces)[self.piece]
         pat = self.pattern
-        return lambda kind, normal: self.lagged.preconditioner(Q, pat.indptr, pat.indices, A, kind, normal)
+        made: dict[bytes, Any] = {}
+
+        def prec(kind: np.ndarray, normal: np.ndarray) -> Any:
+            # the contact rounds of a step often repeat an active set: reuse its local factorisation
+            key = kind.tobytes()
+            if key not in made:
+                made[key] = self.lagged.preconditioner(Q, pat.indptr, pat.indices, A, kind, normal)
+            return made[key]
+
+        return prec
 
     # -- topology changes -------------------------------------------------------------------
     def change_topology(self, mesh: PolyMesh, node_weights: sp.sparray, element_parent: np.ndarray,

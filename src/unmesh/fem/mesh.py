@@ -189,6 +189,13 @@ class PolyMesh:
     # -- derived topology ------------------------------------------------------------------
     @cached_property
     def _elem_nodes(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.n_elements:
+            return K.element_node_sets(self.elem_offsets, self.elem_faces, self.face_offsets, self.face_nodes,
+                                       self.n_nodes)
+        return self._elem_nodes_reference()
+
+    def _elem_nodes_reference(self) -> tuple[np.ndarray, np.ndarray]:
+        """Numpy reference of :meth:`element_nodes` (one global unique)."""
         eid = _segment_ids(self.elem_offsets)
         lens = _csr_lengths(self.face_offsets)[self.elem_faces]
         rows = np.repeat(eid, lens)

@@ -9,8 +9,12 @@ and per-node constraints (fixed, or normal-constrained ground contact):
   system is too stiff for it and the dynamics switch to ``"lu-pcg"`` for good.
 - ``"lu-pcg"``: filtered PCG warm-started from the last velocity,
   preconditioned by a *lagged, warped* sparse LU factorisation: the unwarped
-  matrix ``A₀ = c_m M + c_k K`` is factorised (SuperLU, minimum-degree ordering of
-  A+Aᵀ) and reused for later steps as ``Q A₀⁻¹ Qᵀ`` with Q the best-fit rotation of
+  matrix ``A₀ = c_m M + c_k K``, with the constraints of the step it is made in
+  eliminated (``S A₀ S + I - S``, S the constraint projection; ground contact
+  included, see below), is factorised (SuperLU in METIS nested-dissection order of the
+  node graph, :func:`nested_dissection`, 3×3 blocks kept together; SuperLU's own
+  minimum-degree order of A+Aᵀ when ``pymetis`` is missing) and reused for later steps
+  as ``Q A₀⁻¹ Qᵀ`` with Q the best-fit rotation of
   each connected piece (:func:`unmesh.fem.rotations.piece_rotations`), so rigidly
   rotated pieces are preconditioned exactly. One rotation per piece, not per node:
   a node-to-node varying rotation maps the translations of the current configuration
@@ -21,11 +25,13 @@ and per-node constraints (fixed, or normal-constrained ground contact):
   would still couple the pieces, which then rotate independently), or when a solve needed
   more than ``refactor_iterations`` iterations.
   A cut does not refactorise: the old factorisation is kept and mapped to the new
-  nodes through the cut's node weights W (new state = W old state), and the nodes
+  nodes through the cut's node weights W (new state = W old state), and a *local set*
+  gets an exact solve of its block ``A_tt`` of the current (filtered) matrix: the nodes
   the cut touched (new nodes, duplicated nodes, nodes of re-integrated elements,
-  accumulated over the cuts since the last factorisation) get an exact local
-  solve of their block ``A_tt`` of the current matrix. The two are combined as a
-  symmetric multiplicative Schwarz preconditioner,
+  accumulated over the cuts since the last factorisation) plus ``TOUCHED_RINGS`` (1)
+  layers of neighbours, the constrained nodes plus ``CONSTRAINED_RINGS`` (1) layers, and
+  the nodes whose constraint differs from the factorised one plus ``LOCAL_RINGS`` (3)
+  layers. The two are combined as a symmetric multiplicative Schwarz preconditioner,
   ``z₁ = A_tt⁻¹ r_t``, ``z₂ = z₁ + Q W A₀⁻¹ Wᵀ Qᵀ (r - A z₁)``, ``z = z₂ + A_tt⁻¹ (r - A z₂)_t``.
   (Keeping the old factorisation with only block-Jacobi on new nodes was measured
   to need 80-200 iterations instead of about 8-30; the local solve restores that.)
@@ -33,15 +39,36 @@ and per-node constraints (fixed, or normal-constrained ground contact):
   restarted with a fresh one (:data:`unmesh.fem.dynamics.LAGGED_ITERATIONS`).
   It refactorises when the touched part exceeds ``touched_fraction`` (10%) of the
   nodes or a solve needs more than 1.5 ``refactor_iterations``: on the bunny-slicing
-  benchmark the iterations grow from ~20 to ~120 as the touched part reaches 14%.
+  benchmark the iterations grow to 25-35 per solve as the touched part reaches 10-14%
+  (measured with 20%: 1 LU instead of 2 in 12 frames, but 2.6-4.2 s instead of 1.2-2.8 s
+  per cutting frame).
 - ``"direct"``: exact sparse LU of the constrained system in every step.
+
+Measured on the bunny-slicing benchmark (49k DOFs, one thread, loaded machine; systems of
+frames 1 and 10 solved to 10⁻⁶ from the warm start):
+
+- the contact constraints, not the warping, cost most iterations: 11 and 14 iterations
+  with the unconstrained factorisation and the contact nodes alone solved locally, 5 and 7
+  with 3 rings of neighbours in the local set, 2-3 and 5 with the contacts factorised
+  (still 2-3 and 5 with 1/8 of the contacts missing from the factorisation); the exact
+  current matrix needs 1;
+- METIS nested dissection: fill 14.0M (SuperLU's minimum degree: 16.1M), factorisation
+  1.1-1.3 s instead of 2.4-2.8 s; a solve costs 30-40 ms with either;
+- algebraic multigrid (``pyamg`` smoothed aggregation, rigid-body modes as near-null space,
+  on the filtered matrix): setup 1.6-3.7 s per matrix, 100-140 ms per V-cycle (three times
+  an LU solve), 6-165 iterations (137-165 after cuts with the default strength of
+  connection, 7-11 with θ = 0.02); slower than the lagged LU in every configuration tried;
+- incomplete LU (SuperLU ILUTP, drop 10⁻⁵..10⁻⁷): fill 8.2M-14.4M, no convergence in 300
+  iterations until it is nearly the full factor; a scalar (trace) factorisation: factor
+  0.12 s, but 21-59 iterations;
+- CHOLMOD through ``cholespy`` (the only CHOLMOD wheel on PyPI; scikit-sparse has none):
+  factorisation 4.1 s, solve 26 ms; hand-written numba triangular solves on SuperLU's
+  factors (CSC or CSR, double or single precision): no faster than SuperLU's solve.
 
 The rounds of the contact active-set iteration (:mod:`unmesh.fem.dynamics`) are solved
 to a relative residual of 10⁻³ and the final active set is confirmed by a solve to
-``cg_tol``. A sparse Cholesky (CHOLMOD through ``cholespy``, the only CHOLMOD wheel on
-PyPI; scikit-sparse has none) was measured slower than SuperLU here (1.7 s against 1.5 s
-for the 49k-DOF bunny), and ordering by the node graph did not reduce SuperLU's fill,
-so SuperLU stays.
+``cg_tol``; the local factorisation of a round is reused by later rounds with the same
+active set.
 
 Example
 -------
@@ -64,9 +91,57 @@ from unmesh.errors import InputError
 from unmesh.fem import _solve_kernels as SK
 from unmesh.fem.rotations import polar_rotations
 
-__all__ = ["SOLVERS", "LaggedLU", "direct_solve", "pcg"]
+__all__ = ["LOCAL_RINGS", "SOLVERS", "LaggedLU", "direct_solve", "grow", "nested_dissection", "pcg"]
 
 SOLVERS = ("auto", "lu-pcg", "cg", "direct")
+#: Layers of neighbours added, for the local solve, around nodes whose constraint differs from the factorised one.
+LOCAL_RINGS = 3
+#: Layers of neighbours added around the other constrained nodes.
+CONSTRAINED_RINGS = 1
+#: Layers of neighbours added around the nodes touched by cuts.
+TOUCHED_RINGS = 1
+
+
+def nested_dissection(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
+    """METIS nested-dissection order (n,) of the nodes of a block pattern, or None without ``pymetis``.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> perm = nested_dissection(np.array([0, 2, 4]), np.array([0, 1, 0, 1]))
+    >>> perm is None or sorted(perm.tolist()) == [0, 1]
+    True
+    """
+    try:
+        import pymetis
+    except ImportError:
+        return None
+    n = len(indptr) - 1
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    off = indices != rows
+    xadj = np.r_[0, np.cumsum(np.bincount(rows[off], minlength=n))].astype(np.int32)
+    adjncy = indices[off].astype(np.int32)
+    if hasattr(pymetis, "CSRAdjacency"):
+        perm, _ = pymetis.nested_dissection(adjacency=pymetis.CSRAdjacency(xadj, adjncy))
+    else:  # pymetis < 2025
+        perm, _ = pymetis.nested_dissection(xadj=xadj, adjncy=adjncy)
+    return np.asarray(perm, dtype=np.int64)
+
+
+def grow(indptr: np.ndarray, indices: np.ndarray, mask: np.ndarray, rings: int) -> np.ndarray:
+    """``mask`` (n,) bool grown by ``rings`` layers of neighbours in the block pattern.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> grow(np.array([0, 2, 5, 7]), np.array([0, 1, 0, 1, 2, 1, 2]), np.array([True, False, False]), 1).tolist()
+    [True, True, False]
+    """
+    out = np.asarray(mask, bool).copy()
+    rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+    for _ in range(rings):
+        out[indices[out[rows]]] = True
+    return out
 
 
 def pcg(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, b: np.ndarray, x0: np.ndarray, kind: np.ndarray,
@@ -165,8 +240,12 @@ class LaggedLU:
     True
     """
 
-    def __init__(self, refactor_iterations: int = 40, touched_fraction: float = 0.1) -> None:
+    def __init__(self, refactor_iterations: int = 40, touched_fraction: float = 0.1, rings: int = LOCAL_RINGS,
+                 touched_rings: int = TOUCHED_RINGS, constrained_rings: int = CONSTRAINED_RINGS) -> None:
         self.refactor_iterations = int(refactor_iterations)
+        self.rings = int(rings)
+        self.constrained_rings = int(constrained_rings)
+        self.touched_rings = int(touched_rings)
         self.touched_fraction = float(touched_fraction)
         self.lu: Any = None
         self.coeffs: tuple[float, float] | None = None
@@ -176,12 +255,17 @@ class LaggedLU:
         self.touched: np.ndarray | None = None  # (n,) bool, nodes changed by cuts since the factorisation
         self.remaps = 0
         self.pieces: int | None = None  # connected pieces of the mesh at the factorisation
+        self.perm: np.ndarray | None = None  # DOF order of the factorisation (None: SuperLU's own)
+        self.kind: np.ndarray | None = None  # (n,) constraints factorised, on the current nodes
+        self.normal = np.array([0.0, 1.0, 0.0])
+        self.iperm: np.ndarray | None = None
 
     def invalidate(self) -> None:
         """Drop the factorisation (e.g. after a change of material)."""
         self.lu = None
         self.weights = None
         self.touched = None
+        self.kind = None
 
     def needs_factor(self, coeffs: tuple[float, float], pieces: int | None = None) -> bool:
         """Whether to (re)factorise before the next solve.
@@ -218,24 +302,46 @@ class LaggedLU:
         old_touched = self.touched if self.touched is not None else np.zeros(W.shape[1], bool)
         hit = (W @ old_touched.astype(np.float64)) != 0
         self.touched = np.asarray(touched, bool) | hit
+        if self.kind is not None:
+            # constraints of the factorisation on the new nodes (touched ones are solved locally anyway)
+            self.kind = np.where(self.touched, 0, np.rint(W @ self.kind.astype(np.float64))).astype(np.int64)
         self.weights = W if self.weights is None else sp.csr_array(W @ self.weights)
         self.remaps += 1
 
     def factor(self, indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, coeffs: tuple[float, float],
-               pieces: int | None = None) -> None:
-        """Factorise the unwarped matrix A₀ (3×3 blocks) with SuperLU (``pieces``: see :meth:`needs_factor`)."""
+               pieces: int | None = None, kind: np.ndarray | None = None, normal: np.ndarray | None = None) -> None:
+        """Factorise the unwarped matrix A₀ (3×3 blocks) with SuperLU (``pieces``: see :meth:`needs_factor`).
+
+        With ``kind`` (n,) (1 fixed, 2 normal ``normal`` prescribed, 0 free) the filtered
+        matrix ``S A₀ S + (I - S)`` of these constraints is factorised (module docstring).
+        """
         from scipy.sparse.linalg import splu
 
         n = len(indptr) - 1
+        kind0 = np.zeros(n, np.int64) if kind is None else np.ascontiguousarray(kind, dtype=np.int64)
+        nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.ascontiguousarray(normal, dtype=np.float64)
+        if kind0.any():
+            blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind0, nrm)
         # double precision: single precision solves 1.5x faster but, with lumped masses spanning
         # 5 decades (slivers after cuts), stalled PCG on the bunny-slicing benchmark
-        A0 = sp.bsr_array((blocks0.reshape(-1, 3, 3), indices, indptr), shape=(3 * n, 3 * n)).tocsc()
+        A0 = sp.bsr_array((blocks0.reshape(-1, 3, 3), indices, indptr), shape=(3 * n, 3 * n)).tocsr()
+        perm = nested_dissection(indptr, indices)
         try:
-            self.lu = splu(A0, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+            if perm is None:
+                self.lu = splu(A0.tocsc(), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+                self.perm = None
+            else:
+                dof = (3 * perm[:, None] + np.arange(3)).ravel()
+                self.lu = splu(sp.csc_array(A0[dof][:, dof]), permc_spec="NATURAL", options={"SymmetricMode": True})
+                self.perm = dof
+                self.iperm = np.empty_like(dof)
+                self.iperm[dof] = np.arange(len(dof))
         except RuntimeError as exc:
             raise InputError(f"the implicit system is singular ({exc}); check masses and materials") from None
         self.coeffs = coeffs
         self.pieces = pieces
+        self.kind = kind0
+        self.normal = nrm
         self.factorizations += 1
         self.last_iterations = 0
         self.weights = None
@@ -258,6 +364,7 @@ class LaggedLU:
         """
         lu = self.lu
         assert lu is not None
+        perm, iperm = self.perm, self.iperm
         W = self.weights
         WT = sp.csr_array(W.T) if W is not None else None
 
@@ -265,17 +372,29 @@ class LaggedLU:
             rl = np.einsum("nji,nj->ni", node_rot, r)
             if WT is not None:
                 rl = WT @ rl
-            y = lu.solve(rl.ravel()).reshape(-1, 3)
+            if perm is None:
+                y = lu.solve(rl.ravel()).reshape(-1, 3)
+            else:
+                y = lu.solve(rl.ravel()[perm])[iperm].reshape(-1, 3)
             if W is not None:
                 y = W @ y
             return np.einsum("nij,nj->ni", node_rot, y)
 
         local_set = np.zeros(len(node_rot), bool) if self.touched is None else self.touched.copy()
-        if kind is not None:
-            local_set |= kind != 0
-        t_nodes = np.flatnonzero(local_set)
-        if not len(t_nodes) or indptr is None or indices is None or blocks is None:
+        if indptr is None or indices is None or blocks is None:
             return old
+        if kind is not None and np.any(kind != 0):
+            local_set |= grow(indptr, indices, kind != 0, self.constrained_rings)
+        if kind is not None and self.kind is not None and len(self.kind) == len(kind):
+            changed = (kind != self.kind) | ((kind == 2) & (self.normal @ (normal if normal is not None else self.normal)
+                                                            < 1.0 - 1e-12))
+            if changed.any():
+                local_set |= grow(indptr, indices, changed, self.rings)
+        if self.touched is not None and self.touched_rings:
+            local_set |= grow(indptr, indices, self.touched, self.touched_rings)
+        if not local_set.any():
+            return old
+        t_nodes = np.flatnonzero(local_set)
         from scipy.sparse.linalg import splu
 
         n = len(indptr) - 1
