@@ -2,15 +2,20 @@
 
 Measures, at 1 and 2 threads:
 
-* ``unmesh`` WCSPH, fluid only (density pass + force pass + sorting + integration);
-* ``unmesh`` with elasticity enabled (the same block as an elastic solid: lattice
+* ``unmesh`` WCSPH, fluid only (density pass + force pass + sorting + integration), on the
+  setup SPlisHSPlasH runs: a water column of 47 × 87 × 15 particles on a cubic grid of spacing
+  d = 0.01 m (``SPHConfig(lattice="cubic")``, h = 2d: about 30 neighbours), in a 1.4 × 0.9 × 0.18 m
+  tank, ρ0 = 1000 kg/m³, K = 50 000 Pa, Γ = 7, negative pressures clamped, Δt = 1e-4 s;
+* ``unmesh`` WCSPH, fluid only, on the closest packing of the elastic case (the same particles,
+  about 46 neighbours), to show what elasticity itself costs;
+* ``unmesh`` with elasticity: a 0.35 × 0.7 × 0.18 m jelly block on the closest packing (lattice
   assignment, shape matching, goal positions, exact torque correction, gather);
-* SPlisHSPlasH's WCSPH (``pip install pysplishsplash``) on the same setup (a water
-  column in a box, same particle count, Akinci boundary), run in a subprocess with
+* SPlisHSPlasH's WCSPH (``pip install pysplishsplash``) on the same setup (same grid, particle
+  count, tank, ρ0, K, Γ and Δt; Akinci boundary particles), run in a subprocess with
   ``OMP_NUM_THREADS`` and ``LD_PRELOAD=libGLdispatch.so.0`` (its import needs it headless).
 
 Prints one table and the ratios the issue asks for (elastic/fluid, unmesh/SPlisHSPlasH).
-Timings are wall clock of the stepping only (compilation and set-up excluded).
+Timings are wall clock and CPU time of the stepping only (compilation and set-up excluded).
 
 Then validates the shipped 3D dam break (``examples/sph/dam_break.toml``, a = 0.25 m,
 spacing a/20, no-slip tank walls) against Martin & Moyce (1952), n² = 2: the surge front Z = x/a at the
@@ -35,27 +40,53 @@ import textwrap
 import time
 from pathlib import Path
 
-# The water column: width x height x depth (m) and tank, as in the dam-break scene.
+# The elastic block: width x height x depth (m), and the tank (both cases).
 COLUMN = (0.35, 0.7, 0.18)
 TANK = (1.4, 0.9, 0.18)
+#: Target particle count of the fluid column.
+FLUID_PARTICLES = 61000
+#: The fluid of both codes (SPlisHSPlasH's WCSPH parameters): rest density, stiffness, exponent, time step.
+RHO0, STIFFNESS, EXPONENT, DT = 1000.0, 50000.0, 7.0, 1e-4
 
 
-def unmesh_rate(spacing: float, steps: int, threads: int, elastic: bool) -> tuple[int, float, float, float]:
-    """(particles, particle-steps per wall second, per CPU second, mean neighbours) of the unmesh step."""
+def fluid_block(spacing: float) -> tuple[int, int, int]:
+    """Particles (nx, ny, nz) of the cubic-grid water column, about :data:`FLUID_PARTICLES` in all.
+
+    The column fills the tank's depth less a spacing on each side and is twice as high as wide
+    where the tank allows.
+    """
+    nz = int((TANK[2] - 2 * spacing) / spacing - 0.5)
+    cells = FLUID_PARTICLES * (0.01 / spacing) ** 3 / nz
+    ny = min(round(math.sqrt(2 * cells)), int((TANK[1] - 2 * spacing) / spacing - 0.5))
+    return round(cells / ny), ny, nz
+
+
+def unmesh_rate(spacing: float, steps: int, threads: int, case: str) -> tuple[int, float, float, float]:
+    """(particles, particle-steps per wall second, per CPU second, mean neighbours) of the unmesh step.
+
+    ``case``: ``"fluid"`` (cubic grid, the SPlisHSPlasH setup), ``"fluid-ccp"`` (the elastic block's
+    closest packing as a fluid) or ``"elastic"``.
+    """
     import numba
 
     from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation, box_planes
-    from unmesh.sph.sampling import closest_packing
+    from unmesh.sph.sampling import closest_packing, cubic_grid
 
     numba.set_num_threads(threads)
-    x = closest_packing([0, 0, 0], COLUMN, spacing, 3)
-    if elastic:
+    lattice = "closest"
+    if case == "fluid":
+        nx, ny, nz = fluid_block(spacing)
+        x = cubic_grid([0, 0, 0], [nx * spacing, ny * spacing, nz * spacing], spacing, 3)
+        lattice = "cubic"
+    else:
+        x = closest_packing([0, 0, 0], COLUMN, spacing, 3)
+    if case == "elastic":
         mat = Material("jelly", stiffness=2000.0, elastic_stiffness=1e6, xsph=0.1)
         obj = SPHObject("jelly", x, "jelly", phase="solid")
     else:
-        mat = Material("water", stiffness=2000.0)
+        mat = Material("water", density=RHO0, stiffness=STIFFNESS, gamma=EXPONENT, negative_pressure=0.0)
         obj = SPHObject("water", x, "water")
-    cfg = SPHConfig(dim=3, spacing=spacing, dt=1e-4, gravity=(0, -9.81, 0))
+    cfg = SPHConfig(dim=3, spacing=spacing, dt=DT, gravity=(0, -9.81, 0), lattice=lattice)
     sim = SPHSimulation(cfg, {mat.name: mat}, [obj], planes=box_planes([0, 0, 0], TANK, 3, open_top=True))
     for _ in range(3):  # compile and warm up
         sim.step()
@@ -156,33 +187,27 @@ f 2 7 6
 """
 
 
-def splishsplash_rate(spacing: float, steps: int, threads: int, particles: int) -> tuple[int, float, float] | None:
+def splishsplash_rate(spacing: float, steps: int, threads: int) -> tuple[int, float, float] | None:
     """(particles, particle-steps per wall second, per CPU second) of SPlisHSPlasH's WCSPH, or None.
 
-    ``particles`` is the count to match (the unmesh column's).
+    The column of :func:`fluid_block` (SPlisHSPlasH samples fluid blocks on a cubic grid of spacing
+    2r = spacing; a block of extent (n + 1/2)·2r holds n particles along that axis), one spacing
+    from the tank walls.
     """
     import importlib.util
 
     if importlib.util.find_spec("pysplishsplash") is None:
         return None
-    dt = 1e-4
+    dt = DT
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         (d / "UnitBox.obj").write_text(_BOX_OBJ)
-        # SPlisHSPlasH samples fluid blocks on a cubic grid of spacing 2r = spacing (1/d³ particles per
-        # volume, the closest packing of unmesh has √2/d³): the block fills the tank's depth and is sized
-        # in x and y (height twice the width where the tank allows) to hold the same number of particles
-        # (a block of extent (n + 1/2)·2r holds n particles along that axis)
-        nz = int((TANK[2] - 2 * spacing) / spacing - 0.5)
-        cells = particles / nz
-        ny = min(round(math.sqrt(2 * cells)), int((TANK[1] - 2 * spacing) / spacing - 0.5))
-        nx = round(cells / ny)
-        col = [(n + 0.5) * spacing for n in (nx, ny, nz)]
+        col = [(n + 0.5) * spacing for n in fluid_block(spacing)]
         scene = {
             "Configuration": {
-                "particleRadius": spacing / 2, "numberOfStepsPerRenderUpdate": 1, "density0": 1000,
+                "particleRadius": spacing / 2, "numberOfStepsPerRenderUpdate": 1, "density0": RHO0,
                 "simulationMethod": 0, "gravitation": [0, -9.81, 0], "timeStepSize": dt, "cflMethod": 0,
-                "stiffness": 50000, "exponent": 7, "boundaryHandlingMethod": 0, "enableZSort": True,
+                "stiffness": STIFFNESS, "exponent": EXPONENT, "boundaryHandlingMethod": 0, "enableZSort": True,
             },
             "Materials": [{"id": "Fluid", "viscosity": 0.0, "viscosityMethod": 0}],
             "RigidBodies": [{
@@ -214,40 +239,50 @@ def splishsplash_rate(spacing: float, steps: int, threads: int, particles: int) 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=60, help="timed steps per run")
-    parser.add_argument("--spacing", type=float, default=0.01, help="particle spacing (0.01: about 62k particles)")
+    parser.add_argument("--spacing", type=float, default=0.01, help="particle spacing (0.01: about 61k particles)")
     parser.add_argument("--threads", default="1,2", help="comma-separated thread counts")
     parser.add_argument("--no-splishsplash", action="store_true")
     parser.add_argument("--no-validation", action="store_true", help="skip the dam-break surge-front validation")
     parser.add_argument("--validation-resolution", type=int, default=20, help="dam break spacing a/N (default 20)")
     args = parser.parse_args()
     threads = [int(t) for t in args.threads.split(",")]
+    names = {"fluid": "unmesh WCSPH (fluid)", "fluid-ccp": "unmesh WCSPH (fluid, CCP)",
+             "elastic": "unmesh WCSPH + elasticity", "splish": "SPlisHSPlasH WCSPH"}
+    load0 = os.getloadavg()[0]
     rows = []
     for t in threads:
-        fluid = unmesh_rate(args.spacing, args.steps, t, elastic=False)
-        rows.append(("unmesh WCSPH (fluid)", t, *fluid))
-        rows.append(("unmesh WCSPH + elasticity", t, *unmesh_rate(args.spacing, args.steps, t, elastic=True)))
+        for case in ("fluid", "fluid-ccp", "elastic"):
+            rows.append((names[case], t, *unmesh_rate(args.spacing, args.steps, t, case)))
         if not args.no_splishsplash:
-            res = splishsplash_rate(args.spacing, args.steps, t, fluid[0])
+            res = splishsplash_rate(args.spacing, args.steps, t)
             if res is not None:
-                rows.append(("SPlisHSPlasH WCSPH", t, *res, float("nan")))
-    print(f"\n3D dam break, {args.steps} timed steps (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)")
+                rows.append((names["splish"], t, *res, float("nan")))
+    nx, ny, nz = fluid_block(args.spacing)
+    print(f"\n3D dam break, {args.steps} timed steps (load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, "
+          f"on {os.cpu_count()} CPUs)")
+    print(f"fluid: {nx} x {ny} x {nz} particles on a cubic grid of spacing d = {args.spacing} m, h = 2d, in a "
+          f"{TANK[0]} x {TANK[1]} x {TANK[2]} m tank; rho0 = {RHO0:g}, K = {STIFFNESS:g} Pa, exponent {EXPONENT:g}, "
+          f"dt = {DT:g} s, in both codes (unmesh: analytic walls, artificial viscosity 0.05; SPlisHSPlasH: Akinci "
+          "boundary particles, no viscosity)")
+    print(f"fluid, CCP / elasticity: a {COLUMN[0]} x {COLUMN[1]} x {COLUMN[2]} m block on the closest packing of "
+          f"spacing d (K_e = 1e6/s^2 for the jelly)")
     print(f"{'method':32s} {'threads':>7s} {'particles':>9s} {'M particle-steps/s':>19s} {'per CPU-second':>15s} "
           f"{'neighbours':>10s}")
     for name, t, n, r, rc, nb in rows:
         print(f"{name:32s} {t:7d} {n:9d} {r / 1e6:19.3f} {rc / 1e6:15.3f} {nb:10.1f}")
     for t in threads:
         by = {name: r for name, tt, _n, r, _rc, _nb in rows if tt == t}
-        fluid = by.get("unmesh WCSPH (fluid)")
-        el = by.get("unmesh WCSPH + elasticity")
-        sp = by.get("SPlisHSPlasH WCSPH")
-        line = f"{t} thread(s): elastic step costs {fluid / el:.2f}x the fluid step"
+        fluid = by[names["fluid"]]
+        el = by[names["elastic"]]
+        line = (f"{t} thread(s): elastic step costs {fluid / el:.2f}x the fluid step per particle "
+                f"({by[names['fluid-ccp']] / el:.2f}x the fluid step on the same closest packing)")
+        sp = by.get(names["splish"])
         if sp:
             line += f"; unmesh fluid / SPlisHSPlasH = {fluid / sp:.2f}"
         print(line)
     print("goal: >= 1 M particle-steps/s (fluid, 2 cores), elastic within 3x of fluid, faster than SPlisHSPlasH "
           "at equal threads")
-    print("(neighbours: unmesh's mean count within h = 2d of its closest packing, as measured; SPlisHSPlasH samples a "
-          "cubic grid with support 2 spacings, about 30 neighbours)")
+    print("(neighbours: unmesh's mean count within h = 2d, as measured; SPlisHSPlasH's support is 2 spacings as well)")
     if not args.no_validation:
         dam_break_validation(args.validation_resolution)
 

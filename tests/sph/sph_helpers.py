@@ -47,36 +47,26 @@ class LatticeState:
         self.nbr, self.nn = neighbour_table(self.x, self.h, dim)
 
     def run(self) -> None:
-        n, q, cap = self.n, len(self.vecs), self.nbr.shape[1]
-        self.occ = np.full((n, q), -1, np.int64)
+        n, q = self.n, len(self.vecs)
+        self.occ = np.full((n, q), -1, np.int32)
         self.docked = np.zeros((n, q), np.uint8)
         self.lam = np.full((n, q), np.inf)
         self.out = {
             "amat": np.zeros((n, 3, 3)), "ainv": np.zeros((n, 3, 3)), "gmat": np.zeros((n, 3, 3)),
             "bstr": np.zeros((n, 3, 3)), "omega": np.zeros((n, 3)), "cen": np.zeros((n, 3)),
-            "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8), "mslot": np.full((n, cap), -1, np.int16),
-            "slott": np.full((n, cap), -1, np.int16), "rev": np.full((n, cap), -1, np.int32),
+            "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8), "fel": np.full((n, 3), np.nan),
         }
         o = self.out
-        assert EK.reverse_positions(self.nbr, self.nn, 4, o["rev"]) == 0
         EK.lattice_update(self.x, self.m, np.ones(n, np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
                           np.arange(n, dtype=np.int64), self.mats, self.nbr, self.nn, self.h, self.dim, self.d,
                           self.vecs, self.tmat, self.table, self.amat, self.ainv, self.occ, self.docked, self.lam,
-                          0, 0, 1e-4, 1, o["rev"], o["amat"], o["ainv"], o["gmat"], o["bstr"], o["omega"], o["cen"], o["fown"],
-                          o["valid"], o["mslot"], o["slott"])
+                          0, 0, 1e-4, 1, o["amat"], o["ainv"], o["gmat"], o["bstr"], o["omega"], o["cen"], o["fown"],
+                          o["valid"], o["fel"])
 
     def forces(self) -> np.ndarray:
-        """Total elastic force on every particle, gathered as the force pass does."""
+        """Total elastic force on every particle, as the force pass adds it (own share + member forces)."""
         self.run()
-        o = self.out
-        f = o["fown"].copy()
-        zeros = np.zeros(self.n, np.int32)
-        for i in range(self.n):
-            acc = np.zeros(3)
-            EK.gather_member_force(i, self.x, self.m, zeros, self.mats, self.nbr, self.nn, self.h, self.dim, self.d,
-                                   self.vecs, o["gmat"], o["bstr"], o["omega"], o["cen"], o["slott"], acc)
-            f[i] += acc
-        return f
+        return self.out["fown"] + self.out["fel"]
 
     def reference_forces(self) -> np.ndarray:
         """The same forces from the numpy reference (:mod:`unmesh.sph.elastic`)."""

@@ -1,16 +1,20 @@
-"""Closest-packing lattices (8.20), slots and the nearest-lattice-point search (8.21)."""
+"""Closest-packing lattices (8.20), slots, the nearest-lattice-point search (8.21) and the cubic fluid grid."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from unmesh.kernels import poly6, spiky_derivative
 from unmesh.shapes import Box, Sphere
+from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation
 from unmesh.sph import _elastic_kernels as EK
 from unmesh.sph.sampling import (
     closest_packing,
+    cubic_grid,
     gradient_moment,
     lattice_basis,
+    lattice_points,
     lattice_slots,
     nearest_lattice_point,
     plane_spacings,
@@ -105,3 +109,62 @@ def test_gradient_moment_lattice_values():
     assert abs(gradient_moment(2, 2.0) - 0.872) < 1e-3
     assert abs(gradient_moment(3, 2.0) - 0.949) < 1e-3
     assert gradient_moment(3, 3.0) > gradient_moment(3, 2.0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_cubic_grid_fills_box_with_half_spacing_margins(dim):
+    """The cubic grid holds volume/d^n particles, at spacing d, starting d/2 inside every face."""
+    d = 0.05
+    p = cubic_grid([0, 0, 0], [0.5, 0.3, 0.2], d, dim)
+    assert len(p) == (10 * 6 * 4 if dim == 3 else 10 * 6)
+    assert np.allclose(p.min(axis=0)[:dim], 0.5 * d) and np.allclose(p.max(axis=0)[:dim], np.array([0.5, 0.3, 0.2])[:dim] - 0.5 * d)
+    dist = np.linalg.norm(p[:, None] - p[None], axis=2) + 10 * np.eye(len(p))
+    assert np.isclose(dist.min(), d)
+    centre = np.argmin(np.linalg.norm(p - p.mean(axis=0), axis=1))
+    assert np.sum(np.isclose(dist[centre], d)) == 2 * dim
+    if dim == 2:
+        assert np.all(p[:, 2] == 0.0)
+    box = Box(center=(0.25, 0.15, 0.1 if dim == 3 else 0.0), size=(0.5, 0.3, 0.2))
+    assert np.array_equal(sample_shape(box, d, dim, lattice="cubic"), p)
+
+
+@pytest.mark.parametrize("dim, count", [(2, 8), (3, 26)])
+def test_cubic_lattice_points_and_gradient_moment(dim, count):
+    """26 (3D) / 8 (2D) grid neighbours strictly within h = 2d; the moment by direct summation."""
+    vecs = lattice_points(dim, 2.0, "cubic")
+    assert len(vecs) == count and np.all(np.abs(vecs - np.round(vecs)) == 0)
+    r = np.linalg.norm(vecs, axis=1)
+    assert np.all((r > 0) & (r < 2.0))
+    vol = 1.0 / (float(poly6(0.0, 2.0, dim)) + float(np.sum(poly6(r, 2.0, dim))))
+    ref = -vol * np.sum(np.asarray(spiky_derivative(r, 2.0, dim)) * r) / dim
+    assert np.isclose(gradient_moment(dim, 2.0, "cubic"), ref, rtol=1e-12)
+    assert abs(gradient_moment(dim, 2.0, "cubic") - (0.874 if dim == 2 else 0.947)) < 1e-3
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_cubic_lattice_mass_gives_rest_density(dim):
+    """With lattice = "cubic" the particle mass makes the density of the perfect grid exactly rho0 (8.4)."""
+    d = 0.05
+    x = cubic_grid([0, 0, 0], [0.5, 0.5, 0.5], d, dim)
+    sim = SPHSimulation(SPHConfig(dim=dim, spacing=d, dt=1e-4, lattice="cubic"), {"w": Material("w", density=1000.0)},
+                        [SPHObject("w", x, "w")])
+    st = sim.particles()
+    centre = np.argmin(np.linalg.norm(st.positions - st.positions.mean(axis=0), axis=1))
+    assert np.isclose(st.densities[centre], 1000.0, rtol=1e-12)
+    r = np.linalg.norm(lattice_points(dim, 2.0, "cubic"), axis=1)
+    assert np.isclose(st.masses[0], 1000.0 * d**dim / (float(poly6(0.0, 2.0, dim)) + float(np.sum(poly6(r, 2.0, dim)))),
+                      rtol=1e-12)
+
+
+def test_cubic_lattice_is_for_fluids_only():
+    """Solids and freezing materials need the closest packing (lattice shape matching)."""
+    from unmesh.errors import InputError
+
+    x = cubic_grid([0, 0, 0], [0.2, 0.2, 0], 0.05, 2)
+    cfg = SPHConfig(dim=2, spacing=0.05, dt=1e-4, lattice="cubic")
+    with pytest.raises(InputError, match="closest packing"):
+        SPHSimulation(cfg, {"j": Material("j", elastic_stiffness=1e4)}, [SPHObject("j", x, "j", phase="solid")])
+    with pytest.raises(InputError, match="closest packing"):
+        SPHSimulation(cfg, {"w": Material("w", freeze_rate=1.0)}, [SPHObject("w", x, "w")])
+    with pytest.raises(InputError, match="lattice"):
+        SPHConfig(dim=2, spacing=0.05, dt=1e-4, lattice="hexagonal")

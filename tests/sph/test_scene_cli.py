@@ -143,6 +143,23 @@ def test_bad_scenes_are_reported(tmp_path, extra, message):
         build_simulation(load_scene(scene))
 
 
+def test_cubic_lattice_scene_key(tmp_path):
+    """``simulation.lattice = "cubic"`` samples the objects on the cubic grid (fluids only)."""
+    scene = tmp_path / "cubic.toml"
+    scene.write_text(MINIMAL.format(dt=5e-4).replace("fps = 40", 'fps = 40\nlattice = "cubic"'))
+    sim, _ = build_simulation(load_scene(scene))
+    assert sim.config.lattice == "cubic" and len(sim.x) == 10 * 10
+    assert np.allclose(np.sort(np.unique(sim.x[:, 0].round(9))), 0.025 + 0.05 * np.arange(10))
+    sim.step()
+    assert sim.check() is None
+    scene.write_text(scene.read_text().replace('name = "water"', 'name = "water"\nphase = "solid"'))
+    with pytest.raises(SceneError, match="closest packing"):
+        build_simulation(load_scene(scene))
+    scene.write_text(MINIMAL.format(dt=5e-4).replace("fps = 40", 'fps = 40\nlattice = "square"'))
+    with pytest.raises(SceneError, match="lattice"):
+        build_simulation(load_scene(scene))
+
+
 def test_empty_scene_is_reported(tmp_path):
     scene = tmp_path / "empty.toml"
     scene.write_text("[simulation]\ndimension = 2\nspacing = 0.1\ndt = 0.001\nduration = 1\n[materials.water]\n")

@@ -10,13 +10,12 @@ assignment (8.21) with conflict resolution, docking (section 8.2.5), shape
 matching (8.23–8.24), goal matrix (8.29–8.30), strain stress (8.2.2), the forces
 the neighbourhood exerts on its members and the exact torque correction. It
 keeps the per-neighbourhood data (goal matrix, ``V P M⁻¹``, ``ω``, centroid
-offset) and writes the slot of each member ``j`` into *j's* row, at the position
-of ``i`` in j's neighbour list (``slott[j, rev[i, t]]``, :func:`reverse_positions`):
+offset) and writes the force on each member ``j`` into *j's* row, at the position
+of ``i`` in j's neighbour list (``fpair[j, rev[i, t]]``, :func:`reverse_positions`):
 every entry belongs to exactly one pair ``(i, j)``, so the parallel writes never
-collide. The force pass then recomputes the force of neighbourhood ``j`` on ``i``
-from j's data and the slot (:func:`member_force`, the same arithmetic as here, so
-the result is bit-identical) while walking i's own row — no search, and no
-(N, cap, 3) pair-force array streamed through memory.
+collide, and the force pass sums i's own row — no search and no recomputation
+(measured: recomputing the forces from j's data in the force pass cost 3× more
+than writing and reading the (N, cap, 3) array).
 
 Speed notes: one pass over the neighbours assigns slots (in 3D the map
 ``T A⁻¹/d`` to D3 coordinates is formed once per particle, so each neighbour costs
@@ -39,6 +38,11 @@ from unmesh.kernels._kernels import poly6_2d, poly6_3d
 from unmesh.sph import materials as M
 from unmesh.sph._rng import STREAM_DOCK, uniform
 
+#: Flags of the helpers the fast-math lattice pass calls (numba passes a caller's ``fastmath``
+#: and ``error_model`` on to callees that do not set them): they compile the same whoever calls
+#: them first, e.g. the SVD stays bit-identical to the shared Jacobi solver.
+PLAIN = {"cache": True, "fastmath": False, "error_model": "python"}
+
 SOLID = 1
 #: Clamp of singular values when inverting A for the next assignment.
 SIG_LO = 0.2
@@ -52,6 +56,12 @@ def _w(r2, h, dim):
     if dim == 3:
         return poly6_3d(r2, h)
     return poly6_2d(r2, h)
+
+
+@njit(**PLAIN)
+def _w_zero(h, dim):
+    """``W(0)`` of poly6 (C.1/C.4)."""
+    return _w(0.0, h, dim)
 
 
 # -- small dense linear algebra --------------------------------------------------------
@@ -202,7 +212,7 @@ def jacobi3(b00, b01, b02, b10, b11, b12, b20, b21, b22):
     return b00, b11, b22, v00, v01, v02, v10, v11, v12, v20, v21, v22
 
 
-@njit(cache=True)
+@njit(**PLAIN)
 def svd_rot(a, dim, u, s, v, work):
     """``A = U diag(s) Vᵀ`` with ``det U = det V = +1`` (last ``s`` signed), eq. (8.24).
 
@@ -308,6 +318,13 @@ def _inv3(m, out):
     return det
 
 
+@njit(**PLAIN)
+def _det3(m):
+    """Determinant of a 3×3 matrix."""
+    return (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+            + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+
+
 # -- lattice look-up -------------------------------------------------------------------
 
 
@@ -329,7 +346,7 @@ def _round_away(v, r):
     return r + 1.0 if v > r else r - 1.0
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def nearest_slot(y0, y1, y2, tmat, table, dim):
     """Slot of the lattice point nearest to ``y`` (lattice frame, units of d) and the squared distance.
 
@@ -395,31 +412,40 @@ def nearest_slot(y0, y1, y2, tmat, table, dim):
     return table[i0, i1, i2], best
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _nearest_d3(z0, z1, z2, table):
-    """:func:`nearest_slot` (3D) for a point given in D3 coordinates ``z = T y``."""
+    """:func:`nearest_slot` (3D) for a point given in D3 coordinates ``z = T y``.
+
+    The Conway–Sloane rounding without branches (the parity test is a coin flip for
+    the branch predictor): the coordinate with the largest rounding error (the first
+    of equal ones) moves one step the other way when the rounded sum is odd.
+    """
     r0 = math.floor(z0 + 0.5)
     r1 = math.floor(z1 + 0.5)
     r2 = math.floor(z2 + 0.5)
-    if (int(r0) + int(r1) + int(r2)) & 1:
-        d0 = abs(z0 - r0)
-        d1 = abs(z1 - r1)
-        d2 = abs(z2 - r2)
-        if d0 >= d1 and d0 >= d2:
-            r0 = _round_away(z0, r0)
-        elif d1 >= d2:
-            r1 = _round_away(z1, r1)
-        else:
-            r2 = _round_away(z2, r2)
-    best = 0.5 * ((z0 - r0) ** 2 + (z1 - r1) ** 2 + (z2 - r2) ** 2)
     k0 = int(r0)
     k1 = int(r1)
     k2 = int(r2)
+    odd = (k0 + k1 + k2) & 1
+    d0 = abs(z0 - r0)
+    d1 = abs(z1 - r1)
+    d2 = abs(z2 - r2)
+    p0 = odd if (d0 >= d1) & (d0 >= d2) else 0
+    p1 = (odd - p0) if d1 >= d2 else 0
+    p2 = odd - p0 - p1
+    k0 += p0 if z0 > r0 else -p0
+    k1 += p1 if z1 > r1 else -p1
+    k2 += p2 if z2 > r2 else -p2
+    e0 = z0 - k0
+    e1 = z1 - k1
+    e2 = z2 - k2
+    best = 0.5 * (e0 * e0 + e1 * e1 + e2 * e2)
     half = table.shape[0] // 2
     i0 = ((k0 + k1 - k2) >> 1) + half
     i1 = ((k0 - k1 + k2) >> 1) + half
     i2 = ((k1 + k2 - k0) >> 1) + half
-    if i0 < 0 or i1 < 0 or i2 < 0 or i0 >= table.shape[0] or i1 >= table.shape[0] or i2 >= table.shape[0]:
+    size = table.shape[0]
+    if (i0 < 0) | (i1 < 0) | (i2 < 0) | (i0 >= size) | (i1 >= size) | (i2 >= size):
         return -1, best
     return table[i0, i1, i2], best
 
@@ -435,23 +461,7 @@ def nearest_slots(y, tmat, table, dim):
     return q, d2
 
 
-# -- per-member force (shared by the update pass and the gather) ------------------------
-
-
-@njit(cache=True, inline="always")
-def _member_force(r0, r1, r2, w, l0, l1, l2, coef, g, b):
-    """Direct + strain force of a neighbourhood on one member (without torque correction).
-
-    ``coef = ½ K_e m_i m_j / ρ0``; ``g`` the goal matrix, ``b = V_i P M⁻¹``.
-    """
-    gl0 = g[0, 0] * l0 + g[0, 1] * l1 + g[0, 2] * l2
-    gl1 = g[1, 0] * l0 + g[1, 1] * l1 + g[1, 2] * l2
-    gl2 = g[2, 0] * l0 + g[2, 1] * l1 + g[2, 2] * l2
-    bl0 = b[0, 0] * l0 + b[0, 1] * l1 + b[0, 2] * l2
-    bl1 = b[1, 0] * l0 + b[1, 1] * l1 + b[1, 2] * l2
-    bl2 = b[2, 0] * l0 + b[2, 1] * l1 + b[2, 2] * l2
-    cw = coef * w
-    return cw * (gl0 - r0) - w * bl0, cw * (gl1 - r1) - w * bl1, cw * (gl2 - r2) - w * bl2
+# -- neighbour-list transpose ---------------------------------------------------------------
 
 
 @njit(cache=True, inline="always")
@@ -535,113 +545,204 @@ def reverse_positions(nbr, nnbr, nblocks, rev):
     return missing
 
 
-@njit(cache=True, inline="always")
-def member_force(j, i, q, x, m, matid, mats, h, dim, spacing, slot_vecs, gmat, bstr, omega, cen):
-    """Force of the neighbourhood of ``i`` on its member ``j`` docked at slot ``q``.
+# -- polar decomposition -------------------------------------------------------------------
 
-    Direct force (8.29–8.31) + strain force (8.2.2) + the exact torque correction
-    ``w_j ω_i × (r_ij − c_i)``, from the per-neighbourhood outputs of
-    :func:`lattice_update` (``gmat``, ``bstr``, ``omega``, ``cen`` = centroid offset
-    ``c_i``). The arithmetic is that of :func:`lattice_update`'s member loop.
+
+@njit(**PLAIN)
+def polar_rotation(a, r):
+    """Rotation ``R`` of the polar decomposition ``A = R S`` (3D) by Newton's iteration.
+
+    ``R ← (R + R⁻ᵀ)/2`` from ``R = A`` converges quadratically to the orthogonal
+    polar factor (Higham 1986); it is a rotation when ``det A > 0``. Stops when a
+    step changes no entry by more than 1e-8 (the next iterate is then exact to
+    rounding, the error squares) or after 40 steps. Writes ``r`` (3, 3) and returns
+    True on convergence (False for ``det A ≤ 0`` or no convergence: use :func:`svd_rot`).
+
+    Example
+    -------
+    >>> r = np.empty((3, 3))
+    >>> polar_rotation(np.diag([2.0, 1.0, 0.5]), r), np.round(r, 12).tolist()[0]
+    (True, [1.0, 0.0, 0.0])
     """
-    r0 = x[j, 0] - x[i, 0]
-    r1 = x[j, 1] - x[i, 1]
-    r2 = x[j, 2] - x[i, 2]
-    w = _w(r0 * r0 + r1 * r1 + r2 * r2, h, dim)
-    mt = matid[i]
-    coef = 0.5 * mats[mt, M.KE] * m[i] * m[j] / mats[mt, M.RHO0]
-    f0, f1, f2 = _member_force(r0, r1, r2, w, slot_vecs[q, 0] * spacing, slot_vecs[q, 1] * spacing,
-                               slot_vecs[q, 2] * spacing, coef, gmat[i], bstr[i])
-    wk = m[j] * w
-    y0 = r0 - cen[i, 0]
-    y1 = r1 - cen[i, 1]
-    y2 = r2 - cen[i, 2]
-    om0 = omega[i, 0]
-    om1 = omega[i, 1]
-    om2 = omega[i, 2]
-    return f0 + wk * (om1 * y2 - om2 * y1), f1 + wk * (om2 * y0 - om0 * y2), f2 + wk * (om0 * y1 - om1 * y0)
+    r00, r01, r02 = a[0, 0], a[0, 1], a[0, 2]
+    r10, r11, r12 = a[1, 0], a[1, 1], a[1, 2]
+    r20, r21, r22 = a[2, 0], a[2, 1], a[2, 2]
+    ok = False
+    for _it in range(40):
+        # cofactors: R⁻ᵀ = C / det R
+        c00 = r11 * r22 - r12 * r21
+        c01 = r12 * r20 - r10 * r22
+        c02 = r10 * r21 - r11 * r20
+        c10 = r02 * r21 - r01 * r22
+        c11 = r00 * r22 - r02 * r20
+        c12 = r01 * r20 - r00 * r21
+        c20 = r01 * r12 - r02 * r11
+        c21 = r02 * r10 - r00 * r12
+        c22 = r00 * r11 - r01 * r10
+        det = r00 * c00 + r01 * c01 + r02 * c02
+        if not det > 0.0:
+            break
+        hinv = 0.5 / det
+        n00 = 0.5 * r00 + hinv * c00
+        n01 = 0.5 * r01 + hinv * c01
+        n02 = 0.5 * r02 + hinv * c02
+        n10 = 0.5 * r10 + hinv * c10
+        n11 = 0.5 * r11 + hinv * c11
+        n12 = 0.5 * r12 + hinv * c12
+        n20 = 0.5 * r20 + hinv * c20
+        n21 = 0.5 * r21 + hinv * c21
+        n22 = 0.5 * r22 + hinv * c22
+        diff = max(abs(n00 - r00), abs(n01 - r01), abs(n02 - r02), abs(n10 - r10), abs(n11 - r11),
+                   abs(n12 - r12), abs(n20 - r20), abs(n21 - r21), abs(n22 - r22))
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = n00, n01, n02, n10, n11, n12, n20, n21, n22
+        if diff <= 1e-8:
+            ok = True
+            break
+    r[0, 0], r[0, 1], r[0, 2] = r00, r01, r02
+    r[1, 0], r[1, 1], r[1, 2] = r10, r11, r12
+    r[2, 0], r[2, 1], r[2, 2] = r20, r21, r22
+    return ok
 
 
-@njit(cache=True, inline="always")
-def gather_member_force(i, x, m, matid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, gmat, bstr, omega, cen,
-                        slott, out):
-    """Add the elastic forces that the neighbourhoods of ``i``'s neighbours exert on ``i`` to ``out``.
+@njit(**PLAIN)
+def polar_factors(a, dim, rot, sym, work):
+    """``A = R S`` with the rotation ``R`` and symmetric ``S`` (3, 3) if no singular value is clamped.
 
-    :func:`lattice_update` stores in ``slott[i, t]`` the slot of ``i`` in the
-    lattice of ``j = nbr[i, t]`` (-1 when ``i`` is not docked there or j's
-    neighbourhood gives no forces); the forces are summed in neighbour order.
+    The lattice pass needs only functions of ``S`` that reduce to matrix algebra when
+    every singular value lies inside the clamps (``SIG_LO < σ < SIG_HI``, which also
+    keeps the goal floor ``SIGMA_FLOOR`` inactive): ``U diag(f(σ)) Vᵀ = R f(S)`` for
+    ``f(σ) = sσ + (1 − s)`` and ``V diag(1/σ) Uᵀ = S⁻¹ Rᵀ``, ``Σσ = tr S``. Gershgorin's
+    discs of ``S`` bound its eigenvalues, so the check is rigorous. Returns False (use the
+    SVD, :func:`svd_rot`) in 2D, for ``det A ≤ 0``, when Newton's iteration does not
+    converge or when a disc reaches a clamp. ``work`` is unused scratch (3, 3).
+
+    Example
+    -------
+    >>> rot, sym = np.empty((3, 3)), np.empty((3, 3))
+    >>> polar_factors(np.diag([1.1, 0.9, 1.0]), 3, rot, sym, np.empty((3, 3))), np.round(np.diag(sym), 12).tolist()
+    (True, [1.1, 0.9, 1.0])
     """
-    for t in range(min(nnbr[i], nbr.shape[1])):
-        q = slott[i, t]
-        if q >= 0:
-            f0, f1, f2 = member_force(i, nbr[i, t], q, x, m, matid, mats, h, dim, spacing, slot_vecs, gmat, bstr,
-                                      omega, cen)
-            out[0] += f0
-            out[1] += f1
-            out[2] += f2
+    if dim != 3 or not polar_rotation(a, rot):
+        return False
+    for p in range(3):
+        for q in range(3):
+            work[p, q] = rot[0, p] * a[0, q] + rot[1, p] * a[1, q] + rot[2, p] * a[2, q]
+    for p in range(3):
+        for q in range(3):
+            sym[p, q] = 0.5 * (work[p, q] + work[q, p])
+    for p in range(3):
+        rad = 0.0
+        for q in range(3):
+            if q != p:
+                rad += abs(sym[p, q])
+        if not (sym[p, p] - rad > SIG_LO * (1.0 + 1e-6) and sym[p, p] + rad < SIG_HI * (1.0 - 1e-6)):
+            return False
+    return True
 
 
 # -- the update pass ---------------------------------------------------------------------
 
+#: Blocks of the lattice pass. Each block of particles owns a window of member-force
+#: accumulators (the rows of its particles' neighbours), summed in block order: the result
+#: does not depend on the number of threads.
+LATTICE_BLOCKS = 16
+#: Fast-math flags of the lattice pass (reassociation vectorises the sums over members;
+#: no ``nnan``/``ninf``).
+LATTICE_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 
-@njit(cache=True, inline="always")
-def _clear_slots(i, nbr, nnbr, rev, slott):
-    """Mark ``i``'s neighbours as non-members of its lattice in their rows (no forces from ``i``)."""
-    for t in range(min(nnbr[i], nbr.shape[1])):
-        ut = rev[i, t]
-        if ut >= 0:
-            slott[nbr[i, t], ut] = -1
 
-
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=LATTICE_FASTMATH, error_model="numpy")
 def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing,
                    slot_vecs, tmat, table, amat, ainv, occ, docked, lam,
-                   seed, step, dt, prime, rev,
-                   amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid, mslot, slott):
+                   seed, step, dt, prime,
+                   amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid, fel):
     """Lattice assignment, docking, shape matching and neighbourhood forces for every solid particle.
 
-    Inputs are in cell-sorted order. ``occ`` (N, Q) int64 holds occupant ids (-1
-    empty), ``docked`` (N, Q) uint8 and ``lam`` (N, Q) docking rates are updated in
-    place. Outputs per particle: new ``A`` and its stabilised inverse, goal matrix
-    ``U S Vᵀ``, ``V_i P M⁻¹``, torque-correction ``ω`` and centroid, the particle's
-    own share ``fown`` and ``valid`` (1 when the neighbourhood spans the space).
-    ``prime`` (initial state) docks every assigned neighbour at once. ``mslot``
-    (N, cap) int16 receives, aligned with ``nbr``, the slot of each docked neighbour
-    (-1 otherwise). ``rev`` (N, cap) are the :func:`reverse_positions` of ``nbr``;
-    ``slott`` (N, cap) int16 receives the transpose of ``mslot``: in
-    ``slott[j, rev[i, t]]`` the slot of ``j = nbr[i, t]`` in i's lattice, -1 when
-    ``j`` is not a member or i's neighbourhood gives no forces. ``cen`` is the
-    offset ``c_i`` of the weighted centroid from ``x_i``. The forces on the members
-    follow from these outputs (:func:`member_force`, :func:`gather_member_force`).
+    Inputs are in cell-sorted order; ``nbr`` rows ascending. ``occ`` (N, Q) int32 holds
+    occupant ids (-1 empty), ``docked`` (N, Q) uint8 and ``lam`` (N, Q) docking rates are
+    updated in place. Outputs per particle: new ``A`` and its stabilised inverse, goal
+    matrix ``U S Vᵀ``, ``V_i P M⁻¹``, torque-correction ``ω`` and centroid offset ``c_i``
+    (from ``x_i``), the particle's own share ``fown`` and ``valid`` (1 when the
+    neighbourhood spans the space). ``prime`` (initial state) docks every assigned
+    neighbour at once. ``fel`` (N, 3) receives the forces the neighbourhoods exert on their
+    members: for particle ``j`` the sum over the neighbourhoods it is docked in of the
+    direct + strain force and the exact torque correction ``w_j ω_i × (r_ij − c_i)``. The
+    total elastic force on ``j`` is ``fown[j] + fel[j]``.
+
+    Per particle ``i`` (all in registers and small per-block buffers): one pass over the
+    neighbours assigns slots (8.21) with the branch-free D3 rounding (in 3D the map
+    ``T A⁻¹/d`` is formed once); one pass over the slots docks, keeps the members and sums
+    ``M = Σ w l lᵀ`` (precomputed ``l lᵀ``) and ``B = Σ w r lᵀ`` (8.23); ``A = B M⁻¹`` is
+    split by the polar decomposition (:func:`polar_factors`; the SVD :func:`svd_rot` when
+    a singular value is clamped, in 2D and for inverted lattices); the member forces and
+    torque-correction sums run over contiguous member buffers (vectorised). The forces on
+    the members are added into the block's accumulator window (race-free: one window per
+    block), then summed per particle.
     """
     n = x.shape[0]
     nq = slot_vecs.shape[0]
     cap = nbr.shape[1]
-    nchunk = (n + CHUNK - 1) // CHUNK
-    w_self = _w(0.0, h, dim)
-    for ch in prange(nchunk):
+    nblk = max(1, min(LATTICE_BLOCKS, n))
+    h2 = h * h
+    w_self = _w_zero(h, dim)
+    c6 = w_self / (h2 * h2 * h2)  # W(r) = c6 (h² − r²)³
+    # slot offsets in length units and their outer products l lᵀ (xx, xy, xz, yy, yz, zz)
+    lv = np.empty((nq, 3))
+    llt = np.empty((nq, 6))
+    for q in range(nq):
+        for p in range(3):
+            lv[q, p] = slot_vecs[q, p] * spacing
+        llt[q, 0] = lv[q, 0] * lv[q, 0]
+        llt[q, 1] = lv[q, 0] * lv[q, 1]
+        llt[q, 2] = lv[q, 0] * lv[q, 2]
+        llt[q, 3] = lv[q, 1] * lv[q, 1]
+        llt[q, 4] = lv[q, 1] * lv[q, 2]
+        llt[q, 5] = lv[q, 2] * lv[q, 2]
+    tm = tmat if dim == 3 else _EYE
+    # accumulator windows: block b adds member forces into rows lo[b]..hi[b]
+    lo = np.empty(nblk, np.int64)
+    hi = np.empty(nblk, np.int64)
+    for blk in prange(nblk):
+        lo_b = n
+        hi_b = -1
+        for i in range(blk * n // nblk, (blk + 1) * n // nblk):
+            c = min(nnbr[i], cap)
+            if c > 0:
+                lo_b = min(lo_b, nbr[i, 0])
+                hi_b = max(hi_b, nbr[i, c - 1])
+        lo[blk] = lo_b
+        hi[blk] = hi_b
+    wmax = 1
+    for blk in range(nblk):
+        wmax = max(wmax, hi[blk] - lo[blk] + 1)
+    win = np.empty((nblk, wmax, 3))
+    for blk in prange(nblk):
+        for k in range(wmax):
+            win[blk, k, 0] = 0.0
+            win[blk, k, 1] = 0.0
+            win[blk, k, 2] = 0.0
+        lo_b = lo[blk]
+        rt = np.empty((3, cap))  # offsets r_ij of the neighbours, by position in the row
         bestd = np.empty(nq)
         bestj = np.empty(nq, np.int64)
         bestt = np.empty(nq, np.int64)
-        # the docked members of the current neighbourhood, in slot order
-        mq = np.empty(nq, np.int64)
+        # the docked members of the current neighbourhood (slot order), as contiguous columns
         mj = np.empty(nq, np.int64)
-        mr = np.empty((nq, 3))
-        mw = np.empty(nq)
-        minv = np.empty((3, 3))
+        mb = np.empty((11, nq))  # r (3), lattice offset l (3), W, m_j, force (3)
         a = np.empty((3, 3))
         u = np.empty((3, 3))
         v = np.empty((3, 3))
         sg = np.empty(3)
+        rot = np.empty((3, 3))
+        sym = np.empty((3, 3))
         g = np.empty((3, 3))
         b = np.empty((3, 3))
         mm = np.empty((3, 3))
+        minv = np.empty((3, 3))
         work = np.empty((4, 3, 3))
-        for i in range(ch * CHUNK, min(n, (ch + 1) * CHUNK)):
+        for i in range(blk * n // nblk, (blk + 1) * n // nblk):
             valid[i] = 0
             cnt = min(nnbr[i], cap)
-            for t in range(cnt):
-                mslot[i, t] = -1
             for p in range(3):
                 fown[i, p] = 0.0
                 omega[i, p] = 0.0
@@ -659,7 +760,6 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                 for q in range(nq):
                     occ[i, q] = -1
                     docked[i, q] = 0
-                _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
             rho0 = mats[mt, M.RHO0]
             xi0 = x[i, 0]
@@ -667,7 +767,6 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             xi2 = x[i, 2]
             oi = obj[i]
             # world offset -> lattice frame in units of d (A^(t-1)^-1 / d), in 3D straight on to D3 coordinates
-            tm = tmat if dim == 3 else _EYE
             p00 = (tm[0, 0] * ainv[i, 0, 0] + tm[0, 1] * ainv[i, 1, 0] + tm[0, 2] * ainv[i, 2, 0]) / spacing
             p01 = (tm[0, 0] * ainv[i, 0, 1] + tm[0, 1] * ainv[i, 1, 1] + tm[0, 2] * ainv[i, 2, 1]) / spacing
             p02 = (tm[0, 0] * ainv[i, 0, 2] + tm[0, 1] * ainv[i, 1, 2] + tm[0, 2] * ainv[i, 2, 2]) / spacing
@@ -679,15 +778,18 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             p22 = (tm[2, 0] * ainv[i, 0, 2] + tm[2, 1] * ainv[i, 1, 2] + tm[2, 2] * ainv[i, 2, 2]) / spacing
             # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
             for q in range(nq):
-                bestd[q] = 1e300
+                bestd[q] = np.inf
                 bestj[q] = -1
             for t in range(cnt):
                 j = nbr[i, t]
-                if phase[j] != SOLID or obj[j] != oi:
-                    continue
                 r0 = x[j, 0] - xi0
                 r1 = x[j, 1] - xi1
                 r2 = x[j, 2] - xi2
+                rt[0, t] = r0
+                rt[1, t] = r1
+                rt[2, t] = r2
+                if phase[j] != SOLID or obj[j] != oi:
+                    continue
                 y0 = p00 * r0 + p01 * r1 + p02 * r2
                 y1 = p10 * r0 + p11 * r1 + p12 * r2
                 if dim == 3:
@@ -703,15 +805,12 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             gain = mats[mt, M.DOCK_GAIN]
             loss = mats[mt, M.DOCK_LOSS]
             frac = mats[mt, M.FRACTURE]
-            m00 = 0.0
-            m01 = 0.0
-            m02 = 0.0
-            m10 = 0.0
-            m11 = 0.0
-            m12 = 0.0
-            m20 = 0.0
-            m21 = 0.0
-            m22 = 0.0
+            s00 = 0.0
+            s01 = 0.0
+            s02 = 0.0
+            s11 = 0.0
+            s12 = 0.0
+            s22 = 0.0
             b00 = 0.0
             b01 = 0.0
             b02 = 0.0
@@ -737,42 +836,37 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                     lam[i, q] = lnew
                 if j < 0:
                     continue
-                r0 = x[j, 0] - xi0
-                r1 = x[j, 1] - xi1
-                r2 = x[j, 2] - xi2
+                t = bestt[q]
+                r0 = rt[0, t]
+                r1 = rt[1, t]
+                r2 = rt[2, t]
+                rr = r0 * r0 + r1 * r1 + r2 * r2
                 if prime:
                     docked[i, q] = 1
-                if docked[i, q] == 0 and lam[i, q] > 0.0:
-                    uu = uniform(seed, step, uid[i], q, STREAM_DOCK)
-                    if lam[i, q] == np.inf or uu < 1.0 - math.exp(-lam[i, q] * dt):
+                if docked[i, q] == 0 and lnew > 0.0:
+                    if lnew == np.inf or uniform(seed, step, uid[i], q, STREAM_DOCK) < 1.0 - math.exp(-lnew * dt):
                         docked[i, q] = 1
                 if docked[i, q] == 1 and frac < np.inf:
                     rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
-                    if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) > (1.0 + frac) * rest:
+                    if math.sqrt(rr) > (1.0 + frac) * rest:
                         docked[i, q] = 0
                         lam[i, q] = 0.0
                 if docked[i, q] == 0:
                     continue
-                mslot[i, bestt[q]] = q
-                w = _w(r0 * r0 + r1 * r1 + r2 * r2, h, dim)
-                l0 = slot_vecs[q, 0] * spacing
-                l1 = slot_vecs[q, 1] * spacing
-                l2 = slot_vecs[q, 2] * spacing
-                wl0 = w * l0
-                wl1 = w * l1
-                wl2 = w * l2
+                hw = max(h2 - rr, 0.0)
+                w = c6 * hw * hw * hw
+                l0 = lv[q, 0]
+                l1 = lv[q, 1]
+                l2 = lv[q, 2]
+                s00 += w * llt[q, 0]
+                s01 += w * llt[q, 1]
+                s02 += w * llt[q, 2]
+                s11 += w * llt[q, 3]
+                s12 += w * llt[q, 4]
+                s22 += w * llt[q, 5]
                 wr0 = w * r0
                 wr1 = w * r1
                 wr2 = w * r2
-                m00 += wl0 * l0
-                m01 += wl0 * l1
-                m02 += wl0 * l2
-                m10 += wl1 * l0
-                m11 += wl1 * l1
-                m12 += wl1 * l2
-                m20 += wl2 * l0
-                m21 += wl2 * l1
-                m22 += wl2 * l2
                 b00 += wr0 * l0
                 b01 += wr0 * l1
                 b02 += wr0 * l2
@@ -782,34 +876,35 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                 b20 += wr2 * l0
                 b21 += wr2 * l1
                 b22 += wr2 * l2
-                mq[count] = q
                 mj[count] = j
-                mr[count, 0] = r0
-                mr[count, 1] = r1
-                mr[count, 2] = r2
-                mw[count] = w
+                mb[0, count] = r0
+                mb[1, count] = r1
+                mb[2, count] = r2
+                mb[3, count] = l0
+                mb[4, count] = l1
+                mb[5, count] = l2
+                mb[6, count] = w
+                mb[7, count] = m[j]
                 count += 1
             if dim == 2:
-                m02 = m12 = m20 = m21 = 0.0
+                s02 = s12 = 0.0
                 b02 = b12 = b20 = b21 = 0.0
-                m22 = 1.0
+                s22 = 1.0
                 b22 = 1.0
-            mm[0, 0] = m00
-            mm[0, 1] = m01
-            mm[0, 2] = m02
-            mm[1, 0] = m10
-            mm[1, 1] = m11
-            mm[1, 2] = m12
-            mm[2, 0] = m20
-            mm[2, 1] = m21
-            mm[2, 2] = m22
+            mm[0, 0] = s00
+            mm[0, 1] = s01
+            mm[0, 2] = s02
+            mm[1, 0] = s01
+            mm[1, 1] = s11
+            mm[1, 2] = s12
+            mm[2, 0] = s02
+            mm[2, 1] = s12
+            mm[2, 2] = s22
             if count < dim:
-                _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
-            tr = (m00 + m11 + (m22 if dim == 3 else 0.0)) / dim
+            tr = (s00 + s11 + (s22 if dim == 3 else 0.0)) / dim
             det = _inv3(mm, minv)
             if not det > 1e-6 * tr ** dim:
-                _clear_slots(i, nbr, nnbr, rev, slott)
                 continue
             for p in range(3):
                 bp0 = b00 if p == 0 else (b10 if p == 1 else b20)
@@ -817,38 +912,56 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                 bp2 = b02 if p == 0 else (b12 if p == 1 else b22)
                 for q in range(3):
                     a[p, q] = bp0 * minv[0, q] + bp1 * minv[1, q] + bp2 * minv[2, q]
-            svd_rot(a, dim, u, sg, v, work)
             valid[i] = 1
-            is0 = min(max(sg[0], SIG_LO), SIG_HI)
-            is1 = min(max(sg[1], SIG_LO), SIG_HI)
-            is2 = min(max(sg[2], SIG_LO), SIG_HI)
-            for p in range(3):
-                for q in range(3):
-                    amat_out[i, p, q] = a[p, q]
-                    ainv_out[i, p, q] = v[p, 0] * u[q, 0] / is0 + v[p, 1] * u[q, 1] / is1 + v[p, 2] * u[q, 2] / is2
-            # 4. goal matrix (8.29-8.30)
             s = mats[mt, M.GOAL]
-            dg0 = s * max(sg[0], SIGMA_FLOOR) + (1.0 - s)
-            dg1 = s * max(sg[1], SIGMA_FLOOR) + (1.0 - s)
-            if dim == 3:
-                dg2 = s * max(sg[2], SIGMA_FLOOR) + (1.0 - s)
-                norm = (dg0 * dg1 * dg2) ** (1.0 / 3.0)
-                dg2 /= norm
+            if polar_factors(a, dim, rot, sym, mm):
+                # every singular value inside the clamps: functions of S = Rᵀ A by matrix algebra
+                trs = sym[0, 0] + sym[1, 1] + sym[2, 2] - 3.0
+                for p in range(3):
+                    for q in range(3):
+                        mm[p, q] = s * sym[p, q] + ((1.0 - s) if p == q else 0.0)
+                norm = _det3(mm) ** (1.0 / 3.0)
+                for p in range(3):
+                    for q in range(3):
+                        g[p, q] = (rot[p, 0] * mm[0, q] + rot[p, 1] * mm[1, q] + rot[p, 2] * mm[2, q]) / norm
+                _inv3(sym, mm)  # S⁻¹
+                for p in range(3):
+                    for q in range(3):
+                        amat_out[i, p, q] = a[p, q]
+                        ainv_out[i, p, q] = mm[p, 0] * rot[q, 0] + mm[p, 1] * rot[q, 1] + mm[p, 2] * rot[q, 2]
             else:
-                dg2 = 1.0
-                norm = (dg0 * dg1) ** 0.5
-            dg0 /= norm
-            dg1 /= norm
+                svd_rot(a, dim, u, sg, v, work)
+                is0 = min(max(sg[0], SIG_LO), SIG_HI)
+                is1 = min(max(sg[1], SIG_LO), SIG_HI)
+                is2 = min(max(sg[2], SIG_LO), SIG_HI)
+                for p in range(3):
+                    for q in range(3):
+                        amat_out[i, p, q] = a[p, q]
+                        ainv_out[i, p, q] = v[p, 0] * u[q, 0] / is0 + v[p, 1] * u[q, 1] / is1 + v[p, 2] * u[q, 2] / is2
+                # 4. goal matrix (8.29-8.30)
+                dg0 = s * max(sg[0], SIGMA_FLOOR) + (1.0 - s)
+                dg1 = s * max(sg[1], SIGMA_FLOOR) + (1.0 - s)
+                if dim == 3:
+                    dg2 = s * max(sg[2], SIGMA_FLOOR) + (1.0 - s)
+                    norm = (dg0 * dg1 * dg2) ** (1.0 / 3.0)
+                    dg2 /= norm
+                else:
+                    dg2 = 1.0
+                    norm = (dg0 * dg1) ** 0.5
+                dg0 /= norm
+                dg1 /= norm
+                trs = (sg[0] - 1.0) + (sg[1] - 1.0)
+                if dim == 3:
+                    trs += sg[2] - 1.0
+                for p in range(3):
+                    for q in range(3):
+                        g[p, q] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
+                        rot[p, q] = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
             # 5. strain stress: b = V_i P M^-1, P = 2mu (A - R) + lam tr(R^T A - I) R
-            trs = (sg[0] - 1.0) + (sg[1] - 1.0)
-            if dim == 3:
-                trs += sg[2] - 1.0
             for p in range(3):
                 for q in range(3):
-                    g[p, q] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
                     gmat[i, p, q] = g[p, q]
-                    rpq = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
-                    mm[p, q] = 2.0 * lmu * (a[p, q] - rpq) + llam * trs * rpq
+                    mm[p, q] = 2.0 * lmu * (a[p, q] - rot[p, q]) + llam * trs * rot[p, q]
             if dim == 2:
                 for p in range(3):
                     mm[2, p] = 0.0
@@ -860,7 +973,14 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
                     if dim == 2 and (p == 2 or q == 2):
                         b[p, q] = 0.0
                     bstr[i, p, q] = b[p, q]
-            # 6. member forces, torque about x_i, weights for the correction
+            # 6. member forces (8.31 + strain), torque about x_i, weights for the correction
+            g00, g01, g02 = g[0, 0], g[0, 1], g[0, 2]
+            g10, g11, g12 = g[1, 0], g[1, 1], g[1, 2]
+            g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
+            e00, e01, e02 = b[0, 0], b[0, 1], b[0, 2]
+            e10, e11, e12 = b[1, 0], b[1, 1], b[1, 2]
+            e20, e21, e22 = b[2, 0], b[2, 1], b[2, 2]
+            chalf = 0.5 * ke * m[i] / rho0
             fs0 = 0.0
             fs1 = 0.0
             fs2 = 0.0
@@ -878,32 +998,36 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             i11 = 0.0
             i12 = 0.0
             i22 = 0.0
-            chalf = 0.5 * ke * m[i]
             for k in range(count):
-                q = mq[k]
-                j = mj[k]
-                r0 = mr[k, 0]
-                r1 = mr[k, 1]
-                r2 = mr[k, 2]
-                w = mw[k]
-                coef = chalf * m[j] / rho0
-                f0, f1, f2 = _member_force(r0, r1, r2, w, slot_vecs[q, 0] * spacing, slot_vecs[q, 1] * spacing,
-                                           slot_vecs[q, 2] * spacing, coef, g, b)
+                r0 = mb[0, k]
+                r1 = mb[1, k]
+                r2 = mb[2, k]
+                l0 = mb[3, k]
+                l1 = mb[4, k]
+                l2 = mb[5, k]
+                w = mb[6, k]
+                mk = mb[7, k]
+                cw = chalf * mk * w
+                f0 = cw * (g00 * l0 + g01 * l1 + g02 * l2 - r0) - w * (e00 * l0 + e01 * l1 + e02 * l2)
+                f1 = cw * (g10 * l0 + g11 * l1 + g12 * l2 - r1) - w * (e10 * l0 + e11 * l1 + e12 * l2)
+                f2 = cw * (g20 * l0 + g21 * l1 + g22 * l2 - r2) - w * (e20 * l0 + e21 * l1 + e22 * l2)
+                mb[8, k] = f0
+                mb[9, k] = f1
+                mb[10, k] = f2
                 fs0 += f0
                 fs1 += f1
                 fs2 += f2
                 t0 += r1 * f2 - r2 * f1
                 t1 += r2 * f0 - r0 * f2
                 t2 += r0 * f1 - r1 * f0
-                wk = m[j] * w
+                wk = mk * w
                 wsum += wk
                 c0 += wk * r0
                 c1 += wk * r1
                 c2 += wk * r2
-                rr = r0 * r0 + r1 * r1 + r2 * r2
-                i00 += wk * (rr - r0 * r0)
-                i11 += wk * (rr - r1 * r1)
-                i22 += wk * rr - wk * r2 * r2
+                i00 += wk * (r1 * r1 + r2 * r2)
+                i11 += wk * (r0 * r0 + r2 * r2)
+                i22 += wk * (r0 * r0 + r1 * r1)
                 i01 -= wk * r0 * r1
                 i02 -= wk * r0 * r2
                 i12 -= wk * r1 * r2
@@ -950,8 +1074,26 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
             fown[i, 0] = -fs0 + wi * (om1 * (-c2) - om2 * (-c1))
             fown[i, 1] = -fs1 + wi * (om2 * (-c0) - om0 * (-c2))
             fown[i, 2] = -fs2 + wi * (om0 * (-c1) - om1 * (-c0))
-            # members' slots into the members' rows (the force pass recomputes the forces, member_force)
-            for t in range(cnt):
-                ut = rev[i, t]
-                if ut >= 0:
-                    slott[nbr[i, t], ut] = mslot[i, t]
+            # the members' forces + torque correction at y = r - c, into the block's window
+            for k in range(count):
+                y0 = mb[0, k] - c0
+                y1 = mb[1, k] - c1
+                y2 = mb[2, k] - c2
+                wk = mb[7, k] * mb[6, k]
+                row = mj[k] - lo_b
+                win[blk, row, 0] += mb[8, k] + wk * (om1 * y2 - om2 * y1)
+                win[blk, row, 1] += mb[9, k] + wk * (om2 * y0 - om0 * y2)
+                win[blk, row, 2] += mb[10, k] + wk * (om0 * y1 - om1 * y0)
+    for j in prange(n):
+        f0 = 0.0
+        f1 = 0.0
+        f2 = 0.0
+        for blk in range(nblk):
+            if lo[blk] <= j <= hi[blk]:
+                row = j - lo[blk]
+                f0 += win[blk, row, 0]
+                f1 += win[blk, row, 1]
+                f2 += win[blk, row, 2]
+        fel[j, 0] = f0
+        fel[j, 1] = f1
+        fel[j, 2] = f2

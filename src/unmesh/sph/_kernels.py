@@ -26,7 +26,6 @@ from numba import njit, prange
 from unmesh.kernels._kernels import poly6_2d, poly6_3d, spiky_gradf_2d, spiky_gradf_3d
 from unmesh.spatial._kernels import point_cell, stencil_ranges
 from unmesh.sph import materials as M
-from unmesh.sph._elastic_kernels import member_force
 
 SOLID = 1
 #: Regularisation ε h² of the viscosity and heat-conduction denominators.
@@ -49,14 +48,20 @@ def kernel_gradf(r, h, dim):
     return spiky_gradf_2d(r, h)
 
 
-@njit(cache=True, inline="always")
+#: Flags of helpers that the fast-math pair loops call: numba passes a caller's ``fastmath`` and
+#: ``error_model`` on to callees that do not set them, so helpers (and the shared kernels they call)
+#: set them explicitly and compile the same whoever calls them first.
+PLAIN = {"cache": True, "fastmath": False, "error_model": "python"}
+
+
+@njit(**PLAIN)
 def poly6_coef(h, dim):
     """``c`` with ``W(r) = c (h² − r²)³`` for ``r < h`` (poly6, C.1/C.4): no division per pair."""
     h2 = h * h
     return kernel_w(0.0, h, dim) / (h2 * h2 * h2)
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def spiky_coef(h, dim):
     """``c`` with ``w'(r)/r = c (h − r)²/r`` for ``0 < r < h`` (spiky, C.8/C.11)."""
     return 2.0 * kernel_gradf(0.5 * h, h, dim) / h
@@ -159,8 +164,25 @@ def _gap(x, k, origin, cell, n):
     return 0.0
 
 
+#: Particles per block of the parallel passes (the unit that owns per-thread scratch buffers).
+BLOCK = 64
+
+
+@njit(cache=True)
+def _axis_gaps(xa, c, reach, origin, cell, n, out):
+    """Squared distance from coordinate ``xa`` to the cell slabs ``c - reach .. c + reach``
+    (0 for the own slab, ``inf`` for slabs outside the grid)."""
+    for s in range(2 * reach + 1):
+        k = c - reach + s
+        if k < 0 or k >= n:
+            out[s] = np.inf
+        else:
+            g = _gap(xa, k, origin, cell, n)
+            out[s] = g * g
+
+
 @njit(cache=True, parallel=True)
-def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, nbr, nnbr,
+def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, xm, nbr, nnbr,
                  bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
                  plane_p, plane_n, wall_rho, corners, corner_rho, rho, p):
     """Neighbour lists, density (8.4) and pressure (8.15–8.16) of every particle.
@@ -168,111 +190,126 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     ``x`` (N, 3) must be the grid's sorted points (z = 0 in 2D); any cell size works.
     With ``dense`` (:func:`dense_starts`; empty: use the sparse cell list) each particle
     visits only the cells that intersect its support sphere: along every grid row
-    ``(i, j)`` in reach, the run of cells within ``√(h² − d_ij²)`` in z, one contiguous
-    slice of the sorted points. ``nbr`` (N, cap) int32 receives the neighbours within
-    ``h`` (self excluded, ascending), ``nnbr`` the true counts (may exceed ``cap``: the
-    caller grows ``nbr`` and repeats). ``bnbr`` / ``nbnbr`` the same for boundary
-    particles ``bx`` (static grid ``b*``).
+    ``(i, j)`` in reach, the run of cells within ``√(h² − d_ij²)`` in z (found by comparing
+    squared slab gaps, no square roots), one contiguous slice of the sorted points.
+    ``xm`` (N, 4) is scratch: ``(x, y, z, m)`` rows, one 32-byte load per candidate. The candidate loop is branch-free:
+    every candidate adds ``m_b c (h² − r²)₊³`` (which is 0 beyond ``h`` and the self term
+    ``m_a W(0)`` for ``b = a``) and is written at the next free position of the row, which
+    advances only for neighbours. ``nbr`` (N, cap + 1) int32 therefore receives the
+    neighbours within ``h`` (self excluded, ascending) in its first ``cap`` columns (the
+    last column is scratch); ``nnbr`` the true counts (may exceed ``cap``: the caller grows
+    ``nbr`` and repeats). ``bnbr`` / ``nbnbr`` the same for boundary particles ``bx``
+    (static grid ``b*``; ``bnbr`` has no scratch column).
     """
     n = x.shape[0]
     h2 = h * h
     hr = h * (1.0 + 1e-9)  # conservative reach (round-off of the cell bounds)
     hr2 = hr * hr
     cell = 1.0 / inv_cell
-    cap = nbr.shape[1]
+    cap = nbr.shape[1] - 1
     bcap = bnbr.shape[1]
     nb = bx.shape[0]
-    w0 = kernel_w(0.0, h, dim)
     c6 = poly6_coef(h, dim)
     use_dense = dense.shape[0] > 0
     reach = math.ceil(hr * inv_cell)
-    rows = (2 * reach + 1) * (2 * reach + 1)
+    width = 2 * reach + 1
+    rows = width * width
     d0_, d1_, d2_ = dims[0], dims[1], dims[2]
     o0, o1, o2 = origin[0], origin[1], origin[2]
     for a in prange(n):
-        xa0 = x[a, 0]
-        xa1 = x[a, 1]
-        xa2 = x[a, 2]
-        rho_a = m[a] * w0
-        cnt = 0
-        if use_dense:
-            ilo = _cell_index((xa0 - hr - o0) * inv_cell, d0_)
-            ihi = _cell_index((xa0 + hr - o0) * inv_cell, d0_)
-            for ii in range(ilo, ihi + 1):
-                gx = _gap(xa0, ii, o0, cell, d0_)
-                rem = hr2 - gx * gx
-                if rem < 0.0:
-                    continue
-                ry = math.sqrt(rem)
-                jlo = _cell_index((xa1 - ry - o1) * inv_cell, d1_)
-                jhi = _cell_index((xa1 + ry - o1) * inv_cell, d1_)
-                for jj in range(jlo, jhi + 1):
-                    gy = _gap(xa1, jj, o1, cell, d1_)
-                    rem2 = rem - gy * gy
-                    if rem2 < 0.0:
+        xm[a, 0] = x[a, 0]
+        xm[a, 1] = x[a, 1]
+        xm[a, 2] = x[a, 2]
+        xm[a, 3] = m[a]
+    nblk = (n + BLOCK - 1) // BLOCK
+    for blk in prange(nblk):
+        g0 = np.empty(width)
+        g1 = np.empty(width)
+        g2 = np.empty(width)
+        ranges = np.empty((rows, 2), np.int64)
+        branges = np.empty((9, 2), np.int64)
+        for a in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
+            xa0 = xm[a, 0]
+            xa1 = xm[a, 1]
+            xa2 = xm[a, 2]
+            rho_a = 0.0
+            cnt = 0
+            if use_dense:
+                c0 = _cell_index((xa0 - o0) * inv_cell, d0_)
+                c1 = _cell_index((xa1 - o1) * inv_cell, d1_)
+                c2 = _cell_index((xa2 - o2) * inv_cell, d2_)
+                _axis_gaps(xa0, c0, reach, o0, cell, d0_, g0)
+                _axis_gaps(xa1, c1, reach, o1, cell, d1_, g1)
+                _axis_gaps(xa2, c2, reach, o2, cell, d2_, g2)
+                for si in range(width):
+                    rem = hr2 - g0[si]
+                    if not rem > 0.0:
                         continue
-                    rz = math.sqrt(rem2)
-                    klo = _cell_index((xa2 - rz - o2) * inv_cell, d2_)
-                    khi = _cell_index((xa2 + rz - o2) * inv_cell, d2_)
-                    base = (ii * d1_ + jj) * d2_
-                    for b in range(dense[base + klo], dense[base + khi + 1]):
-                        d0 = xa0 - x[b, 0]
-                        d1 = xa1 - x[b, 1]
-                        d2 = xa2 - x[b, 2]
+                    ii = c0 - reach + si
+                    for sj in range(width):
+                        rem2 = rem - g1[sj]
+                        if not rem2 > 0.0:
+                            continue
+                        # the z slabs within reach: squared gaps grow away from c2 on both sides
+                        klo = c2 - reach
+                        khi = c2 + reach
+                        for s in range(reach):
+                            klo += g2[s] >= rem2
+                            khi -= g2[width - 1 - s] >= rem2
+                        base = (ii * d1_ + sj + c1 - reach) * d2_
+                        for b in range(dense[base + klo], dense[base + khi + 1]):
+                            d0 = xa0 - xm[b, 0]
+                            d1 = xa1 - xm[b, 1]
+                            d2 = xa2 - xm[b, 2]
+                            r2 = d0 * d0 + d1 * d1 + d2 * d2
+                            t6 = max(h2 - r2, 0.0)
+                            rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
+                            nbr[a, min(cnt, cap)] = b
+                            cnt += (r2 < h2) & (b != a)
+            else:
+                ci, cj, ck = point_cell(x[a], origin, inv_cell, dims)
+                ns = stencil_ranges(ci, cj, ck, reach, dims, cell_keys, cell_start, ranges)
+                for s in range(ns):
+                    for b in range(ranges[s, 0], ranges[s, 1]):
+                        d0 = xa0 - xm[b, 0]
+                        d1 = xa1 - xm[b, 1]
+                        d2 = xa2 - xm[b, 2]
                         r2 = d0 * d0 + d1 * d1 + d2 * d2
-                        if r2 < h2 and b != a:
+                        t6 = max(h2 - r2, 0.0)
+                        rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
+                        nbr[a, min(cnt, cap)] = b
+                        cnt += (r2 < h2) & (b != a)
+            nnbr[a] = cnt
+            mt = matid[a]
+            rho0 = mats[mt, M.RHO0]
+            bcnt = 0
+            if nb > 0:
+                bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
+                nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
+                for s in range(nbs):
+                    for b in range(branges[s, 0], branges[s, 1]):
+                        d0 = xa0 - bx[b, 0]
+                        d1 = xa1 - bx[b, 1]
+                        d2 = xa2 - bx[b, 2]
+                        r2 = d0 * d0 + d1 * d1 + d2 * d2
+                        if r2 < h2:
                             t6 = h2 - r2
-                            rho_a += m[b] * (c6 * t6 * t6 * t6)
-                            if cnt < cap:
-                                nbr[a, cnt] = b
-                            cnt += 1
-        else:
-            ranges = np.empty((rows, 2), np.int64)
-            ci, cj, ck = point_cell(x[a], origin, inv_cell, dims)
-            ns = stencil_ranges(ci, cj, ck, reach, dims, cell_keys, cell_start, ranges)
-            for s in range(ns):
-                for b in range(ranges[s, 0], ranges[s, 1]):
-                    d0 = xa0 - x[b, 0]
-                    d1 = xa1 - x[b, 1]
-                    d2 = xa2 - x[b, 2]
-                    r2 = d0 * d0 + d1 * d1 + d2 * d2
-                    if r2 < h2 and b != a:
-                        t6 = h2 - r2
-                        rho_a += m[b] * (c6 * t6 * t6 * t6)
-                        if cnt < cap:
-                            nbr[a, cnt] = b
-                        cnt += 1
-        nnbr[a] = cnt
-        mt = matid[a]
-        rho0 = mats[mt, M.RHO0]
-        bcnt = 0
-        if nb > 0:
-            branges = np.empty((9, 2), np.int64)
-            bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
-            nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
-            for s in range(nbs):
-                for b in range(branges[s, 0], branges[s, 1]):
-                    d0 = xa0 - bx[b, 0]
-                    d1 = xa1 - bx[b, 1]
-                    d2 = xa2 - bx[b, 2]
-                    r2 = d0 * d0 + d1 * d1 + d2 * d2
-                    if r2 < h2:
-                        rho_a += rho0 * bvol[b] * kernel_w(r2, h, dim)
-                        if bcnt < bcap:
-                            bnbr[a, bcnt] = b
-                        bcnt += 1
-        nbnbr[a] = bcnt
-        for k in range(plane_p.shape[0]):
-            dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
-            if dist < h:
-                rho_a += rho0 * _table(wall_rho, dist, h)
-        for k in range(corners.shape[0]):
-            da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
-            db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
-            if da < h and db < h:
-                rho_a -= rho0 * _table2(corner_rho, da, db, h)
-        rho[a] = rho_a
-        p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+                            rho_a += rho0 * bvol[b] * (c6 * t6 * t6 * t6)
+                            if bcnt < bcap:
+                                bnbr[a, bcnt] = b
+                            bcnt += 1
+            nbnbr[a] = bcnt
+            for k in range(plane_p.shape[0]):
+                dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
+                if dist < h:
+                    rho_a += rho0 * _table(wall_rho, dist, h)
+            for k in range(corners.shape[0]):
+                da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
+                db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
+                if da < h and db < h:
+                    rho_a -= rho0 * _table2(corner_rho, da, db, h)
+            rho[a] = rho_a
+            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
 
 
 def cell_starts(grid, buffer=None):
@@ -296,18 +333,24 @@ def cell_starts(grid, buffer=None):
     return out
 
 
-@njit(cache=True, parallel=True)
+#: Columns of the per-particle rows that the force pass gathers for every neighbour (one 128-byte row).
+PK_X, PK_PR, PK_V, PK_M, PK_RHO, PK_RINV, PK_VISC, PK_ALPHA, PK_SOUND, PK_OBJ, PK_SOLID = 0, 3, 4, 7, 8, 9, 10, 11, 12, 13, 14
+PK_COLS = 16
+#: Fast-math flags of the pair loops: reassociation lets LLVM vectorise the sums over neighbours
+#: (no ``nnan``/``ninf``: NaN and infinity keep their meaning for the stability checks).
+PAIR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
+
+
+@njit(cache=True, parallel=True, fastmath=PAIR_FASTMATH, error_model="numpy")
 def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
                bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-               plane_noslip, wall_visc, bnoslip, grad_scale, elastic, spacing, slot_vecs, gmat, bstr, omega, cen, slott, fown,
-               acc, xsph, dtemp):
+               plane_noslip, wall_visc, bnoslip, grad_scale, elastic, fel, fown, pk, acc, xsph, dtemp):
     """Accelerations, XSPH corrections and temperature rates of every particle.
 
-    See the module docstring for the terms. ``elastic`` (bool) enables the gather
-    of lattice forces: ``fown`` plus the forces of the neighbourhoods of i's
-    neighbours ``j = nbr[i, t]`` in which ``i`` is docked at slot ``slott[i, t]``
-    (-1: not a member), recomputed from j's ``gmat``, ``bstr``, ``omega``, ``cen``
-    (:func:`unmesh.sph._elastic_kernels.member_force`; outputs of ``lattice_update``).
+    See the module docstring for the terms. ``elastic`` (bool) adds the lattice forces
+    on solid particles: ``fown[i] + fel[i]``, the particle's own share and the forces of
+    the neighbourhoods it is a member of (outputs of
+    :func:`unmesh.sph._elastic_kernels.lattice_update`).
     ``wall_mirror`` scales the boundary pressure term (2: pressure mirroring
     ``p_b = p_i``; 1: Akinci et al. 2012, ``p_i/ρ_i²``). ``plane_noslip`` (P,) and ``bnoslip``
     (NB,) uint8 mark no-slip walls: they apply the viscous term of (8.18) with the fluid's
@@ -316,6 +359,13 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     ``wall_visc`` (2, S) of :func:`unmesh.sph.boundary.wall_friction_tables`. ``grad_scale`` multiplies the kernel
     gradient of particle pairs (the lattice correction, see
     :func:`unmesh.sph.sampling.gradient_moment`).
+
+    Layout: ``pk`` (N, :data:`PK_COLS`) is scratch that first receives every particle's
+    pair data (position, ``p/ρ²``, velocity, mass, ``ρ``, ``1/ρ``, its material's ``μ``, ``α``,
+    ``c``, object, solid flag): one 128-byte row per neighbour instead of a dozen scattered
+    arrays. Per particle the rows of its neighbours are copied into a small column buffer,
+    and the pair loop over that buffer is branch-free (collisions and XSPH by selects), so
+    it is vectorised. Heat conduction runs in a second loop only for conducting particles.
     """
     n = x.shape[0]
     cap = nbr.shape[1]
@@ -325,167 +375,185 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     h2 = h * h
     c6 = poly6_coef(h, dim)
     cg = spiky_coef(h, dim)
-    # per-particle p/ρ² and 1/ρ: no divisions by neighbour quantities in the pair loop
-    pr = np.empty(n)
-    rinv = np.empty(n)
     for i in prange(n):
-        rinv[i] = 1.0 / rho[i]
-        pr[i] = p[i] / (rho[i] * rho[i])
-    for i in prange(n):
-        fe0 = 0.0
-        fe1 = 0.0
-        fe2 = 0.0
-        xi0 = x[i, 0]
-        xi1 = x[i, 1]
-        xi2 = x[i, 2]
-        vi0 = v[i, 0]
-        vi1 = v[i, 1]
-        vi2 = v[i, 2]
-        rhoi = rho[i]
-        rinv_i = rinv[i]
-        pi_ = pr[i]
         mt = matid[i]
-        mui = mats[mt, M.VISC]
-        xii = mats[mt, M.XI]
-        difi = mats[mt, M.DIFF]
-        rho0 = mats[mt, M.RHO0]
-        alphai = mats[mt, M.ALPHA]
-        ci = mats[mt, M.SOUND]
-        ai0 = 0.0
-        ai1 = 0.0
-        ai2 = 0.0
-        xs0 = 0.0
-        xs1 = 0.0
-        xs2 = 0.0
-        dti = 0.0
-        cnt = min(nnbr[i], cap)
-        solid_i = phase[i] == SOLID
-        for t in range(cnt):
-            j = nbr[i, t]
-            d0 = xi0 - x[j, 0]
-            d1 = xi1 - x[j, 1]
-            d2 = xi2 - x[j, 2]
-            r2 = d0 * d0 + d1 * d1 + d2 * d2
-            r = math.sqrt(r2)
-            gf = 0.0
-            if r > 0.0:
+        pk[i, PK_X] = x[i, 0]
+        pk[i, PK_X + 1] = x[i, 1]
+        pk[i, PK_X + 2] = x[i, 2]
+        pk[i, PK_PR] = p[i] / (rho[i] * rho[i])
+        pk[i, PK_V] = v[i, 0]
+        pk[i, PK_V + 1] = v[i, 1]
+        pk[i, PK_V + 2] = v[i, 2]
+        pk[i, PK_M] = m[i]
+        pk[i, PK_RHO] = rho[i]
+        pk[i, PK_RINV] = 1.0 / rho[i]
+        pk[i, PK_VISC] = mats[mt, M.VISC]
+        pk[i, PK_ALPHA] = mats[mt, M.ALPHA]
+        pk[i, PK_SOUND] = mats[mt, M.SOUND]
+        pk[i, PK_OBJ] = obj[i]
+        pk[i, PK_SOLID] = 1.0 if phase[i] == SOLID else 0.0
+        pk[i, PK_COLS - 1] = 0.0
+    nblk = (n + BLOCK - 1) // BLOCK
+    for blk in prange(nblk):
+        buf = np.empty((PK_COLS - 1, cap))
+        for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
+            cnt = min(nnbr[i], cap)
+            for t in range(cnt):
+                j = nbr[i, t]
+                for c in range(PK_COLS - 1):
+                    buf[c, t] = pk[j, c]
+            fe0 = 0.0
+            fe1 = 0.0
+            fe2 = 0.0
+            xi0 = pk[i, PK_X]
+            xi1 = pk[i, PK_X + 1]
+            xi2 = pk[i, PK_X + 2]
+            vi0 = pk[i, PK_V]
+            vi1 = pk[i, PK_V + 1]
+            vi2 = pk[i, PK_V + 2]
+            rhoi = pk[i, PK_RHO]
+            rinv_i = pk[i, PK_RINV]
+            pi_ = pk[i, PK_PR]
+            oi = pk[i, PK_OBJ]
+            si = pk[i, PK_SOLID]
+            mt = matid[i]
+            mui = mats[mt, M.VISC]
+            xii = mats[mt, M.XI]
+            difi = mats[mt, M.DIFF]
+            rho0 = mats[mt, M.RHO0]
+            alphai = mats[mt, M.ALPHA]
+            ci = mats[mt, M.SOUND]
+            ai0 = 0.0
+            ai1 = 0.0
+            ai2 = 0.0
+            xs0 = 0.0
+            xs1 = 0.0
+            xs2 = 0.0
+            dti = 0.0
+            solid_i = phase[i] == SOLID
+            for t in range(cnt):
+                d0 = xi0 - buf[PK_X, t]
+                d1 = xi1 - buf[PK_X + 1, t]
+                d2 = xi2 - buf[PK_X + 2, t]
+                r2 = d0 * d0 + d1 * d1 + d2 * d2
+                r = math.sqrt(r2)
                 hr = h - r
                 gf = cg * hr * hr / r  # spiky w'(r)/r
-            mj = m[j]
-            rhoj = rho[j]
-            mtj = matid[j]
-            vij0 = vi0 - v[j, 0]
-            vij1 = vi1 - v[j, 1]
-            vij2 = vi2 - v[j, 2]
-            vx = vij0 * d0 + vij1 * d1 + vij2 * d2
-            mu = 0.5 * (mui + mats[mtj, M.VISC])
-            # pressure (8.17) + viscosity (8.18), both along x_ij
-            bracket = -(pi_ + pr[j])
-            ire = 1.0 / (r2 + eh2)
-            if mu > 0.0:
-                bracket += visc_c * mu * rinv_i * rinv[j] * vx * ire
-            # Monaghan's artificial viscosity, approaching pairs only (branch-free: min(v_ij·x_ij, 0))
-            alpha = 0.5 * (alphai + mats[mtj, M.ALPHA])
-            cbar = 0.5 * (ci + mats[mtj, M.SOUND])
-            bracket += alpha * cbar * h * min(vx, 0.0) * ire * 2.0 / (rhoi + rhoj)
-            coef = mj * bracket * gf * grad_scale
-            same = obj[i] == obj[j]
-            if not same and (solid_i or phase[j] == SOLID):
-                # penalty collision between objects (8.37): repulsive part only
+                gf = gf if r > 0.0 else 0.0
+                mj = buf[PK_M, t]
+                vij0 = vi0 - buf[PK_V, t]
+                vij1 = vi1 - buf[PK_V + 1, t]
+                vij2 = vi2 - buf[PK_V + 2, t]
+                vx = vij0 * d0 + vij1 * d1 + vij2 * d2
+                ire = 1.0 / (r2 + eh2)
+                rsum = 2.0 / (rhoi + buf[PK_RHO, t])
+                # pressure (8.17) + viscosity (8.18) + Monaghan's artificial viscosity (approaching pairs
+                # only: min(v_ij·x_ij, 0)), all along x_ij
+                bracket = (-(pi_ + buf[PK_PR, t])
+                           + visc_c * (0.5 * (mui + buf[PK_VISC, t])) * rinv_i * buf[PK_RINV, t] * vx * ire
+                           + (0.5 * (alphai + buf[PK_ALPHA, t])) * (0.5 * (ci + buf[PK_SOUND, t])) * h
+                           * min(vx, 0.0) * ire * rsum)
+                coef = mj * bracket * gf * grad_scale
+                # penalty collision between objects (8.37): repulsive part only; XSPH (8.19) within one body
+                other = oi != buf[PK_OBJ, t] and si + buf[PK_SOLID, t] > 0.0
+                coef = max(coef, 0.0) if other else coef
+                t6 = h2 - r2
+                wx = 0.0 if other else xii * mj * rsum * (c6 * t6 * t6 * t6)
+                xs0 -= wx * vij0
+                xs1 -= wx * vij1
+                xs2 -= wx * vij2
+                ai0 += coef * d0
+                ai1 += coef * d1
+                ai2 += coef * d2
+            # heat conduction (Cleary & Monaghan)
+            if difi > 0.0:
+                for t in range(cnt):
+                    j = nbr[i, t]
+                    difj = mats[matid[j], M.DIFF]
+                    if difj > 0.0:
+                        d0 = xi0 - x[j, 0]
+                        d1 = xi1 - x[j, 1]
+                        d2 = xi2 - x[j, 2]
+                        r2 = d0 * d0 + d1 * d1 + d2 * d2
+                        r = math.sqrt(r2)
+                        gf = 0.0
+                        if r > 0.0:
+                            hr = h - r
+                            gf = cg * hr * hr / r
+                        dbar = 2.0 * difi * difj / (difi + difj)
+                        dti += (2.0 * m[j] / (rhoi * rho[j])) * rho0 * dbar * (temp[i] - temp[j]) * gf * r2 / (r2 + eh2)
+            # elastic forces: own share + the neighbourhoods i is a member of
+            if elastic and solid_i:
+                fe0 = fown[i, 0] + fel[i, 0]
+                fe1 = fown[i, 1] + fel[i, 1]
+                fe2 = fown[i, 2] + fel[i, 2]
+            # boundary particles (Akinci et al. 2012)
+            bcnt = min(nbnbr[i], bcap)
+            pb = max(p[i], 0.0) / (rhoi * rhoi) * wall_mirror
+            # no-slip walls: the fluid's effective shear viscosity (physical + artificial)
+            nu_wall = visc_c * (mui / rho0 + alphai * ci * h / (2.0 * visc_c)) / rhoi
+            for t in range(bcnt):
+                b = bnbr[i, t]
+                d0 = xi0 - bx[b, 0]
+                d1 = xi1 - bx[b, 1]
+                d2 = xi2 - bx[b, 2]
+                r2 = d0 * d0 + d1 * d1 + d2 * d2
+                r = math.sqrt(r2)
+                hb = h - r
+                gf = cg * hb * hb / r if r > 0.0 else 0.0  # spiky w'(r)/r
+                psi = rho0 * bvol[b]
+                bracket = -pb
+                noslip = bnoslip[b] != 0
+                if mui > 0.0 and not noslip:
+                    vx = vi0 * d0 + vi1 * d1 + vi2 * d2
+                    bracket += visc_c * mui / (rhoi * rho0) * vx / (r2 + eh2)
+                coef = psi * bracket * gf * grad_scale
                 if coef < 0.0:
                     coef = 0.0
-            else:
-                # XSPH (8.19) within one body
-                if xii > 0.0:
-                    t6 = h2 - r2
-                    wx = xii * 2.0 * mj / (rhoi + rhoj) * (c6 * t6 * t6 * t6)
-                    xs0 -= wx * vij0
-                    xs1 -= wx * vij1
-                    xs2 -= wx * vij2
-            ai0 += coef * d0
-            ai1 += coef * d1
-            ai2 += coef * d2
-            # heat conduction
-            difj = mats[mtj, M.DIFF]
-            if difi > 0.0 and difj > 0.0:
-                dbar = 2.0 * difi * difj / (difi + difj)
-                dti += (2.0 * mj / (rhoi * rhoj)) * rho0 * dbar * (temp[i] - temp[j]) * gf * r2 / (r2 + eh2)
-        # elastic forces of the neighbourhoods j in which i is docked (slot in i's own row)
-        if elastic and solid_i:
-            for t in range(cnt):
-                q = slott[i, t]
-                if q >= 0:
-                    f0, f1, f2 = member_force(i, nbr[i, t], q, x, m, matid, mats, h, dim, spacing, slot_vecs, gmat,
-                                              bstr, omega, cen)
-                    fe0 += f0
-                    fe1 += f1
-                    fe2 += f2
-        # boundary particles (Akinci et al. 2012)
-        bcnt = min(nbnbr[i], bcap)
-        pb = max(p[i], 0.0) / (rhoi * rhoi) * wall_mirror
-        # no-slip walls: the fluid's effective shear viscosity (physical + artificial)
-        nu_wall = visc_c * (mui / rho0 + alphai * ci * h / (2.0 * visc_c)) / rhoi
-        for t in range(bcnt):
-            b = bnbr[i, t]
-            d0 = xi0 - bx[b, 0]
-            d1 = xi1 - bx[b, 1]
-            d2 = xi2 - bx[b, 2]
-            r2 = d0 * d0 + d1 * d1 + d2 * d2
-            r = math.sqrt(r2)
-            gf = kernel_gradf(r, h, dim)
-            psi = rho0 * bvol[b]
-            bracket = -pb
-            noslip = bnoslip[b] != 0
-            if mui > 0.0 and not noslip:
-                vx = vi0 * d0 + vi1 * d1 + vi2 * d2
-                bracket += visc_c * mui / (rhoi * rho0) * vx / (r2 + eh2)
-            coef = psi * bracket * gf * grad_scale
-            if coef < 0.0:
-                coef = 0.0
-            if noslip:
-                vx = vi0 * d0 + vi1 * d1 + vi2 * d2
-                coef += psi * nu_wall * vx / (r2 + eh2) * gf * grad_scale
-            ai0 += coef * d0
-            ai1 += coef * d1
-            ai2 += coef * d2
-        # analytic walls
-        for k in range(plane_p.shape[0]):
-            dist = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, k)
-            if dist < h:
-                s = rho0 * pb * _table(wall_grad, dist, h)
-                if plane_noslip[k] != 0:
-                    # no-slip: ν ρ0/ρ_i (Mt v_t + Mn v_n n)
-                    mtan = rho0 * nu_wall * _table(wall_visc[0], dist, h)
-                    vn = vi0 * plane_n[k, 0] + vi1 * plane_n[k, 1] + vi2 * plane_n[k, 2]
-                    s += (rho0 * nu_wall * _table(wall_visc[1], dist, h) - mtan) * vn
-                    ai0 += mtan * vi0
-                    ai1 += mtan * vi1
-                    ai2 += mtan * vi2
-                ai0 += s * plane_n[k, 0]
-                ai1 += s * plane_n[k, 1]
-                ai2 += s * plane_n[k, 2]
-        for k in range(corners.shape[0]):
-            ka = corners[k, 0]
-            kb = corners[k, 1]
-            da = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, ka)
-            db = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, kb)
-            if da < h and db < h:
-                ga = rho0 * pb * _table2(corner_grad, da, db, h)
-                gb = rho0 * pb * _table2(corner_grad, db, da, h)
-                ai0 += ga * plane_n[ka, 0] + gb * plane_n[kb, 0]
-                ai1 += ga * plane_n[ka, 1] + gb * plane_n[kb, 1]
-                ai2 += ga * plane_n[ka, 2] + gb * plane_n[kb, 2]
-        if elastic and solid_i:
-            ai0 += (fe0 + fown[i, 0]) / m[i]
-            ai1 += (fe1 + fown[i, 1]) / m[i]
-            ai2 += (fe2 + fown[i, 2]) / m[i]
-        acc[i, 0] = ai0 + gravity[0]
-        acc[i, 1] = ai1 + gravity[1]
-        acc[i, 2] = ai2 + gravity[2]
-        xsph[i, 0] = xs0
-        xsph[i, 1] = xs1
-        xsph[i, 2] = xs2
-        dtemp[i] = dti
+                if noslip:
+                    vx = vi0 * d0 + vi1 * d1 + vi2 * d2
+                    coef += psi * nu_wall * vx / (r2 + eh2) * gf * grad_scale
+                ai0 += coef * d0
+                ai1 += coef * d1
+                ai2 += coef * d2
+            # analytic walls
+            for k in range(plane_p.shape[0]):
+                dist = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, k)
+                if dist < h:
+                    s = rho0 * pb * _table(wall_grad, dist, h)
+                    if plane_noslip[k] != 0:
+                        # no-slip: ν ρ0/ρ_i (Mt v_t + Mn v_n n)
+                        mtan = rho0 * nu_wall * _table(wall_visc[0], dist, h)
+                        vn = vi0 * plane_n[k, 0] + vi1 * plane_n[k, 1] + vi2 * plane_n[k, 2]
+                        s += (rho0 * nu_wall * _table(wall_visc[1], dist, h) - mtan) * vn
+                        ai0 += mtan * vi0
+                        ai1 += mtan * vi1
+                        ai2 += mtan * vi2
+                    ai0 += s * plane_n[k, 0]
+                    ai1 += s * plane_n[k, 1]
+                    ai2 += s * plane_n[k, 2]
+            for k in range(corners.shape[0]):
+                ka = corners[k, 0]
+                kb = corners[k, 1]
+                da = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, ka)
+                db = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, kb)
+                if da < h and db < h:
+                    ga = rho0 * pb * _table2(corner_grad, da, db, h)
+                    gb = rho0 * pb * _table2(corner_grad, db, da, h)
+                    ai0 += ga * plane_n[ka, 0] + gb * plane_n[kb, 0]
+                    ai1 += ga * plane_n[ka, 1] + gb * plane_n[kb, 1]
+                    ai2 += ga * plane_n[ka, 2] + gb * plane_n[kb, 2]
+            if elastic and solid_i:
+                ai0 += fe0 / m[i]
+                ai1 += fe1 / m[i]
+                ai2 += fe2 / m[i]
+            acc[i, 0] = ai0 + gravity[0]
+            acc[i, 1] = ai1 + gravity[1]
+            acc[i, 2] = ai2 + gravity[2]
+            xsph[i, 0] = xs0
+            xsph[i, 1] = xs1
+            xsph[i, 2] = xs2
+            dtemp[i] = dti
 
 
 @njit(cache=True, parallel=True)

@@ -37,7 +37,7 @@ def _mix(z):
     return z ^ (z >> np.uint64(31))
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False, error_model="python")
 def uniform(seed, step, pid, slot, stream):
     """Uniform number in [0, 1) for the given integer counters (numba scalar)."""
     z = _mix(np.uint64(seed) * _G + np.uint64(stream))

@@ -6,6 +6,13 @@ and the cubic closest packed (CCP, face-centred cubic) lattice of eq. (8.20) in
 every particle sees the same neighbourhood — the *lattice* ``L`` of eq. (8.21),
 whose points within the kernel support are the particle's *slots*.
 
+Fluids may instead be sampled on the simple cubic grid of spacing ``d``
+(:func:`cubic_grid`, ``lattice="cubic"``), the usual initial state of SPH fluid
+codes (e.g. SPlisHSPlasH): with ``h = 2d`` a particle has 26 neighbours at rest
+(42 on the closest packing), so the fluid passes do less work per particle. Solids
+need the closest packing: the lattice shape matching of section 8.2 assigns
+neighbours to its slots.
+
 Lattice coordinates are expressed in the lattice's own frame ``e1, e2, e3``
 (eq. 8.20); a sampled object places that frame in the world with the rotation
 :data:`LAYERS_HORIZONTAL` (3D: close-packed layers horizontal, ``e3`` = +y, so
@@ -31,16 +38,22 @@ from unmesh._validate import as_array, positive_scalar
 from unmesh.errors import InputError
 
 __all__ = [
+    "LATTICES",
     "LAYERS_HORIZONTAL",
     "closest_packing",
+    "cubic_grid",
     "gradient_moment",
     "lattice_basis",
     "lattice_frame",
+    "lattice_points",
     "lattice_slots",
     "nearest_lattice_point",
     "plane_spacings",
     "sample_shape",
 ]
+
+#: Sampling lattices: ``"closest"`` (hexagonal / CCP, eq. 8.20; needed by solids) and ``"cubic"`` (fluids).
+LATTICES = ("closest", "cubic")
 
 #: World rotation of the 3D lattice frame: e1 -> +x, e2 -> -z, e3 -> +y (layers horizontal).
 LAYERS_HORIZONTAL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -50,6 +63,12 @@ def _dim(dim: Any) -> int:
     if isinstance(dim, bool) or dim not in (2, 3):
         raise InputError(f"dim: expected 2 or 3, got {dim!r}")
     return int(dim)
+
+
+def _lattice(lattice: Any) -> str:
+    if lattice not in LATTICES:
+        raise InputError(f"lattice: expected one of {', '.join(map(repr, LATTICES))}, got {lattice!r}")
+    return str(lattice)
 
 
 def lattice_basis(dim: int) -> np.ndarray:
@@ -139,6 +158,34 @@ def lattice_slots(dim: int, radius_in_spacings: float) -> tuple[np.ndarray, np.n
     for q, c in enumerate(coords):
         table[c[0] + half, c[1] + half, c[2] + half] = q
     return vecs, coords, table
+
+
+def lattice_points(dim: int, radius_in_spacings: float, lattice: str = "closest") -> np.ndarray:
+    """The points ``0 < |l| < radius`` of a sampling lattice around a particle, in units of ``d``.
+
+    ``"closest"``: the slots of :func:`lattice_slots` (lattice-frame coordinates);
+    ``"cubic"``: the integer vectors of the simple cubic grid (2D: z = 0).
+
+    Returns
+    -------
+    ndarray, shape (Q, 3), float64
+
+    Example
+    -------
+    >>> len(lattice_points(3, 2.0)), len(lattice_points(3, 2.0, "cubic")), len(lattice_points(2, 2.0, "cubic"))
+    (42, 26, 8)
+    """
+    n = _dim(dim)
+    if _lattice(lattice) == "closest":
+        return lattice_slots(n, radius_in_spacings)[0]
+    rad = positive_scalar(radius_in_spacings, "radius_in_spacings")
+    k = math.ceil(rad)
+    rng = np.arange(-k, k + 1, dtype=np.float64)
+    grids = np.meshgrid(rng, rng, rng if n == 3 else np.zeros(1), indexing="ij")
+    vecs = np.stack([g.ravel() for g in grids], axis=1)
+    length = np.linalg.norm(vecs, axis=1)
+    keep = (length > 1e-9) & (length < rad * (1.0 - 1e-9))
+    return np.ascontiguousarray(vecs[keep][np.argsort(length[keep], kind="stable")])
 
 
 def nearest_lattice_point(y: Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -284,8 +331,52 @@ def closest_packing(lower: Any, upper: Any, spacing: float, dim: int = 3,
     return np.ascontiguousarray(out[order])
 
 
-def sample_shape(shape: Any, spacing: float, dim: int = 3, frame: Any = None) -> np.ndarray:
-    """Particles on a closest packing inside a shape (``shape.contains``).
+def cubic_grid(lower: Any, upper: Any, spacing: float, dim: int = 3) -> np.ndarray:
+    """Points of the simple cubic grid of spacing ``d`` filling the box ``[lower, upper]``.
+
+    The grid planes start ``d/2`` inside the box faces (as in :func:`closest_packing`),
+    so a box whose edges are multiples of ``d`` holds exactly ``volume / d³`` particles.
+
+    Parameters
+    ----------
+    lower, upper : array_like, shape (3,)
+        Box corners; in 2D only x and y are used and z = 0.
+    spacing : float
+        Grid spacing ``d`` (> 0).
+    dim : int
+        2 or 3.
+
+    Returns
+    -------
+    ndarray, shape (N, 3), float64
+        Sorted by height (y), then z, then x.
+
+    Example
+    -------
+    >>> p = cubic_grid([0, 0, 0], [0.4, 0.2, 0.3], 0.1)
+    >>> len(p), p.min(axis=0).round(6).tolist()
+    (24, [0.05, 0.05, 0.05])
+    """
+    n = _dim(dim)
+    lo = as_array(lower, "lower", (3,)).copy()
+    hi = as_array(upper, "upper", (3,)).copy()
+    d = positive_scalar(spacing, "spacing")
+    if np.any(hi[:n] < lo[:n]):
+        raise InputError(f"upper: expected upper >= lower, got {lo.tolist()} and {hi.tolist()}")
+    tol = 1e-9 * max(1.0, float(np.abs(hi - lo).max()))
+    counts = [math.floor((hi[a] - lo[a]) / d + tol / d) if a < n else 1 for a in range(3)]
+    if float(np.prod(counts, dtype=np.float64)) > 5e8:
+        raise InputError(f"spacing: {d} gives about {np.prod(counts, dtype=np.float64):.3g} grid points in the box; "
+                         "use a larger spacing")
+    axes = [lo[a] + (np.arange(counts[a]) + 0.5) * d if a < n else np.zeros(1) for a in range(3)]
+    gi, gj, gk = np.meshgrid(*axes, indexing="ij")
+    out = np.stack([gi.ravel(), gj.ravel(), gk.ravel()], axis=1)
+    order = np.lexsort((out[:, 0], out[:, 2], out[:, 1]))
+    return np.ascontiguousarray(out[order])
+
+
+def sample_shape(shape: Any, spacing: float, dim: int = 3, frame: Any = None, lattice: str = "closest") -> np.ndarray:
+    """Particles on a closest packing (or the cubic grid) inside a shape (``shape.contains``).
 
     Parameters
     ----------
@@ -297,7 +388,9 @@ def sample_shape(shape: Any, spacing: float, dim: int = 3, frame: Any = None) ->
     dim : int
         2: the shape's cross-section with the plane z = 0 is sampled.
     frame : array_like, shape (3, 3), optional
-        Lattice frame rotation (default :func:`lattice_frame`).
+        Lattice frame rotation (default :func:`lattice_frame`; closest packing only).
+    lattice : {"closest", "cubic"}
+        :func:`closest_packing` or :func:`cubic_grid` (axis-aligned).
 
     Returns
     -------
@@ -307,32 +400,35 @@ def sample_shape(shape: Any, spacing: float, dim: int = 3, frame: Any = None) ->
     Example
     -------
     >>> from unmesh.shapes import Box
-    >>> len(sample_shape(Box(size=(1.0, 1.0, 1.0)), 0.25, dim=2))
-    16
+    >>> len(sample_shape(Box(size=(1.0, 1.0, 1.0)), 0.25, dim=2)), len(sample_shape(Box(size=(1.0, 1.0, 1.0)), 0.25, 2, lattice="cubic"))
+    (16, 16)
     """
     bounds = np.asarray(shape.bounds(), dtype=np.float64)
-    pts = closest_packing(bounds[0], bounds[1], spacing, dim, frame)
+    if _lattice(lattice) == "cubic":
+        pts = cubic_grid(bounds[0], bounds[1], spacing, dim)
+    else:
+        pts = closest_packing(bounds[0], bounds[1], spacing, dim, frame)
     if len(pts) == 0:
         return pts
     return np.ascontiguousarray(pts[np.asarray(shape.contains(pts), dtype=bool)])
 
 
-def gradient_moment(dim: int, radius_in_spacings: float) -> float:
+def gradient_moment(dim: int, radius_in_spacings: float, lattice: str = "closest") -> float:
     """``−(1/n) tr Σ_j V_j (x_j − x_i) ⊗ ∇W_ij`` of the spiky kernel on the rest lattice.
 
     1 for a consistent gradient; SPH sums over a closest packing with ``h = 2d``
     give 0.872 (2D) and 0.949 (3D), i.e. pressure gradients (8.17) are
-    underestimated by that factor. Volumes ``V_j = m/ρ0`` with the lattice mass
-    (density exactly ``ρ0`` on the lattice, eq. 8.4).
+    underestimated by that factor (cubic grid: 0.874 and 0.947). Volumes ``V_j = m/ρ0``
+    with the lattice mass (density exactly ``ρ0`` on the lattice, eq. 8.4).
 
     Example
     -------
-    >>> round(gradient_moment(2, 2.0), 3), round(gradient_moment(3, 2.0), 3)
-    (0.872, 0.949)
+    >>> round(gradient_moment(2, 2.0), 3), round(gradient_moment(3, 2.0), 3), round(gradient_moment(3, 2.0, "cubic"), 3)
+    (0.872, 0.949, 0.947)
     """
     from unmesh.kernels import poly6, spiky_derivative
 
-    vecs, _, _ = lattice_slots(dim, radius_in_spacings)
+    vecs = lattice_points(dim, radius_in_spacings, lattice)
     r = np.linalg.norm(vecs, axis=1)
     h = float(radius_in_spacings)
     vol = 1.0 / (float(poly6(0.0, h, dim)) + float(np.sum(poly6(r, h, dim))))

@@ -39,7 +39,7 @@ from unmesh.sim import RunSettings
 from unmesh.sph.boundary import BoundaryParticles, Plane, box_planes, sample_boundary
 from unmesh.sph.materials import Material
 from unmesh.sph.phase import HeatSource
-from unmesh.sph.sampling import sample_shape
+from unmesh.sph.sampling import LATTICES, sample_shape
 from unmesh.sph.simulation import SPHConfig, SPHObject, SPHSimulation
 
 __all__ = ["MATERIAL_KEYS", "build_simulation"]
@@ -76,9 +76,9 @@ def _material(name: str, t: Table) -> Material:
         raise t.error(None, str(exc)) from None
 
 
-def _sample(obj: Table, shape: Any, spacing: float, dim: int) -> np.ndarray:
+def _sample(obj: Table, shape: Any, spacing: float, dim: int, lattice: str) -> np.ndarray:
     try:
-        return sample_shape(shape, spacing, dim)
+        return sample_shape(shape, spacing, dim, lattice=lattice)
     except InputError as exc:
         raise obj.error("shape", str(exc)) from None
 
@@ -162,9 +162,10 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
     seed = sim_t.integer("seed", default=0, minimum=0)
     wall_pressure = sim_t.number("wall_pressure", default=2.0, positive=True)
     name = sim_t.string("name", default=scene.file.stem)
+    lattice = sim_t.string("lattice", default="closest", choices=LATTICES)
     try:
         config = SPHConfig(dim=dim, spacing=spacing, dt=dt, smoothing=smoothing, cfl=cfl, gravity=gravity, seed=seed,
-                           wall_pressure=wall_pressure)
+                           wall_pressure=wall_pressure, lattice=lattice)
     except InputError as exc:
         raise sim_t.error(None, str(exc)) from None
     out_t = scene.table("output", required=False)
@@ -184,7 +185,7 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
         oname = o.string("name", default=f"object{k}")
         mat = o.string("material", choices=tuple(materials))
         shape = o.shape("shape")
-        pos = _sample(o, shape, spacing, dim)
+        pos = _sample(o, shape, spacing, dim, lattice)
         shapes.append(shape)
         if len(pos) == 0:
             raise o.error("shape", f"samples no particles at spacing {spacing}"

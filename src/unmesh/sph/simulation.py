@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numba
 import numpy as np
 
 from unmesh._validate import as_array, as_points
@@ -52,7 +51,7 @@ from unmesh.sph import materials as MT
 from unmesh.sph.boundary import BoundaryParticles, Plane, corner_pairs, corner_tables, wall_friction_tables, wall_tables
 from unmesh.sph.materials import Material, material_table
 from unmesh.sph.phase import HeatSource
-from unmesh.sph.sampling import gradient_moment, lattice_basis, lattice_frame, lattice_slots
+from unmesh.sph.sampling import LATTICES, gradient_moment, lattice_basis, lattice_frame, lattice_points, lattice_slots
 from unmesh.sph.state import FLUID, SOLID, ParticleState
 
 __all__ = ["SPHConfig", "SPHObject", "SPHSimulation"]
@@ -62,6 +61,8 @@ PARALLEL_MIN = 2000
 
 _PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed")
 _ELASTIC_ARRAYS = ("amat", "ainv", "occ", "docked", "lam")
+#: Per-particle arrays that every step recomputes after the re-sort (not re-sorted in a step).
+_RECOMPUTED = ("a", "xsph", "rho", "p", "dtemp")
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,12 @@ class SPHConfig:
         pressure gradient (8.17) is exact on the rest lattice (with ``h = 2d`` the
         spiky gradient underestimates it by 13 % in 2D and 5 % in 3D). A constant
         factor keeps the forces symmetric and momentum-conserving.
+    lattice : {"closest", "cubic"}
+        The lattice the objects are sampled on (:mod:`unmesh.sph.sampling`): it sets the
+        particle mass (density exactly ``ρ0`` on that lattice, eq. 8.4) and the gradient
+        correction. ``"cubic"`` (the simple cubic grid, 26 neighbours at rest instead of 42)
+        is for fluids only: solid objects and freezing materials need the closest packing
+        (lattice shape matching, section 8.2).
 
     Example
     -------
@@ -110,10 +117,13 @@ class SPHConfig:
     wall_pressure: float = 2.0
     neighbor_capacity: int = 0
     gradient_correction: bool = True
+    lattice: str = "closest"
 
     def __post_init__(self) -> None:
         if self.dim not in (2, 3):
             raise InputError(f"dim: expected 2 or 3, got {self.dim!r}")
+        if self.lattice not in LATTICES:
+            raise InputError(f"lattice: expected one of {', '.join(map(repr, LATTICES))}, got {self.lattice!r}")
         for key in ("spacing", "dt", "smoothing", "wall_pressure"):
             v = getattr(self, key)
             if not (isinstance(v, int | float) and v > 0 and math.isfinite(v)):
@@ -285,8 +295,13 @@ class SPHSimulation(Simulation):
         self.bmat = lattice_basis(self.dim)
         self.tmat = EK.d3_transform(self.bmat) if self.dim == 3 else np.eye(3)
         self.frame = lattice_frame(self.dim)
-        self.grad_scale = 1.0 / gradient_moment(self.dim, config.smoothing) if config.gradient_correction else 1.0
+        if config.gradient_correction:
+            self.grad_scale = 1.0 / gradient_moment(self.dim, config.smoothing, config.lattice)
+        else:
+            self.grad_scale = 1.0
         self.elastic = any(m.is_elastic for m in self.materials)
+        if config.lattice != "closest":
+            self._check_fluid_lattice()
         self.phase_changes = any(m.melt_rate > 0 or m.freeze_rate > 0 for m in self.materials)
         self._build_particles()
         self._build_boundary_grid()
@@ -302,11 +317,24 @@ class SPHSimulation(Simulation):
         self._v_limit = self._speed_limit()
 
     # -- construction -----------------------------------------------------------------
+    def _check_fluid_lattice(self) -> None:
+        """A non-closest sampling lattice holds fluids only (no solids, no freezing)."""
+        lat = self.config.lattice
+        for o in self.objects:
+            if o.phase == "solid":
+                raise InputError(f"object {o.name!r} is solid but lattice = {lat!r}: solids need the closest packing "
+                                 "(lattice shape matching, section 8.2); use lattice = 'closest'")
+        used = {o.material for o in self.objects}
+        for name, mat in zip(self.material_names, self.materials, strict=True):
+            if name in used and mat.freeze_rate > 0:
+                raise InputError(f"material {name!r} freezes but lattice = {lat!r}: solids need the closest packing "
+                                 "(lattice shape matching, section 8.2); use lattice = 'closest'")
+
     def _lattice_mass(self, rho0: float) -> float:
-        """Particle mass giving density ``ρ0`` on the perfect lattice (eq. 8.4)."""
+        """Particle mass giving density ``ρ0`` on the perfect sampling lattice (eq. 8.4)."""
         from unmesh.kernels import poly6
 
-        r = np.linalg.norm(self.slot_vecs, axis=1) * self.spacing
+        r = np.linalg.norm(lattice_points(self.dim, self.config.smoothing, self.config.lattice), axis=1) * self.spacing
         total = float(poly6(0.0, self.h, self.dim)) + float(np.sum(poly6(r, self.h, self.dim)))
         return rho0 / total
 
@@ -360,15 +388,16 @@ class SPHSimulation(Simulation):
         q = len(self.slot_vecs)
         self.amat = np.ascontiguousarray(np.repeat(self.frame[None], n, axis=0))
         self.ainv = np.ascontiguousarray(np.repeat(self.frame.T[None], n, axis=0))
-        self.occ = np.full((n, q), -1, np.int64) if self.elastic else np.full((n, 0), -1, np.int64)
+        self.occ = np.full((n, q), -1, np.int32) if self.elastic else np.full((n, 0), -1, np.int32)
         self.docked = np.zeros(self.occ.shape, np.uint8)
         self.lam = np.repeat(self.mats[self.mat, MT.DOCK_MAX][:, None], self.occ.shape[1], axis=1)
         cap = self.config.neighbor_capacity or (24 if self.dim == 2 else 64)
-        self.nbr = np.zeros((n, cap), np.int32)
+        self.nbr = np.zeros((n, cap + 1), np.int32)  # + the scratch column of the branch-free fill
         self.nnbr = np.zeros(n, np.int64)
         self.bnbr = np.zeros((n, 32 if len(self.boundary) else 1), np.int32)
         self.nbnbr = np.zeros(n, np.int64)
         self._scratch = None
+        self._rows: dict[str, np.ndarray] | None = None  # packed per-particle rows of the density and force passes
         self._spare: dict[str, np.ndarray] = {}  # re-sort buffers, reused every step
 
     def _check_layout(self) -> None:
@@ -418,14 +447,20 @@ class SPHSimulation(Simulation):
     def _arrays(self) -> list[str]:
         return list(_PARTICLE_ARRAYS) + (list(_ELASTIC_ARRAYS) if self.elastic else [])
 
-    def _sort(self) -> None:
-        """Re-sort every per-particle array by grid cell; returns the grid."""
+    def _sort(self, full: bool = True) -> None:
+        """Re-sort the per-particle arrays by grid cell (``self.grid``).
+
+        ``full=False`` (the step) leaves out the arrays that the density and force passes
+        overwrite before anything reads them (:data:`_RECOMPUTED`).
+        """
         from unmesh.spatial import build_cell_grid
 
         g = build_cell_grid(self.x, K.CELL_FRACTION * self.h)
         order = g.order
         spare = self._spare
         for name in self._arrays():
+            if not full and name in _RECOMPUTED:
+                continue
             if name == "x":
                 self.x = np.ascontiguousarray(g.points)
                 continue
@@ -447,58 +482,50 @@ class SPHSimulation(Simulation):
 
     def _ensure_scratch(self) -> None:
         n = len(self.x)
-        if self.elastic and self._scratch is not None and self._scratch["mslot"].shape != self.nbr.shape:
-            self._scratch["mslot"] = np.full(self.nbr.shape, -1, np.int16)
-            self._scratch["slott"] = np.full(self.nbr.shape, -1, np.int16)
-            self._scratch["rev"] = np.full(self.nbr.shape, -1, np.int32)
         if self._scratch is None or self._scratch["fown"].shape[0] != n:
             self._scratch = {
                 "amat_out": np.zeros((n, 3, 3)), "ainv_out": np.zeros((n, 3, 3)), "gmat": np.zeros((n, 3, 3)),
                 "bstr": np.zeros((n, 3, 3)), "omega": np.zeros((n, 3)), "cen": np.zeros((n, 3)),
                 "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8),
-                "mslot": np.full(self.nbr.shape if self.elastic else (1, 1), -1, np.int16),
-                "slott": np.full(self.nbr.shape if self.elastic else (1, 1), -1, np.int16),
-                "rev": np.full(self.nbr.shape if self.elastic else (1, 1), -1, np.int32),
+                "fel": np.zeros((n, 3)),
             }
 
     def _density(self) -> None:
         g = self.grid
         bo, binv, bd, bk, bs = self.bgrid
         self._dense = dense = K.cell_starts(g, getattr(self, "_dense", None))
+        n = len(self.x)
+        if self._rows is None or self._rows["xm"].shape[0] != n:
+            self._rows = {"xm": np.empty((n, 4)), "pk": np.empty((n, K.PK_COLS))}
         while True:
             K.density_pass(self.x, self.m, self.mat, self.mats, self.h, self.dim, g.origin, g.inv_cell, g.dims,
-                           g.cell_keys, g.cell_start, dense, self.nbr, self.nnbr, self.bx, self.bvol, bo, binv, bd, bk, bs,
-                           self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho, self.corners,
-                           self.corner_rho, self.rho, self.p)
+                           g.cell_keys, g.cell_start, dense, self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol,
+                           bo, binv, bd, bk, bs, self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho,
+                           self.corners, self.corner_rho, self.rho, self.p)
             need = int(self.nnbr.max()) if len(self.nnbr) else 0
             bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
-            if need <= self.nbr.shape[1] and bneed <= self.bnbr.shape[1]:
+            if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1]:
                 return
-            self.nbr = np.zeros((len(self.x), max(need + 8, self.nbr.shape[1])), np.int32)
+            self.nbr = np.zeros((n, max(need + 9, self.nbr.shape[1])), np.int32)
             self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
 
     def _update(self, prime: bool = False) -> None:
         """Sort, density, lattice and force passes at the current positions."""
-        self._sort()
+        self._sort(full=False)
         self._density()
         self._ensure_scratch()
         s = self._scratch
         if self.elastic:
-            missing = EK.reverse_positions(self.nbr, self.nnbr, 8 * numba.get_num_threads(), s["rev"])
-            if missing:  # the density pass builds symmetric, ascending lists: a bug if this happens
-                raise RuntimeError(f"internal error: {missing} neighbour-list entries have no reverse entry")
             EK.lattice_update(self.x, self.m, self.phase, self.obj, self.mat, self.uid, self.mats, self.nbr, self.nnbr,
                               self.h, self.dim, self.spacing, self.slot_vecs, self.tmat, self.slot_table,
                               self.amat, self.ainv, self.occ, self.docked, self.lam, self.config.seed, self.steps,
-                              self.dt_last, 1 if prime else 0, s["rev"], s["amat_out"], s["ainv_out"], s["gmat"], s["bstr"],
-                              s["omega"], s["cen"], s["fown"], s["valid"], s["mslot"], s["slott"])
+                              self.dt_last, 1 if prime else 0, s["amat_out"], s["ainv_out"], s["gmat"], s["bstr"],
+                              s["omega"], s["cen"], s["fown"], s["valid"], s["fel"])
         K.force_pass(self.x, self.v, self.m, self.rho, self.p, self.temp, self.phase, self.obj, self.mat, self.uid,
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
                      self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.bnoslip,
-                     self.grad_scale,
-                     self.elastic, self.spacing, self.slot_vecs, s["gmat"], s["bstr"], s["omega"], s["cen"], s["slott"],
-                     s["fown"], self.a, self.xsph, self.dtemp)
+                     self.grad_scale, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
         if self.elastic:
             # the new lattice transformations become the previous ones of the next step
             self.amat, s["amat_out"] = s["amat_out"], self.amat
@@ -609,7 +636,7 @@ class SPHSimulation(Simulation):
         donor = np.empty(n, np.int64)
         rates = np.empty(n)
         s = self._scratch
-        occ = self.occ if self.elastic else np.full((n, len(self.slot_vecs)), -1, np.int64)
+        occ = self.occ if self.elastic else np.full((n, len(self.slot_vecs)), -1, np.int32)
         PK.phase_pass(self.x, self.v, self.m, self.phase, self.obj, self.mat, self.uid, self.temp, self.mats,
                       self.nbr, self.nnbr, self.h, self.dim, self.spacing, self.slot_vecs, self.tmat,
                       self.slot_table, self.ainv, s["gmat"], occ, s["valid"], self.config.seed, self.steps, dt,
