@@ -212,3 +212,18 @@ def test_element_node_kernel_matches_the_numpy_reference():
             ref_off, ref_nodes = m._elem_nodes_reference()
             np.testing.assert_array_equal(off, ref_off)
             np.testing.assert_array_equal(nodes, ref_nodes)
+
+
+def test_node_face_and_repeated_node_kernels_match_numpy_references():
+    for m in (voronoi_foam(12, seed=6), hex_grid((2, 3, 2))):
+        off, faces = K.node_faces(m.face_offsets, m.face_nodes, m.n_nodes)
+        order = np.argsort(m.face_nodes, kind="stable")
+        ref_faces = np.repeat(np.arange(m.n_faces), np.diff(m.face_offsets))[order]
+        ref_off = np.searchsorted(m.face_nodes[order], np.arange(m.n_nodes + 1))
+        np.testing.assert_array_equal(off, ref_off)
+        np.testing.assert_array_equal(faces, ref_faces)
+        assert K.repeated_face_node(m.face_offsets, m.face_nodes) == (-1, -1)
+        fn = m.face_nodes.copy()
+        f = 3
+        fn[m.face_offsets[f] + 2] = fn[m.face_offsets[f]]
+        assert K.repeated_face_node(m.face_offsets, fn) == (f, fn[m.face_offsets[f]])

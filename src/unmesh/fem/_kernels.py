@@ -198,3 +198,38 @@ def element_node_sets(elem_offsets, elem_faces, face_offsets, face_nodes, n_node
                 j -= 1
             nodes[j + 1] = x
     return offsets, nodes
+
+
+@njit(cache=True)
+def node_faces(face_offsets, face_nodes, n_nodes):
+    """CSR ``(offsets (n+1,), faces)`` of the faces containing each node, ascending (counting sort).
+
+    The numpy reference is a stable argsort of ``face_nodes`` (in the tests).
+    """
+    off = np.zeros(n_nodes + 1, np.int64)
+    for k in range(face_nodes.shape[0]):
+        off[face_nodes[k] + 1] += 1
+    for i in range(n_nodes):
+        off[i + 1] += off[i]
+    fill = off[:-1].copy()
+    faces = np.empty(face_nodes.shape[0], np.int64)
+    for f in range(face_offsets.shape[0] - 1):
+        for k in range(face_offsets[f], face_offsets[f + 1]):
+            v = face_nodes[k]
+            faces[fill[v]] = f
+            fill[v] += 1
+    return off, faces
+
+
+@njit(cache=True)
+def repeated_face_node(face_offsets, face_nodes):
+    """First face (and the node) listing a node twice, or (-1, -1).
+
+    The numpy reference is the lexsort in :func:`unmesh.fem._meshcheck.check_structure`.
+    """
+    for f in range(face_offsets.shape[0] - 1):
+        for a in range(face_offsets[f], face_offsets[f + 1]):
+            for b in range(a + 1, face_offsets[f + 1]):
+                if face_nodes[a] == face_nodes[b]:
+                    return f, face_nodes[a]
+    return -1, -1

@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.errors import InputError
+from unmesh.fem._kernels import repeated_face_node
 
 __all__ = ["check_geometry", "check_structure", "convexity_violation"]
 
@@ -41,12 +42,9 @@ def check_structure(mesh: Any) -> None:
     if np.any(counts < 4):
         raise InputError(f"element {int(np.flatnonzero(counts < 4)[0])}: has {int(counts.min())} faces, expected at least 4")
     # repeated nodes inside a face
-    fid = np.repeat(np.arange(len(fo) - 1), sizes)
-    order = np.lexsort((fn, fid))
-    dup = (fid[order][1:] == fid[order][:-1]) & (fn[order][1:] == fn[order][:-1])
-    if dup.any():
-        f = int(fid[order][1:][dup][0])
-        raise InputError(f"face {f}: node {int(fn[order][1:][dup][0])} appears twice")
+    f, v = repeated_face_node(fo, fn)
+    if f >= 0:
+        raise InputError(f"face {int(f)}: node {int(v)} appears twice")
     use = np.bincount(ef, minlength=len(fo) - 1)
     if np.any(use == 0):
         raise InputError(f"face {int(np.flatnonzero(use == 0)[0])}: is not used by any element")

@@ -30,6 +30,7 @@ Example
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -885,24 +886,33 @@ def _cross2(a: np.ndarray, b: np.ndarray) -> float:
     return float(a[0] * b[1] - a[1] * b[0])
 
 
-def _proj(poly: np.ndarray, axis: np.ndarray) -> tuple[float, float]:
-    p = poly @ axis
-    return float(p.min()), float(p.max())
+def _proj(poly: list[list[float]], ax: float, ay: float) -> tuple[float, float]:
+    lo = hi = poly[0][0] * ax + poly[0][1] * ay
+    for x, y in poly[1:]:
+        t = x * ax + y * ay
+        lo = min(lo, t)
+        hi = max(hi, t)
+    return lo, hi
 
 
 def _overlap(A: np.ndarray, B: np.ndarray, eps: float) -> bool:
-    """Do two convex 2D polygons overlap with positive area (separating axis test)?"""
-    for poly in (A, B):
+    """Do two convex 2D polygons overlap with positive area (separating axis test)?
+
+    Scalar arithmetic on lists (small numpy arrays cost most of the cut, issue 5).
+    """
+    a = A.tolist() if isinstance(A, np.ndarray) else [list(p) for p in A]
+    b = B.tolist() if isinstance(B, np.ndarray) else [list(p) for p in B]
+    for poly in (a, b):
         k = len(poly)
         for i in range(k):
-            d = poly[(i + 1) % k] - poly[i]
-            ax = np.array([-d[1], d[0]])
-            ln = np.linalg.norm(ax)
+            dx = poly[(i + 1) % k][0] - poly[i][0]
+            dy = poly[(i + 1) % k][1] - poly[i][1]
+            ln = math.hypot(dx, dy)
             if ln == 0:
                 continue
-            ax /= ln
-            a0, a1 = _proj(A, ax)
-            b0, b1 = _proj(B, ax)
+            ax, ay = -dy / ln, dx / ln
+            a0, a1 = _proj(a, ax, ay)
+            b0, b1 = _proj(b, ax, ay)
             if a1 <= b0 + eps or b1 <= a0 + eps:
                 return False
     return True

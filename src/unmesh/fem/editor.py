@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from unmesh.errors import InputError
+from unmesh.fem._kernels import node_faces
 from unmesh.fem.mesh import PolyMesh
 
 __all__ = ["EditResult", "MeshEditor"]
@@ -81,9 +82,7 @@ class MeshEditor:
         self.n_elems = mesh.n_elements
         self.changed: set[int] = set()
         self._fe = mesh.face_elements()
-        order = np.argsort(mesh.face_nodes, kind="stable")
-        self._nf_faces = np.repeat(np.arange(mesh.n_faces), np.diff(mesh.face_offsets))[order]
-        self._nf_off = np.searchsorted(mesh.face_nodes[order], np.arange(mesh.n_nodes + 1))
+        self._nf_off, self._nf_faces = node_faces(mesh.face_offsets, mesh.face_nodes, mesh.n_nodes)
         self._extra: dict[int, set[int]] = {}
         self._edge_cache: dict[tuple[int, int], int] = {}
         self._moved: dict[int, np.ndarray] = {}
@@ -368,11 +367,11 @@ class MeshEditor:
             dead[e] = True
         elem_ids = np.r_[np.flatnonzero(~dead[:ne_base]), [e for e in range(ne_base, self.n_elems) if not dead[e]]]
         elem_ids = elem_ids.astype(np.int64)
-        counts = np.empty(len(elem_ids), np.int64)
         eo = base.elem_offsets
         base_counts = np.diff(eo)
-        for k, e in enumerate(elem_ids):
-            counts[k] = len(self._elems[e]) if (e >= ne_base or edited[e]) else base_counts[e]
+        counts = base_counts[np.minimum(elem_ids, ne_base - 1)] if ne_base else np.zeros(len(elem_ids), np.int64)
+        for k in np.flatnonzero((elem_ids >= ne_base) | edited[np.minimum(elem_ids, ne_base - 1)]):
+            counts[k] = len(self._elems[int(elem_ids[k])])
         ef = np.empty(counts.sum(), np.int64)
         es = np.empty(counts.sum(), np.int64)
         off = np.r_[0, np.cumsum(counts)].astype(np.int64)
