@@ -438,3 +438,14 @@ def test_lagged_lu_with_factorised_constraints_is_exact_for_them(rng, monkeypatc
                       lag.preconditioner(Q, p.indptr, p.indices, A, kind, normal), 1e-10, 50)
     assert its <= 2 and res < 1e-10
     assert grow(p.indptr, p.indices, kind != 0, 1).sum() > (kind != 0).sum()
+
+
+def test_fused_warped_assembly_matches_rotated_blocks_scattered(rng):
+    sim = Dynamics(voronoi_foam(10, seed=7), 50.0, 0.3, 1.0)
+    p = sim.pattern
+    R = Rotation.random(sim.mesh.n_elements, random_state=3).as_matrix()
+    ref = FK.scatter_blocks(p.block_map, FK.rotated_blocks(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R),
+                            len(p.indices))
+    got = FK.warped_global_blocks(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R, p.block_map,
+                                  len(p.indices))
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())

@@ -159,6 +159,42 @@ def scatter_blocks(block_map, blocks, nblocks):
     return out
 
 
+@njit(cache=True)
+def warped_global_blocks(node_off, k_off, ke, rots, block_map, nblocks):
+    """Global blocks (nblocks, 9) of the warped stiffness Σ_e R_e K_e R_eᵀ in one pass.
+
+    Serial (the global sums would race); the reference is :func:`rotated_blocks`
+    followed by :func:`scatter_blocks`, which write and read all element blocks once more.
+    """
+    ne = node_off.shape[0] - 1
+    out = np.zeros((nblocks, 9))
+    T = np.empty((3, 3))
+    for e in range(ne):
+        n = node_off[e + 1] - node_off[e]
+        R = rots[e]
+        r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
+        r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
+        r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+        for ab in range(n * n):
+            o = k_off[e] + ab * 9
+            for j in range(3):
+                k0 = ke[o + j]
+                k1 = ke[o + 3 + j]
+                k2 = ke[o + 6 + j]
+                T[0, j] = r00 * k0 + r01 * k1 + r02 * k2
+                T[1, j] = r10 * k0 + r11 * k1 + r12 * k2
+                T[2, j] = r20 * k0 + r21 * k1 + r22 * k2
+            b = block_map[o // 9]
+            for i in range(3):
+                t0 = T[i, 0]
+                t1 = T[i, 1]
+                t2 = T[i, 2]
+                out[b, i * 3] += t0 * r00 + t1 * r01 + t2 * r02
+                out[b, i * 3 + 1] += t0 * r10 + t1 * r11 + t2 * r12
+                out[b, i * 3 + 2] += t0 * r20 + t1 * r21 + t2 * r22
+    return out
+
+
 @njit(cache=True, parallel=True)
 def rotated_blocks(node_off, k_off, ke, rots):
     """Rotated element blocks R K_ab Rᵀ (stiffness warping, 9.1.4) as (Σn², 9)."""

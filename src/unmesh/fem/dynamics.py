@@ -338,8 +338,8 @@ class Dynamics:
         x = self.positions()
         R = self.rotations()
         f_el, _ = self.elastic_forces(R)
-        blocks = FK.rotated_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R)
-        K = FK.scatter_blocks(self.pattern.block_map, blocks, len(self.pattern.indices))
+        K = FK.warped_global_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R,
+                                    self.pattern.block_map, len(self.pattern.indices))
         cm = 1.0 + dt * self.alpha
         ck = dt * self.beta + dt * dt
         A = SK.add_diagonal(K, self.pattern.diag, ck, self.masses, cm)
