@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from tests.shells.conftest import Box, grid_cloud, grid_nodes
 from unmesh.shells import ShellMaterial, ShellSimulation
+from unmesh.shells.energy import FiberState
 from unmesh.shells.forces import elastic_forces, node_terms
 from unmesh.shells.skinning import bind_points
 from unmesh.shells.topology import csr_from_groups, csr_from_groups_reference
@@ -177,3 +178,65 @@ def test_skinned_cloud_skips_only_the_validation(torn_strip):
     assert out.axes is None and checked.axes is None
     np.testing.assert_array_equal(out.attributes["discontinuity"], checked.attributes["discontinuity"])
     assert out.attributes["discontinuity"].sum() == 2 * len(torn_strip.cracks)
+
+
+def test_local_rebuild_equals_the_reference_rebuild(monkeypatch):
+    """The spliced fiber rebuild (7.3.2) gives the reference's topology, fiber state and origins at
+    every crack event, with detached nodes around (its local filtering) and when a crack detaches
+    one (it then runs the reference)."""
+    from unmesh.shells import MaterialRegion, rebuild, simulation
+    from unmesh.shells.fracture import rebuild_near as reference
+
+    seen = {"events": 0, "reference": 0, "detached": 0}
+    plain = rebuild.rebuild_near_reference
+
+    def counting(*args, **kwargs):
+        seen["reference"] += 1
+        return plain(*args, **kwargs)
+
+    def both(*args, **kwargs):
+        t1, s1, o1 = rebuild.rebuild_near(*args, **kwargs)
+        t2, s2, o2 = reference(*args, **kwargs)
+        for name in ("neighbor_offsets", "neighbors", "pairs", "pair_offsets", "pair_center", "fibers",
+                     "fiber_offsets", "soft"):
+            np.testing.assert_array_equal(getattr(t1, name), getattr(t2, name), err_msg=name)
+        for name, arr in s1.as_dict().items():
+            np.testing.assert_array_equal(arr, getattr(s2, name), err_msg=name)
+        np.testing.assert_array_equal(o1, o2)
+        seen["events"] += 1
+        seen["detached"] += int((np.diff(t1.neighbor_offsets) == 0).any())
+        return t1, s1, o1
+
+    monkeypatch.setattr(rebuild, "rebuild_near_reference", counting)
+    monkeypatch.setattr(simulation, "rebuild_near", both)
+    cloud = grid_cloud(61, 21, 0.02)
+    idx = grid_nodes(61, 21, 2)
+    mat = ShellMaterial(ks=1000.0, kb=100.0, damping=2.0, density=2.0, fracture_stretch=0.03,
+                        regions=(MaterialRegion(Box([-0.03, -1, -1], [0.03, 1, 1]), fracture=0.5),
+                                 MaterialRegion(Box([-1, -1, -1], [-0.4, 1, 1]), fracture=5.0),
+                                 MaterialRegion(Box([0.4, -1, -1], [1, 1, 1]), fracture=5.0)))
+    sim = ShellSimulation(cloud, mat, 0.0005, node_indices=idx, gravity=(0, 0, 0), total_area=1.2 * 0.4,
+                          handles=[{"region": Box([-1, -1, -1], [-0.55, 1, 1]), "velocity": (-0.2, 0, 0)},
+                                   {"region": Box([0.55, -1, -1], [1, 1, 1]), "velocity": (0.2, 0, 0)}])
+    for _ in range(1600):
+        sim.step()
+        assert sim.check() is None
+    assert seen["events"] >= 15 and 0 < seen["reference"] < seen["events"] and seen["detached"] > 0
+
+
+def test_fast_fracture_candidates_equal_the_reference():
+    from unmesh.shells.fracture import fracture_candidates, fracture_candidates_fast
+
+    rng = np.random.default_rng(4)
+    n = 5000
+    state = FiberState(rng.uniform(0.5, 1.5, n), rng.normal(size=n), rng.normal(scale=0.05, size=n),
+                       rng.normal(scale=0.1, size=n), np.ones(n), np.ones(n),
+                       np.where(rng.random(n) < 0.2, np.inf, rng.uniform(0.01, 0.1, n)),
+                       np.where(rng.random(n) < 0.5, np.inf, rng.uniform(0.1, 1.0, n)))
+    lengths = state.rest_length() * rng.uniform(0.9, 1.2, n)
+    lengths[:50] = state.rest_length()[:50] * 1.05                # ties in the excess
+    angles = state.rest_angle() + rng.normal(scale=0.5, size=n)
+    for got, ref in zip(fracture_candidates_fast(state, lengths, angles), fracture_candidates(state, lengths, angles),
+                        strict=True):
+        np.testing.assert_array_equal(got, ref)
+    assert len(fracture_candidates(state, lengths, angles)[0]) > 100

@@ -247,6 +247,37 @@ def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
     return folds
 
 
+@njit(cache=True, inline="always")
+def touched_range(lo, hi, pairs, pstart, pcount, fibers, fstart, fcount):
+    """Smallest node range ``[a, b)`` holding every node the forces of nodes ``lo .. hi-1`` touch
+    (their fibers' ends and umbrella pairs): the part of a chunk buffer that is not zero."""
+    a = lo
+    b = hi
+    if hi <= lo:
+        return lo, lo
+    for k in range(fstart[lo], fstart[hi - 1] + fcount[hi - 1]):
+        a = min(a, fibers[k, 0], fibers[k, 2])
+        b = max(b, fibers[k, 0] + 1, fibers[k, 2] + 1)
+    for q in range(pstart[lo], pstart[hi - 1] + pcount[hi - 1]):
+        a = min(a, pairs[q, 0], pairs[q, 1])
+        b = max(b, pairs[q, 0] + 1, pairs[q, 1] + 1)
+    return a, b
+
+
+@njit(cache=True, inline="always")
+def sum_chunks(i, chunks, buf, span):
+    """Force on node ``i``: the sum over the chunk buffers that can hold a contribution (fixed order)."""
+    f0 = 0.0
+    f1 = 0.0
+    f2 = 0.0
+    for c in range(chunks):
+        if span[c, 0] <= i < span[c, 1]:
+            f0 += buf[c, i, 0]
+            f1 += buf[c, i, 1]
+            f2 += buf[c, i, 2]
+    return f0, f1, f2
+
+
 #: The node loops must run one after the other: no fusion of the parallel loops.
 @njit(cache=True, parallel={"fusion": False}, fastmath=FASTMATH, error_model="numpy")
 def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
@@ -255,16 +286,22 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
     """Elastic forces of all nodes (7.16): ``chunks`` contiguous node ranges in parallel.
 
     Every chunk scatters into its own buffer ``buf[c]`` (chunks, N, 3) -- no write races --
-    and the buffers are summed into ``out_force`` (N, 3). ``cap`` is the largest fiber count
+    and the buffers are summed into ``out_force`` (N, 3); only the node range a chunk can
+    touch (:func:`touched_range`) is cleared and summed. ``cap`` is the largest fiber count
     of a node (scratch size). With a non-empty mask ``only`` (N,) only the measures and node
     terms of the blocks holding listed nodes are computed (same arithmetic, no forces).
     """
     n = x.shape[0]
     scatter = only.shape[0] == 0
+    span = np.zeros((chunks, 2), dtype=np.int64)
     for c in prange(chunks):
         b = buf[c]
         if scatter:
-            b[:, :] = 0.0
+            lo, hi = touched_range(c * n // chunks, (c + 1) * n // chunks, pairs, pstart, pcount, fibers, fstart,
+                                   fcount)
+            span[c, 0] = lo
+            span[c, 1] = hi
+            b[lo:hi, :] = 0.0
         blk = np.empty(ROWS * BLK)
         scr = np.empty((max(cap, 1), SCRATCH))
         chunk_forces(c * n // chunks, (c + 1) * n // chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
@@ -273,13 +310,7 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
     if not scatter:
         return
     for i in prange(n):
-        f0 = 0.0
-        f1 = 0.0
-        f2 = 0.0
-        for c in range(chunks):
-            f0 += buf[c, i, 0]
-            f1 += buf[c, i, 1]
-            f2 += buf[c, i, 2]
+        f0, f1, f2 = sum_chunks(i, chunks, buf, span)
         out_force[i, 0] = f0
         out_force[i, 1] = f1
         out_force[i, 2] = f2
@@ -353,6 +384,32 @@ def fracture_scan(x, fibers, lengths, angles, rest_length, rest_angle, gamma_s, 
             if min(s0, s1) < degenerate * sc:
                 bad += 1
     return over, bad
+
+
+@njit(cache=True, error_model="numpy")
+def fiber_excess(lengths, angles, lorig, lplast, aorig, aplast, gamma_s, gamma_b, out_index, out_excess):
+    """Fibers with ``max(strain / gamma_s, |dtheta| / gamma_b) > 1`` (7.24) and that excess, in fiber order.
+
+    The arithmetic of :func:`unmesh.shells.fracture.fracture_candidates` (non-finite
+    thresholds count 0, NaN 0, infinities the largest float); returns the count.
+    """
+    big = 1.7976931348623157e308
+    m = 0
+    for k in range(lengths.shape[0]):
+        es = 0.0
+        if math.isfinite(gamma_s[k]):
+            es = (lengths[k] / (lorig[k] + lplast[k]) - 1.0) / gamma_s[k]
+        eb = 0.0
+        if math.isfinite(gamma_b[k]):
+            eb = abs(angles[k] - (aorig[k] + aplast[k])) / gamma_b[k]
+        es = 0.0 if math.isnan(es) else min(max(es, -big), big)
+        eb = 0.0 if math.isnan(eb) else min(max(eb, -big), big)
+        e = max(es, eb)
+        if e > 1.0:
+            out_index[m] = k
+            out_excess[m] = e
+            m += 1
+    return m
 
 
 @njit(cache=True)

@@ -77,6 +77,24 @@ def plane_normal(x, normals, nodes):
     return vx, vy, vz
 
 
+@njit(cache=True)
+def within_reach(points, rows, reach, radius, centers):
+    """(R,) bool: some centre lies within ``reach[r] + radius`` of ``points[r]`` (r in ``rows``), with
+    distances ``sqrt(dx^2 + dy^2 + dz^2)`` as ``numpy.linalg.norm``."""
+    out = np.zeros(rows.shape[0], dtype=np.bool_)
+    for t in range(rows.shape[0]):
+        r = rows[t]
+        lim = reach[r] + radius
+        for c in range(centers.shape[0]):
+            dx = points[r, 0] - centers[c, 0]
+            dy = points[r, 1] - centers[c, 1]
+            dz = points[r, 2] - centers[c, 2]
+            if math.sqrt(dx * dx + dy * dy + dz * dz) <= lim:
+                out[t] = True
+                break
+    return out
+
+
 @njit(cache=True, parallel=True)
 def rest_plane_normals(x, normals, bind, out):
     """Rest plane normals (S, 3) of all bindings."""

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.shells._block_kernels import BLK, ROWS
-from unmesh.shells._kernels import FASTMATH, SCRATCH, chunk_forces
+from unmesh.shells._kernels import FASTMATH, SCRATCH, chunk_forces, sum_chunks, touched_range
 
 #: Collider kinds in ``col_type``; ``col_data`` rows are (point, normal, restitution, friction)
 #: for planes and (center, radius, -, -, restitution, friction) for spheres.
@@ -162,9 +162,13 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
                 _kinematic(i, kin_handle[i], rest, hdisp, hvel, x, v)
     # elastic forces: every node range scatters into its own buffer
     folds = 0
+    span = np.zeros((chunks, 2), dtype=np.int64)
     for c in prange(chunks):
         b = buf[c]
-        b[:, :] = 0.0
+        lo, hi = touched_range(c * n // chunks, (c + 1) * n // chunks, pairs, pstart, pcount, fibers, fstart, fcount)
+        span[c, 0] = lo
+        span[c, 1] = hi
+        b[lo:hi, :] = 0.0
         blk = np.empty(ROWS * BLK)
         scr = np.empty((max(cap, 1), SCRATCH))
         folds += chunk_forces(c * n // chunks, (c + 1) * n // chunks, x, pairs, pstart, pcount, soft, fibers, fstart,
@@ -177,13 +181,7 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
     g2 = gravity[2]
     for c in prange(chunks):
         for i in range(c * n // chunks, (c + 1) * n // chunks):
-            f0 = 0.0
-            f1 = 0.0
-            f2 = 0.0
-            for k in range(chunks):
-                f0 += buf[k, i, 0]
-                f1 += buf[k, i, 1]
-                f2 += buf[k, i, 2]
+            f0, f1, f2 = sum_chunks(i, chunks, buf, span)
             out_force[i, 0] = f0
             out_force[i, 1] = f1
             out_force[i, 2] = f2

@@ -24,9 +24,11 @@ from unmesh.shells import _kernels, _step_kernels
 from unmesh.shells.dynamics import Gravity, Handle, Pressure, Pull, damping_force
 from unmesh.shells.energy import FiberState, umbrella_normals
 from unmesh.shells.forces import ForceResult, elastic_forces, node_terms, threads_for
-from unmesh.shells.fracture import CrackSet, fracture_candidates, rebuild_near, select_cracks
+from unmesh.shells.fracture import CrackSet, select_cracks
+from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
 from unmesh.shells.material import ShellMaterial
 from unmesh.shells.nodes import DEFAULT_MIN_ANGLE, DEFAULT_NEIGHBORS, build_topology, select_nodes
+from unmesh.shells.rebuild import rebuild_near
 from unmesh.shells.skinning import DEFAULT_SKIN_NODES, SkinnedSurface
 from unmesh.shells.topology import ShellTopology
 from unmesh.sim import Simulation
@@ -402,7 +404,7 @@ class ShellSimulation(Simulation):
         self.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
                                            f[keep], t.soft, validate=False)
         self.fibers = self.fibers.take(keep)
-        self._anchor_crumbs(np.arange(t.n_nodes))
+        self._anchor_crumbs(None)
         return True
 
     def _fracture(self) -> None:
@@ -446,7 +448,7 @@ class ShellSimulation(Simulation):
         self._carry_angles(angles, origin)
         rebuilt = np.unique(near)
         self._keep_node_terms(before, had, rebuilt)
-        self._anchor_crumbs(np.arange(len(self.rest)))   # a rebuild can strip nodes outside `near` too
+        self._anchor_crumbs(None)   # all nodes: a rebuild can strip nodes outside `near` too
         self._reach = max(self._reach, self._neighbor_reach(rebuilt))
         # the dense surface is re-bound once per rendered frame (_update_surface), not per event
         self._pending_cracks.extend(len(self.cracks) - len(chosen) + np.arange(len(chosen)))
@@ -479,8 +481,10 @@ class ShellSimulation(Simulation):
         self.surface.add_discontinuities(c.centers[new], c.normals[new], c.radii[new], self.rest_normals[c.nodes[new]],
                                          c.blocked)
 
-    def _anchor_crumbs(self, rows: np.ndarray) -> None:
+    def _anchor_crumbs(self, rows: np.ndarray | None) -> None:
         """Let nodes that the cracks cut off from every fiber follow a neighbouring piece.
+
+        ``rows`` are the nodes to look at (with the crumbs that exist; None: all nodes).
 
         Such a crumb (a sliver between two nearly parallel crack discs) has no elastic
         forces; left free it would drift off as a separate piece of one node. It follows,
@@ -493,7 +497,7 @@ class ShellSimulation(Simulation):
         self.anchor[on_fiber] = -1                     # a rebuild gave it fibers again
         lost = np.flatnonzero(self.anchor >= 0)
         self.anchor[lost[~on_fiber[self.anchor[lost]]]] = -1   # its anchor lost its fibers: choose again
-        rows = np.union1d(rows, lost)
+        rows = np.arange(len(self.rest)) if rows is None else np.union1d(rows, lost)
         crumbs = rows[~on_fiber[rows] & (self.anchor[rows] < 0) & ~self.fixed[rows]]
         if not len(crumbs):
             return
@@ -550,12 +554,11 @@ class ShellSimulation(Simulation):
 
     def _carry_angles(self, angles: np.ndarray, origin: np.ndarray) -> None:
         """Keep the continuous angle branch of surviving fibers across a topology change."""
-        ref = self.fibers.rest_angle().copy() if len(self.fibers) == len(origin) else None
-        if ref is None:  # origin refers to the fibers after _drop_degenerate's take
-            ref = angles[origin].copy()
-        else:
-            ref[origin >= 0] = angles[origin[origin >= 0]]
-        self._resume_angles = ref
+        if len(self.fibers) != len(origin):  # origin refers to the fibers after _drop_degenerate's take
+            self._resume_angles = angles[origin].copy()
+            return
+        rest = self.fibers.rest_angle()
+        self._resume_angles = np.where(origin >= 0, angles[np.maximum(origin, 0)], rest) if len(angles) else rest
 
     def _keep_node_terms(self, before: np.ndarray, had: np.ndarray, rows: np.ndarray) -> None:
         """Offsets that keep each rebuilt node's area and curvature terms continuous.

@@ -202,7 +202,7 @@ def _trusted_cloud(positions: np.ndarray, normals: np.ndarray, radii: np.ndarray
 class _Passive:
     """Arrays of a set of bound passive points (dense surfels or discontinuity surfels), growable."""
 
-    FIELDS = ("points", "axes", "orient", "colors", "bind", "weights", "plane", "coords")
+    FIELDS = ("points", "axes", "orient", "colors", "bind", "weights", "plane", "coords", "reach")
 
     def __init__(self, k: int) -> None:
         self.n = 0
@@ -214,6 +214,7 @@ class _Passive:
         self.weights = np.zeros((0, k))
         self.plane = np.zeros((0, 3))
         self.coords = np.zeros((0, k, _sk.COORDS))
+        self.reach = np.zeros(0)     # distance to the farthest bound node
 
     def append(self, **arrays: np.ndarray) -> None:
         """Append rows (capacity doubles, so many small appends cost O(total))."""
@@ -280,9 +281,10 @@ class SkinnedSurface:
         plane = self._planes(bind)
         self.dense = _Passive(self.k)
         self.dense.append(points=pts, axes=axes, orient=orient, colors=cloud.colors, bind=bind, weights=weights,
-                          plane=plane, coords=self._coords(bind, weights, plane, pts, axes))
+                          plane=plane, coords=self._coords(bind, weights, plane, pts, axes),
+                          reach=self._reaches(bind, pts))
         self.disc = _Passive(self.k)
-        self._reach = self._max_reach(self.dense.view("bind"), pts)
+        self._reach = float(self.dense.view("reach").max()) if self.dense.n else 0.0
         from unmesh.shells.topology import csr_from_groups
 
         # surfels of the dense cloud grouped by their nearest node at rest (never changes)
@@ -338,12 +340,12 @@ class SkinnedSurface:
                                   np.ascontiguousarray(axes), out)
         return out
 
-    def _max_reach(self, bind: np.ndarray, pts: np.ndarray) -> float:
-        valid = bind >= 0
-        if not valid.any():
-            return 0.0
-        d = np.where(valid, np.linalg.norm(self.node_rest[np.maximum(bind, 0)] - pts[:, None], axis=2), 0)
-        return float(d.max())
+    def _reaches(self, bind: np.ndarray, pts: np.ndarray) -> np.ndarray:
+        """Distance from each point to its farthest bound node, (S,) (0 without nodes)."""
+        if not len(bind):
+            return np.zeros(0)
+        d = np.where(bind >= 0, np.linalg.norm(self.node_rest[np.maximum(bind, 0)] - pts[:, None], axis=2), 0)
+        return d.max(axis=1)
 
     def _rebind(self, part: _Passive, rows: np.ndarray, blocked: Any) -> None:
         pts = part.points[rows]
@@ -352,13 +354,17 @@ class SkinnedSurface:
         plane = self._planes(b)
         part.bind[rows], part.weights[rows], part.plane[rows] = b, w, plane
         part.coords[rows] = self._coords(b, w, plane, pts, axes)
-        self._reach = max(self._reach, self._max_reach(b, pts))
+        part.reach[rows] = self._reaches(b, pts)
+        self._reach = max(self._reach, float(part.reach[rows].max()))
 
     def rebind_near(self, centers: np.ndarray, radius: float, blocked: Any) -> int:
         """Bind again, with visibility, every point within reach of the given crack centres.
 
         Only the surfels owned by nodes near the centres are examined (no pass over the
-        whole cloud). Returns the number of points re-bound.
+        whole cloud), and a point only when a centre is within its own reach (the distance
+        to its farthest bound node) plus ``radius``: segments to its bound nodes are no
+        longer, so farther cracks cannot hide them, and the binding stays. Returns the
+        number of points re-bound.
         """
         if len(centers) == 0 or len(self) == 0:
             return 0
@@ -369,16 +375,16 @@ class SkinnedSurface:
         near = np.unique(near)
         count = 0
         if len(near):
-            starts, stops = self._owned_offsets[near], self._owned_offsets[near + 1]
-            rows = self._owned[np.concatenate([np.arange(a, b) for a, b in zip(starts, stops, strict=True)])]
-            d = np.min(np.linalg.norm(self.dense.points[rows][:, None, :] - c[None, :, :], axis=2), axis=1)
-            rows = np.unique(rows[d <= reach])
+            starts, counts = self._owned_offsets[near], np.diff(self._owned_offsets)[near]
+            pos = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+            rows = np.unique(self._owned[pos])
+            rows = rows[_sk.within_reach(self.dense.points, rows, self.dense.reach, float(radius), c)]
             if len(rows):
                 self._rebind(self.dense, rows, blocked)
                 count += len(rows)
         if self.disc.n:
-            d = np.min(np.linalg.norm(self.disc.view("points")[:, None, :] - c[None, :, :], axis=2), axis=1)
-            rows = np.flatnonzero(d <= reach)
+            rows = np.arange(self.disc.n)
+            rows = rows[_sk.within_reach(self.disc.points, rows, self.disc.reach, float(radius), c)]
             if len(rows):
                 self._rebind(self.disc, rows, blocked)
                 count += len(rows)
@@ -419,7 +425,7 @@ class SkinnedSurface:
         b, w = bind_points(p, self.node_rest, self.k, blocked=blocked, tree=self.tree)
         plane = self._planes(b)
         self.disc.append(points=p, axes=a, orient=orient, colors=np.asarray(colors), bind=b, weights=w, plane=plane,
-                         coords=self._coords(b, w, plane, p, a))
+                         coords=self._coords(b, w, plane, p, a), reach=self._reaches(b, p))
 
     def deform(self, node_positions: np.ndarray, node_normals: np.ndarray) -> SurfelCloud:
         """The deformed cloud for current node positions and (umbrella) normals.

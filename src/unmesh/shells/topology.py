@@ -22,6 +22,7 @@ folds under extreme deformation then has bounded forces.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,6 +82,16 @@ def csr_from_groups_reference(groups: np.ndarray, count: int) -> tuple[np.ndarra
     return offsets, order
 
 
+def _grouped(keys: np.ndarray, rows: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR offsets by ``keys`` and ``rows``, ``keys`` in stable key order (no reordering when sorted)."""
+    if len(keys) < 2 or bool((keys[1:] >= keys[:-1]).all()):
+        offsets = np.zeros(count + 1, dtype=np.int64)
+        np.cumsum(np.bincount(keys, minlength=count), out=offsets[1:])
+        return offsets, np.ascontiguousarray(rows), np.ascontiguousarray(keys)
+    offsets, order = csr_from_groups(keys, count)
+    return offsets, np.ascontiguousarray(rows[order]), np.ascontiguousarray(keys[order])
+
+
 @dataclass(frozen=True, eq=False)
 class ShellTopology:
     """Neighbourhoods, umbrella pairs and fibers of ``n_nodes`` simulation nodes.
@@ -125,13 +136,38 @@ class ShellTopology:
     pairs: np.ndarray
     pair_offsets: np.ndarray
     pair_center: np.ndarray
-    pair_incidence_offsets: np.ndarray
-    pair_incidence: np.ndarray
     fibers: np.ndarray
     fiber_offsets: np.ndarray
-    fiber_incidence_offsets: np.ndarray
-    fiber_incidence: np.ndarray
     soft: np.ndarray
+
+    # the incidence lists are built on first use (the force kernels do not need them)
+    @functools.cached_property
+    def _pair_incidence(self) -> tuple[np.ndarray, np.ndarray]:
+        return csr_from_groups(self.pairs.reshape(-1), self.n_nodes)  # entry e = 2 * pair + role
+
+    @functools.cached_property
+    def _fiber_incidence(self) -> tuple[np.ndarray, np.ndarray]:
+        return csr_from_groups(self.fibers.reshape(-1), self.n_nodes)  # entry e = 3 * fiber + role
+
+    @property
+    def pair_incidence_offsets(self) -> np.ndarray:
+        """CSR offsets (N + 1,) of :attr:`pair_incidence`."""
+        return self._pair_incidence[0]
+
+    @property
+    def pair_incidence(self) -> np.ndarray:
+        """``2 * pair + role`` for every pair in which a node is ``a`` (0) or ``b`` (1), by node."""
+        return self._pair_incidence[1]
+
+    @property
+    def fiber_incidence_offsets(self) -> np.ndarray:
+        """CSR offsets (N + 1,) of :attr:`fiber_incidence`."""
+        return self._fiber_incidence[0]
+
+    @property
+    def fiber_incidence(self) -> np.ndarray:
+        """``3 * fiber + role`` for every fiber through a node, by node."""
+        return self._fiber_incidence[1]
 
     @classmethod
     def build(cls, n_nodes: int, neighbor_offsets: object, neighbors: object, pairs: object, pair_center: object,
@@ -184,14 +220,14 @@ class ShellTopology:
     @classmethod
     def _derive(cls, n: int, noff: np.ndarray, nbr: np.ndarray, pr: np.ndarray, pc: np.ndarray, fib: np.ndarray,
                 sf: np.ndarray) -> ShellTopology:
-        """Sort pairs and fibers by centre and build the incidence lists (arrays already checked)."""
-        poff, porder = csr_from_groups(pc, n)
-        pr, pc = np.ascontiguousarray(pr[porder]), np.ascontiguousarray(pc[porder])
-        foff, forder = csr_from_groups(fib[:, 1], n)
-        fib = np.ascontiguousarray(fib[forder])
-        pio, pin = csr_from_groups(pr.reshape(-1), n)  # entry e = 2 * pair + role
-        fio, fin = csr_from_groups(fib.reshape(-1), n)  # entry e = 3 * fiber + role
-        return cls(n, noff, nbr, pr, poff, pc, pio, pin, fib, foff, fio, fin, sf)
+        """Sort pairs and fibers by centre (arrays already checked).
+
+        Already sorted arrays (a fracture rebuild splices them in order) are kept as they
+        are: the stable sort would not move anything.
+        """
+        poff, pr, pc = _grouped(pc, pr, n)
+        foff, fib, _ = _grouped(np.ascontiguousarray(fib[:, 1]), fib, n)
+        return cls(n, noff, nbr, pr, poff, pc, fib, foff, sf)
 
     def fiber_counts(self) -> np.ndarray:
         """Number of fibers ``m_i`` centred at each node, (N,) int64."""

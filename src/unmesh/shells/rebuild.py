@@ -1,0 +1,180 @@
+"""Local fiber rebuild after a crack (thesis 7.3.2) at the cost of the affected nodes.
+
+:func:`rebuild_near` gives what :func:`unmesh.shells.fracture.rebuild_near` (the plain
+reference) gives -- the same topology, fiber state and origins, entry for entry
+(``tests/shells/test_speed_paths.py``) -- but touches the whole shell only to copy its
+arrays once: the neighbourhoods, umbrella pairs and fibers of the affected nodes are made
+as in the reference, their rest and current measures are taken from the new umbrella pairs
+of those nodes alone, and the new rows are spliced into the node-ordered arrays
+(:mod:`unmesh.shells._rebuild_kernels`), which are then already sorted.
+
+When the crack leaves a node that still had neighbours with fewer than
+:data:`~unmesh.shells.fracture.MIN_VISIBLE` visible ones (it is detached from the whole
+shell, a global change), the reference is used.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from unmesh.shells import _kernels, _rebuild_kernels
+from unmesh.shells.energy import _FIELDS, FiberState
+from unmesh.shells.forces import arc_gram
+from unmesh.shells.fracture import MIN_VISIBLE, CrackSet, FiberMaterial, fracture_candidates
+from unmesh.shells.fracture import rebuild_near as rebuild_near_reference
+from unmesh.shells.nodes import create_fibers, node_neighborhoods, umbrella_pairs, umbrella_softening
+from unmesh.shells.topology import ShellTopology
+
+__all__ = ["rebuild_near"]
+
+
+def _row_offsets(keys: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """CSR offsets over ``rows`` (sorted) of entries with (sorted) row ``keys``."""
+    return np.searchsorted(keys, np.concatenate([rows, [np.iinfo(np.int64).max]]), side="left").astype(np.int64)
+
+
+def _splice(old_offsets: np.ndarray, row_of: np.ndarray, new_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    out = np.empty(len(old_offsets), dtype=np.int64)
+    src = _rebuild_kernels.splice_sources(old_offsets, row_of, new_offsets, out)
+    return out, src
+
+
+def _take(src: np.ndarray, old: np.ndarray, new: np.ndarray) -> np.ndarray:
+    out = np.empty((len(src), *old.shape[1:]), dtype=old.dtype)
+    if old.ndim == 1:
+        _rebuild_kernels.gather(src, old, np.ascontiguousarray(new, dtype=old.dtype), out)
+    else:
+        _rebuild_kernels.gather2(src, old, np.ascontiguousarray(new, dtype=old.dtype).reshape(-1, old.shape[1]), out)
+    return out
+
+
+def _measure(x: np.ndarray, fibers: np.ndarray, pairs: np.ndarray, pair_offsets: np.ndarray, rows: np.ndarray,
+             soft: np.ndarray, samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """``FiberState.measure`` of ``fibers`` (centred at ``rows``) with the rows' umbrella pairs only."""
+    n = len(x)
+    s, nrm = np.zeros((n, 3)), np.zeros((n, 3))
+    full = np.zeros(n + 1, dtype=np.int64)              # pair offsets of all nodes (other rows empty)
+    counts = np.zeros(n, dtype=np.int64)
+    counts[rows] = np.diff(pair_offsets)
+    np.cumsum(counts, out=full[1:])
+    _kernels.umbrella(np.ascontiguousarray(x), np.ascontiguousarray(pairs), full, s, nrm)
+    f = np.ascontiguousarray(fibers)
+    length, angle = np.empty(len(f)), np.empty(len(f))
+    _kernels.fiber_measures(np.ascontiguousarray(x), f, np.ascontiguousarray(s[f[:, 1]]),
+                            np.ascontiguousarray(soft[f[:, 1]]), arc_gram(samples), length, angle)
+    return length, angle
+
+
+def _keys(f: np.ndarray, n: int) -> np.ndarray:
+    return (f[:, 0] * n + f[:, 1]) * n + f[:, 2]
+
+
+def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopology, state: FiberState,
+                 cracks: CrackSet, affected: np.ndarray, neighbors: int, min_angle: float,
+                 fiber_material: FiberMaterial, current: np.ndarray | None = None,
+                 samples: int = 4, tree: Any = None) -> tuple[ShellTopology, FiberState, np.ndarray]:
+    """:func:`unmesh.shells.fracture.rebuild_near` (same arguments and result) in time of the affected nodes.
+
+    Example
+    -------
+    >>> from unmesh.shells.nodes import grid_sheet
+    >>> x, topo = grid_sheet(6, 6)
+    >>> cracks = CrackSet()
+    >>> cracks.add([2.5, 2.5, 0], [1.0, 0, 0], 1.5, 14, 0.0)
+    >>> mat = lambda f, r: {"stretch_scale": np.ones(len(f)), "bend_scale": np.ones(len(f)),
+    ...                     "fracture_stretch": np.full(len(f), np.inf), "fracture_bend": np.full(len(f), np.inf)}
+    >>> st = FiberState.at_rest(x, topo)
+    >>> args = (x, np.tile([0, 0, 1.0], (36, 1)), topo, st, cracks, np.arange(8, 28), 12, 60.0, mat, x)
+    >>> t1, s1, o1 = rebuild_near(*args)
+    >>> t2, s2, o2 = rebuild_near_reference(*args)
+    >>> bool(np.array_equal(t1.fibers, t2.fibers) and np.array_equal(s1.length_orig, s2.length_orig))
+    True
+    """
+    n = topology.n_nodes
+    rows = np.unique(np.asarray(affected, dtype=np.int64))
+    if current is None or len(rows) == 0 or n >= 2**21:
+        return rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
+                                      fiber_material, current, samples, tree)
+    noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
+    old_counts = np.diff(topology.neighbor_offsets)
+    counts = old_counts.copy()
+    counts[rows] = np.diff(noff)
+    loose = counts < MIN_VISIBLE
+    if (loose & (old_counts > 0)).any():          # a node is detached from the shell: a global change
+        return rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
+                                      fiber_material, current, samples, tree)
+    # pairs and fibers of the affected nodes, from their unfiltered neighbourhoods (as the reference)
+    pairs, centers = umbrella_pairs(rest, rest_normals, noff, nbr, nodes=rows)
+    new = create_fibers(rest, noff, nbr, min_angle, nodes=rows)
+    # reuse the state of fibers that existed before (the last of equal old fibers, as a dict would)
+    k0, k1 = topology.fiber_offsets[rows], topology.fiber_offsets[rows + 1]
+    aff_old = np.concatenate([np.arange(a, b) for a, b in zip(k0, k1, strict=True)]) if len(rows) else np.zeros(0, int)
+    aff_old = aff_old.astype(np.int64)
+    old_keys = _keys(topology.fibers[aff_old], n)
+    order = np.argsort(old_keys, kind="stable")
+    sk = old_keys[order]
+    new_keys = _keys(new, n)
+    at = np.searchsorted(sk, new_keys, side="right") - 1
+    hit = (at >= 0) & (sk[np.maximum(at, 0)] == new_keys) if len(sk) else np.zeros(len(new), bool)
+    reuse = np.where(hit, aff_old[order][np.maximum(at, 0)] if len(sk) else -1, -1).astype(np.int64)
+    if loose.any():                                # nodes detached before: no fibers, pairs or neighbours
+        good = ~loose[pairs].any(axis=1) & ~loose[centers]
+        pairs, centers = pairs[good], centers[good]
+        att = ~loose[new].any(axis=1) if len(new) else np.zeros(0, bool)
+        new, reuse = new[att], reuse[att]
+        entry_row = np.repeat(rows, np.diff(noff))
+        ok = ~loose[nbr] & ~loose[entry_row]
+        nbr = nbr[ok]
+        noff = _row_offsets(entry_row[ok], rows)
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
+    centers = np.ascontiguousarray(centers, dtype=np.int64)
+    poff_rows = _row_offsets(centers, rows)
+    soft = topology.soft.copy()
+    redo = np.zeros(n, dtype=bool)
+    redo[rows] = True
+    redo |= loose
+    fresh_soft = umbrella_softening(rest, pairs, centers)
+    soft[redo] = fresh_soft[redo]
+    # states of the new fibers: the old state where a fiber existed, else the material's
+    f = len(new)
+    st = {name: np.zeros(f) for name in _FIELDS}
+    st["length_orig"][:] = 1.0
+    if f:
+        mat = fiber_material(new, rest)
+        for name in ("stretch_scale", "bend_scale", "fracture_stretch", "fracture_bend"):
+            st[name][:] = mat[name]
+        have = reuse >= 0
+        for name in _FIELDS:
+            st[name][have] = getattr(state, name)[reuse[have]]
+        # rest measures with the new umbrella normals; fresh fibers start unloaded (or torn)
+        st["length_orig"][:], st["angle_orig"][:] = _measure(rest, new, pairs, poff_rows, rows, soft, samples)
+        fr = np.flatnonzero(~have)
+        if len(fr):
+            now_l, now_a = _measure(current, new[fr], pairs, poff_rows, rows, soft, samples)
+            sub = FiberState._checked(st[name][fr] for name in _FIELDS)
+            torn, _ = fracture_candidates(sub, now_l, now_a)
+            ok = np.ones(len(fr), bool)
+            ok[torn] = False
+            st["length_plastic"][fr[ok]] = now_l[ok] - st["length_orig"][fr[ok]]
+            st["angle_plastic"][fr[ok]] = now_a[ok] - st["angle_orig"][fr[ok]]
+            if not ok.all():
+                keep = np.ones(f, bool)
+                keep[fr[~ok]] = False
+                new, reuse = new[keep], reuse[keep]
+                st = {name: arr[keep] for name, arr in st.items()}
+    # splice the rows into the node-ordered arrays
+    row_of = np.full(n, -1, dtype=np.int64)
+    row_of[rows] = np.arange(len(rows))
+    off, src = _splice(topology.neighbor_offsets, row_of, noff)
+    idx = _take(src, topology.neighbors, nbr)
+    _, src = _splice(topology.pair_offsets, row_of, poff_rows)
+    out_pairs = _take(src, topology.pairs, pairs)
+    out_centers = _take(src, topology.pair_center, centers)
+    _, src = _splice(topology.fiber_offsets, row_of, _row_offsets(new[:, 1], rows))
+    fibers = _take(src, topology.fibers, new)
+    merged = FiberState._checked(_take(src, getattr(state, name), st[name]) for name in _FIELDS)
+    origin = _take(src, np.arange(len(topology.fibers), dtype=np.int64), reuse)
+    topo = ShellTopology.build(n, off, idx, out_pairs, out_centers, fibers, soft, validate=False)
+    return topo, merged, origin
