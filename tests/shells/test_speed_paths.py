@@ -138,14 +138,7 @@ def test_unvalidated_topology_build_equals_the_validated_one(torn_strip):
 def test_branch_free_plane_eigenvector_matches_eigh():
     """The vectorisable smallest eigenvector of the skinning (7.26) against numpy, also for
     degenerate matrices (rank one, repeated eigenvalues, zero)."""
-    from numba import njit
-
-    from unmesh.shells._skinning_kernels import smallest_eigenvector_sel
-
-    @njit(error_model="numpy")           # as the skinning kernel (a division by zero gives inf)
-    def run(c, out):
-        for k in range(c.shape[0]):
-            out[k] = smallest_eigenvector_sel(c[k, 0, 0], c[k, 0, 1], c[k, 0, 2], c[k, 1, 1], c[k, 1, 2], c[k, 2, 2])
+    from unmesh.shells._skinning_kernels import smallest_eigenvectors_sel as run
 
     rng = np.random.default_rng(5)
     pts = rng.normal(size=(4000, 7, 3)) * [1.0, 0.7, 0.01]               # nearly planar node sets
@@ -240,3 +233,40 @@ def test_fast_fracture_candidates_equal_the_reference():
                         strict=True):
         np.testing.assert_array_equal(got, ref)
     assert len(fracture_candidates(state, lengths, angles)[0]) > 100
+
+
+def test_forces_after_a_rebuild_from_the_changed_centres_equal_a_full_pass(monkeypatch):
+    """After every crack event the accelerations come from the last force pass plus the centres that
+    changed or touch a node that moved since (crumbs): the forces, measures and node terms of a full pass."""
+    from unmesh.shells import MaterialRegion, refresh
+
+    used = {"refreshed": 0, "full": 0}
+    plain = refresh.refreshed_forces
+
+    def checked(x, topology, state, offsets, reference, origin, old, ks, kb, samples):
+        got = plain(x, topology, state, offsets, reference, origin, old, ks, kb, samples)
+        if got is None:
+            used["full"] += 1
+            return None
+        full = elastic_forces(x, topology, state, ks, kb, samples, reference, offsets)
+        scale = np.abs(full.forces).max()
+        np.testing.assert_allclose(got.forces, full.forces, rtol=0, atol=1e-11 * scale)
+        for name in ("lengths", "angles", "normals", "umbrella", "node_terms", "stretch_energy", "bend_energy"):
+            np.testing.assert_allclose(getattr(got, name), getattr(full, name), rtol=1e-12, atol=1e-15, err_msg=name)
+        used["refreshed"] += 1
+        return got
+
+    monkeypatch.setattr(refresh, "refreshed_forces", checked)
+    cloud = grid_cloud(61, 21, 0.02)
+    idx = grid_nodes(61, 21, 2)
+    mat = ShellMaterial(ks=1000.0, kb=100.0, damping=2.0, density=2.0, fracture_stretch=0.03,
+                        regions=(MaterialRegion(Box([-0.03, -1, -1], [0.03, 1, 1]), fracture=0.5),
+                                 MaterialRegion(Box([-1, -1, -1], [-0.4, 1, 1]), fracture=5.0),
+                                 MaterialRegion(Box([0.4, -1, -1], [1, 1, 1]), fracture=5.0)))
+    sim = ShellSimulation(cloud, mat, 0.0005, node_indices=idx, gravity=(0, 0, 0), total_area=1.2 * 0.4,
+                          handles=[{"region": Box([-1, -1, -1], [-0.55, 1, 1]), "velocity": (-0.2, 0, 0)},
+                                   {"region": Box([0.55, -1, -1], [1, 1, 1]), "velocity": (0.2, 0, 0)}])
+    for _ in range(1600):
+        sim.step()
+        assert sim.check() is None
+    assert used["refreshed"] >= 10 and (sim.anchor >= 0).any()

@@ -194,8 +194,9 @@ def block_geometry(k0, m, x, fibers, s, soft, gram, blk):
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
                  sscale, bscale, ks, kb, gram, ref, offs, buf, blk, out_len, out_ang, out_s, out_normal, out_node,
-                 out_es, out_eb, scatter):
-    """Umbrellas, fiber measures, node terms, energies and (``scatter``) forces of nodes ``a .. b-1``.
+                 out_es, out_eb, scatter, only):
+    """Umbrellas, fiber measures, node terms, energies and (``scatter``) forces of nodes ``a .. b-1``
+    (with a non-empty mask ``only`` (N,), the forces of the listed nodes only).
 
     The fibers of the block (at most :data:`BLK`) go through :func:`block_geometry`; then
     per node as :func:`unmesh.shells._kernels.node_forces`: ``buf -= dE/dx``. Returns the
@@ -222,8 +223,10 @@ def block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, l
         out_ang[k] = th
         out_len[k] = blk[_L * B + q]
     q4 = math.pi / 4.0
+    masked = only.shape[0] > 0
     for i in range(a, b):
         mi = fcount[i]
+        push = scatter and (not masked or only[i])
         if mi == 0:
             for c in range(4):
                 out_node[i, c] = 0.0
@@ -276,7 +279,7 @@ def block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, l
             dak = q4 * (ln * ln - l0 * l0)
             sk = sscale[k]
             esum += sk * dak * dak
-            if not scatter:
+            if not push:
                 continue
             de_dl = ks * inv_m * (sig * da + sk * dak) * (0.5 * math.pi) * ln
             de_dth = kd * bscale[k]
@@ -302,7 +305,7 @@ def block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, l
             gs2 += de_dth * blk[(_GN + 2) * B + q]
         out_es[i] = 0.5 * ks * (sig * da * da + esum * inv_m)
         out_eb[i] = 0.5 * kb * area0 * bsum * inv_m * dh * dh
-        if not scatter:
+        if not push:
             continue
         if gs0 != 0.0 or gs1 != 0.0 or gs2 != 0.0:
             # through the umbrella vector s_i = sum e_a x e_b: dE/dx_a = e_b x g, dE/dx_b = g x e_a

@@ -87,6 +87,13 @@ def atan2(y, x):
     return -r if y < 0.0 else r
 
 
+@njit(cache=True)
+def atan2_batch(y, x, out):
+    """:func:`atan2` elementwise (for tests)."""
+    for k in range(y.shape[0]):
+        out[k] = atan2(y[k], x[k])
+
+
 @njit(cache=True, inline="always")
 def _cross(a0, a1, a2, b0, b1, b2):
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0

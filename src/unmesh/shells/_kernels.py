@@ -40,13 +40,13 @@ SCRATCH = 15
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast, sscale,
-                bscale, ks, kb, gram, ref, offs, buf, scr, out_len, out_ang, out_s, out_normal, out_node):
+                bscale, ks, kb, gram, ref, offs, buf, scr, out_len, out_ang, out_s, out_normal, out_node, scatter):
     """Energy and force contributions of node ``i``'s umbrella and fibers (7.5-7.17).
 
     One pass per centre node: the umbrella vector ``s_i`` (normal of the tangent angles),
     every fiber's ``l~`` and ``theta`` with gradients (kept in ``scr`` (cap, SCRATCH)), the
-    node sums, then ``dE/dx`` of every node touched by the fibers and the umbrella scattered
-    into ``buf`` (N, 3) (``buf -= dE/dx``). Energies (per node ``i``, ``m`` fibers ``k``)::
+    node sums, then (``scatter``) ``dE/dx`` of every node touched by the fibers and the umbrella
+    scattered into ``buf`` (N, 3) (``buf -= dE/dx``). Energies (per node ``i``, ``m`` fibers ``k``)::
 
         E_s = K_s/2 [ mean(sigma) da^2 + (1/m) sum_k sigma_k (A_k - A_k^0)^2 ]      (7.7)
         E_b = K_b/2 A_i^0 mean(beta) dh^2                                          (7.11)
@@ -162,6 +162,8 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
         dak = q4 * (ln * ln - l0 * l0)
         sk = sscale[k]
         esum += sk * dak * dak
+        if not scatter:
+            continue
         de_dl = ks * inv_m * (sig * da + sk * dak) * half_pi * ln
         de_dth = kd * bscale[k]
         j1 = fibers[k, 0]
@@ -186,6 +188,8 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
         gs2 += de_dth * g[q, 14]
     es = 0.5 * ks * (sig * da * da + esum * inv_m)
     eb = 0.5 * kb * area0 * bsum * inv_m * dh * dh
+    if not scatter:
+        return es, eb, folds
     if gs0 != 0.0 or gs1 != 0.0 or gs2 != 0.0:
         # through the umbrella vector s_i = sum e_a x e_b: dE/dx_a = e_b x g, dE/dx_b = g x e_a
         for q in range(p0, p0 + pcount[i]):
@@ -216,7 +220,8 @@ def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
     Consecutive nodes are grouped into blocks of at most :data:`BLK` fibers for
     :func:`unmesh.shells._block_kernels.block_forces` (a node with more fibers takes the
     scalar :func:`node_forces`). With a non-empty bool mask ``only`` (N,), only blocks that
-    contain a listed node are evaluated; ``scatter`` False skips the forces.
+    contain a listed node are evaluated and only the listed nodes' forces are scattered;
+    ``scatter`` False skips the forces.
     """
     folds = 0
     a = lo
@@ -226,7 +231,7 @@ def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
             if not masked or only[a]:
                 es, eb, fo = node_forces(a, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast,
                                          aorig, aplast, sscale, bscale, ks, kb, gram, ref, offs, buf, scr, out_len,
-                                         out_ang, out_s, out_normal, out_node)
+                                         out_ang, out_s, out_normal, out_node, scatter)
                 out_es[a] = es
                 out_eb[a] = eb
                 folds += fo
@@ -242,7 +247,7 @@ def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
         if wanted:
             folds += block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig,
                                   aplast, sscale, bscale, ks, kb, gram, ref, offs, buf, blk, out_len, out_ang, out_s,
-                                  out_normal, out_node, out_es, out_eb, scatter)
+                                  out_normal, out_node, out_es, out_eb, scatter, only)
         a = b
     return folds
 
@@ -282,31 +287,35 @@ def sum_chunks(i, chunks, buf, span):
 @njit(cache=True, parallel={"fusion": False}, fastmath=FASTMATH, error_model="numpy")
 def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
                  sscale, bscale, ks, kb, gram, ref, offs, cap, buf, out_force, out_len, out_ang, out_s,
-                 out_normal, out_node, out_es, out_eb, only):
+                 out_normal, out_node, out_es, out_eb, only, scatter):
     """Elastic forces of all nodes (7.16): ``chunks`` contiguous node ranges in parallel.
 
     Every chunk scatters into its own buffer ``buf[c]`` (chunks, N, 3) -- no write races --
     and the buffers are summed into ``out_force`` (N, 3); only the node range a chunk can
     touch (:func:`touched_range`) is cleared and summed. ``cap`` is the largest fiber count
-    of a node (scratch size). With a non-empty mask ``only`` (N,) only the measures and node
-    terms of the blocks holding listed nodes are computed (same arithmetic, no forces).
+    of a node (scratch size). With a non-empty mask ``only`` (N,) only the blocks holding
+    listed nodes are evaluated (same arithmetic) and only the listed nodes' force
+    contributions summed; ``scatter`` False computes measures, node terms and energies only.
     """
     n = x.shape[0]
-    scatter = only.shape[0] == 0
     span = np.zeros((chunks, 2), dtype=np.int64)
+    masked = only.shape[0] > 0
     for c in prange(chunks):
         b = buf[c]
+        c0 = c * n // chunks
+        c1 = (c + 1) * n // chunks
+        if masked and not only[c0:c1].any():
+            continue
         if scatter:
-            lo, hi = touched_range(c * n // chunks, (c + 1) * n // chunks, pairs, pstart, pcount, fibers, fstart,
-                                   fcount)
+            lo, hi = touched_range(c0, c1, pairs, pstart, pcount, fibers, fstart, fcount)
             span[c, 0] = lo
             span[c, 1] = hi
             b[lo:hi, :] = 0.0
         blk = np.empty(ROWS * BLK)
         scr = np.empty((max(cap, 1), SCRATCH))
-        chunk_forces(c * n // chunks, (c + 1) * n // chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
-                     lorig, lplast, aorig, aplast, sscale, bscale, ks, kb, gram, ref, offs, b, blk, scr, out_len,
-                     out_ang, out_s, out_normal, out_node, out_es, out_eb, only, scatter)
+        chunk_forces(c0, c1, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
+                     sscale, bscale, ks, kb, gram, ref, offs, b, blk, scr, out_len, out_ang, out_s, out_normal,
+                     out_node, out_es, out_eb, only, scatter)
     if not scatter:
         return
     for i in prange(n):

@@ -60,3 +60,37 @@ def gather2(src, old, new, out):
         else:
             for c in range(new.shape[1]):
                 out[m, c] = new[-1 - k, c]
+
+
+@njit(cache=True)
+def changed_centres(old_foff, old_fibers, old_poff, old_pairs, old_soft, old_offs, old_l0, old_lp, old_a0, old_ap,
+                    old_ss, old_bs, new_foff, new_fibers, new_poff, new_pairs, new_soft, new_offs, new_l0, new_lp,
+                    new_a0, new_ap, new_ss, new_bs, moved, out):
+    """``out[c]`` (N,) bool: the force contribution of centre ``c`` may differ between the old
+    arrays at the old positions and the new arrays at the new positions -- its fibers (nodes,
+    rest lengths and angles with their plastic parts, stiffness scales), umbrella pairs,
+    regularisation or node-term offsets changed, or one of the nodes it touches ``moved``."""
+    for c in range(out.shape[0]):
+        ch = moved[c] or old_soft[c] != new_soft[c] or old_offs[c, 0] != new_offs[c, 0] or old_offs[c, 1] != new_offs[c, 1]
+        m = old_foff[c + 1] - old_foff[c]
+        p = old_poff[c + 1] - old_poff[c]
+        ch = ch or m != new_foff[c + 1] - new_foff[c] or p != new_poff[c + 1] - new_poff[c]
+        q = 0
+        while not ch and q < m:
+            ko = old_foff[c] + q
+            kn = new_foff[c] + q
+            a = old_fibers[ko, 0]
+            b = old_fibers[ko, 2]
+            ch = (a != new_fibers[kn, 0] or b != new_fibers[kn, 2] or moved[a] or moved[b]
+                  or old_l0[ko] != new_l0[kn] or old_lp[ko] != new_lp[kn] or old_a0[ko] != new_a0[kn]
+                  or old_ap[ko] != new_ap[kn] or old_ss[ko] != new_ss[kn] or old_bs[ko] != new_bs[kn])
+            q += 1
+        q = 0
+        while not ch and q < p:
+            po = old_poff[c] + q
+            pn = new_poff[c] + q
+            a = old_pairs[po, 0]
+            b = old_pairs[po, 1]
+            ch = a != new_pairs[pn, 0] or b != new_pairs[pn, 1] or moved[a] or moved[b]
+            q += 1
+        out[c] = ch

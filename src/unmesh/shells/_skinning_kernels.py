@@ -246,6 +246,14 @@ def smallest_eigenvector_sel(a00, a01, a02, a11, a12, a22):
     return vx * inv, vy * inv, vz * inv
 
 
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def smallest_eigenvectors_sel(cov, out):
+    """:func:`smallest_eigenvector_sel` of every symmetric matrix (S, 3, 3) into ``out`` (S, 3) (for tests)."""
+    for k in range(cov.shape[0]):
+        c = cov[k]
+        out[k, 0], out[k, 1], out[k, 2] = smallest_eigenvector_sel(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2])
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
 def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes, orient, rest, blk, out_points,
                   out_normals, out_radii):

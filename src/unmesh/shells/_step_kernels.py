@@ -102,7 +102,7 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
                lorig, lplast, aorig, aplast, sscale, bscale, gamma_s, gamma_b,
                ks, kb, gram, ref, offs, gravity, damping, pressure, fan0, extra,
                col_type, col_data, crumbs, anchors, plastic, degenerate, scan,
-               buf, out_force, out_len, out_ang, out_s, out_normal, out_node, out_es, out_eb):
+               buf, out_force, out_len, out_ang, out_s, out_normal, out_node, out_es, out_eb, out_x):
     """One velocity-Verlet step of (7.18) with plasticity and the fracture test, in place.
 
     Parameters (N nodes, F fibers; arrays float64 unless noted)
@@ -141,7 +141,8 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
     scan : bool
         Count fibers over a fracture threshold and degenerate ones.
     buf, out_* :
-        Scratch and outputs of the force pass (forces, l~, theta, s_i, N_i, node terms, energies).
+        Scratch and outputs of the force pass (forces, l~, theta, s_i, N_i, node terms, energies,
+        and the positions ``out_x`` (N, 3) they were evaluated at).
 
     Returns
     -------
@@ -160,6 +161,8 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
                 x[i, d] += dt * v[i, d]
             if kin_handle[i] > -2:
                 _kinematic(i, kin_handle[i], rest, hdisp, hvel, x, v)
+            for d in range(3):
+                out_x[i, d] = x[i, d]
     # elastic forces: every node range scatters into its own buffer
     folds = 0
     span = np.zeros((chunks, 2), dtype=np.int64)

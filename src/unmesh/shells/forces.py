@@ -229,7 +229,7 @@ _NO_MASK = np.zeros(0, dtype=np.bool_)
 
 def _elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, ks: float, kb: float, samples: int,
                     reference: np.ndarray | None, node_offsets: np.ndarray | None,
-                    only: np.ndarray = _NO_MASK) -> ForceResult:
+                    only: np.ndarray = _NO_MASK, scatter: bool = True) -> ForceResult:
     n = topology.n_nodes
     nf = len(topology.fibers)
     chunks = FORCE_CHUNKS
@@ -245,13 +245,13 @@ def _elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, k
     counts = np.diff(topology.fiber_offsets)
     cap = int(counts.max()) if n else 0
     ref = state.rest_angle() if reference is None else np.ascontiguousarray(reference, dtype=np.float64)
-    buf = np.empty((chunks, n, 3)) if len(only) == 0 else np.empty((chunks, 0, 3))
+    buf = np.empty((chunks, n, 3)) if scatter else np.empty((chunks, 0, 3))
     _kernels.force_chunks(chunks, np.ascontiguousarray(x, dtype=np.float64), topology.pairs,
                           topology.pair_offsets[:-1], np.diff(topology.pair_offsets), topology.soft, topology.fibers,
                           topology.fiber_offsets[:-1], counts, state.length_orig, state.length_plastic,
                           state.angle_orig, state.angle_plastic, state.stretch_scale, state.bend_scale, float(ks),
                           float(kb), arc_gram(int(samples)), ref, offsets, cap, buf, forces, lengths, angles, s,
-                          normals, node, es, eb, only)
+                          normals, node, es, eb, only, scatter)
     return ForceResult(forces, es, eb, lengths, angles, normals, s, node)
 
 
@@ -294,5 +294,5 @@ def node_terms(x: np.ndarray, topology: ShellTopology, state: FiberState, rows: 
     only = np.zeros(topology.n_nodes, dtype=np.bool_)
     only[rows] = True
     with threads_for(len(topology.fibers)):
-        res = _elastic_forces(x, topology, state, 1.0, 1.0, samples, reference, None, only)
+        res = _elastic_forces(x, topology, state, 1.0, 1.0, samples, reference, None, only, scatter=False)
     return res.node_terms[rows]

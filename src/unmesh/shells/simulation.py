@@ -312,6 +312,11 @@ class ShellSimulation(Simulation):
         m = self.material
         ref = self._reference_angles()
         res = elastic_forces(self.x, self.topology, self.fibers, m.ks, m.kb, m.arc_samples, ref, self.node_offsets)
+        self._x_force = self.x.copy()
+        return self._acc_of(res)
+
+    def _acc_of(self, res: ForceResult) -> np.ndarray:
+        """Accelerations (7.18) from the elastic forces ``res`` at the current state (kept as the last pass)."""
         self._last = res
         self._last_topology = self.topology
         acc = (res.forces + self._external(self.time, res)) / self.mass[:, None]
@@ -441,6 +446,8 @@ class ShellSimulation(Simulation):
         before = self._last.node_terms
         had = np.diff(self.topology.fiber_offsets) > 0
         angles = self._last.angles
+        last = {"topology": self.topology, "state": self.fibers, "offsets": self.node_offsets.copy(),
+                "result": self._last, "x": getattr(self, "_x_force", None)}
         self.topology, self.fibers, origin = rebuild_near(self.rest, self.rest_normals, self.topology, self.fibers,
                                                           self.cracks, np.unique(near), self.neighbors,
                                                           self.min_angle, self.material.fiber_material, self.x,
@@ -452,7 +459,24 @@ class ShellSimulation(Simulation):
         self._reach = max(self._reach, self._neighbor_reach(rebuilt))
         # the dense surface is re-bound once per rendered frame (_update_surface), not per event
         self._pending_cracks.extend(len(self.cracks) - len(chosen) + np.arange(len(chosen)))
-        self.acc = self._accelerations()
+        self.acc = self._accelerations_after(last, origin)
+
+    def _accelerations_after(self, last: dict[str, Any], origin: np.ndarray) -> np.ndarray:
+        """:meth:`_accelerations` after a rebuild, from the last force pass and the changed centres
+        (:func:`unmesh.shells.refresh.refreshed_forces`); a full pass when that does not apply."""
+        from unmesh.shells.refresh import refreshed_forces
+
+        if last["x"] is None or last["result"] is not self._last or not self.fused:
+            return self._accelerations()
+        m = self.material
+        ref = self._reference_angles()
+        res = refreshed_forces(self.x, self.topology, self.fibers, self.node_offsets, ref, origin, last, m.ks, m.kb,
+                               m.arc_samples)
+        if res is None:
+            self._resume_angles = ref
+            return self._accelerations()
+        self._x_force = self.x.copy()
+        return self._acc_of(res)
 
     def _rest_tree(self) -> Any:
         """KD-tree over the rest node positions (built once; the rest positions never change)."""

@@ -80,6 +80,7 @@ class FusedStep:
                                 dtype=np.float64)
         self.gram = arc_gram(int(sim.material.arc_samples))
         self.buf = np.empty((FORCE_CHUNKS, n, 3))
+        self.x_force = np.empty((n, 3))     # positions of the last force pass
         self.no_extra = np.zeros((0, 3))
         self._topology: Any = None
 
@@ -125,8 +126,9 @@ class FusedStep:
                 st.stretch_scale, st.bend_scale, st.fracture_stretch, st.fracture_bend, m.ks, m.kb, self.gram, ref,
                 sim.node_offsets, sim.gravity.g, m.damping, pressure, self.fan0, extra, self.col_type,
                 self.col_data, crumbs, anchors, self.plastic, self.degenerate if fractures else 0.0,
-                fractures, self.buf, forces, lengths, angles, s, normals, node, es, eb)
+                fractures, self.buf, forces, lengths, angles, s, normals, node, es, eb, self.x_force)
         sim.time = t
+        sim._x_force = self.x_force
         sim._last = ForceResult(forces, es, eb, lengths, angles, normals, s, node)
         sim._last_topology = topo
         return int(over), int(bad)
