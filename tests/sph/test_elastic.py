@@ -183,6 +183,34 @@ def test_unrolled_jacobi_is_bit_identical(seed, kind):
     assert np.array_equal(v, v_ref)
 
 
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 100_000), stretch=st.floats(0.0, 0.6))
+def test_polar_factors_match_the_svd(seed, stretch):
+    """The polar fast path of the lattice pass: R = U Vᵀ and S = V Σ Vᵀ of the SVD (8.24) whenever it
+    accepts A (det A > 0, every singular value strictly inside the clamps); otherwise it declines."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    a = q @ (np.eye(3) + stretch * rng.standard_normal((3, 3)))
+    rot, sym = np.empty((3, 3)), np.empty((3, 3))
+    ok = EK.polar_factors(a, 3, rot, sym, np.empty((3, 3)))
+    u, s, v = np.empty((3, 3)), np.empty(3), np.empty((3, 3))
+    EK.svd_rot(a, 3, u, s, v, np.empty((4, 3, 3)))
+    inside = np.linalg.det(a) > 0 and EK.SIG_LO < s.min() and s.max() < EK.SIG_HI
+    if ok:
+        assert inside
+        assert np.allclose(rot, u @ v.T, atol=1e-12) and np.allclose(rot @ rot.T, np.eye(3), atol=1e-14)
+        assert np.allclose(sym, v @ np.diag(s) @ v.T, atol=1e-12) and np.allclose(rot @ sym, a, atol=1e-12)
+    else:  # declined: A is inverted or a Gershgorin disc of S reaches a clamp
+        sm = v @ np.diag(s) @ v.T
+        rad = np.abs(sm).sum(axis=1) - np.abs(np.diag(sm))
+        assert (not inside or (np.diag(sm) - rad).min() < EK.SIG_LO * (1 + 1e-5)
+                or (np.diag(sm) + rad).max() > EK.SIG_HI * (1 - 1e-5))
+    assert not EK.polar_factors(np.diag([1.0, 1.0, -1.0]), 3, rot, sym, np.empty((3, 3)))
+    assert not EK.polar_factors(np.diag([3.0 * EK.SIG_HI, 1.0, 1.0]), 3, rot, sym, np.empty((3, 3)))
+    assert not EK.polar_factors(np.eye(3), 2, rot, sym, np.empty((3, 3)))
+
+
 def test_goal_matrix_preserves_volume():
     """The scale matrix S of eq. (8.30) has determinant 1 and interpolates I ... Σ."""
     s = np.array([1.5, 0.8, 1.1])

@@ -86,6 +86,10 @@ def test_nearest_point_fast_matches_brute_force(dim):
     assert np.array_equal(q, ref_q)
     _c_np, d2_np = nearest_lattice_point(y[:500], dim)
     assert np.allclose(d2_np, ref_d2[:500], atol=1e-12)
+    if dim == 3:  # the branch-free rounding of the lattice pass, from D3 coordinates z = T y
+        z = y @ tmat.T
+        qd, d2d = zip(*(EK._nearest_d3(a, b, c, table) for a, b, c in z), strict=True)
+        assert np.array_equal(np.array(qd), q) and np.allclose(d2d, d2, rtol=1e-12, atol=1e-14)
 
 
 def test_plane_spacings_and_box_margins():

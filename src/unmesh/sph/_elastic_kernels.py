@@ -430,12 +430,14 @@ def _nearest_d3(z0, z1, z2, table):
     d0 = abs(z0 - r0)
     d1 = abs(z1 - r1)
     d2 = abs(z2 - r2)
-    p0 = odd if (d0 >= d1) & (d0 >= d2) else 0
-    p1 = (odd - p0) if d1 >= d2 else 0
+    # integer arithmetic, not conditional expressions (which numba lowers to branches)
+    b0 = np.int64((d0 >= d1) & (d0 >= d2))
+    p0 = odd & b0
+    p1 = odd & (1 - b0) & np.int64(d1 >= d2)
     p2 = odd - p0 - p1
-    k0 += p0 if z0 > r0 else -p0
-    k1 += p1 if z1 > r1 else -p1
-    k2 += p2 if z2 > r2 else -p2
+    k0 += p0 * (2 * np.int64(z0 > r0) - 1)
+    k1 += p1 * (2 * np.int64(z1 > r1) - 1)
+    k2 += p2 * (2 * np.int64(z2 > r2) - 1)
     e0 = z0 - k0
     e1 = z1 - k1
     e2 = z2 - k2
@@ -651,7 +653,388 @@ LATTICE_BLOCKS = 16
 LATTICE_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 
 
-@njit(cache=True, parallel=True, fastmath=LATTICE_FASTMATH, error_model="numpy")
+@njit(cache=True, fastmath=LATTICE_FASTMATH, error_model="numpy")
+def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, lv,
+                   c6, w_self, tm, tmat, table, amat, ainv, occ, docked, lam, seed, step, dt, prime,
+                   amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid):
+    """The particles ``r0 .. r1 - 1`` of :func:`lattice_update` (one block, serial); member forces are
+    added into ``win`` (W, 3), the accumulator rows ``lo_b, lo_b + 1, ...``."""
+    nq = slot_vecs.shape[0]
+    cap = nbr.shape[1]
+    h2 = h * h
+    for k in range(win.shape[0]):
+        win[k, 0] = 0.0
+        win[k, 1] = 0.0
+        win[k, 2] = 0.0
+    rt = np.empty((4, cap))  # offsets r_ij of the neighbours and squared lattice distances, by row position
+    qt = np.empty(cap, np.int64)
+    bestd = np.empty(nq)
+    bestj = np.empty(nq, np.int64)
+    bestt = np.empty(nq, np.int64)
+    # the docked members of the current neighbourhood (slot order), as contiguous columns
+    mj = np.empty(nq, np.int64)
+    mb = np.empty((11, nq))  # r (3), lattice offset l (3), W, m_j, force (3)
+    a = np.empty((3, 3))
+    u = np.empty((3, 3))
+    v = np.empty((3, 3))
+    sg = np.empty(3)
+    rot = np.empty((3, 3))
+    sym = np.empty((3, 3))
+    g = np.empty((3, 3))
+    b = np.empty((3, 3))
+    mm = np.empty((3, 3))
+    minv = np.empty((3, 3))
+    work = np.empty((4, 3, 3))
+    for i in range(r0, r1):
+        valid[i] = 0
+        cnt = min(nnbr[i], cap)
+        for p in range(3):
+            fown[i, p] = 0.0
+            omega[i, p] = 0.0
+            cen[i, p] = 0.0
+            for q in range(3):
+                amat_out[i, p, q] = amat[i, p, q]
+                ainv_out[i, p, q] = ainv[i, p, q]
+                gmat[i, p, q] = 0.0
+                bstr[i, p, q] = 0.0
+        mt = matid[i]
+        ke = mats[mt, M.KE]
+        lmu = mats[mt, M.LMU]
+        llam = mats[mt, M.LLAM]
+        if phase[i] != SOLID or (ke <= 0.0 and lmu <= 0.0 and llam <= 0.0):
+            for q in range(nq):
+                occ[i, q] = -1
+                docked[i, q] = 0
+            continue
+        rho0 = mats[mt, M.RHO0]
+        xi0 = x[i, 0]
+        xi1 = x[i, 1]
+        xi2 = x[i, 2]
+        oi = obj[i]
+        # world offset -> lattice frame in units of d (A^(t-1)^-1 / d), in 3D straight on to D3 coordinates
+        p00 = (tm[0, 0] * ainv[i, 0, 0] + tm[0, 1] * ainv[i, 1, 0] + tm[0, 2] * ainv[i, 2, 0]) / spacing
+        p01 = (tm[0, 0] * ainv[i, 0, 1] + tm[0, 1] * ainv[i, 1, 1] + tm[0, 2] * ainv[i, 2, 1]) / spacing
+        p02 = (tm[0, 0] * ainv[i, 0, 2] + tm[0, 1] * ainv[i, 1, 2] + tm[0, 2] * ainv[i, 2, 2]) / spacing
+        p10 = (tm[1, 0] * ainv[i, 0, 0] + tm[1, 1] * ainv[i, 1, 0] + tm[1, 2] * ainv[i, 2, 0]) / spacing
+        p11 = (tm[1, 0] * ainv[i, 0, 1] + tm[1, 1] * ainv[i, 1, 1] + tm[1, 2] * ainv[i, 2, 1]) / spacing
+        p12 = (tm[1, 0] * ainv[i, 0, 2] + tm[1, 1] * ainv[i, 1, 2] + tm[1, 2] * ainv[i, 2, 2]) / spacing
+        p20 = (tm[2, 0] * ainv[i, 0, 0] + tm[2, 1] * ainv[i, 1, 0] + tm[2, 2] * ainv[i, 2, 0]) / spacing
+        p21 = (tm[2, 0] * ainv[i, 0, 1] + tm[2, 1] * ainv[i, 1, 1] + tm[2, 2] * ainv[i, 2, 1]) / spacing
+        p22 = (tm[2, 0] * ainv[i, 0, 2] + tm[2, 1] * ainv[i, 1, 2] + tm[2, 2] * ainv[i, 2, 2]) / spacing
+        # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
+        for q in range(nq):
+            bestd[q] = np.inf
+            bestj[q] = -1
+        for t in range(cnt):
+            j = nbr[i, t]
+            r0 = x[j, 0] - xi0
+            r1 = x[j, 1] - xi1
+            r2 = x[j, 2] - xi2
+            rt[0, t] = r0
+            rt[1, t] = r1
+            rt[2, t] = r2
+            y0 = p00 * r0 + p01 * r1 + p02 * r2
+            y1 = p10 * r0 + p11 * r1 + p12 * r2
+            if dim == 3:
+                q, d2 = _nearest_d3(y0, y1, p20 * r0 + p21 * r1 + p22 * r2, table)
+            else:
+                q, d2 = nearest_slot(y0, y1, 0.0, tmat, table, dim)
+            qt[t] = q if (phase[j] == SOLID) & (obj[j] == oi) else -1
+            rt[3, t] = d2
+        for t in range(cnt):
+            q = qt[t]
+            if q >= 0 and rt[3, t] < bestd[q]:
+                bestd[q] = rt[3, t]
+                bestj[q] = nbr[i, t]
+                bestt[q] = t
+        # 2. docking (section 8.2.5), 3. shape matching sums (8.23) over the docked members
+        lmax = mats[mt, M.DOCK_MAX]
+        gain = mats[mt, M.DOCK_GAIN]
+        loss = mats[mt, M.DOCK_LOSS]
+        frac = mats[mt, M.FRACTURE]
+        s00 = 0.0
+        s01 = 0.0
+        s02 = 0.0
+        s11 = 0.0
+        s12 = 0.0
+        s22 = 0.0
+        b00 = 0.0
+        b01 = 0.0
+        b02 = 0.0
+        b10 = 0.0
+        b11 = 0.0
+        b12 = 0.0
+        b20 = 0.0
+        b21 = 0.0
+        b22 = 0.0
+        count = 0
+        for q in range(nq):
+            j = bestj[q]
+            newocc = uid[j] if j >= 0 else -1
+            if newocc != occ[i, q]:
+                occ[i, q] = newocc
+                docked[i, q] = 0
+            lq = lam[i, q]
+            if j >= 0:
+                lnew = min(lq + gain * dt, lmax) if gain < np.inf else lmax
+            else:
+                lnew = max(lq - loss * dt, 0.0) if loss < np.inf else 0.0
+            if lnew != lq:  # a settled rate is not rewritten (no dirty cache lines)
+                lam[i, q] = lnew
+            if j < 0:
+                continue
+            t = bestt[q]
+            r0 = rt[0, t]
+            r1 = rt[1, t]
+            r2 = rt[2, t]
+            rr = r0 * r0 + r1 * r1 + r2 * r2
+            if prime:
+                docked[i, q] = 1
+            if docked[i, q] == 0 and lnew > 0.0:
+                if lnew == np.inf or uniform(seed, step, uid[i], q, STREAM_DOCK) < 1.0 - math.exp(-lnew * dt):
+                    docked[i, q] = 1
+            if docked[i, q] == 1 and frac < np.inf:
+                rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
+                if math.sqrt(rr) > (1.0 + frac) * rest:
+                    docked[i, q] = 0
+                    lam[i, q] = 0.0
+            if docked[i, q] == 0:
+                continue
+            hw = max(h2 - rr, 0.0)
+            mj[count] = j
+            mb[0, count] = r0
+            mb[1, count] = r1
+            mb[2, count] = r2
+            mb[3, count] = lv[q, 0]
+            mb[4, count] = lv[q, 1]
+            mb[5, count] = lv[q, 2]
+            mb[6, count] = c6 * hw * hw * hw
+            mb[7, count] = m[j]
+            count += 1
+        for k in range(count):
+            w = mb[6, k]
+            l0 = mb[3, k]
+            l1 = mb[4, k]
+            l2 = mb[5, k]
+            wl0 = w * l0
+            wl1 = w * l1
+            wl2 = w * l2
+            s00 += wl0 * l0
+            s01 += wl0 * l1
+            s02 += wl0 * l2
+            s11 += wl1 * l1
+            s12 += wl1 * l2
+            s22 += wl2 * l2
+            b00 += w * mb[0, k] * l0
+            b01 += w * mb[0, k] * l1
+            b02 += w * mb[0, k] * l2
+            b10 += w * mb[1, k] * l0
+            b11 += w * mb[1, k] * l1
+            b12 += w * mb[1, k] * l2
+            b20 += w * mb[2, k] * l0
+            b21 += w * mb[2, k] * l1
+            b22 += w * mb[2, k] * l2
+        if dim == 2:
+            s02 = s12 = 0.0
+            b02 = b12 = b20 = b21 = 0.0
+            s22 = 1.0
+            b22 = 1.0
+        mm[0, 0] = s00
+        mm[0, 1] = s01
+        mm[0, 2] = s02
+        mm[1, 0] = s01
+        mm[1, 1] = s11
+        mm[1, 2] = s12
+        mm[2, 0] = s02
+        mm[2, 1] = s12
+        mm[2, 2] = s22
+        if count < dim:
+            continue
+        tr = (s00 + s11 + (s22 if dim == 3 else 0.0)) / dim
+        det = _inv3(mm, minv)
+        if not det > 1e-6 * tr ** dim:
+            continue
+        for p in range(3):
+            bp0 = b00 if p == 0 else (b10 if p == 1 else b20)
+            bp1 = b01 if p == 0 else (b11 if p == 1 else b21)
+            bp2 = b02 if p == 0 else (b12 if p == 1 else b22)
+            for q in range(3):
+                a[p, q] = bp0 * minv[0, q] + bp1 * minv[1, q] + bp2 * minv[2, q]
+        valid[i] = 1
+        s = mats[mt, M.GOAL]
+        if polar_factors(a, dim, rot, sym, mm):
+            # every singular value inside the clamps: functions of S = Rᵀ A by matrix algebra
+            trs = sym[0, 0] + sym[1, 1] + sym[2, 2] - 3.0
+            for p in range(3):
+                for q in range(3):
+                    mm[p, q] = s * sym[p, q] + ((1.0 - s) if p == q else 0.0)
+            norm = _det3(mm) ** (1.0 / 3.0)
+            for p in range(3):
+                for q in range(3):
+                    g[p, q] = (rot[p, 0] * mm[0, q] + rot[p, 1] * mm[1, q] + rot[p, 2] * mm[2, q]) / norm
+            _inv3(sym, mm)  # S⁻¹
+            for p in range(3):
+                for q in range(3):
+                    amat_out[i, p, q] = a[p, q]
+                    ainv_out[i, p, q] = mm[p, 0] * rot[q, 0] + mm[p, 1] * rot[q, 1] + mm[p, 2] * rot[q, 2]
+        else:
+            svd_rot(a, dim, u, sg, v, work)
+            is0 = min(max(sg[0], SIG_LO), SIG_HI)
+            is1 = min(max(sg[1], SIG_LO), SIG_HI)
+            is2 = min(max(sg[2], SIG_LO), SIG_HI)
+            for p in range(3):
+                for q in range(3):
+                    amat_out[i, p, q] = a[p, q]
+                    ainv_out[i, p, q] = v[p, 0] * u[q, 0] / is0 + v[p, 1] * u[q, 1] / is1 + v[p, 2] * u[q, 2] / is2
+            # 4. goal matrix (8.29-8.30)
+            dg0 = s * max(sg[0], SIGMA_FLOOR) + (1.0 - s)
+            dg1 = s * max(sg[1], SIGMA_FLOOR) + (1.0 - s)
+            if dim == 3:
+                dg2 = s * max(sg[2], SIGMA_FLOOR) + (1.0 - s)
+                norm = (dg0 * dg1 * dg2) ** (1.0 / 3.0)
+                dg2 /= norm
+            else:
+                dg2 = 1.0
+                norm = (dg0 * dg1) ** 0.5
+            dg0 /= norm
+            dg1 /= norm
+            trs = (sg[0] - 1.0) + (sg[1] - 1.0)
+            if dim == 3:
+                trs += sg[2] - 1.0
+            for p in range(3):
+                for q in range(3):
+                    g[p, q] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
+                    rot[p, q] = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
+        # 5. strain stress: b = V_i P M^-1, P = 2mu (A - R) + lam tr(R^T A - I) R
+        for p in range(3):
+            for q in range(3):
+                gmat[i, p, q] = g[p, q]
+                mm[p, q] = 2.0 * lmu * (a[p, q] - rot[p, q]) + llam * trs * rot[p, q]
+        if dim == 2:
+            for p in range(3):
+                mm[2, p] = 0.0
+                mm[p, 2] = 0.0
+        vol = m[i] / rho0
+        for p in range(3):
+            for q in range(3):
+                b[p, q] = vol * (mm[p, 0] * minv[0, q] + mm[p, 1] * minv[1, q] + mm[p, 2] * minv[2, q])
+                if dim == 2 and (p == 2 or q == 2):
+                    b[p, q] = 0.0
+                bstr[i, p, q] = b[p, q]
+        # 6. member forces (8.31 + strain), torque about x_i, weights for the correction
+        g00, g01, g02 = g[0, 0], g[0, 1], g[0, 2]
+        g10, g11, g12 = g[1, 0], g[1, 1], g[1, 2]
+        g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
+        e00, e01, e02 = b[0, 0], b[0, 1], b[0, 2]
+        e10, e11, e12 = b[1, 0], b[1, 1], b[1, 2]
+        e20, e21, e22 = b[2, 0], b[2, 1], b[2, 2]
+        chalf = 0.5 * ke * m[i] / rho0
+        fs0 = 0.0
+        fs1 = 0.0
+        fs2 = 0.0
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        wi = m[i] * w_self
+        wsum = wi
+        c0 = 0.0
+        c1 = 0.0
+        c2 = 0.0
+        i00 = 0.0
+        i01 = 0.0
+        i02 = 0.0
+        i11 = 0.0
+        i12 = 0.0
+        i22 = 0.0
+        for k in range(count):
+            r0 = mb[0, k]
+            r1 = mb[1, k]
+            r2 = mb[2, k]
+            l0 = mb[3, k]
+            l1 = mb[4, k]
+            l2 = mb[5, k]
+            w = mb[6, k]
+            mk = mb[7, k]
+            cw = chalf * mk * w
+            f0 = cw * (g00 * l0 + g01 * l1 + g02 * l2 - r0) - w * (e00 * l0 + e01 * l1 + e02 * l2)
+            f1 = cw * (g10 * l0 + g11 * l1 + g12 * l2 - r1) - w * (e10 * l0 + e11 * l1 + e12 * l2)
+            f2 = cw * (g20 * l0 + g21 * l1 + g22 * l2 - r2) - w * (e20 * l0 + e21 * l1 + e22 * l2)
+            mb[8, k] = f0
+            mb[9, k] = f1
+            mb[10, k] = f2
+            fs0 += f0
+            fs1 += f1
+            fs2 += f2
+            t0 += r1 * f2 - r2 * f1
+            t1 += r2 * f0 - r0 * f2
+            t2 += r0 * f1 - r1 * f0
+            wk = mk * w
+            wsum += wk
+            c0 += wk * r0
+            c1 += wk * r1
+            c2 += wk * r2
+            i00 += wk * (r1 * r1 + r2 * r2)
+            i11 += wk * (r0 * r0 + r2 * r2)
+            i22 += wk * (r0 * r0 + r1 * r1)
+            i01 -= wk * r0 * r1
+            i02 -= wk * r0 * r2
+            i12 -= wk * r1 * r2
+        c0 /= wsum
+        c1 /= wsum
+        c2 /= wsum
+        # parallel-axis shift to the centroid
+        cc = c0 * c0 + c1 * c1 + c2 * c2
+        i00 -= wsum * (cc - c0 * c0)
+        i11 -= wsum * (cc - c1 * c1)
+        i22 -= wsum * (cc - c2 * c2)
+        i01 += wsum * c0 * c1
+        i02 += wsum * c0 * c2
+        i12 += wsum * c1 * c2
+        if dim == 2:
+            om0 = 0.0
+            om1 = 0.0
+            om2 = -t2 / i22 if i22 > 0.0 else 0.0
+        else:
+            mm[0, 0] = i00
+            mm[1, 1] = i11
+            mm[2, 2] = i22
+            mm[0, 1] = i01
+            mm[1, 0] = i01
+            mm[0, 2] = i02
+            mm[2, 0] = i02
+            mm[1, 2] = i12
+            mm[2, 1] = i12
+            if _inv3(mm, minv) != 0.0:
+                om0 = -(minv[0, 0] * t0 + minv[0, 1] * t1 + minv[0, 2] * t2)
+                om1 = -(minv[1, 0] * t0 + minv[1, 1] * t1 + minv[1, 2] * t2)
+                om2 = -(minv[2, 0] * t0 + minv[2, 1] * t1 + minv[2, 2] * t2)
+            else:
+                om0 = 0.0
+                om1 = 0.0
+                om2 = 0.0
+        omega[i, 0] = om0
+        omega[i, 1] = om1
+        omega[i, 2] = om2
+        cen[i, 0] = c0
+        cen[i, 1] = c1
+        cen[i, 2] = c2
+        # own share: -sum of member forces + correction at y = -c
+        fown[i, 0] = -fs0 + wi * (om1 * (-c2) - om2 * (-c1))
+        fown[i, 1] = -fs1 + wi * (om2 * (-c0) - om0 * (-c2))
+        fown[i, 2] = -fs2 + wi * (om0 * (-c1) - om1 * (-c0))
+        # the members' forces + torque correction at y = r - c, into the block's window
+        for k in range(count):
+            y0 = mb[0, k] - c0
+            y1 = mb[1, k] - c1
+            y2 = mb[2, k] - c2
+            wk = mb[7, k] * mb[6, k]
+            row = mj[k] - lo_b
+            win[row, 0] += mb[8, k] + wk * (om1 * y2 - om2 * y1)
+            win[row, 1] += mb[9, k] + wk * (om2 * y0 - om0 * y2)
+            win[row, 2] += mb[10, k] + wk * (om0 * y1 - om1 * y0)
+
+
+@njit(cache=True, parallel=True)
 def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing,
                    slot_vecs, tmat, table, amat, ainv, occ, docked, lam,
                    seed, step, dt, prime,
@@ -671,8 +1054,9 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
 
     Per particle ``i`` (all in registers and small per-block buffers): one pass over the
     neighbours assigns slots (8.21) with the branch-free D3 rounding (in 3D the map
-    ``T A⁻¹/d`` is formed once); one pass over the slots docks, keeps the members and sums
-    ``M = Σ w l lᵀ`` (precomputed ``l lᵀ``) and ``B = Σ w r lᵀ`` (8.23); ``A = B M⁻¹`` is
+    ``T A⁻¹/d`` is formed once; the slot conflicts are resolved in a second, short pass); one
+    pass over the slots docks and keeps the members, one over the members sums
+    ``M = Σ w l lᵀ`` and ``B = Σ w r lᵀ`` (8.23, vectorised); ``A = B M⁻¹`` is
     split by the polar decomposition (:func:`polar_factors`; the SVD :func:`svd_rot` when
     a singular value is clamped, in 2D and for inverted lattices); the member forces and
     torque-correction sums run over contiguous member buffers (vectorised). The forces on
@@ -686,18 +1070,11 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     h2 = h * h
     w_self = _w_zero(h, dim)
     c6 = w_self / (h2 * h2 * h2)  # W(r) = c6 (h² − r²)³
-    # slot offsets in length units and their outer products l lᵀ (xx, xy, xz, yy, yz, zz)
+    # slot offsets in length units
     lv = np.empty((nq, 3))
-    llt = np.empty((nq, 6))
     for q in range(nq):
         for p in range(3):
             lv[q, p] = slot_vecs[q, p] * spacing
-        llt[q, 0] = lv[q, 0] * lv[q, 0]
-        llt[q, 1] = lv[q, 0] * lv[q, 1]
-        llt[q, 2] = lv[q, 0] * lv[q, 2]
-        llt[q, 3] = lv[q, 1] * lv[q, 1]
-        llt[q, 4] = lv[q, 1] * lv[q, 2]
-        llt[q, 5] = lv[q, 2] * lv[q, 2]
     tm = tmat if dim == 3 else _EYE
     # accumulator windows: block b adds member forces into rows lo[b]..hi[b]
     lo = np.empty(nblk, np.int64)
@@ -717,373 +1094,9 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
         wmax = max(wmax, hi[blk] - lo[blk] + 1)
     win = np.empty((nblk, wmax, 3))
     for blk in prange(nblk):
-        for k in range(wmax):
-            win[blk, k, 0] = 0.0
-            win[blk, k, 1] = 0.0
-            win[blk, k, 2] = 0.0
-        lo_b = lo[blk]
-        rt = np.empty((3, cap))  # offsets r_ij of the neighbours, by position in the row
-        bestd = np.empty(nq)
-        bestj = np.empty(nq, np.int64)
-        bestt = np.empty(nq, np.int64)
-        # the docked members of the current neighbourhood (slot order), as contiguous columns
-        mj = np.empty(nq, np.int64)
-        mb = np.empty((11, nq))  # r (3), lattice offset l (3), W, m_j, force (3)
-        a = np.empty((3, 3))
-        u = np.empty((3, 3))
-        v = np.empty((3, 3))
-        sg = np.empty(3)
-        rot = np.empty((3, 3))
-        sym = np.empty((3, 3))
-        g = np.empty((3, 3))
-        b = np.empty((3, 3))
-        mm = np.empty((3, 3))
-        minv = np.empty((3, 3))
-        work = np.empty((4, 3, 3))
-        for i in range(blk * n // nblk, (blk + 1) * n // nblk):
-            valid[i] = 0
-            cnt = min(nnbr[i], cap)
-            for p in range(3):
-                fown[i, p] = 0.0
-                omega[i, p] = 0.0
-                cen[i, p] = 0.0
-                for q in range(3):
-                    amat_out[i, p, q] = amat[i, p, q]
-                    ainv_out[i, p, q] = ainv[i, p, q]
-                    gmat[i, p, q] = 0.0
-                    bstr[i, p, q] = 0.0
-            mt = matid[i]
-            ke = mats[mt, M.KE]
-            lmu = mats[mt, M.LMU]
-            llam = mats[mt, M.LLAM]
-            if phase[i] != SOLID or (ke <= 0.0 and lmu <= 0.0 and llam <= 0.0):
-                for q in range(nq):
-                    occ[i, q] = -1
-                    docked[i, q] = 0
-                continue
-            rho0 = mats[mt, M.RHO0]
-            xi0 = x[i, 0]
-            xi1 = x[i, 1]
-            xi2 = x[i, 2]
-            oi = obj[i]
-            # world offset -> lattice frame in units of d (A^(t-1)^-1 / d), in 3D straight on to D3 coordinates
-            p00 = (tm[0, 0] * ainv[i, 0, 0] + tm[0, 1] * ainv[i, 1, 0] + tm[0, 2] * ainv[i, 2, 0]) / spacing
-            p01 = (tm[0, 0] * ainv[i, 0, 1] + tm[0, 1] * ainv[i, 1, 1] + tm[0, 2] * ainv[i, 2, 1]) / spacing
-            p02 = (tm[0, 0] * ainv[i, 0, 2] + tm[0, 1] * ainv[i, 1, 2] + tm[0, 2] * ainv[i, 2, 2]) / spacing
-            p10 = (tm[1, 0] * ainv[i, 0, 0] + tm[1, 1] * ainv[i, 1, 0] + tm[1, 2] * ainv[i, 2, 0]) / spacing
-            p11 = (tm[1, 0] * ainv[i, 0, 1] + tm[1, 1] * ainv[i, 1, 1] + tm[1, 2] * ainv[i, 2, 1]) / spacing
-            p12 = (tm[1, 0] * ainv[i, 0, 2] + tm[1, 1] * ainv[i, 1, 2] + tm[1, 2] * ainv[i, 2, 2]) / spacing
-            p20 = (tm[2, 0] * ainv[i, 0, 0] + tm[2, 1] * ainv[i, 1, 0] + tm[2, 2] * ainv[i, 2, 0]) / spacing
-            p21 = (tm[2, 0] * ainv[i, 0, 1] + tm[2, 1] * ainv[i, 1, 1] + tm[2, 2] * ainv[i, 2, 1]) / spacing
-            p22 = (tm[2, 0] * ainv[i, 0, 2] + tm[2, 1] * ainv[i, 1, 2] + tm[2, 2] * ainv[i, 2, 2]) / spacing
-            # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
-            for q in range(nq):
-                bestd[q] = np.inf
-                bestj[q] = -1
-            for t in range(cnt):
-                j = nbr[i, t]
-                r0 = x[j, 0] - xi0
-                r1 = x[j, 1] - xi1
-                r2 = x[j, 2] - xi2
-                rt[0, t] = r0
-                rt[1, t] = r1
-                rt[2, t] = r2
-                if phase[j] != SOLID or obj[j] != oi:
-                    continue
-                y0 = p00 * r0 + p01 * r1 + p02 * r2
-                y1 = p10 * r0 + p11 * r1 + p12 * r2
-                if dim == 3:
-                    q, d2 = _nearest_d3(y0, y1, p20 * r0 + p21 * r1 + p22 * r2, table)
-                else:
-                    q, d2 = nearest_slot(y0, y1, 0.0, tmat, table, dim)
-                if q >= 0 and d2 < bestd[q]:
-                    bestd[q] = d2
-                    bestj[q] = j
-                    bestt[q] = t
-            # 2. docking (section 8.2.5), 3. shape matching sums (8.23) over the docked members
-            lmax = mats[mt, M.DOCK_MAX]
-            gain = mats[mt, M.DOCK_GAIN]
-            loss = mats[mt, M.DOCK_LOSS]
-            frac = mats[mt, M.FRACTURE]
-            s00 = 0.0
-            s01 = 0.0
-            s02 = 0.0
-            s11 = 0.0
-            s12 = 0.0
-            s22 = 0.0
-            b00 = 0.0
-            b01 = 0.0
-            b02 = 0.0
-            b10 = 0.0
-            b11 = 0.0
-            b12 = 0.0
-            b20 = 0.0
-            b21 = 0.0
-            b22 = 0.0
-            count = 0
-            for q in range(nq):
-                j = bestj[q]
-                newocc = uid[j] if j >= 0 else -1
-                if newocc != occ[i, q]:
-                    occ[i, q] = newocc
-                    docked[i, q] = 0
-                lq = lam[i, q]
-                if j >= 0:
-                    lnew = min(lq + gain * dt, lmax) if gain < np.inf else lmax
-                else:
-                    lnew = max(lq - loss * dt, 0.0) if loss < np.inf else 0.0
-                if lnew != lq:  # a settled rate is not rewritten (no dirty cache lines)
-                    lam[i, q] = lnew
-                if j < 0:
-                    continue
-                t = bestt[q]
-                r0 = rt[0, t]
-                r1 = rt[1, t]
-                r2 = rt[2, t]
-                rr = r0 * r0 + r1 * r1 + r2 * r2
-                if prime:
-                    docked[i, q] = 1
-                if docked[i, q] == 0 and lnew > 0.0:
-                    if lnew == np.inf or uniform(seed, step, uid[i], q, STREAM_DOCK) < 1.0 - math.exp(-lnew * dt):
-                        docked[i, q] = 1
-                if docked[i, q] == 1 and frac < np.inf:
-                    rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
-                    if math.sqrt(rr) > (1.0 + frac) * rest:
-                        docked[i, q] = 0
-                        lam[i, q] = 0.0
-                if docked[i, q] == 0:
-                    continue
-                hw = max(h2 - rr, 0.0)
-                w = c6 * hw * hw * hw
-                l0 = lv[q, 0]
-                l1 = lv[q, 1]
-                l2 = lv[q, 2]
-                s00 += w * llt[q, 0]
-                s01 += w * llt[q, 1]
-                s02 += w * llt[q, 2]
-                s11 += w * llt[q, 3]
-                s12 += w * llt[q, 4]
-                s22 += w * llt[q, 5]
-                wr0 = w * r0
-                wr1 = w * r1
-                wr2 = w * r2
-                b00 += wr0 * l0
-                b01 += wr0 * l1
-                b02 += wr0 * l2
-                b10 += wr1 * l0
-                b11 += wr1 * l1
-                b12 += wr1 * l2
-                b20 += wr2 * l0
-                b21 += wr2 * l1
-                b22 += wr2 * l2
-                mj[count] = j
-                mb[0, count] = r0
-                mb[1, count] = r1
-                mb[2, count] = r2
-                mb[3, count] = l0
-                mb[4, count] = l1
-                mb[5, count] = l2
-                mb[6, count] = w
-                mb[7, count] = m[j]
-                count += 1
-            if dim == 2:
-                s02 = s12 = 0.0
-                b02 = b12 = b20 = b21 = 0.0
-                s22 = 1.0
-                b22 = 1.0
-            mm[0, 0] = s00
-            mm[0, 1] = s01
-            mm[0, 2] = s02
-            mm[1, 0] = s01
-            mm[1, 1] = s11
-            mm[1, 2] = s12
-            mm[2, 0] = s02
-            mm[2, 1] = s12
-            mm[2, 2] = s22
-            if count < dim:
-                continue
-            tr = (s00 + s11 + (s22 if dim == 3 else 0.0)) / dim
-            det = _inv3(mm, minv)
-            if not det > 1e-6 * tr ** dim:
-                continue
-            for p in range(3):
-                bp0 = b00 if p == 0 else (b10 if p == 1 else b20)
-                bp1 = b01 if p == 0 else (b11 if p == 1 else b21)
-                bp2 = b02 if p == 0 else (b12 if p == 1 else b22)
-                for q in range(3):
-                    a[p, q] = bp0 * minv[0, q] + bp1 * minv[1, q] + bp2 * minv[2, q]
-            valid[i] = 1
-            s = mats[mt, M.GOAL]
-            if polar_factors(a, dim, rot, sym, mm):
-                # every singular value inside the clamps: functions of S = Rᵀ A by matrix algebra
-                trs = sym[0, 0] + sym[1, 1] + sym[2, 2] - 3.0
-                for p in range(3):
-                    for q in range(3):
-                        mm[p, q] = s * sym[p, q] + ((1.0 - s) if p == q else 0.0)
-                norm = _det3(mm) ** (1.0 / 3.0)
-                for p in range(3):
-                    for q in range(3):
-                        g[p, q] = (rot[p, 0] * mm[0, q] + rot[p, 1] * mm[1, q] + rot[p, 2] * mm[2, q]) / norm
-                _inv3(sym, mm)  # S⁻¹
-                for p in range(3):
-                    for q in range(3):
-                        amat_out[i, p, q] = a[p, q]
-                        ainv_out[i, p, q] = mm[p, 0] * rot[q, 0] + mm[p, 1] * rot[q, 1] + mm[p, 2] * rot[q, 2]
-            else:
-                svd_rot(a, dim, u, sg, v, work)
-                is0 = min(max(sg[0], SIG_LO), SIG_HI)
-                is1 = min(max(sg[1], SIG_LO), SIG_HI)
-                is2 = min(max(sg[2], SIG_LO), SIG_HI)
-                for p in range(3):
-                    for q in range(3):
-                        amat_out[i, p, q] = a[p, q]
-                        ainv_out[i, p, q] = v[p, 0] * u[q, 0] / is0 + v[p, 1] * u[q, 1] / is1 + v[p, 2] * u[q, 2] / is2
-                # 4. goal matrix (8.29-8.30)
-                dg0 = s * max(sg[0], SIGMA_FLOOR) + (1.0 - s)
-                dg1 = s * max(sg[1], SIGMA_FLOOR) + (1.0 - s)
-                if dim == 3:
-                    dg2 = s * max(sg[2], SIGMA_FLOOR) + (1.0 - s)
-                    norm = (dg0 * dg1 * dg2) ** (1.0 / 3.0)
-                    dg2 /= norm
-                else:
-                    dg2 = 1.0
-                    norm = (dg0 * dg1) ** 0.5
-                dg0 /= norm
-                dg1 /= norm
-                trs = (sg[0] - 1.0) + (sg[1] - 1.0)
-                if dim == 3:
-                    trs += sg[2] - 1.0
-                for p in range(3):
-                    for q in range(3):
-                        g[p, q] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
-                        rot[p, q] = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
-            # 5. strain stress: b = V_i P M^-1, P = 2mu (A - R) + lam tr(R^T A - I) R
-            for p in range(3):
-                for q in range(3):
-                    gmat[i, p, q] = g[p, q]
-                    mm[p, q] = 2.0 * lmu * (a[p, q] - rot[p, q]) + llam * trs * rot[p, q]
-            if dim == 2:
-                for p in range(3):
-                    mm[2, p] = 0.0
-                    mm[p, 2] = 0.0
-            vol = m[i] / rho0
-            for p in range(3):
-                for q in range(3):
-                    b[p, q] = vol * (mm[p, 0] * minv[0, q] + mm[p, 1] * minv[1, q] + mm[p, 2] * minv[2, q])
-                    if dim == 2 and (p == 2 or q == 2):
-                        b[p, q] = 0.0
-                    bstr[i, p, q] = b[p, q]
-            # 6. member forces (8.31 + strain), torque about x_i, weights for the correction
-            g00, g01, g02 = g[0, 0], g[0, 1], g[0, 2]
-            g10, g11, g12 = g[1, 0], g[1, 1], g[1, 2]
-            g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
-            e00, e01, e02 = b[0, 0], b[0, 1], b[0, 2]
-            e10, e11, e12 = b[1, 0], b[1, 1], b[1, 2]
-            e20, e21, e22 = b[2, 0], b[2, 1], b[2, 2]
-            chalf = 0.5 * ke * m[i] / rho0
-            fs0 = 0.0
-            fs1 = 0.0
-            fs2 = 0.0
-            t0 = 0.0
-            t1 = 0.0
-            t2 = 0.0
-            wi = m[i] * w_self
-            wsum = wi
-            c0 = 0.0
-            c1 = 0.0
-            c2 = 0.0
-            i00 = 0.0
-            i01 = 0.0
-            i02 = 0.0
-            i11 = 0.0
-            i12 = 0.0
-            i22 = 0.0
-            for k in range(count):
-                r0 = mb[0, k]
-                r1 = mb[1, k]
-                r2 = mb[2, k]
-                l0 = mb[3, k]
-                l1 = mb[4, k]
-                l2 = mb[5, k]
-                w = mb[6, k]
-                mk = mb[7, k]
-                cw = chalf * mk * w
-                f0 = cw * (g00 * l0 + g01 * l1 + g02 * l2 - r0) - w * (e00 * l0 + e01 * l1 + e02 * l2)
-                f1 = cw * (g10 * l0 + g11 * l1 + g12 * l2 - r1) - w * (e10 * l0 + e11 * l1 + e12 * l2)
-                f2 = cw * (g20 * l0 + g21 * l1 + g22 * l2 - r2) - w * (e20 * l0 + e21 * l1 + e22 * l2)
-                mb[8, k] = f0
-                mb[9, k] = f1
-                mb[10, k] = f2
-                fs0 += f0
-                fs1 += f1
-                fs2 += f2
-                t0 += r1 * f2 - r2 * f1
-                t1 += r2 * f0 - r0 * f2
-                t2 += r0 * f1 - r1 * f0
-                wk = mk * w
-                wsum += wk
-                c0 += wk * r0
-                c1 += wk * r1
-                c2 += wk * r2
-                i00 += wk * (r1 * r1 + r2 * r2)
-                i11 += wk * (r0 * r0 + r2 * r2)
-                i22 += wk * (r0 * r0 + r1 * r1)
-                i01 -= wk * r0 * r1
-                i02 -= wk * r0 * r2
-                i12 -= wk * r1 * r2
-            c0 /= wsum
-            c1 /= wsum
-            c2 /= wsum
-            # parallel-axis shift to the centroid
-            cc = c0 * c0 + c1 * c1 + c2 * c2
-            i00 -= wsum * (cc - c0 * c0)
-            i11 -= wsum * (cc - c1 * c1)
-            i22 -= wsum * (cc - c2 * c2)
-            i01 += wsum * c0 * c1
-            i02 += wsum * c0 * c2
-            i12 += wsum * c1 * c2
-            if dim == 2:
-                om0 = 0.0
-                om1 = 0.0
-                om2 = -t2 / i22 if i22 > 0.0 else 0.0
-            else:
-                mm[0, 0] = i00
-                mm[1, 1] = i11
-                mm[2, 2] = i22
-                mm[0, 1] = i01
-                mm[1, 0] = i01
-                mm[0, 2] = i02
-                mm[2, 0] = i02
-                mm[1, 2] = i12
-                mm[2, 1] = i12
-                if _inv3(mm, minv) != 0.0:
-                    om0 = -(minv[0, 0] * t0 + minv[0, 1] * t1 + minv[0, 2] * t2)
-                    om1 = -(minv[1, 0] * t0 + minv[1, 1] * t1 + minv[1, 2] * t2)
-                    om2 = -(minv[2, 0] * t0 + minv[2, 1] * t1 + minv[2, 2] * t2)
-                else:
-                    om0 = 0.0
-                    om1 = 0.0
-                    om2 = 0.0
-            omega[i, 0] = om0
-            omega[i, 1] = om1
-            omega[i, 2] = om2
-            cen[i, 0] = c0
-            cen[i, 1] = c1
-            cen[i, 2] = c2
-            # own share: -sum of member forces + correction at y = -c
-            fown[i, 0] = -fs0 + wi * (om1 * (-c2) - om2 * (-c1))
-            fown[i, 1] = -fs1 + wi * (om2 * (-c0) - om0 * (-c2))
-            fown[i, 2] = -fs2 + wi * (om0 * (-c1) - om1 * (-c0))
-            # the members' forces + torque correction at y = r - c, into the block's window
-            for k in range(count):
-                y0 = mb[0, k] - c0
-                y1 = mb[1, k] - c1
-                y2 = mb[2, k] - c2
-                wk = mb[7, k] * mb[6, k]
-                row = mj[k] - lo_b
-                win[blk, row, 0] += mb[8, k] + wk * (om1 * y2 - om2 * y1)
-                win[blk, row, 1] += mb[9, k] + wk * (om2 * y0 - om0 * y2)
-                win[blk, row, 2] += mb[10, k] + wk * (om0 * y1 - om1 * y0)
+        _lattice_block(blk * n // nblk, (blk + 1) * n // nblk, lo[blk], win[blk], x, m, phase, obj, matid, uid, mats,
+                       nbr, nnbr, h, dim, spacing, slot_vecs, lv, c6, w_self, tm, tmat, table, amat, ainv, occ,
+                       docked, lam, seed, step, dt, prime, amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid)
     for j in prange(n):
         f0 = 0.0
         f1 = 0.0
