@@ -257,56 +257,53 @@ def smallest_eigenvectors_sel(cov, out):
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
 def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes, orient, rest, blk, out_points,
                   out_normals, out_radii):
-    """:func:`deform` of the surfels ``s0 .. s0 + nb`` (nb <= SBLK): node sums per surfel, the plane
-    normals of the whole block (vectorised), then frames and blending per surfel."""
+    """:func:`deform` of the surfels ``s0 .. s0 + nb`` (nb <= SBLK): node sums per surfel (one pass,
+    offsets from x_0), the plane normals of the whole block (vectorised), then frames and
+    blending per surfel."""
     B = SBLK
     kk = bind.shape[1]
-    for t in range(nb):                               # mean, covariance and normal sum of the bound nodes
+    for t in range(nb):                               # node count, covariance and normal sum of the bound nodes
         s = s0 + t
-        cnt = 0.0
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        ox = 0.0
-        oy = 0.0
-        oz = 0.0
-        for a in range(kk):
+        o = bind[s, 0]
+        xo0 = cur[o, 0]
+        xo1 = cur[o, 1]
+        xo2 = cur[o, 2]
+        cnt = 1.0
+        ox = cur_normals[o, 0]
+        oy = cur_normals[o, 1]
+        oz = cur_normals[o, 2]
+        s10 = s11 = s12 = 0.0
+        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+        for a in range(1, kk):                        # sums of d = x_j - x_0 and of d d^T (x_0 itself: d = 0)
             j = bind[s, a]
             if j >= 0:
+                d0 = cur[j, 0] - xo0
+                d1 = cur[j, 1] - xo1
+                d2 = cur[j, 2] - xo2
                 cnt += 1.0
-                mx += cur[j, 0]
-                my += cur[j, 1]
-                mz += cur[j, 2]
                 ox += cur_normals[j, 0]
                 oy += cur_normals[j, 1]
                 oz += cur_normals[j, 2]
-        inv = 1.0 / max(cnt, 1.0)
-        mx *= inv
-        my *= inv
-        mz *= inv
-        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-        for a in range(kk):
-            j = bind[s, a]
-            if j >= 0:
-                dx = cur[j, 0] - mx
-                dy = cur[j, 1] - my
-                dz = cur[j, 2] - mz
-                c00 += dx * dx
-                c01 += dx * dy
-                c02 += dx * dz
-                c11 += dy * dy
-                c12 += dy * dz
-                c22 += dz * dz
+                s10 += d0
+                s11 += d1
+                s12 += d2
+                c00 += d0 * d0
+                c01 += d0 * d1
+                c02 += d0 * d2
+                c11 += d1 * d1
+                c12 += d1 * d2
+                c22 += d2 * d2
+        ic = 1.0 / cnt
         blk[_CNT * B + t] = cnt
         blk[(_NSUM + 0) * B + t] = ox
         blk[(_NSUM + 1) * B + t] = oy
         blk[(_NSUM + 2) * B + t] = oz
-        blk[(_COV + 0) * B + t] = c00
-        blk[(_COV + 1) * B + t] = c01
-        blk[(_COV + 2) * B + t] = c02
-        blk[(_COV + 3) * B + t] = c11
-        blk[(_COV + 4) * B + t] = c12
-        blk[(_COV + 5) * B + t] = c22
+        blk[(_COV + 0) * B + t] = c00 - s10 * s10 * ic
+        blk[(_COV + 1) * B + t] = c01 - s10 * s11 * ic
+        blk[(_COV + 2) * B + t] = c02 - s10 * s12 * ic
+        blk[(_COV + 3) * B + t] = c11 - s11 * s11 * ic
+        blk[(_COV + 4) * B + t] = c12 - s11 * s12 * ic
+        blk[(_COV + 5) * B + t] = c22 - s12 * s12 * ic
     for t in range(nb):                               # the least-squares plane normals (7.26)
         vx, vy, vz = smallest_eigenvector_sel(blk[(_COV + 0) * B + t], blk[(_COV + 1) * B + t],
                                               blk[(_COV + 2) * B + t], blk[(_COV + 3) * B + t],
@@ -427,8 +424,8 @@ def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, 
     (``orient`` times the normalised cross product of the deformed axes; the plane normal
     where that vanishes, (0, 0, 1) where both do) and radii (the longer deformed axis,
     1e-9 where zero). Points without any weighted frame are translated with x_0. The
-    surfels are done in blocks of :data:`SBLK` with the loops over the bound nodes outside
-    the loops over the surfels (vectorised); the plane normal is that of :func:`plane_normal`.
+    surfels are done in blocks of :data:`SBLK`; the plane normal is that of :func:`plane_normal`
+    (its covariance from sums of the node offsets from x_0, up to round-off).
     """
     n = bind.shape[0]
     nblocks = (n + SBLK - 1) // SBLK
