@@ -94,3 +94,17 @@ def changed_centres(old_foff, old_fibers, old_poff, old_pairs, old_soft, old_off
             ch = a != new_pairs[pn, 0] or b != new_pairs[pn, 1] or moved[a] or moved[b]
             q += 1
         out[c] = ch
+
+
+@njit(cache=True)
+def touching(fibers, pairs, pair_offsets, moved, out):
+    """Mark in ``out`` (N,) every centre with a fiber or umbrella pair that touches a ``moved`` node."""
+    for k in range(fibers.shape[0]):
+        if moved[fibers[k, 0]] or moved[fibers[k, 1]] or moved[fibers[k, 2]]:
+            out[fibers[k, 1]] = True
+    for c in range(pair_offsets.shape[0] - 1):
+        if moved[c]:
+            out[c] = True
+        for q in range(pair_offsets[c], pair_offsets[c + 1]):
+            if moved[pairs[q, 0]] or moved[pairs[q, 1]]:
+                out[c] = True

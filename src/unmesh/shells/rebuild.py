@@ -27,7 +27,7 @@ from unmesh.shells.fracture import rebuild_near as rebuild_near_reference
 from unmesh.shells.nodes import create_fibers, node_neighborhoods, umbrella_pairs, umbrella_softening
 from unmesh.shells.topology import ShellTopology
 
-__all__ = ["rebuild_near"]
+__all__ = ["rebuild_local", "rebuild_near"]
 
 
 def _row_offsets(keys: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -67,6 +67,19 @@ def _measure(x: np.ndarray, fibers: np.ndarray, pairs: np.ndarray, pair_offsets:
     return length, angle
 
 
+def _crossed(rest: np.ndarray, topology: ShellTopology, rows: np.ndarray, cracks: CrackSet, new: int) -> np.ndarray:
+    """(R,) bool: a segment from the node to one of its neighbours crosses one of the last ``new`` cracks."""
+    counts = topology.neighbor_offsets[rows + 1] - topology.neighbor_offsets[rows]
+    pos = np.repeat(topology.neighbor_offsets[rows] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+    src = np.repeat(rows, counts)
+    latest = CrackSet(cracks.centers[-new:], cracks.normals[-new:], cracks.radii[-new:], cracks.nodes[-new:],
+                      cracks.times[-new:])
+    hit = latest.blocked(rest[src], rest[topology.neighbors[pos]])
+    out = np.zeros(len(rows), dtype=bool)
+    out[np.repeat(np.arange(len(rows)), counts)[hit]] = True
+    return out
+
+
 def _keys(f: np.ndarray, n: int) -> np.ndarray:
     return (f[:, 0] * n + f[:, 1]) * n + f[:, 2]
 
@@ -74,8 +87,15 @@ def _keys(f: np.ndarray, n: int) -> np.ndarray:
 def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopology, state: FiberState,
                  cracks: CrackSet, affected: np.ndarray, neighbors: int, min_angle: float,
                  fiber_material: FiberMaterial, current: np.ndarray | None = None,
-                 samples: int = 4, tree: Any = None) -> tuple[ShellTopology, FiberState, np.ndarray]:
+                 samples: int = 4, tree: Any = None, new_cracks: int | None = None,
+                 ) -> tuple[ShellTopology, FiberState, np.ndarray]:
     """:func:`unmesh.shells.fracture.rebuild_near` (same arguments and result) in time of the affected nodes.
+
+    With ``new_cracks`` (the number of cracks at the end of ``cracks`` that are new), only
+    the affected nodes one of whose neighbour segments crosses a new crack disc are built
+    again: the neighbourhood of any other node is the same with or without the new discs
+    (its first visible candidates stay visible, hidden ones stay hidden), and so are its
+    umbrella pairs, fibers and their rest measures.
 
     Example
     -------
@@ -92,19 +112,34 @@ def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopo
     >>> bool(np.array_equal(t1.fibers, t2.fibers) and np.array_equal(s1.length_orig, s2.length_orig))
     True
     """
+    return rebuild_local(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle, fiber_material,
+                         current, samples, tree, new_cracks)[:3]
+
+
+def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopology, state: FiberState,
+                  cracks: CrackSet, affected: np.ndarray, neighbors: int, min_angle: float,
+                  fiber_material: FiberMaterial, current: np.ndarray | None = None, samples: int = 4,
+                  tree: Any = None, new_cracks: int | None = None,
+                  ) -> tuple[ShellTopology, FiberState, np.ndarray, np.ndarray | None]:
+    """:func:`rebuild_near`, and the nodes built again (None when the reference rebuild ran: then
+    anything may have changed). The arrays of all other nodes are copies of the old ones."""
     n = topology.n_nodes
     rows = np.unique(np.asarray(affected, dtype=np.int64))
+    if new_cracks is not None and current is not None and len(rows) and len(cracks) >= new_cracks > 0:
+        rows = rows[_crossed(rest, topology, rows, cracks, new_cracks)]
+        if len(rows) == 0:
+            return topology, state, np.arange(len(topology.fibers), dtype=np.int64), rows
     if current is None or len(rows) == 0 or n >= 2**21:
-        return rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
-                                      fiber_material, current, samples, tree)
+        return (*rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
+                                        fiber_material, current, samples, tree), None)
     noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
     old_counts = np.diff(topology.neighbor_offsets)
     counts = old_counts.copy()
     counts[rows] = np.diff(noff)
     loose = counts < MIN_VISIBLE
     if (loose & (old_counts > 0)).any():          # a node is detached from the shell: a global change
-        return rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
-                                      fiber_material, current, samples, tree)
+        return (*rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
+                                        fiber_material, current, samples, tree), None)
     # pairs and fibers of the affected nodes, from their unfiltered neighbourhoods (as the reference)
     pairs, centers = umbrella_pairs(rest, rest_normals, noff, nbr, nodes=rows)
     new = create_fibers(rest, noff, nbr, min_angle, nodes=rows)
@@ -177,4 +212,4 @@ def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopo
     merged = FiberState._checked(_take(src, getattr(state, name), st[name]) for name in _FIELDS)
     origin = _take(src, np.arange(len(topology.fibers), dtype=np.int64), reuse)
     topo = ShellTopology.build(n, off, idx, out_pairs, out_centers, fibers, soft, validate=False)
-    return topo, merged, origin
+    return topo, merged, origin, np.flatnonzero(redo)

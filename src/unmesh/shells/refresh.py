@@ -66,7 +66,9 @@ def refreshed_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, 
         Index of every new fiber before the change (-1: new fiber).
     old : dict
         ``topology``, ``state``, ``offsets`` (copies of the arrays before the change),
-        ``result`` (the last ForceResult) and ``x`` (the positions it was evaluated at).
+        ``result`` (the last ForceResult), ``x`` (the positions it was evaluated at) and
+        optionally ``touched``, the nodes whose fibers, pairs and regularisation were built
+        again (all others unchanged; None or absent: compare everything).
     ks, kb, samples
         As for :func:`~unmesh.shells.forces.elastic_forces`.
 
@@ -81,12 +83,19 @@ def refreshed_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, 
         return None
     moved = (x != old["x"]).any(axis=1)
     only = np.zeros(n, dtype=np.bool_)
-    forces_of = ("length_orig", "length_plastic", "angle_orig", "angle_plastic", "stretch_scale", "bend_scale")
-    _rebuild_kernels.changed_centres(ot.fiber_offsets, ot.fibers, ot.pair_offsets, ot.pairs, ot.soft, old["offsets"],
-                                     *(getattr(ost, f) for f in forces_of), topology.fiber_offsets, topology.fibers,
-                                     topology.pair_offsets, topology.pairs, topology.soft,
-                                     np.ascontiguousarray(offsets, dtype=np.float64),
-                                     *(getattr(state, f) for f in forces_of), moved, only)
+    touched = old.get("touched")
+    if touched is not None:     # only these nodes were built again, the other arrays are copies
+        only[touched] = True
+        only |= (old["offsets"] != offsets).any(axis=1)
+        if moved.any():
+            _rebuild_kernels.touching(topology.fibers, topology.pairs, topology.pair_offsets, moved, only)
+    else:
+        forces_of = ("length_orig", "length_plastic", "angle_orig", "angle_plastic", "stretch_scale", "bend_scale")
+        _rebuild_kernels.changed_centres(ot.fiber_offsets, ot.fibers, ot.pair_offsets, ot.pairs, ot.soft,
+                                         old["offsets"], *(getattr(ost, f) for f in forces_of), topology.fiber_offsets,
+                                         topology.fibers, topology.pair_offsets, topology.pairs, topology.soft,
+                                         np.ascontiguousarray(offsets, dtype=np.float64),
+                                         *(getattr(state, f) for f in forces_of), moved, only)
     if only.sum() > MAX_CHANGED * n:
         return None
     if not only.any():

@@ -28,7 +28,7 @@ from unmesh.shells.fracture import CrackSet, select_cracks
 from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
 from unmesh.shells.material import ShellMaterial
 from unmesh.shells.nodes import DEFAULT_MIN_ANGLE, DEFAULT_NEIGHBORS, build_topology, select_nodes
-from unmesh.shells.rebuild import rebuild_near
+from unmesh.shells.rebuild import rebuild_local
 from unmesh.shells.skinning import DEFAULT_SKIN_NODES, SkinnedSurface
 from unmesh.shells.topology import ShellTopology
 from unmesh.sim import Simulation
@@ -448,10 +448,10 @@ class ShellSimulation(Simulation):
         angles = self._last.angles
         last = {"topology": self.topology, "state": self.fibers, "offsets": self.node_offsets.copy(),
                 "result": self._last, "x": getattr(self, "_x_force", None)}
-        self.topology, self.fibers, origin = rebuild_near(self.rest, self.rest_normals, self.topology, self.fibers,
-                                                          self.cracks, np.unique(near), self.neighbors,
-                                                          self.min_angle, self.material.fiber_material, self.x,
-                                                          self.material.arc_samples, tree=self._rest_tree())
+        self.topology, self.fibers, origin, last["touched"] = rebuild_local(
+            self.rest, self.rest_normals, self.topology, self.fibers, self.cracks, np.unique(near), self.neighbors,
+            self.min_angle, self.material.fiber_material, self.x, self.material.arc_samples, tree=self._rest_tree(),
+            new_cracks=len(chosen))
         self._carry_angles(angles, origin)
         rebuilt = np.unique(near)
         self._keep_node_terms(before, had, rebuilt)
