@@ -449,3 +449,14 @@ def test_fused_warped_assembly_matches_rotated_blocks_scattered(rng):
     got = FK.warped_global_blocks(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R, p.block_map,
                                   len(p.indices))
     np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+
+
+def test_row_subset_matvec_matches_the_full_product(rng):
+    sim = Dynamics(voronoi_foam(10, seed=8), 50.0, 0.3, 1.0)
+    p, n = sim.pattern, sim.mesh.n_nodes
+    K = FK.scatter_blocks(p.block_map, sim.kstiff.data.reshape(-1, 9), len(p.indices))
+    x = rng.normal(size=(n, 3))
+    rows = np.flatnonzero(rng.random(n) < 0.3)
+    np.testing.assert_allclose(SK.bsr_matvec_rows(p.indptr, p.indices, K, x, rows),
+                               SK.bsr_matvec(p.indptr, p.indices, K, x)[rows], rtol=1e-12, atol=1e-12 * np.abs(K).max())
+

@@ -37,6 +37,30 @@ def bsr_matvec(indptr, indices, blocks, x):
 
 
 @njit(cache=True)
+def bsr_matvec_rows(indptr, indices, blocks, x, rows):
+    """Rows ``rows`` (m,) of y = A x for a 3×3-block CSR matrix: (m, 3) (serial; reference: :func:`bsr_matvec`)."""
+    m = rows.shape[0]
+    y = np.zeros((m, 3))
+    for t in range(m):
+        i = rows[t]
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            x0 = x[j, 0]
+            x1 = x[j, 1]
+            x2 = x[j, 2]
+            a0 += blocks[k, 0] * x0 + blocks[k, 1] * x1 + blocks[k, 2] * x2
+            a1 += blocks[k, 3] * x0 + blocks[k, 4] * x1 + blocks[k, 5] * x2
+            a2 += blocks[k, 6] * x0 + blocks[k, 7] * x1 + blocks[k, 8] * x2
+        y[t, 0] = a0
+        y[t, 1] = a1
+        y[t, 2] = a2
+    return y
+
+
+@njit(cache=True)
 def _filter(r, kind, normal):
     n = r.shape[0]
     for i in range(n):

@@ -257,6 +257,7 @@ class LaggedLU:
         self.pieces: int | None = None  # connected pieces of the mesh at the factorisation
         self.perm: np.ndarray | None = None  # DOF order of the factorisation (None: SuperLU's own)
         self.kind: np.ndarray | None = None  # (n,) constraints factorised, on the current nodes
+        self._local_cache: tuple[Any, bytes, Any] | None = None  # (matrix, node set, local factor) of the cut region
         self.normal = np.array([0.0, 1.0, 0.0])
         self.iperm: np.ndarray | None = None
 
@@ -380,57 +381,83 @@ class LaggedLU:
                 y = W @ y
             return np.einsum("nij,nj->ni", node_rot, y)
 
-        local_set = np.zeros(len(node_rot), bool) if self.touched is None else self.touched.copy()
         if indptr is None or indices is None or blocks is None:
             return old
+        n = len(indptr) - 1
+        t_mask = np.zeros(n, bool) if self.touched is None else self.touched.copy()
+        if self.touched is not None and self.touched_rings:
+            t_mask |= grow(indptr, indices, self.touched, self.touched_rings)
+        c_mask = np.zeros(n, bool)
         if kind is not None and np.any(kind != 0):
-            local_set |= grow(indptr, indices, kind != 0, self.constrained_rings)
+            c_mask |= grow(indptr, indices, kind != 0, self.constrained_rings)
         if kind is not None and self.kind is not None and len(self.kind) == len(kind):
             changed = (kind != self.kind) | ((kind == 2) & (self.normal @ (normal if normal is not None else self.normal)
                                                             < 1.0 - 1e-12))
             if changed.any():
-                local_set |= grow(indptr, indices, changed, self.rings)
-        if self.touched is not None and self.touched_rings:
-            local_set |= grow(indptr, indices, self.touched, self.touched_rings)
-        if not local_set.any():
+                c_mask |= grow(indptr, indices, changed, self.rings)
+        if not (t_mask.any() or c_mask.any()):
             return old
-        t_nodes = np.flatnonzero(local_set)
-        from scipy.sparse.linalg import splu
-
-        n = len(indptr) - 1
-        Att = _sub_blocks(indptr, indices, blocks, t_nodes)
-        kt = np.zeros(len(t_nodes), np.int64) if kind is None else np.ascontiguousarray(kind[t_nodes])
         nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.asarray(normal, np.float64)
-        proj = np.broadcast_to(np.eye(3), (len(t_nodes), 3, 3)).copy()
-        proj[kt == 1] = 0.0
-        proj[kt == 2] -= np.outer(nrm, nrm)
-        m = len(t_nodes)
-        S = sp.bsr_array((proj, np.arange(m), np.arange(m + 1)), shape=(3 * m, 3 * m)).tocsr()
-        L = S @ Att @ S + (sp.eye_array(3 * m, format="csr") - S)
-        local = splu(sp.csc_array(L), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
         kf = np.zeros(n, np.int64) if kind is None else np.ascontiguousarray(kind, dtype=np.int64)
+        if t_mask.any() and c_mask.any() and not (grow(indptr, indices, c_mask, 1) & t_mask).any():
+            # the cut region and the constrained region do not touch: A_tt is block diagonal, and
+            # the cut block (unconstrained) is the same in every contact round of the step
+            key = np.flatnonzero(t_mask).tobytes()
+            cached = self._local_cache
+            if cached is not None and cached[0] is blocks and cached[1] == key:
+                t_part = cached[2]
+            else:
+                t_part = _local_factor(indptr, indices, blocks, np.flatnonzero(t_mask), kf, nrm)
+                self._local_cache = (blocks, key, t_part)
+            parts = [t_part, _local_factor(indptr, indices, blocks, np.flatnonzero(c_mask), kf, nrm)]
+        else:
+            parts = [_local_factor(indptr, indices, blocks, np.flatnonzero(t_mask | c_mask), kf, nrm)]
 
         def loc(r: np.ndarray) -> np.ndarray:
             z = np.zeros_like(r)
-            z[t_nodes] = local.solve(r[t_nodes].ravel()).reshape(-1, 3)
+            for nodes, local in parts:
+                z[nodes] = local.solve(r[nodes].ravel()).reshape(-1, 3)
             SK.filter_inplace(z, kf, nrm)
             return z
+
+        # the local corrections live on the local set: A z₁ is needed only on its neighbourhood,
+        # and the second local solve reads the residual only on the local set
+        local_nodes = np.flatnonzero(t_mask | c_mask)
+        near = np.flatnonzero(grow(indptr, indices, t_mask | c_mask, 1))
 
         def apply_schwarz(r: np.ndarray) -> np.ndarray:
             r = r.copy()
             SK.filter_inplace(r, kf, nrm)
             z = loc(r)
-            q = r - SK.bsr_matvec(indptr, indices, blocks, z)
+            q = r.copy()
+            q[near] -= SK.bsr_matvec_rows(indptr, indices, blocks, z, near)
             SK.filter_inplace(q, kf, nrm)
             y = old(q)
             SK.filter_inplace(y, kf, nrm)
             z += y
-            q = r - SK.bsr_matvec(indptr, indices, blocks, z)
+            q = np.zeros_like(r)
+            q[local_nodes] = r[local_nodes] - SK.bsr_matvec_rows(indptr, indices, blocks, z, local_nodes)
             SK.filter_inplace(q, kf, nrm)
             z += loc(q)
             return z
 
         return apply_schwarz
+
+
+def _local_factor(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray, kind: np.ndarray,
+                  normal: np.ndarray) -> tuple[np.ndarray, Any]:
+    """``(nodes, SuperLU)`` of the filtered block ``S A_tt S + (I - S)`` on the sorted node set ``nodes``."""
+    from scipy.sparse.linalg import splu
+
+    Att = _sub_blocks(indptr, indices, blocks, nodes)
+    kt = kind[nodes]
+    m = len(nodes)
+    proj = np.broadcast_to(np.eye(3), (m, 3, 3)).copy()
+    proj[kt == 1] = 0.0
+    proj[kt == 2] -= np.outer(normal, normal)
+    S = sp.bsr_array((proj, np.arange(m), np.arange(m + 1)), shape=(3 * m, 3 * m)).tocsr()
+    L = S @ Att @ S + (sp.eye_array(3 * m, format="csr") - S)
+    return nodes, splu(sp.csc_array(L), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
 
 
 def _sub_blocks(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray) -> sp.csr_array:
