@@ -325,6 +325,60 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
         out_force[i, 2] = f2
 
 
+@njit(cache=True)
+def discs_near_segments(p, q, centers, radii):
+    """Indices of the discs whose centre lies within (1 + 1e-9) radius of the bounding box of all
+    segments p[m]-q[m]: only those can block one of them (7.3.2)."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for k in range(p.shape[0]):
+        for d in range(3):
+            lo[d] = min(lo[d], p[k, d], q[k, d])
+            hi[d] = max(hi[d], p[k, d], q[k, d])
+    out = np.empty(centers.shape[0], dtype=np.int64)
+    m = 0
+    for c in range(centers.shape[0]):
+        g = 0.0
+        for d in range(3):
+            e = max(lo[d] - centers[c, d], centers[c, d] - hi[d], 0.0)
+            g += e * e
+        if g <= radii[c] * radii[c] * (1.0 + 1e-9) + 1e-300:
+            out[m] = c
+            m += 1
+    return out[:m]
+
+
+@njit(cache=True, inline="always")
+def _disc_hit(p, q, k, mx, my, mz, half, centers, normals, radii, c):
+    """Segment ``k`` of :func:`segments_blocked` against disc ``c``."""
+    dx = mx - centers[c, 0]
+    dy = my - centers[c, 1]
+    dz = mz - centers[c, 2]
+    reach = half + radii[c]
+    if dx * dx + dy * dy + dz * dz > reach * reach:
+        return False
+    dp = (normals[c, 0] * (p[k, 0] - centers[c, 0]) + normals[c, 1] * (p[k, 1] - centers[c, 1])
+          + normals[c, 2] * (p[k, 2] - centers[c, 2]))
+    dq = (normals[c, 0] * (q[k, 0] - centers[c, 0]) + normals[c, 1] * (q[k, 1] - centers[c, 1])
+          + normals[c, 2] * (q[k, 2] - centers[c, 2]))
+    if (dp >= 0.0) == (dq >= 0.0):
+        return False
+    t = dp / (dp - dq)
+    ix = p[k, 0] + t * (q[k, 0] - p[k, 0]) - centers[c, 0]
+    iy = p[k, 1] + t * (q[k, 1] - p[k, 1]) - centers[c, 1]
+    iz = p[k, 2] + t * (q[k, 2] - p[k, 2]) - centers[c, 2]
+    return ix * ix + iy * iy + iz * iz <= radii[c] * radii[c]
+
+
+@njit(cache=True, inline="always")
+def _segment(p, q, k):
+    mx = 0.5 * (p[k, 0] + q[k, 0])
+    my = 0.5 * (p[k, 1] + q[k, 1])
+    mz = 0.5 * (p[k, 2] + q[k, 2])
+    half = 0.5 * math.sqrt((q[k, 0] - p[k, 0]) ** 2 + (q[k, 1] - p[k, 1]) ** 2 + (q[k, 2] - p[k, 2]) ** 2)
+    return mx, my, mz, half
+
+
 @njit(cache=True, parallel=True)
 def segments_blocked(p, q, centers, normals, radii, out):
     """out[m] = True when segment p[m]-q[m] crosses one of the crack discs (7.3.2).
@@ -336,31 +390,75 @@ def segments_blocked(p, q, centers, normals, radii, out):
     m = p.shape[0]
     nc = centers.shape[0]
     for k in prange(m):
+        mx, my, mz, half = _segment(p, q, k)
         hit = False
-        mx = 0.5 * (p[k, 0] + q[k, 0])
-        my = 0.5 * (p[k, 1] + q[k, 1])
-        mz = 0.5 * (p[k, 2] + q[k, 2])
-        half = 0.5 * math.sqrt((q[k, 0] - p[k, 0]) ** 2 + (q[k, 1] - p[k, 1]) ** 2 + (q[k, 2] - p[k, 2]) ** 2)
         for c in range(nc):
-            dx = mx - centers[c, 0]
-            dy = my - centers[c, 1]
-            dz = mz - centers[c, 2]
-            reach = half + radii[c]
-            if dx * dx + dy * dy + dz * dz > reach * reach:
-                continue
-            dp = (normals[c, 0] * (p[k, 0] - centers[c, 0]) + normals[c, 1] * (p[k, 1] - centers[c, 1])
-                  + normals[c, 2] * (p[k, 2] - centers[c, 2]))
-            dq = (normals[c, 0] * (q[k, 0] - centers[c, 0]) + normals[c, 1] * (q[k, 1] - centers[c, 1])
-                  + normals[c, 2] * (q[k, 2] - centers[c, 2]))
-            if (dp >= 0.0) == (dq >= 0.0):
-                continue
-            t = dp / (dp - dq)
-            ix = p[k, 0] + t * (q[k, 0] - p[k, 0]) - centers[c, 0]
-            iy = p[k, 1] + t * (q[k, 1] - p[k, 1]) - centers[c, 1]
-            iz = p[k, 2] + t * (q[k, 2] - p[k, 2]) - centers[c, 2]
-            if ix * ix + iy * iy + iz * iz <= radii[c] * radii[c]:
+            if _disc_hit(p, q, k, mx, my, mz, half, centers, normals, radii, c):
                 hit = True
                 break
+        out[k] = hit
+
+
+@njit(cache=True, parallel=True)
+def segments_blocked_grid(p, q, centers, normals, radii, out):
+    """:func:`segments_blocked` with the discs in a uniform grid (many segments and discs).
+
+    The cell edge is at least the largest half segment length plus the largest radius, so a
+    disc that passes the first test of a segment (its centre within half length plus radius
+    of the segment's midpoint) lies in the 27 cells around the midpoint's cell: the result
+    is the same, and each segment meets only the discs near it.
+    """
+    m = p.shape[0]
+    nc = centers.shape[0]
+    hmax = 0.0
+    for k in range(m):
+        hmax = max(hmax, _segment(p, q, k)[3])
+    rmax = 0.0
+    lo0 = lo1 = lo2 = np.inf
+    hi0 = hi1 = hi2 = -np.inf
+    for c in range(nc):
+        rmax = max(rmax, radii[c])
+        lo0 = min(lo0, centers[c, 0])
+        lo1 = min(lo1, centers[c, 1])
+        lo2 = min(lo2, centers[c, 2])
+        hi0 = max(hi0, centers[c, 0])
+        hi1 = max(hi1, centers[c, 1])
+        hi2 = max(hi2, centers[c, 2])
+    h = (hmax + rmax) * (1.0 + 1e-9) + 1e-300
+    ext = max(hi0 - lo0, hi1 - lo1, hi2 - lo2)
+    while (int((hi0 - lo0) / h) + 1) * (int((hi1 - lo1) / h) + 1) * (int((hi2 - lo2) / h) + 1) > 8 * nc + 64:
+        h = max(2.0 * h, ext / 64.0)
+    n0 = int((hi0 - lo0) / h) + 1
+    n1 = int((hi1 - lo1) / h) + 1
+    n2 = int((hi2 - lo2) / h) + 1
+    start = np.zeros(n0 * n1 * n2 + 1, dtype=np.int64)
+    key = np.empty(nc, dtype=np.int64)
+    for c in range(nc):
+        i0 = min(int((centers[c, 0] - lo0) / h), n0 - 1)
+        i1 = min(int((centers[c, 1] - lo1) / h), n1 - 1)
+        i2 = min(int((centers[c, 2] - lo2) / h), n2 - 1)
+        key[c] = i0 + n0 * (i1 + n1 * i2)
+        start[key[c] + 1] += 1
+    for g in range(n0 * n1 * n2):
+        start[g + 1] += start[g]
+    fill = start[:-1].copy()
+    order = np.empty(nc, dtype=np.int64)
+    for c in range(nc):
+        order[fill[key[c]]] = c
+        fill[key[c]] += 1
+    for k in prange(m):
+        mx, my, mz, half = _segment(p, q, k)
+        c0 = math.floor((mx - lo0) / h)       # any value is safe: the cell ranges are clipped
+        c1 = math.floor((my - lo1) / h)
+        c2 = math.floor((mz - lo2) / h)
+        hit = False
+        for j2 in range(max(c2 - 1, 0), min(c2 + 2, n2)):
+            for j1 in range(max(c1 - 1, 0), min(c1 + 2, n1)):
+                for j0 in range(max(c0 - 1, 0), min(c0 + 2, n0)):
+                    g = j0 + n0 * (j1 + n1 * j2)
+                    for e in range(start[g], start[g + 1]):
+                        if not hit and _disc_hit(p, q, k, mx, my, mz, half, centers, normals, radii, order[e]):
+                            hit = True
         out[k] = hit
 
 

@@ -91,14 +91,11 @@ class CrackSet:
             p = np.ascontiguousarray(p, dtype=np.float64)
             q = np.ascontiguousarray(q, dtype=np.float64)
             # only discs that reach the segments' bounding box can block one (the kernel's own test)
-            lo = np.minimum(p.min(axis=0), q.min(axis=0))
-            hi = np.maximum(p.max(axis=0), q.max(axis=0))
-            gap = np.maximum(np.maximum(lo - self.centers, self.centers - hi), 0.0)
-            near = np.flatnonzero(np.einsum("ij,ij->i", gap, gap) <= self.radii**2 * (1.0 + 1e-9) + 1e-300)
+            near = _kernels.discs_near_segments(p, q, self.centers, self.radii)
             if len(near):
-                _kernels.segments_blocked(p, q, np.ascontiguousarray(self.centers[near]),
-                                          np.ascontiguousarray(self.normals[near]),
-                                          np.ascontiguousarray(self.radii[near]), out)
+                kernel = _kernels.segments_blocked_grid if len(near) > 48 else _kernels.segments_blocked
+                kernel(p, q, np.ascontiguousarray(self.centers[near]), np.ascontiguousarray(self.normals[near]),
+                       np.ascontiguousarray(self.radii[near]), out)
         return out
 
     def as_dict(self) -> dict[str, np.ndarray]:

@@ -54,7 +54,8 @@ def skin_weight(r: np.ndarray) -> np.ndarray:
 
 
 def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocked: Any = None,
-                tree: Any = None) -> tuple[np.ndarray, np.ndarray]:
+                tree: Any = None, candidates: tuple[np.ndarray, np.ndarray] | None = None,
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Bind points to their nearest (visible) nodes: indices (S, K+1) and frame weights (S, K).
 
     Parameters
@@ -70,6 +71,10 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
         point that sees none of its ``3 (K + 1)`` nearest nodes follows the nearest one).
     tree : unmesh.spatial.KDTree, optional
         Tree over ``node_rest`` to reuse.
+    candidates : (ndarray, ndarray), optional
+        The distances and indices (S, c) of the ``c`` nearest nodes of every point, as
+        ``tree.knn(points, c)`` gives them (``c = K + 1``, or ``3 (K + 1)`` with ``blocked``),
+        when they are known already.
 
     Returns
     -------
@@ -93,8 +98,12 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
         raise InputError(f"skin_nodes: expected a positive integer, got {k!r}")
     want = int(min(k + 1, len(x)))
     cand = want if blocked is None else int(min(3 * want, len(x)))
-    t = tree if tree is not None else KDTree(x)
-    dist, idx = t.knn(p, cand)
+    if candidates is not None:
+        dist, idx = candidates
+        if idx.shape != (len(p), cand):
+            raise InputError(f"candidates: expected ({len(p)}, {cand}) arrays, got {idx.shape}")
+    else:
+        dist, idx = (tree if tree is not None else KDTree(x)).knn(p, cand)
     keep = idx >= 0
     if blocked is not None and len(p):
         rows = np.repeat(np.arange(len(p)), cand).reshape(idx.shape)
@@ -347,10 +356,29 @@ class SkinnedSurface:
         d = np.where(bind >= 0, np.linalg.norm(self.node_rest[np.maximum(bind, 0)] - pts[:, None], axis=2), 0)
         return d.max(axis=1)
 
+    def _candidates(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The ``3 (K + 1)`` nearest nodes of dense surfels ``rows`` (distances, indices), each kd-tree
+        query done once and kept (surfels near a tear are re-bound again as it grows)."""
+        cand = int(min(3 * min(self.k + 1, len(self.node_rest)), len(self.node_rest)))
+        if getattr(self, "_slot", None) is None:
+            self._slot = np.full(self.dense.n, -1, dtype=np.int64)
+            self._cand_d = np.zeros((0, cand))
+            self._cand_i = np.zeros((0, cand), dtype=np.int64)
+        slot = self._slot[rows]
+        miss = rows[slot < 0]
+        if len(miss):
+            d, i = self.tree.knn(self.dense.points[miss], cand)
+            self._slot[miss] = len(self._cand_i) + np.arange(len(miss))
+            self._cand_d = np.concatenate([self._cand_d, d])
+            self._cand_i = np.concatenate([self._cand_i, i])
+            slot = self._slot[rows]
+        return self._cand_d[slot], self._cand_i[slot]
+
     def _rebind(self, part: _Passive, rows: np.ndarray, blocked: Any) -> None:
         pts = part.points[rows]
         axes = part.axes[rows]
-        b, w = bind_points(pts, self.node_rest, self.k, blocked=blocked, tree=self.tree)
+        cand = self._candidates(rows) if part is self.dense else None
+        b, w = bind_points(pts, self.node_rest, self.k, blocked=blocked, tree=self.tree, candidates=cand)
         plane = self._planes(b)
         part.bind[rows], part.weights[rows], part.plane[rows] = b, w, plane
         part.coords[rows] = self._coords(b, w, plane, pts, axes)
