@@ -177,7 +177,7 @@ def test_local_rebuild_equals_the_reference_rebuild(monkeypatch):
     """The spliced fiber rebuild (7.3.2) gives the reference's topology, fiber state and origins at
     every crack event, with detached nodes around (its local filtering) and when a crack detaches
     one (it then runs the reference)."""
-    from unmesh.shells import MaterialRegion, rebuild, simulation
+    from unmesh.shells import MaterialRegion, rebuild, tearing
     from unmesh.shells.fracture import rebuild_near as reference
 
     seen = {"events": 0, "reference": 0, "detached": 0}
@@ -202,7 +202,7 @@ def test_local_rebuild_equals_the_reference_rebuild(monkeypatch):
         return t1, s1, o1, touched
 
     monkeypatch.setattr(rebuild, "rebuild_near_reference", counting)
-    monkeypatch.setattr(simulation, "rebuild_local", both)
+    monkeypatch.setattr(tearing, "rebuild_local", both)
     cloud = grid_cloud(61, 21, 0.02)
     idx = grid_nodes(61, 21, 2)
     mat = ShellMaterial(ks=1000.0, kb=100.0, damping=2.0, density=2.0, fracture_stretch=0.03,

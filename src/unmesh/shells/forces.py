@@ -293,6 +293,6 @@ def node_terms(x: np.ndarray, topology: ShellTopology, state: FiberState, rows: 
         return np.zeros((0, 4))
     only = np.zeros(topology.n_nodes, dtype=np.bool_)
     only[rows] = True
-    with threads_for(len(topology.fibers)):
+    with threads_for(int(np.diff(topology.fiber_offsets)[rows].sum())):     # a few blocks: one thread
         res = _elastic_forces(x, topology, state, 1.0, 1.0, samples, reference, None, only, scatter=False)
     return res.node_terms[rows]
