@@ -18,7 +18,10 @@ the table (the Fig. 7.5 row uses the Max Planck bust when the test models are pr
 the procedural blob); times are wall-clock averages over the measured frames, without file
 output (reported separately). The goal is at least 20x faster than the thesis per row.
 
-Run:  python benchmarks/bench_shells.py [--frames N] [--rows 7.5,7.4,7.8,7.10]
+Run:  python benchmarks/bench_shells.py [--frames N] [--rows 7.5,7.4,7.8,7.10] [--threads N]
+
+On a machine shared with other busy processes the wall-clock times say little; the 'cpu'
+column (process CPU time per frame) with ``--threads 1`` is the robust figure.
 """
 
 from __future__ import annotations
@@ -105,8 +108,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=25, help="frames measured per row (default 25)")
     ap.add_argument("--rows", default="7.5,7.10,7.4,7.8", help="Table 7.1 rows (figure numbers)")
+    ap.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's)")
     args = ap.parse_args()
+    import os
+
+    import numba
+
+    if args.threads:
+        numba.set_num_threads(args.threads)
+    load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     print(f"Thin shells, per rendered frame at {FPS:g} fps (steps per frame = (1/fps)/dt, dt from F.1);")
+    print(f"numba threads: {numba.get_num_threads()} of {os.cpu_count()} CPUs, load average {load}.")
     print("forces = forces + integration, fracture = testing + rebuild, surface = dense-surface skinning.\n")
     head = (f"{'fig':>5} {'nodes':>6} {'points':>7} {'fibers':>7} {'steps':>5} | {'forces':>8} {'fract.':>8} "
             f"{'surface':>8} {'total':>8} | {'thesis':>7} {'speed-up':>8} | {'cpu':>7} | {'write':>6} {'setup':>6} "
@@ -122,8 +134,9 @@ def main() -> None:
               + f"  {m['threads']:>3}" + (f"   ({m['cracks']} cracks)" if m["cracks"] else ""))
     print("\nAll times in ms (setup in s): wall-clock averages per frame. 'cpu' is the process CPU time per")
     print("frame (all threads; less sensitive to other load). 'write' is the time to write one frame's files")
-    print("(not in 'total'). 'thr': threads the force pass chose by timing (1, or all of numba's threads;")
+    print("(not in 'total'). 'thr': threads the time step chose by timing (1, or all of numba's threads;")
     print("'-' = below forces.PARALLEL_MIN or one thread only); the results do not depend on it.")
+    print(f"Load average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}.")
 
 
 if __name__ == "__main__":
