@@ -460,3 +460,27 @@ def test_row_subset_matvec_matches_the_full_product(rng):
     np.testing.assert_allclose(SK.bsr_matvec_rows(p.indptr, p.indices, K, x, rows),
                                SK.bsr_matvec(p.indptr, p.indices, K, x)[rows], rtol=1e-12, atol=1e-12 * np.abs(K).max())
 
+
+
+@pytest.mark.parametrize("nd_nodes", [1, 10**9])
+def test_local_factorisation_solves_the_filtered_block_in_either_order(rng, monkeypatch, nd_nodes):
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import spsolve
+
+    import unmesh.fem.solvers as SV
+
+    monkeypatch.setattr(SV, "LOCAL_ND_NODES", nd_nodes)
+    sim = Dynamics(voronoi_foam(12, seed=10), 50.0, 0.3, 1.0)
+    p, n = sim.pattern, sim.mesh.n_nodes
+    K = FK.scatter_blocks(p.block_map, sim.kstiff.data.reshape(-1, 9), len(p.indices))
+    A = SK.add_diagonal(K, p.diag, 1e-3, sim.masses, 1.0)
+    kind = np.where(rng.random(n) < 0.1, 1, np.where(rng.random(n) < 0.2, 2, 0)).astype(np.int64)
+    normal = np.array([0.0, 1.0, 0.0])
+    nodes = np.flatnonzero(rng.random(n) < 0.5)
+    _, lu = SV._local_factor(p.indptr, p.indices, A, nodes, kind, normal)
+    assert (lu.perm is not None) == (nd_nodes == 1 and SV.nested_dissection(p.indptr, p.indices) is not None)
+    ref = _filtered_blocks_reference(p.indptr, p.indices, A, kind, normal)
+    full = sp.bsr_array((ref.reshape(-1, 3, 3), p.indices, p.indptr), shape=(3 * n, 3 * n)).tocsr()
+    dof = (3 * nodes[:, None] + np.arange(3)).ravel()
+    r = rng.normal(size=3 * len(nodes))
+    np.testing.assert_allclose(lu.solve(r), spsolve(sp.csc_array(full[dof][:, dof]), r), rtol=1e-8, atol=1e-10)
