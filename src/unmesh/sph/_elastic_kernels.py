@@ -412,7 +412,7 @@ def nearest_slot(y0, y1, y2, tmat, table, dim):
     return table[i0, i1, i2], best
 
 
-@njit(**PLAIN)
+@njit(cache=True, inline="always")
 def _nearest_d3(z0, z1, z2, table):
     """:func:`nearest_slot` (3D) for a point given in D3 coordinates ``z = T y``.
 
@@ -727,20 +727,28 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
             bestj[q] = -1
         for t in range(cnt):
             j = nbr[i, t]
-            r0 = x[j, 0] - xi0
-            r1 = x[j, 1] - xi1
-            r2 = x[j, 2] - xi2
-            rt[0, t] = r0
-            rt[1, t] = r1
-            rt[2, t] = r2
-            y0 = p00 * r0 + p01 * r1 + p02 * r2
-            y1 = p10 * r0 + p11 * r1 + p12 * r2
-            if dim == 3:
-                q, d2 = _nearest_d3(y0, y1, p20 * r0 + p21 * r1 + p22 * r2, table)
-            else:
-                q, d2 = nearest_slot(y0, y1, 0.0, tmat, table, dim)
-            qt[t] = q if (phase[j] == SOLID) & (obj[j] == oi) else -1
-            rt[3, t] = d2
+            rt[0, t] = x[j, 0] - xi0
+            rt[1, t] = x[j, 1] - xi1
+            rt[2, t] = x[j, 2] - xi2
+            qt[t] = np.int64((phase[j] == SOLID) & (obj[j] == oi))
+        if dim == 3:
+            for t in range(cnt):
+                r0 = rt[0, t]
+                r1 = rt[1, t]
+                r2 = rt[2, t]
+                q, d2 = _nearest_d3(p00 * r0 + p01 * r1 + p02 * r2, p10 * r0 + p11 * r1 + p12 * r2,
+                                    p20 * r0 + p21 * r1 + p22 * r2, table)
+                ok = qt[t]
+                qt[t] = q * ok - (1 - ok)
+                rt[3, t] = d2
+        else:
+            for t in range(cnt):
+                r0 = rt[0, t]
+                r1 = rt[1, t]
+                q, d2 = nearest_slot(p00 * r0 + p01 * r1 + p02 * rt[2, t], p10 * r0 + p11 * r1 + p12 * rt[2, t], 0.0,
+                                     tmat, table, dim)
+                qt[t] = q if qt[t] != 0 else -1
+                rt[3, t] = d2
         for t in range(cnt):
             q = qt[t]
             if q >= 0 and rt[3, t] < bestd[q]:

@@ -362,8 +362,9 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
 
     Layout: ``pk`` (N, :data:`PK_COLS`) is scratch that first receives every particle's
     pair data (position, ``p/ρ²``, velocity, mass, ``ρ``, ``1/ρ``, its material's ``μ``, ``α``,
-    ``c``, object, solid flag): one 128-byte row per neighbour instead of a dozen scattered
-    arrays. Per particle the rows of its neighbours are copied into a small column buffer,
+    ``c``, object, solid flag): one row per neighbour instead of a dozen scattered arrays, of
+    which only the first 80 bytes are read when all particles share one material and no
+    collisions can occur. Per particle the rows of its neighbours are copied into a small column buffer,
     and the pair loop over that buffer is branch-free (collisions and XSPH by selects), so
     it is vectorised. Heat conduction runs in a second loop only for conducting particles.
     """
@@ -375,8 +376,16 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     h2 = h * h
     c6 = poly6_coef(h, dim)
     cg = spiky_coef(h, dim)
+    mat0 = matid[0] if n > 0 else 0
+    obj0 = obj[0] if n > 0 else 0
+    mixed = 0
+    solids = 0
+    bodies = 0
     for i in prange(n):
         mt = matid[i]
+        mixed += mt != mat0
+        solids += phase[i] == SOLID
+        bodies += obj[i] != obj0
         pk[i, PK_X] = x[i, 0]
         pk[i, PK_X + 1] = x[i, 1]
         pk[i, PK_X + 2] = x[i, 2]
@@ -393,14 +402,26 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
         pk[i, PK_OBJ] = obj[i]
         pk[i, PK_SOLID] = 1.0 if phase[i] == SOLID else 0.0
         pk[i, PK_COLS - 1] = 0.0
+    # columns to gather: the material columns only with several materials, the collision columns
+    # only when solids of different objects may meet; otherwise their (constant) buffer rows are set
+    # once per block (with one object, or without solids, no pair is a collision)
+    collide = solids > 0 and bodies > 0
+    ncol = PK_SOLID + 1 if collide else (PK_OBJ if mixed > 0 else PK_VISC)
     nblk = (n + BLOCK - 1) // BLOCK
     for blk in prange(nblk):
         buf = np.empty((PK_COLS - 1, cap))
+        if n > 0:
+            for t in range(cap):
+                buf[PK_VISC, t] = mats[mat0, M.VISC]
+                buf[PK_ALPHA, t] = mats[mat0, M.ALPHA]
+                buf[PK_SOUND, t] = mats[mat0, M.SOUND]
+                buf[PK_OBJ, t] = obj0
+                buf[PK_SOLID, t] = 0.0
         for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
             cnt = min(nnbr[i], cap)
             for t in range(cnt):
                 j = nbr[i, t]
-                for c in range(PK_COLS - 1):
+                for c in range(ncol):
                     buf[c, t] = pk[j, c]
             fe0 = 0.0
             fe1 = 0.0
@@ -557,29 +578,22 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
 
 
 @njit(cache=True, parallel=True)
-def kick(v, acc, half_dt, fixed):
-    """``v += half_dt · a`` (velocity Verlet half kick); fixed particles stay at rest."""
-    for i in prange(v.shape[0]):
+def kick_drift(x, v, acc, xsph, half_dt, dt, fixed, plane_p, plane_n, margin):
+    """Half kick ``v += half_dt · a``, then drift ``x += dt (v + Δv_XSPH)`` (one pass).
+
+    Fixed particles stay where they are, at rest. A particle closer than ``margin``
+    to an analytic wall (or behind it) is moved to ``margin`` and its velocity component
+    into the wall removed. Returns the number of particles with non-finite positions.
+    """
+    bad = 0
+    for i in prange(x.shape[0]):
         if fixed[i]:
             v[i, 0] = 0.0
             v[i, 1] = 0.0
             v[i, 2] = 0.0
             continue
-        v[i, 0] += half_dt * acc[i, 0]
-        v[i, 1] += half_dt * acc[i, 1]
-        v[i, 2] += half_dt * acc[i, 2]
-
-
-@njit(cache=True, parallel=True)
-def drift(x, v, xsph, dt, fixed, plane_p, plane_n, margin):
-    """``x += dt (v + Δv_XSPH)``; particles that crossed an analytic wall are put back.
-
-    A particle closer than ``margin`` to a wall (or behind it) is moved to
-    ``margin`` and its velocity component into the wall removed.
-    """
-    for i in prange(x.shape[0]):
-        if fixed[i]:
-            continue
+        for a in range(3):
+            v[i, a] += half_dt * acc[i, a]
         for a in range(3):
             x[i, a] += dt * (v[i, a] + xsph[i, a])
         for k in range(plane_p.shape[0]):
@@ -592,6 +606,38 @@ def drift(x, v, xsph, dt, fixed, plane_p, plane_n, margin):
                 if vn < 0.0:
                     for a in range(3):
                         v[i, a] -= vn * plane_n[k, a]
+        if not math.isfinite(x[i, 0] + x[i, 1] + x[i, 2]):
+            bad += 1
+    return bad
+
+
+@njit(cache=True, parallel=True)
+def kick_diagnostics(x, v, acc, half_dt, fixed, m, rho, matid, mats):
+    """Half kick ``v += half_dt · a`` (fixed particles at rest), then :func:`diagnostics` (one pass)."""
+    n = x.shape[0]
+    ke = 0.0
+    vmax = 0.0
+    amax = 0.0
+    derr = 0.0
+    bad = 0
+    for i in prange(n):
+        if fixed[i]:
+            v[i, 0] = 0.0
+            v[i, 1] = 0.0
+            v[i, 2] = 0.0
+        else:
+            v[i, 0] += half_dt * acc[i, 0]
+            v[i, 1] += half_dt * acc[i, 1]
+            v[i, 2] += half_dt * acc[i, 2]
+        v2 = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
+        a2 = acc[i, 0] * acc[i, 0] + acc[i, 1] * acc[i, 1] + acc[i, 2] * acc[i, 2]
+        ke += 0.5 * m[i] * v2
+        vmax = max(vmax, v2)
+        amax = max(amax, a2)
+        derr = max(derr, abs(rho[i] / mats[matid[i], M.RHO0] - 1.0))
+        if not (math.isfinite(v2) and math.isfinite(a2) and math.isfinite(x[i, 0] + x[i, 1] + x[i, 2])):
+            bad += 1
+    return ke, math.sqrt(vmax), math.sqrt(amax), derr, bad
 
 
 @njit(cache=True, parallel=True)
