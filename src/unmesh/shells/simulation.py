@@ -28,7 +28,7 @@ from unmesh.shells.fracture import CrackSet
 from unmesh.shells.material import ShellMaterial
 from unmesh.shells.nodes import DEFAULT_MIN_ANGLE, DEFAULT_NEIGHBORS, build_topology, select_nodes
 from unmesh.shells.skinning import DEFAULT_SKIN_NODES, SkinnedSurface
-from unmesh.shells.tearing import DEGENERATE_RATIO, Tearing
+from unmesh.shells.tearing import DEGENERATE_RATIO, Tearing, warm_up
 from unmesh.shells.topology import ShellTopology
 from unmesh.sim import Simulation
 from unmesh.surfels import SurfelCloud
@@ -221,6 +221,8 @@ class ShellSimulation(Tearing, Simulation):
         self._prev_topology: ShellTopology | None = None
         self._surface_cache: tuple[int, SurfelCloud] | None = None
         self.acc = self._accelerations()
+        if material.fractures:
+            warm_up()
 
     # -- set-up checks ------------------------------------------------------------
     def _check_input(self, topo: ShellTopology) -> None:

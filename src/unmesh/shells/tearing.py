@@ -22,10 +22,28 @@ from unmesh.shells.fracture import select_cracks
 from unmesh.shells.rebuild import rebuild_local
 from unmesh.shells.topology import ShellTopology
 
-__all__ = ["DEGENERATE_RATIO", "Tearing"]
+__all__ = ["DEGENERATE_RATIO", "Tearing", "warm_up"]
 
 #: With fracture, a fiber whose end tangent falls below this fraction of its centre tangent is torn.
 DEGENERATE_RATIO = 0.3
+
+
+def warm_up() -> None:
+    """Load the compiled kernels of a crack event now (from numba's cache) rather than at the first crack."""
+    from unmesh.shells import _rebuild_kernels, _skinning_kernels
+
+    i1, i2, f1, b1 = np.zeros(1, np.int64), np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.bool_)
+    p3 = np.zeros((0, 3))
+    _rebuild_kernels.splice_sources(np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64), i1.copy())
+    for arr in (np.zeros(0, np.int64), f1):
+        _rebuild_kernels.gather(np.zeros(0, np.int64), arr, arr, arr.copy())
+    for arr in (i2, np.zeros((0, 3), np.int64)):
+        _rebuild_kernels.gather2(np.zeros(0, np.int64), arr, arr, arr.copy())
+    _kernels.fiber_excess(f1, f1, f1, f1, f1, f1, f1, f1, np.zeros(0, np.int64), f1.copy())
+    _kernels.discs_near_segments(p3, p3, np.zeros((1, 3)), np.ones(1))
+    for kernel in (_kernels.segments_blocked, _kernels.segments_blocked_grid):
+        kernel(p3, p3, np.zeros((1, 3)), np.ones((1, 3)), np.ones(1), b1.copy())
+    _skinning_kernels.within_reach(p3, np.zeros(0, np.int64), f1, 1.0, np.zeros((1, 3)))
 
 
 class Tearing:
