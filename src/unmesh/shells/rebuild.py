@@ -122,17 +122,35 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
                   tree: Any = None, new_cracks: int | None = None,
                   ) -> tuple[ShellTopology, FiberState, np.ndarray, np.ndarray | None]:
     """:func:`rebuild_near`, and the nodes built again (None when the reference rebuild ran: then
-    anything may have changed). The arrays of all other nodes are copies of the old ones."""
+    anything may have changed). The arrays of all other nodes are copies of the old ones.
+
+    ``new_cracks`` (the number of cracks at the end of ``cracks`` that are new) may only be
+    given when no node has ever been detached: then the neighbourhood of an affected node none
+    of whose neighbour segments crosses a new disc is its present one (its first visible
+    candidates stay visible, hidden ones stay hidden), and only the others are searched again.
+    (Its fibers are still made again: fibers dropped before may come back, as in the reference.)
+    """
     n = topology.n_nodes
     rows = np.unique(np.asarray(affected, dtype=np.int64))
-    if new_cracks is not None and current is not None and len(rows) and len(cracks) >= new_cracks > 0:
-        rows = rows[_crossed(rest, topology, rows, cracks, new_cracks)]
-        if len(rows) == 0:
-            return topology, state, np.arange(len(topology.fibers), dtype=np.int64), rows
     if current is None or len(rows) == 0 or n >= 2**21:
         return (*rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
                                         fiber_material, current, samples, tree), None)
-    noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
+    if new_cracks is not None and len(cracks) >= new_cracks > 0:
+        crossed = _crossed(rest, topology, rows, cracks, new_cracks)
+        if crossed.all():
+            noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
+        else:
+            # the present lists of the others and the new lists of the crossed ones, in row order
+            soff, snbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows[crossed], tree=tree)
+            sub_off = np.zeros(len(rows) + 1, dtype=np.int64)
+            np.cumsum(np.diff(topology.neighbor_offsets)[rows], out=sub_off[1:])
+            pos = np.repeat(topology.neighbor_offsets[rows] - sub_off[:-1], np.diff(sub_off)) + np.arange(int(sub_off[-1]))
+            local = np.full(len(rows), -1, dtype=np.int64)
+            local[crossed] = np.arange(int(crossed.sum()))
+            noff, src = _splice(sub_off, local, soff)
+            nbr = _take(src, topology.neighbors[pos], snbr)
+    else:
+        noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
     old_counts = np.diff(topology.neighbor_offsets)
     counts = old_counts.copy()
     counts[rows] = np.diff(noff)
