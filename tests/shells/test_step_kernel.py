@@ -172,3 +172,34 @@ def test_check_statistics_match_numpy():
     v[7, 1] = np.nan
     assert not check_stats(x, v, m, ang, np.zeros(0))[0]
     assert check_stats(x, np.zeros_like(v), m, ang, np.zeros(0))[3] == 0
+
+
+def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):
+    """Fixed node and fiber ranges: the step does not depend on the number of threads."""
+    import numba
+
+    from unmesh.shells import forces
+
+    cloud, idx = sphere_with_nodes()
+
+    def make():
+        mat = ShellMaterial(ks=200.0, kb=200.0, damping=0.5, density=2.0,
+                            plasticity=Plasticity(creep_stretch=3.0, creep_bend=3.0, yield_stretch=0.01,
+                                                  yield_bend=0.02))
+        return ShellSimulation(cloud, mat, 0.002, node_indices=idx, gravity=(0, -9.81, 0), total_area=4 * np.pi,
+                               velocity=(0.3, -1.0, 0.0), colliders=[PlaneCollider((0, -1.05, 0), (0, 1, 0), 0.3, 0.5)])
+
+    runs = []
+    threads = numba.get_num_threads()
+    for count, minimum in ((1, 10**12), (min(2, numba.config.NUMBA_NUM_THREADS), 0)):
+        monkeypatch.setattr(forces, "PARALLEL_MIN", minimum)
+        numba.set_num_threads(count)
+        try:
+            sim = make()
+            for _ in range(120):
+                sim.step()
+            runs.append((sim.x.copy(), sim.v.copy(), sim.fibers.length_plastic.copy()))
+        finally:
+            numba.set_num_threads(threads)
+    for a, b in zip(*runs, strict=True):
+        np.testing.assert_array_equal(a, b)
