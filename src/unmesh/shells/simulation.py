@@ -357,11 +357,12 @@ class ShellSimulation(Tearing, Simulation):
             return None
         st = getattr(self, "_fused", None)
         if (st is None or st[0][0] is not self.handles or st[0][1] is not self.colliders
-                or not np.array_equal(st[1], self.fixed)):
+                or st[0][2] is not self.material or st[1] != self.fixed.tobytes()):
             from unmesh.shells.stepping import FusedStep
 
             fs = FusedStep(self, DEGENERATE_RATIO**2)
-            st = self._fused = ((self.handles, self.colliders), self.fixed.copy(), fs if fs.supported else None)
+            st = self._fused = ((self.handles, self.colliders, self.material), self.fixed.tobytes(),
+                                fs if fs.supported else None)
         return st[2]
 
     def step_plain(self) -> float:

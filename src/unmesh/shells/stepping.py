@@ -79,6 +79,7 @@ class FusedStep:
         self.plastic = np.array([p.creep_stretch, p.creep_bend, p.yield_stretch, p.yield_bend, p.weakening, flags],
                                 dtype=np.float64)
         self.gram = arc_gram(int(sim.material.arc_samples))
+        self.fractures = sim.material.fractures
         self.buf = np.empty((FORCE_CHUNKS, n, 3))
         self.x_force = np.empty((n, 3))     # positions of the last force pass
         self.no_extra = np.zeros((0, 3))
@@ -116,7 +117,7 @@ class FusedStep:
         lengths, angles = np.empty(nf), np.empty(nf)
         node, es, eb = np.empty((n, 4)), np.empty(n), np.empty(n)
         m = sim.material
-        fractures = m.fractures
+        fractures = self.fractures
         crumbs, anchors = sim._crumbs
         with threads_for(nf, key="step"):
             over, bad, _ = _step_kernels.shell_step(
