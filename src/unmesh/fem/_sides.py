@@ -15,7 +15,8 @@ the same in every later cut by the same plane: a node snapped onto the blade pla
 in one step of a progressive cut (9.3.2) is on it in the next step as well, and no
 sliver is cut off between the two. Classes can be *forced* to 0 afterwards (where
 one side of an element would be degenerate); the node's length scale then grows
-so that its band covers the plane, which keeps that decision for later steps too.
+so that its band covers the plane, which keeps that decision for later steps too
+(when the cutter's cuts are done, see :meth:`unmesh.fem.cutting.Cutter.keep_snapped`).
 """
 
 from __future__ import annotations
@@ -47,8 +48,11 @@ class PlaneSides:
     ((-0.505, -1), 0)
     """
 
-    def __init__(self, cutter: Any, origin: np.ndarray, normal: np.ndarray) -> None:
+    def __init__(self, cutter: Any, origin: np.ndarray, normal: np.ndarray, keep: bool = True) -> None:
         self.cutter = cutter
+        #: whether :meth:`force` decisions are kept for later cuts (blade planes; not the
+        #: planes through a cut polygon's edges, which only clip its in-plane faces)
+        self.keep = keep
         self.ed = cutter.ed
         self.origin = np.asarray(origin, dtype=np.float64)
         self.normal = np.asarray(normal, dtype=np.float64)
@@ -86,14 +90,19 @@ class PlaneSides:
         """Class of node v (-1, 0, +1)."""
         return self(v)[1]
 
-    def force(self, v: int) -> bool:
+    def force(self, v: int, keep: bool = True) -> bool:
         """Snap node v onto the plane (class 0); returns whether its class changed.
 
+        Unless ``keep`` is false, the cutter keeps the decision for its later cuts and for the cuts of later steps
+        (:meth:`unmesh.fem.cutting.Cutter.keep_snapped`: the node's length scale grows so
+        that its band covers its distance to this plane).
         """
         before = self(v)[1]
         self._c[v] = 0
         if before != 0:
             self.forced.add(v)
+            if self.keep and keep:
+                self.cutter.keep_snapped(v, abs(self.distance(v)))
         return before != 0
 
     def on_plane(self, v: int) -> None:

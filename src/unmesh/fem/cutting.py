@@ -200,11 +200,49 @@ class Cutter:
         self.forced = 0
         #: straddling elements whose split would have been degenerate (their thin side was snapped)
         self.degenerate = 0
+        #: forced snapping decisions of the current cut to keep (node -> distance), see :meth:`keep_snapped`
+        self._kept: dict[int, float] = {}
 
     # -- nodes ---------------------------------------------------------------------------------
     def length_scale(self, v: int) -> float:
         """Snapping length scale of node v (:meth:`PolyMesh.node_scales`, carried over by cuts)."""
         return self.ed.node_scale(v)
+
+    def keep_snapped(self, v: int, distance: float) -> None:
+        """Keep the decision to snap node v onto a plane it lies ``distance`` off (called by
+        :meth:`PlaneSides.force`): once the current cut is done, v's length scale grows so that
+        its band covers ``distance`` (:attr:`MeshEditor.scale_override`, carried over by the
+        commit into :meth:`PolyMesh.node_scales`).
+
+        So a node forced onto the blade plane in one step of a progressive cut (9.3.2) is on
+        it in the next steps as well (as a node within its own band is, :mod:`._sides`):
+        otherwise the next step finds the element it kept on one side straddling the
+        plane again and cuts off the sliver between that element's face through the node,
+        which the previous step left as (part of) the cut surface, and the plane; the
+        sliver's cap then runs through the snapped nodes of that face, which lie off the
+        plane by up to their band, at a grazing angle: in the plane they lie far inside
+        the section, so the cap is not convex (the blob slicing scene, issue 5).
+
+        Kept are the decisions for thin sides (:meth:`_thin_side`: within twice the band of
+        a node of the element), degenerate halves and slightly non-convex faces, not those of
+        the fallback for an element whose halves do not close (:meth:`_unsplittable_side`):
+        it may snap nodes from farther away, and a band grown to that distance would snap
+        them onto unrelated later planes too. Nor are the snaps onto the planes through a
+        cut polygon's edges kept (``PlaneSides(keep=False)``), which only clip its faces.
+        """
+        self._kept[v] = max(self._kept.get(v, 0.0), distance)
+
+    def _keep_forced(self) -> None:
+        """Grow the length scales of the nodes forced by the cut just done (:meth:`keep_snapped`)."""
+        if self.snap > 0:
+            for v, d in self._kept.items():
+                # a hair wider than the distance, so the next plane (same plane, another
+                # origin on it: other rounding) still finds the node within its band
+                h = d / self.snap * (1.0 + 1e-9)
+                if h > self.ed.node_scale(v):
+                    self.ed.scale_override[v] = h
+                    self.max_band = max(self.max_band, self.snap * h)
+        self._kept.clear()
 
     def _new_edge_node(self, a: int, b: int, sides: PlaneSides) -> int:
         da, db = sides.distance(a), sides.distance(b)
@@ -251,17 +289,19 @@ class Cutter:
                 if not self._straddles(nodes, sides):
                     continue
                 thin = self._thin_side(nodes, sides)
+                keep = True  # the decision holds for later steps, except the fallback's (see keep_snapped)
                 if thin == 0:
                     vneg, vpos = self._half_volumes(e, sides)
                     if min(vneg, vpos) <= 1e-6 * (vneg + vpos):
                         thin = -1 if vneg < vpos else 1
                         if vneg < 0 or vpos < 0:  # no valid split
                             thin = self._unsplittable_side(e, nodes, sides, outside)
+                            keep = False
                         self.degenerate += 1
                 if thin != 0:
                     for v in nodes:
                         if sides.cls(v) == thin:
-                            changed |= sides.force(v)
+                            changed |= sides.force(v, keep)
                             self.forced += 1
                     continue
                 out.append(e)
@@ -432,6 +472,12 @@ class Cutter:
 
     def plane(self, origin: Any, normal: Any, elements: Any | None = None) -> int:
         """Split every element the plane crosses (or only ``elements``); returns the number split."""
+        try:
+            return self._plane(origin, normal, elements)
+        finally:
+            self._keep_forced()
+
+    def _plane(self, origin: Any, normal: Any, elements: Any | None) -> int:
         o = as_array(origin, "origin", (3,))
         n = _unit(normal, "normal")
         sides = PlaneSides(self, o, n)
@@ -482,6 +528,12 @@ class Cutter:
         nodes on the plane), so a polygon covering the whole section separates the
         material, whatever was snapped.
         """
+        try:
+            return self._polygon(polygon)
+        finally:
+            self._keep_forced()
+
+    def _polygon(self, polygon: Any) -> int:
         P = as_points(polygon, "polygon")
         if len(P) < 3:
             raise InputError(f"polygon: expected at least 3 vertices, got {len(P)}")
@@ -576,7 +628,7 @@ class Cutter:
             if (c - a3) @ m > 0:
                 m = -m
             ed.reset_cache()
-            ls = PlaneSides(self, a3, m)
+            ls = PlaneSides(self, a3, m, keep=False)
             line_sides.append(ls)
             newT = []
             for f in T:
