@@ -51,7 +51,7 @@ SIGMA_FLOOR = 0.05
 CHUNK = 64
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _w(r2, h, dim):
     if dim == 3:
         return poly6_3d(r2, h)
@@ -83,7 +83,7 @@ def sym_eig3(a, vec, val, b):
     _sort_desc(vec, val)
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _sort_desc(vec, val):
     """Sort eigenvalues descending (columns of ``vec`` along) and make ``det vec = +1``."""
     for i in range(2):
@@ -125,13 +125,13 @@ def _orthonormal_to(u, col, ref):
         u[k, col] /= n
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _rot2(c, s, a, b):
     """Plane rotation of the pair ``(a, b)``: ``(c a − s b, s a + c b)``."""
     return c * a - s * b, s * a + c * b
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _angle(bpp, bqq, apq):
     """Cosine and sine of the Jacobi rotation that annihilates ``apq`` (as :func:`jacobi_eigh`)."""
     theta = (bqq - bpp) / (2.0 * apq)
@@ -296,7 +296,7 @@ def svd_rot(a, dim, u, s, v, work):
         s[j] = u[0, j] * av[0, j] + u[1, j] * av[1, j] + u[2, j] * av[2, j]
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _inv3(m, out):
     """Inverse of a 3×3 matrix; returns the determinant (0 leaves ``out`` unchanged)."""
     c00 = m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]
@@ -340,7 +340,7 @@ def d3_transform(bmat: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(_D3 @ np.linalg.inv(bmat))
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _round_away(v, r):
     """Round ``v`` to the integer next to ``r = round(v)`` on the other side."""
     return r + 1.0 if v > r else r - 1.0
@@ -466,7 +466,7 @@ def nearest_slots(y, tmat, table, dim):
 # -- neighbour-list transpose ---------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _position(row, count, value):
     """Index of ``value`` in the ascending ``row[:count]`` (-1 if absent); branch-free search."""
     if count == 0:
@@ -481,7 +481,7 @@ def _position(row, count, value):
     return base if row[base] == value else -1
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _lower_bound(row, count, value):
     """Number of entries of the ascending ``row[:count]`` that are below ``value``."""
     lo = 0
@@ -1087,7 +1087,7 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     # accumulator windows: block b adds member forces into rows lo[b]..hi[b]
     lo = np.empty(nblk, np.int64)
     hi = np.empty(nblk, np.int64)
-    for blk in prange(nblk):
+    for blk in range(nblk):
         lo_b = n
         hi_b = -1
         for i in range(blk * n // nblk, (blk + 1) * n // nblk):
@@ -1105,16 +1105,11 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
         _lattice_block(blk * n // nblk, (blk + 1) * n // nblk, lo[blk], win[blk], x, m, phase, obj, matid, uid, mats,
                        nbr, nnbr, h, dim, spacing, slot_vecs, lv, c6, w_self, tm, tmat, table, amat, ainv, occ,
                        docked, lam, seed, step, dt, prime, amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid)
-    for j in prange(n):
-        f0 = 0.0
-        f1 = 0.0
-        f2 = 0.0
-        for blk in range(nblk):
-            if lo[blk] <= j <= hi[blk]:
-                row = j - lo[blk]
-                f0 += win[blk, row, 0]
-                f1 += win[blk, row, 1]
-                f2 += win[blk, row, 2]
-        fel[j, 0] = f0
-        fel[j, 1] = f1
-        fel[j, 2] = f2
+    # the windows summed in block order (deterministic, whatever the thread count)
+    fel[:] = 0.0
+    for blk in range(nblk):
+        for row in range(hi[blk] - lo[blk] + 1):
+            j = lo[blk] + row
+            fel[j, 0] += win[blk, row, 0]
+            fel[j, 1] += win[blk, row, 1]
+            fel[j, 2] += win[blk, row, 2]

@@ -27,12 +27,17 @@ from unmesh.kernels._kernels import poly6_2d, poly6_3d, spiky_gradf_2d, spiky_gr
 from unmesh.spatial._kernels import point_cell, stencil_ranges
 from unmesh.sph import materials as M
 
+#: Flags of helpers that the fast-math pair loops call: numba passes a caller's ``fastmath`` and
+#: ``error_model`` on to callees that do not set them, so helpers (and the shared kernels they call)
+#: set them explicitly and compile the same whoever calls them first.
+PLAIN = {"cache": True, "fastmath": False, "error_model": "python"}
+
 SOLID = 1
 #: Regularisation ε h² of the viscosity and heat-conduction denominators.
 EPS = 0.01
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def kernel_w(r2, h, dim):
     """poly6 W (C.1/C.4) for squared distance ``r2``."""
     if dim == 3:
@@ -40,7 +45,7 @@ def kernel_w(r2, h, dim):
     return poly6_2d(r2, h)
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def kernel_gradf(r, h, dim):
     """Spiky ``w'(r)/r`` (C.8/C.11): ``∇_i W_ij = gradf · x_ij``."""
     if dim == 3:
@@ -48,10 +53,6 @@ def kernel_gradf(r, h, dim):
     return spiky_gradf_2d(r, h)
 
 
-#: Flags of helpers that the fast-math pair loops call: numba passes a caller's ``fastmath`` and
-#: ``error_model`` on to callees that do not set them, so helpers (and the shared kernels they call)
-#: set them explicitly and compile the same whoever calls them first.
-PLAIN = {"cache": True, "fastmath": False, "error_model": "python"}
 
 
 @njit(**PLAIN)
@@ -67,7 +68,7 @@ def spiky_coef(h, dim):
     return 2.0 * kernel_gradf(0.5 * h, h, dim) / h
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _table(tab, dist, h):
     """Linear interpolation of a wall table sampled on [-h, h]."""
     if dist >= h:
@@ -83,7 +84,7 @@ def _table(tab, dist, h):
     return tab[k] * (1.0 - f) + tab[k + 1] * f
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _table2(tab, d1, d2, h):
     """Bilinear interpolation of a corner table sampled on [-h, h]² (0 beyond h)."""
     if d1 >= h or d2 >= h:
@@ -99,13 +100,13 @@ def _table2(tab, d1, d2, h):
             + (tab[i + 1, j] * (1.0 - g) + tab[i + 1, j + 1] * g) * f)
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _plane_dist(x0, x1, x2, plane_p, plane_n, k):
     return ((x0 - plane_p[k, 0]) * plane_n[k, 0] + (x1 - plane_p[k, 1]) * plane_n[k, 1]
             + (x2 - plane_p[k, 2]) * plane_n[k, 2])
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def pressure_eos(rho, rho0, k, gamma, zeta):
     """Eq. (8.15) with the negative-pressure scale ζ of eq. (8.16)."""
     if gamma == 1.0:
@@ -140,7 +141,7 @@ def dense_starts(cell_keys, cell_start, nkeys, out):
             out[key] = val
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _cell_index(t, n):
     """``floor(t)`` clamped to ``[0, n - 1]`` (as :func:`unmesh.spatial._kernels.point_cell`)."""
     if not t > 0.0:
@@ -150,7 +151,7 @@ def _cell_index(t, n):
     return int(t)
 
 
-@njit(cache=True, inline="always")
+@njit(**PLAIN)
 def _gap(x, k, origin, cell, n):
     """Distance from coordinate ``x`` to cell slab ``k`` (0 inside; edge cells are unbounded)."""
     if k > 0:
@@ -181,6 +182,114 @@ def _axis_gaps(xa, c, reach, origin, cell, n, out):
             out[s] = g * g
 
 
+@njit(**PLAIN)
+def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, nbr, nnbr,
+                   bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners,
+                   corner_rho, rho, p):
+    """Particles ``r0 .. r1 - 1`` of :func:`density_pass` (one block, serial)."""
+    h2 = h * h
+    hr = h * (1.0 + 1e-9)  # conservative reach (round-off of the cell bounds)
+    hr2 = hr * hr
+    cell = 1.0 / inv_cell
+    cap = nbr.shape[1] - 1
+    bcap = bnbr.shape[1]
+    nb = bx.shape[0]
+    c6 = poly6_coef(h, dim)
+    use_dense = dense.shape[0] > 0
+    reach = math.ceil(hr * inv_cell)
+    width = 2 * reach + 1
+    rows = width * width
+    d0_, d1_, d2_ = dims[0], dims[1], dims[2]
+    o0, o1, o2 = origin[0], origin[1], origin[2]
+    g0 = np.empty(width)
+    g1 = np.empty(width)
+    g2 = np.empty(width)
+    ranges = np.empty((rows, 2), np.int64)
+    branges = np.empty((9, 2), np.int64)
+    for a in range(r0, r1):
+        xa0 = xm[a, 0]
+        xa1 = xm[a, 1]
+        xa2 = xm[a, 2]
+        rho_a = 0.0
+        cnt = 0
+        if use_dense:
+            c0 = _cell_index((xa0 - o0) * inv_cell, d0_)
+            c1 = _cell_index((xa1 - o1) * inv_cell, d1_)
+            c2 = _cell_index((xa2 - o2) * inv_cell, d2_)
+            _axis_gaps(xa0, c0, reach, o0, cell, d0_, g0)
+            _axis_gaps(xa1, c1, reach, o1, cell, d1_, g1)
+            _axis_gaps(xa2, c2, reach, o2, cell, d2_, g2)
+            for si in range(width):
+                rem = hr2 - g0[si]
+                if not rem > 0.0:
+                    continue
+                ii = c0 - reach + si
+                for sj in range(width):
+                    rem2 = rem - g1[sj]
+                    if not rem2 > 0.0:
+                        continue
+                    # the z slabs within reach: squared gaps grow away from c2 on both sides
+                    klo = c2 - reach
+                    khi = c2 + reach
+                    for s in range(reach):
+                        klo += g2[s] >= rem2
+                        khi -= g2[width - 1 - s] >= rem2
+                    base = (ii * d1_ + sj + c1 - reach) * d2_
+                    for b in range(dense[base + klo], dense[base + khi + 1]):
+                        d0 = xa0 - xm[b, 0]
+                        d1 = xa1 - xm[b, 1]
+                        d2 = xa2 - xm[b, 2]
+                        r2 = d0 * d0 + d1 * d1 + d2 * d2
+                        t6 = max(h2 - r2, 0.0)
+                        rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
+                        nbr[a, min(cnt, cap)] = b
+                        cnt += (r2 < h2) & (b != a)
+        else:
+            ci, cj, ck = point_cell(x[a], origin, inv_cell, dims)
+            ns = stencil_ranges(ci, cj, ck, reach, dims, cell_keys, cell_start, ranges)
+            for s in range(ns):
+                for b in range(ranges[s, 0], ranges[s, 1]):
+                    d0 = xa0 - xm[b, 0]
+                    d1 = xa1 - xm[b, 1]
+                    d2 = xa2 - xm[b, 2]
+                    r2 = d0 * d0 + d1 * d1 + d2 * d2
+                    t6 = max(h2 - r2, 0.0)
+                    rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
+                    nbr[a, min(cnt, cap)] = b
+                    cnt += (r2 < h2) & (b != a)
+        nnbr[a] = cnt
+        mt = matid[a]
+        rho0 = mats[mt, M.RHO0]
+        bcnt = 0
+        if nb > 0:
+            bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
+            nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
+            for s in range(nbs):
+                for b in range(branges[s, 0], branges[s, 1]):
+                    d0 = xa0 - bx[b, 0]
+                    d1 = xa1 - bx[b, 1]
+                    d2 = xa2 - bx[b, 2]
+                    r2 = d0 * d0 + d1 * d1 + d2 * d2
+                    if r2 < h2:
+                        t6 = h2 - r2
+                        rho_a += rho0 * bvol[b] * (c6 * t6 * t6 * t6)
+                        if bcnt < bcap:
+                            bnbr[a, bcnt] = b
+                        bcnt += 1
+        nbnbr[a] = bcnt
+        for k in range(plane_p.shape[0]):
+            dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
+            if dist < h:
+                rho_a += rho0 * _table(wall_rho, dist, h)
+        for k in range(corners.shape[0]):
+            da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
+            db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
+            if da < h and db < h:
+                rho_a -= rho0 * _table2(corner_rho, da, db, h)
+        rho[a] = rho_a
+        p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+
+
 @njit(cache=True, parallel=True)
 def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, xm, nbr, nnbr,
                  bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
@@ -202,20 +311,6 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     (static grid ``b*``; ``bnbr`` has no scratch column).
     """
     n = x.shape[0]
-    h2 = h * h
-    hr = h * (1.0 + 1e-9)  # conservative reach (round-off of the cell bounds)
-    hr2 = hr * hr
-    cell = 1.0 / inv_cell
-    cap = nbr.shape[1] - 1
-    bcap = bnbr.shape[1]
-    nb = bx.shape[0]
-    c6 = poly6_coef(h, dim)
-    use_dense = dense.shape[0] > 0
-    reach = math.ceil(hr * inv_cell)
-    width = 2 * reach + 1
-    rows = width * width
-    d0_, d1_, d2_ = dims[0], dims[1], dims[2]
-    o0, o1, o2 = origin[0], origin[1], origin[2]
     for a in prange(n):
         xm[a, 0] = x[a, 0]
         xm[a, 1] = x[a, 1]
@@ -223,93 +318,9 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
         xm[a, 3] = m[a]
     nblk = (n + BLOCK - 1) // BLOCK
     for blk in prange(nblk):
-        g0 = np.empty(width)
-        g1 = np.empty(width)
-        g2 = np.empty(width)
-        ranges = np.empty((rows, 2), np.int64)
-        branges = np.empty((9, 2), np.int64)
-        for a in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
-            xa0 = xm[a, 0]
-            xa1 = xm[a, 1]
-            xa2 = xm[a, 2]
-            rho_a = 0.0
-            cnt = 0
-            if use_dense:
-                c0 = _cell_index((xa0 - o0) * inv_cell, d0_)
-                c1 = _cell_index((xa1 - o1) * inv_cell, d1_)
-                c2 = _cell_index((xa2 - o2) * inv_cell, d2_)
-                _axis_gaps(xa0, c0, reach, o0, cell, d0_, g0)
-                _axis_gaps(xa1, c1, reach, o1, cell, d1_, g1)
-                _axis_gaps(xa2, c2, reach, o2, cell, d2_, g2)
-                for si in range(width):
-                    rem = hr2 - g0[si]
-                    if not rem > 0.0:
-                        continue
-                    ii = c0 - reach + si
-                    for sj in range(width):
-                        rem2 = rem - g1[sj]
-                        if not rem2 > 0.0:
-                            continue
-                        # the z slabs within reach: squared gaps grow away from c2 on both sides
-                        klo = c2 - reach
-                        khi = c2 + reach
-                        for s in range(reach):
-                            klo += g2[s] >= rem2
-                            khi -= g2[width - 1 - s] >= rem2
-                        base = (ii * d1_ + sj + c1 - reach) * d2_
-                        for b in range(dense[base + klo], dense[base + khi + 1]):
-                            d0 = xa0 - xm[b, 0]
-                            d1 = xa1 - xm[b, 1]
-                            d2 = xa2 - xm[b, 2]
-                            r2 = d0 * d0 + d1 * d1 + d2 * d2
-                            t6 = max(h2 - r2, 0.0)
-                            rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
-                            nbr[a, min(cnt, cap)] = b
-                            cnt += (r2 < h2) & (b != a)
-            else:
-                ci, cj, ck = point_cell(x[a], origin, inv_cell, dims)
-                ns = stencil_ranges(ci, cj, ck, reach, dims, cell_keys, cell_start, ranges)
-                for s in range(ns):
-                    for b in range(ranges[s, 0], ranges[s, 1]):
-                        d0 = xa0 - xm[b, 0]
-                        d1 = xa1 - xm[b, 1]
-                        d2 = xa2 - xm[b, 2]
-                        r2 = d0 * d0 + d1 * d1 + d2 * d2
-                        t6 = max(h2 - r2, 0.0)
-                        rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
-                        nbr[a, min(cnt, cap)] = b
-                        cnt += (r2 < h2) & (b != a)
-            nnbr[a] = cnt
-            mt = matid[a]
-            rho0 = mats[mt, M.RHO0]
-            bcnt = 0
-            if nb > 0:
-                bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
-                nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
-                for s in range(nbs):
-                    for b in range(branges[s, 0], branges[s, 1]):
-                        d0 = xa0 - bx[b, 0]
-                        d1 = xa1 - bx[b, 1]
-                        d2 = xa2 - bx[b, 2]
-                        r2 = d0 * d0 + d1 * d1 + d2 * d2
-                        if r2 < h2:
-                            t6 = h2 - r2
-                            rho_a += rho0 * bvol[b] * (c6 * t6 * t6 * t6)
-                            if bcnt < bcap:
-                                bnbr[a, bcnt] = b
-                            bcnt += 1
-            nbnbr[a] = bcnt
-            for k in range(plane_p.shape[0]):
-                dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
-                if dist < h:
-                    rho_a += rho0 * _table(wall_rho, dist, h)
-            for k in range(corners.shape[0]):
-                da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
-                db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
-                if da < h and db < h:
-                    rho_a -= rho0 * _table2(corner_rho, da, db, h)
-            rho[a] = rho_a
-            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+        _density_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), x, xm, matid, mats, h, dim, origin, inv_cell, dims,
+                       cell_keys, cell_start, dense, nbr, nnbr, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr,
+                       nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p)
 
 
 def cell_starts(grid, buffer=None):
@@ -341,7 +352,189 @@ PK_COLS = 16
 PAIR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 
 
-@njit(cache=True, parallel=True, fastmath=PAIR_FASTMATH, error_model="numpy")
+@njit(cache=True, fastmath=PAIR_FASTMATH, error_model="numpy")
+def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, mats, h, dim, gravity, nbr, nnbr,
+                 bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
+                 plane_noslip, wall_visc, bnoslip, grad_scale, elastic, fel, fown, pk, acc, xsph, dtemp):
+    """Particles ``r0 .. r1 - 1`` of :func:`force_pass` (one block, serial): the first ``ncol`` columns
+    of the neighbours' ``pk`` rows are gathered, the others are the constants of material ``mat0``
+    and object ``obj0``."""
+    cap = nbr.shape[1]
+    bcap = bnbr.shape[1]
+    visc_c = 2.0 * (dim + 2)
+    eh2 = EPS * h * h
+    h2 = h * h
+    c6 = poly6_coef(h, dim)
+    cg = spiky_coef(h, dim)
+    buf = np.empty((PK_COLS - 1, cap))
+    if r1 > r0:
+        for t in range(cap):
+            buf[PK_VISC, t] = mats[mat0, M.VISC]
+            buf[PK_ALPHA, t] = mats[mat0, M.ALPHA]
+            buf[PK_SOUND, t] = mats[mat0, M.SOUND]
+            buf[PK_OBJ, t] = obj0
+            buf[PK_SOLID, t] = 0.0
+    for i in range(r0, r1):
+        cnt = min(nnbr[i], cap)
+        for t in range(cnt):
+            j = nbr[i, t]
+            for c in range(ncol):
+                buf[c, t] = pk[j, c]
+        fe0 = 0.0
+        fe1 = 0.0
+        fe2 = 0.0
+        xi0 = pk[i, PK_X]
+        xi1 = pk[i, PK_X + 1]
+        xi2 = pk[i, PK_X + 2]
+        vi0 = pk[i, PK_V]
+        vi1 = pk[i, PK_V + 1]
+        vi2 = pk[i, PK_V + 2]
+        rhoi = pk[i, PK_RHO]
+        rinv_i = pk[i, PK_RINV]
+        pi_ = pk[i, PK_PR]
+        oi = pk[i, PK_OBJ]
+        si = pk[i, PK_SOLID]
+        mt = matid[i]
+        mui = mats[mt, M.VISC]
+        xii = mats[mt, M.XI]
+        difi = mats[mt, M.DIFF]
+        rho0 = mats[mt, M.RHO0]
+        alphai = mats[mt, M.ALPHA]
+        ci = mats[mt, M.SOUND]
+        ai0 = 0.0
+        ai1 = 0.0
+        ai2 = 0.0
+        xs0 = 0.0
+        xs1 = 0.0
+        xs2 = 0.0
+        dti = 0.0
+        solid_i = phase[i] == SOLID
+        for t in range(cnt):
+            d0 = xi0 - buf[PK_X, t]
+            d1 = xi1 - buf[PK_X + 1, t]
+            d2 = xi2 - buf[PK_X + 2, t]
+            r2 = d0 * d0 + d1 * d1 + d2 * d2
+            r = math.sqrt(r2)
+            hr = h - r
+            gf = cg * hr * hr / r  # spiky w'(r)/r
+            gf = gf if r > 0.0 else 0.0
+            mj = buf[PK_M, t]
+            vij0 = vi0 - buf[PK_V, t]
+            vij1 = vi1 - buf[PK_V + 1, t]
+            vij2 = vi2 - buf[PK_V + 2, t]
+            vx = vij0 * d0 + vij1 * d1 + vij2 * d2
+            ire = 1.0 / (r2 + eh2)
+            rsum = 2.0 / (rhoi + buf[PK_RHO, t])
+            # pressure (8.17) + viscosity (8.18) + Monaghan's artificial viscosity (approaching pairs
+            # only: min(v_ij·x_ij, 0)), all along x_ij
+            bracket = (-(pi_ + buf[PK_PR, t])
+                       + visc_c * (0.5 * (mui + buf[PK_VISC, t])) * rinv_i * buf[PK_RINV, t] * vx * ire
+                       + (0.5 * (alphai + buf[PK_ALPHA, t])) * (0.5 * (ci + buf[PK_SOUND, t])) * h
+                       * min(vx, 0.0) * ire * rsum)
+            coef = mj * bracket * gf * grad_scale
+            # penalty collision between objects (8.37): repulsive part only; XSPH (8.19) within one body
+            other = oi != buf[PK_OBJ, t] and si + buf[PK_SOLID, t] > 0.0
+            coef = max(coef, 0.0) if other else coef
+            t6 = h2 - r2
+            wx = 0.0 if other else xii * mj * rsum * (c6 * t6 * t6 * t6)
+            xs0 -= wx * vij0
+            xs1 -= wx * vij1
+            xs2 -= wx * vij2
+            ai0 += coef * d0
+            ai1 += coef * d1
+            ai2 += coef * d2
+        # heat conduction (Cleary & Monaghan)
+        if difi > 0.0:
+            for t in range(cnt):
+                j = nbr[i, t]
+                difj = mats[matid[j], M.DIFF]
+                if difj > 0.0:
+                    d0 = xi0 - x[j, 0]
+                    d1 = xi1 - x[j, 1]
+                    d2 = xi2 - x[j, 2]
+                    r2 = d0 * d0 + d1 * d1 + d2 * d2
+                    r = math.sqrt(r2)
+                    gf = 0.0
+                    if r > 0.0:
+                        hr = h - r
+                        gf = cg * hr * hr / r
+                    dbar = 2.0 * difi * difj / (difi + difj)
+                    dti += (2.0 * m[j] / (rhoi * rho[j])) * rho0 * dbar * (temp[i] - temp[j]) * gf * r2 / (r2 + eh2)
+        # elastic forces: own share + the neighbourhoods i is a member of
+        if elastic and solid_i:
+            fe0 = fown[i, 0] + fel[i, 0]
+            fe1 = fown[i, 1] + fel[i, 1]
+            fe2 = fown[i, 2] + fel[i, 2]
+        # boundary particles (Akinci et al. 2012)
+        bcnt = min(nbnbr[i], bcap)
+        pb = max(p[i], 0.0) / (rhoi * rhoi) * wall_mirror
+        # no-slip walls: the fluid's effective shear viscosity (physical + artificial)
+        nu_wall = visc_c * (mui / rho0 + alphai * ci * h / (2.0 * visc_c)) / rhoi
+        for t in range(bcnt):
+            b = bnbr[i, t]
+            d0 = xi0 - bx[b, 0]
+            d1 = xi1 - bx[b, 1]
+            d2 = xi2 - bx[b, 2]
+            r2 = d0 * d0 + d1 * d1 + d2 * d2
+            r = math.sqrt(r2)
+            hb = h - r
+            gf = cg * hb * hb / r if r > 0.0 else 0.0  # spiky w'(r)/r
+            psi = rho0 * bvol[b]
+            bracket = -pb
+            noslip = bnoslip[b] != 0
+            if mui > 0.0 and not noslip:
+                vx = vi0 * d0 + vi1 * d1 + vi2 * d2
+                bracket += visc_c * mui / (rhoi * rho0) * vx / (r2 + eh2)
+            coef = psi * bracket * gf * grad_scale
+            if coef < 0.0:
+                coef = 0.0
+            if noslip:
+                vx = vi0 * d0 + vi1 * d1 + vi2 * d2
+                coef += psi * nu_wall * vx / (r2 + eh2) * gf * grad_scale
+            ai0 += coef * d0
+            ai1 += coef * d1
+            ai2 += coef * d2
+        # analytic walls
+        for k in range(plane_p.shape[0]):
+            dist = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, k)
+            if dist < h:
+                s = rho0 * pb * _table(wall_grad, dist, h)
+                if plane_noslip[k] != 0:
+                    # no-slip: ν ρ0/ρ_i (Mt v_t + Mn v_n n)
+                    mtan = rho0 * nu_wall * _table(wall_visc[0], dist, h)
+                    vn = vi0 * plane_n[k, 0] + vi1 * plane_n[k, 1] + vi2 * plane_n[k, 2]
+                    s += (rho0 * nu_wall * _table(wall_visc[1], dist, h) - mtan) * vn
+                    ai0 += mtan * vi0
+                    ai1 += mtan * vi1
+                    ai2 += mtan * vi2
+                ai0 += s * plane_n[k, 0]
+                ai1 += s * plane_n[k, 1]
+                ai2 += s * plane_n[k, 2]
+        for k in range(corners.shape[0]):
+            ka = corners[k, 0]
+            kb = corners[k, 1]
+            da = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, ka)
+            db = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, kb)
+            if da < h and db < h:
+                ga = rho0 * pb * _table2(corner_grad, da, db, h)
+                gb = rho0 * pb * _table2(corner_grad, db, da, h)
+                ai0 += ga * plane_n[ka, 0] + gb * plane_n[kb, 0]
+                ai1 += ga * plane_n[ka, 1] + gb * plane_n[kb, 1]
+                ai2 += ga * plane_n[ka, 2] + gb * plane_n[kb, 2]
+        if elastic and solid_i:
+            ai0 += fe0 / m[i]
+            ai1 += fe1 / m[i]
+            ai2 += fe2 / m[i]
+        acc[i, 0] = ai0 + gravity[0]
+        acc[i, 1] = ai1 + gravity[1]
+        acc[i, 2] = ai2 + gravity[2]
+        xsph[i, 0] = xs0
+        xsph[i, 1] = xs1
+        xsph[i, 2] = xs2
+        dtemp[i] = dti
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
 def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
                bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
                plane_noslip, wall_visc, bnoslip, grad_scale, elastic, fel, fown, pk, acc, xsph, dtemp):
@@ -369,13 +562,6 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     it is vectorised. Heat conduction runs in a second loop only for conducting particles.
     """
     n = x.shape[0]
-    cap = nbr.shape[1]
-    bcap = bnbr.shape[1]
-    visc_c = 2.0 * (dim + 2)
-    eh2 = EPS * h * h
-    h2 = h * h
-    c6 = poly6_coef(h, dim)
-    cg = spiky_coef(h, dim)
     mat0 = matid[0] if n > 0 else 0
     obj0 = obj[0] if n > 0 else 0
     mixed = 0
@@ -409,172 +595,10 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     ncol = PK_SOLID + 1 if collide else (PK_OBJ if mixed > 0 else PK_VISC)
     nblk = (n + BLOCK - 1) // BLOCK
     for blk in prange(nblk):
-        buf = np.empty((PK_COLS - 1, cap))
-        if n > 0:
-            for t in range(cap):
-                buf[PK_VISC, t] = mats[mat0, M.VISC]
-                buf[PK_ALPHA, t] = mats[mat0, M.ALPHA]
-                buf[PK_SOUND, t] = mats[mat0, M.SOUND]
-                buf[PK_OBJ, t] = obj0
-                buf[PK_SOLID, t] = 0.0
-        for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
-            cnt = min(nnbr[i], cap)
-            for t in range(cnt):
-                j = nbr[i, t]
-                for c in range(ncol):
-                    buf[c, t] = pk[j, c]
-            fe0 = 0.0
-            fe1 = 0.0
-            fe2 = 0.0
-            xi0 = pk[i, PK_X]
-            xi1 = pk[i, PK_X + 1]
-            xi2 = pk[i, PK_X + 2]
-            vi0 = pk[i, PK_V]
-            vi1 = pk[i, PK_V + 1]
-            vi2 = pk[i, PK_V + 2]
-            rhoi = pk[i, PK_RHO]
-            rinv_i = pk[i, PK_RINV]
-            pi_ = pk[i, PK_PR]
-            oi = pk[i, PK_OBJ]
-            si = pk[i, PK_SOLID]
-            mt = matid[i]
-            mui = mats[mt, M.VISC]
-            xii = mats[mt, M.XI]
-            difi = mats[mt, M.DIFF]
-            rho0 = mats[mt, M.RHO0]
-            alphai = mats[mt, M.ALPHA]
-            ci = mats[mt, M.SOUND]
-            ai0 = 0.0
-            ai1 = 0.0
-            ai2 = 0.0
-            xs0 = 0.0
-            xs1 = 0.0
-            xs2 = 0.0
-            dti = 0.0
-            solid_i = phase[i] == SOLID
-            for t in range(cnt):
-                d0 = xi0 - buf[PK_X, t]
-                d1 = xi1 - buf[PK_X + 1, t]
-                d2 = xi2 - buf[PK_X + 2, t]
-                r2 = d0 * d0 + d1 * d1 + d2 * d2
-                r = math.sqrt(r2)
-                hr = h - r
-                gf = cg * hr * hr / r  # spiky w'(r)/r
-                gf = gf if r > 0.0 else 0.0
-                mj = buf[PK_M, t]
-                vij0 = vi0 - buf[PK_V, t]
-                vij1 = vi1 - buf[PK_V + 1, t]
-                vij2 = vi2 - buf[PK_V + 2, t]
-                vx = vij0 * d0 + vij1 * d1 + vij2 * d2
-                ire = 1.0 / (r2 + eh2)
-                rsum = 2.0 / (rhoi + buf[PK_RHO, t])
-                # pressure (8.17) + viscosity (8.18) + Monaghan's artificial viscosity (approaching pairs
-                # only: min(v_ij·x_ij, 0)), all along x_ij
-                bracket = (-(pi_ + buf[PK_PR, t])
-                           + visc_c * (0.5 * (mui + buf[PK_VISC, t])) * rinv_i * buf[PK_RINV, t] * vx * ire
-                           + (0.5 * (alphai + buf[PK_ALPHA, t])) * (0.5 * (ci + buf[PK_SOUND, t])) * h
-                           * min(vx, 0.0) * ire * rsum)
-                coef = mj * bracket * gf * grad_scale
-                # penalty collision between objects (8.37): repulsive part only; XSPH (8.19) within one body
-                other = oi != buf[PK_OBJ, t] and si + buf[PK_SOLID, t] > 0.0
-                coef = max(coef, 0.0) if other else coef
-                t6 = h2 - r2
-                wx = 0.0 if other else xii * mj * rsum * (c6 * t6 * t6 * t6)
-                xs0 -= wx * vij0
-                xs1 -= wx * vij1
-                xs2 -= wx * vij2
-                ai0 += coef * d0
-                ai1 += coef * d1
-                ai2 += coef * d2
-            # heat conduction (Cleary & Monaghan)
-            if difi > 0.0:
-                for t in range(cnt):
-                    j = nbr[i, t]
-                    difj = mats[matid[j], M.DIFF]
-                    if difj > 0.0:
-                        d0 = xi0 - x[j, 0]
-                        d1 = xi1 - x[j, 1]
-                        d2 = xi2 - x[j, 2]
-                        r2 = d0 * d0 + d1 * d1 + d2 * d2
-                        r = math.sqrt(r2)
-                        gf = 0.0
-                        if r > 0.0:
-                            hr = h - r
-                            gf = cg * hr * hr / r
-                        dbar = 2.0 * difi * difj / (difi + difj)
-                        dti += (2.0 * m[j] / (rhoi * rho[j])) * rho0 * dbar * (temp[i] - temp[j]) * gf * r2 / (r2 + eh2)
-            # elastic forces: own share + the neighbourhoods i is a member of
-            if elastic and solid_i:
-                fe0 = fown[i, 0] + fel[i, 0]
-                fe1 = fown[i, 1] + fel[i, 1]
-                fe2 = fown[i, 2] + fel[i, 2]
-            # boundary particles (Akinci et al. 2012)
-            bcnt = min(nbnbr[i], bcap)
-            pb = max(p[i], 0.0) / (rhoi * rhoi) * wall_mirror
-            # no-slip walls: the fluid's effective shear viscosity (physical + artificial)
-            nu_wall = visc_c * (mui / rho0 + alphai * ci * h / (2.0 * visc_c)) / rhoi
-            for t in range(bcnt):
-                b = bnbr[i, t]
-                d0 = xi0 - bx[b, 0]
-                d1 = xi1 - bx[b, 1]
-                d2 = xi2 - bx[b, 2]
-                r2 = d0 * d0 + d1 * d1 + d2 * d2
-                r = math.sqrt(r2)
-                hb = h - r
-                gf = cg * hb * hb / r if r > 0.0 else 0.0  # spiky w'(r)/r
-                psi = rho0 * bvol[b]
-                bracket = -pb
-                noslip = bnoslip[b] != 0
-                if mui > 0.0 and not noslip:
-                    vx = vi0 * d0 + vi1 * d1 + vi2 * d2
-                    bracket += visc_c * mui / (rhoi * rho0) * vx / (r2 + eh2)
-                coef = psi * bracket * gf * grad_scale
-                if coef < 0.0:
-                    coef = 0.0
-                if noslip:
-                    vx = vi0 * d0 + vi1 * d1 + vi2 * d2
-                    coef += psi * nu_wall * vx / (r2 + eh2) * gf * grad_scale
-                ai0 += coef * d0
-                ai1 += coef * d1
-                ai2 += coef * d2
-            # analytic walls
-            for k in range(plane_p.shape[0]):
-                dist = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, k)
-                if dist < h:
-                    s = rho0 * pb * _table(wall_grad, dist, h)
-                    if plane_noslip[k] != 0:
-                        # no-slip: ν ρ0/ρ_i (Mt v_t + Mn v_n n)
-                        mtan = rho0 * nu_wall * _table(wall_visc[0], dist, h)
-                        vn = vi0 * plane_n[k, 0] + vi1 * plane_n[k, 1] + vi2 * plane_n[k, 2]
-                        s += (rho0 * nu_wall * _table(wall_visc[1], dist, h) - mtan) * vn
-                        ai0 += mtan * vi0
-                        ai1 += mtan * vi1
-                        ai2 += mtan * vi2
-                    ai0 += s * plane_n[k, 0]
-                    ai1 += s * plane_n[k, 1]
-                    ai2 += s * plane_n[k, 2]
-            for k in range(corners.shape[0]):
-                ka = corners[k, 0]
-                kb = corners[k, 1]
-                da = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, ka)
-                db = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, kb)
-                if da < h and db < h:
-                    ga = rho0 * pb * _table2(corner_grad, da, db, h)
-                    gb = rho0 * pb * _table2(corner_grad, db, da, h)
-                    ai0 += ga * plane_n[ka, 0] + gb * plane_n[kb, 0]
-                    ai1 += ga * plane_n[ka, 1] + gb * plane_n[kb, 1]
-                    ai2 += ga * plane_n[ka, 2] + gb * plane_n[kb, 2]
-            if elastic and solid_i:
-                ai0 += fe0 / m[i]
-                ai1 += fe1 / m[i]
-                ai2 += fe2 / m[i]
-            acc[i, 0] = ai0 + gravity[0]
-            acc[i, 1] = ai1 + gravity[1]
-            acc[i, 2] = ai2 + gravity[2]
-            xsph[i, 0] = xs0
-            xsph[i, 1] = xs1
-            xsph[i, 2] = xs2
-            dtemp[i] = dti
+        _force_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid,
+                     mats, h, dim, gravity, nbr, nnbr, bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners,
+                     corner_grad, wall_mirror, plane_noslip, wall_visc, bnoslip, grad_scale, elastic, fel, fown, pk,
+                     acc, xsph, dtemp)
 
 
 @njit(cache=True, parallel=True)

@@ -18,7 +18,7 @@ FLUID = 0
 SOLID = 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, fastmath=False, error_model="python")
 def melting_rate(lam0, temp, t_melt):
     """Eq. (8.35): ``λ_m = max(0, λ_m^0 (T − T_m))``."""
     if lam0 <= 0.0:
@@ -26,7 +26,7 @@ def melting_rate(lam0, temp, t_melt):
     return max(0.0, lam0 * (temp - t_melt))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, fastmath=False, error_model="python")
 def freezing_rate(lam0, temp, t_freeze, n_solid, n_min, dv, v_max, force, f_max):
     """Eq. (8.36): ``λ_f = max(0, λ_f^0 (T_f − T)(n_s − n_min + 1) min(1, c_v) min(1, c_F))``.
 
