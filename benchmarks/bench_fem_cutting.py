@@ -29,7 +29,7 @@ def naive_tet_cut(points: np.ndarray, tets: np.ndarray, origin: np.ndarray, norm
     """Split every crossed tetrahedron (overlapping ``polygon`` when given) into tetrahedra."""
     from scipy.spatial import Delaunay
 
-    from unmesh.fem.cutting import _overlap
+    from unmesh.fem._cutgeom import overlap as _overlap
 
     d = (points - origin) @ normal
     scale = np.ptp(points, axis=0).max()

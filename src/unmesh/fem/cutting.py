@@ -30,7 +30,6 @@ Example
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -38,8 +37,10 @@ from typing import Any
 
 import numpy as np
 
-from unmesh._validate import as_array, as_points, scalar
+from unmesh._validate import as_array, scalar
 from unmesh.errors import InputError
+from unmesh.fem import _cutgeom as G
+from unmesh.fem._polygon_cut import CutMissWarning, PolygonCutter
 from unmesh.fem._sides import PlaneSides
 from unmesh.fem.editor import EditResult, MeshEditor
 from unmesh.fem.mesh import PolyMesh
@@ -50,10 +51,6 @@ __all__ = ["CutMissWarning", "Cutter", "PlaneCut", "PolygonCut", "apply_cuts", "
 #: Cut elements are convex within ``CONVEXITY_FACTOR * snap`` of their diameter (checked on commit).
 CONVEXITY_FACTOR = 4.0
 
-
-
-class CutMissWarning(UserWarning):
-    """A cut did not intersect the mesh (nothing changed)."""
 
 
 @dataclass(frozen=True)
@@ -85,86 +82,7 @@ class PolygonCut:
     polygon: np.ndarray
 
 
-def _unit(v: Any, name: str) -> np.ndarray:
-    n = as_array(v, name, (3,))
-    ln = float(np.linalg.norm(n))
-    if not ln > 0:
-        raise InputError(f"{name}: expected a non-zero vector, got {n.tolist()}")
-    return n / ln
-
-
-def _open_loop(cycles: list[list[int]]) -> list[int]:
-    """The single loop of half-edges without a reverse partner."""
-    he = set()
-    for c in cycles:
-        for i, a in enumerate(c):
-            he.add((a, c[(i + 1) % len(c)]))
-    nxt: dict[int, int] = {}
-    for a, b in he:
-        if (b, a) not in he:
-            if a in nxt:
-                raise InputError("degenerate cut: the cut section is not a simple polygon")
-            nxt[a] = b
-    if not nxt:
-        raise InputError("degenerate cut: the element has no open boundary on the cut plane")
-    start = next(iter(nxt))
-    loop = [start]
-    v = nxt[start]
-    while v != start:
-        loop.append(v)
-        v = nxt.get(v, start)
-        if len(loop) > len(nxt):
-            break
-    if len(loop) != len(nxt) or len(loop) < 3:
-        raise InputError("degenerate cut: the cut section is not a single polygon")
-    return loop
-
-
-def _sign_runs(cl: list[int]) -> list[list[int]]:
-    """Cyclic runs of equal non-zero sign (zeros ignored): lists of positions."""
-    nz = [i for i, c in enumerate(cl) if c != 0]
-    if not nz:
-        return []
-    runs: list[list[int]] = [[nz[0]]]
-    for i in nz[1:]:
-        if cl[i] == cl[runs[-1][-1]]:
-            runs[-1].append(i)
-        else:
-            runs.append([i])
-    if len(runs) > 1 and cl[runs[0][0]] == cl[runs[-1][0]]:
-        runs[0] = runs.pop() + runs[0]
-    return runs
-
-
-def _split_cycle(cyc: list[int], cl: list[int]) -> tuple[list[int], list[int]]:
-    """Split a face cycle classified -1/0/+1 into its (negative, positive) pieces.
-
-    Requires one run of each sign (zeros ignored) and no edge joining -1 and +1
-    (crossing edges are split first). The pieces share the chord between the zero
-    nodes bounding the negative run; both keep the face's orientation.
-    """
-    n = len(cyc)
-    if len(_sign_runs(cl)) != 2:
-        raise InputError("degenerate cut: a face is crossed more than twice (non-convex face?)")
-    i0 = next(i for i in range(n) if cl[i] > 0)
-    rot = cyc[i0:] + cyc[:i0]
-    clr = cl[i0:] + cl[:i0]
-    i1 = next(i for i in range(n) if clr[i] < 0)
-    i2 = max(i for i in range(n) if clr[i] < 0)
-    if clr[i1 - 1] != 0 or i2 + 1 >= n or clr[i2 + 1] != 0:
-        raise InputError("internal error: crossing edge left unsplit")
-    neg = rot[i1 - 1:i2 + 2]
-    pos = rot[i2 + 1:] + rot[:i1]
-    return neg, pos
-
-
-def _newell(p: np.ndarray) -> np.ndarray:
-    """Area vector (Newell normal times area) of a polygon (k,3)."""
-    c = p.mean(axis=0)
-    return 0.5 * np.cross(p - c, np.roll(p, -1, axis=0) - c).sum(axis=0)
-
-
-class Cutter:
+class Cutter(PolygonCutter):
     """Applies plane and polygon cuts to a :class:`MeshEditor` (commit once at the end).
 
     Parameters
@@ -278,14 +196,14 @@ class Cutter:
                 for f, _ in ed.elem(e):
                     cyc = ed.face(f)
                     cl = [sides.cls(v) for v in cyc]
-                    runs = _sign_runs(cl)
+                    runs = G.sign_runs(cl)
                     while len(runs) > 2:
                         worst = min(runs, key=lambda r: max(abs(sides.distance(cyc[i])) for i in r))
                         for i in worst:
                             changed |= sides.force(cyc[i])
                             cl[i] = 0
                         self.forced += len(worst)
-                        runs = _sign_runs(cl)
+                        runs = G.sign_runs(cl)
                 if not self._straddles(nodes, sides):
                     continue
                 thin = self._thin_side(nodes, sides)
@@ -399,7 +317,7 @@ class Cutter:
             has_n = any(c < 0 for c in cl)
             has_p = any(c > 0 for c in cl)
             if has_n and has_p:
-                pn, pp = _split_cycle(cyc, cl)
+                pn, pp = G.split_cycle(cyc, cl)
                 f1, f2 = ed.split_face(f, pn, pp)
                 neg.append((f1, s))
                 pos.append((f2, s))
@@ -417,7 +335,7 @@ class Cutter:
             if attempt == "adjacency":
                 self._assign_by_adjacency(flat, n_side, p_side, normal)
             try:
-                loop = _open_loop([ed.oriented(f, s) for f, s in n_side])
+                loop = G.open_loop([ed.oriented(f, s) for f, s in n_side])
             except InputError:
                 if not flat or attempt == "adjacency":
                     raise
@@ -446,7 +364,7 @@ class Cutter:
         give such a face to the half that is in front of it, and that half's cap would
         then overlap it (an edge used by four faces of one element).
         """
-        area = _newell(self.ed.points_of(cyc))
+        area = G.newell(self.ed.points_of(cyc))
         return 1 if area @ sides.normal < 0 else -1
 
     def _assign_by_adjacency(self, flat: list[tuple[int, int]], neg: list[tuple[int, int]],
@@ -464,7 +382,7 @@ class Cutter:
             scores = [(shared(neg, ed.face(f)), shared(pos, ed.face(f)), (f, s)) for f, s in todo]
             sn, sp_, fs = max(scores, key=lambda t: abs(t[0] - t[1]))
             if sn == sp_:
-                area = _newell(ed.points_of(ed.oriented(*fs)))
+                area = G.newell(ed.points_of(ed.oriented(*fs)))
                 (pos if area @ normal < 0 else neg).append(fs)
             else:
                 (neg if sn > sp_ else pos).append(fs)
@@ -479,7 +397,7 @@ class Cutter:
 
     def _plane(self, origin: Any, normal: Any, elements: Any | None) -> int:
         o = as_array(origin, "origin", (3,))
-        n = _unit(normal, "normal")
+        n = G.unit(normal, "normal")
         sides = PlaneSides(self, o, n)
         ed = self.ed
         ed.reset_cache()
@@ -509,182 +427,6 @@ class Cutter:
         return out + sorted(edited)
 
     # -- 9.3.2 polygon cut ---------------------------------------------------------------------------
-    def polygon(self, polygon: Any) -> int:
-        """Cut along a convex planar polygon (k,3); returns the number of duplicated nodes.
-
-        1. Every element whose plane section overlaps the polygon and that has nodes on
-           both sides of the plane is split (9.3.1; never refused, see :meth:`_prepare`).
-        2. The *cut faces* are all faces lying in the plane (every node on it, up to
-           snapping) between elements on opposite sides - created by the splits or
-           already there - restricted to the polygon: faces crossing a polygon edge are
-           split along it.
-        3. Nodes of the cut faces are duplicated per part of their element star that the
-           cut faces separate (:meth:`_separate`); nodes on the polygon's boundary stay
-           shared, and cut faces without such a node get a node at their centroid first
-           (the pocket case).
-
-        Every path between the two sides inside the polygon crosses a cut face (an
-        element has nodes on one side only, so a face between opposite sides has all its
-        nodes on the plane), so a polygon covering the whole section separates the
-        material, whatever was snapped.
-        """
-        try:
-            return self._polygon(polygon)
-        finally:
-            self._keep_forced()
-
-    def _polygon(self, polygon: Any) -> int:
-        P = as_points(polygon, "polygon")
-        if len(P) < 3:
-            raise InputError(f"polygon: expected at least 3 vertices, got {len(P)}")
-        c = P.mean(axis=0)
-        nrm = np.zeros(3)
-        for i in range(len(P)):
-            nrm += np.cross(P[i] - c, P[(i + 1) % len(P)] - c)
-        area2 = float(np.linalg.norm(nrm))
-        size = float(np.ptp(P, axis=0).max())
-        if not area2 > 1e-12 * size * size:
-            raise InputError("polygon: degenerate cut polygon (zero area or collinear vertices)")
-        n = nrm / area2
-        if np.abs((P - c) @ n).max() > 1e-6 * size:
-            raise InputError("polygon: the vertices are not coplanar (split it into planar polygons)")
-        e1 = P[0] - c
-        e1 -= n * (e1 @ n)
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(n, e1)
-        P2 = np.c_[(P - c) @ e1, (P - c) @ e2]
-        turns = [_cross2(P2[(i + 1) % len(P2)] - P2[i], P2[(i + 2) % len(P2)] - P2[(i + 1) % len(P2)])
-                 for i in range(len(P2))]
-        if min(turns) < -1e-9 * size * size:
-            raise InputError("polygon: expected a convex polygon (split non-convex cut shapes into convex ones)")
-        ed = self.ed
-        sides = PlaneSides(self, c, n)
-
-        def to2(x: np.ndarray) -> np.ndarray:
-            return np.array([(x - c) @ e1, (x - c) @ e2])
-
-        eps = 1e-9 * size
-        # 1. split the straddling elements whose plane section overlaps the polygon
-        ed.reset_cache()
-        near = self._near(sides.base_d, P)
-
-        def overlaps(e: int) -> bool:
-            sec = self._section(e, sides)
-            return sec is not None and _overlap(np.array([to2(x) for x in sec]), P2, eps)
-
-        crossing = [e for e in near if self._straddles(ed.elem_nodes(e), sides) and overlaps(e)]
-        for e in near:  # straddling without a section polygon: only collinear nodes cross the plane
-            nodes = ed.elem_nodes(e)
-            if self._straddles(nodes, sides) and self._section(e, sides) is None:
-                crossing.append(e)
-        split_children: set[int] = set()
-
-        def outside(v: int) -> bool:
-            return _outside(to2(ed.point(v)), P2, sides.band(v))
-
-        for e in self._prepare(crossing, sides, outside):
-            r = self.split(e, sides)
-            if r is not None:
-                split_children.update(r)
-        # 2. in-plane faces between opposite sides overlapping the polygon
-        cand_elems = split_children | {e for e in near if e not in ed.dead_elems and self._has_zero(e, sides)}
-        faces = set()
-        for e in cand_elems:
-            for f, _ in ed.elem(e):
-                faces.add(f)
-        side_of: dict[int, int] = {}
-
-        def side(e: int) -> int:
-            s = side_of.get(e)
-            if s is None:
-                s = side_of[e] = self._side(e, sides)
-            return s
-
-        T = []
-        for f in sorted(faces):
-            if f in ed.dead_faces:
-                continue
-            refs = ed.refs(f)
-            if len(refs) != 2:
-                continue
-            cyc = ed.face(f)
-            if any(sides.cls(v) != 0 for v in cyc):
-                continue
-            if {side(a) for a, _ in refs} != {-1, 1}:
-                continue
-            if _overlap(np.array([to2(ed.point(v)) for v in cyc]), P2, eps):
-                T.append(f)
-        if not T:
-            warnings.warn("cut polygon misses the mesh (no material on its plane inside the polygon); nothing cut",
-                          CutMissWarning, stacklevel=3)
-            return 0
-        # 3. split the in-plane faces along the polygon edges (each line only where its segment crosses)
-        line_sides = []
-        for j in range(len(P)):
-            a3, b3 = P[j], P[(j + 1) % len(P)]
-            a2, b2 = P2[j], P2[(j + 1) % len(P)]
-            m = np.cross(n, b3 - a3)
-            m /= np.linalg.norm(m)
-            if (c - a3) @ m > 0:
-                m = -m
-            ed.reset_cache()
-            ls = PlaneSides(self, a3, m, keep=False)
-            line_sides.append(ls)
-            newT = []
-            for f in T:
-                cyc = ed.face(f)
-                poly = np.array([to2(ed.point(v)) for v in cyc])
-                if not _segment_crosses(a2, b2, poly, eps):
-                    newT.append(f)
-                    continue
-                cl = [ls.cls(v) for v in cyc]
-                runs = _sign_runs(cl)
-                if len(runs) < 2:
-                    newT.append(f)
-                    continue
-                while len(runs) > 2:  # a slightly non-convex face: snap the nodes of the shortest run
-                    worst = min(runs, key=lambda r: max(abs(ls.distance(cyc[i])) for i in r))
-                    for i in worst:
-                        ls.force(cyc[i])
-                        cl[i] = 0
-                    runs = _sign_runs(cl)
-                for i in range(len(cyc)):
-                    a, b = cyc[i], cyc[(i + 1) % len(cyc)]
-                    if cl[i] * cl[(i + 1) % len(cyc)] < 0:
-                        mnode = self._new_edge_node(a, b, ls)
-                        sides.on_plane(mnode)  # lies in the cut plane
-                cyc = ed.face(f)
-                pn, pp = _split_cycle(cyc, [ls.cls(v) for v in cyc])
-                newT.extend(ed.split_face(f, pn, pp))
-            T = newT
-        # 4. the cut faces: pieces inside the polygon, decided with the same (snapped) side
-        #    classification as the splits, so a piece is never left between two polygons
-        inside = [f for f in T if all(max(ls.cls(v) for v in ed.face(f)) <= 0 for ls in line_sides)]
-        if not inside:
-            warnings.warn("cut polygon covers no in-plane face of the mesh; nothing cut", CutMissWarning, stacklevel=3)
-            return 0
-        self.touched = True
-        return self._separate(set(inside))
-
-    def _near(self, base_d: np.ndarray, P: np.ndarray) -> list[int]:
-        lo, hi = P.min(axis=0), P.max(axis=0)
-        pad = 1e-9 * float(np.ptp(P, axis=0).max())
-        off, nodes = self.mesh.element_nodes()
-        d = base_d[nodes]
-        dlo = np.minimum.reduceat(d, off[:-1])
-        dhi = np.maximum.reduceat(d, off[:-1])
-        tol = self.max_band
-        box = np.all(self._elo <= hi + pad, axis=1) & np.all(self._ehi >= lo - pad, axis=1)
-        base = np.flatnonzero(box & (dlo <= tol) & (dhi >= -tol)).tolist()
-        ed = self.ed
-        edited = {e for e in ed._elems if e not in ed.dead_elems}
-        out = [e for e in base if e not in edited and e not in ed.dead_elems]
-        for e in sorted(edited):
-            pts = ed.points_of(ed.elem_nodes(e))
-            if np.all(pts.min(axis=0) <= hi + pad) and np.all(pts.max(axis=0) >= lo - pad):
-                out.append(e)
-        return out
-
     def _has_zero(self, e: int, sides: PlaneSides) -> bool:
         return any(sides.cls(v) == 0 for v in self.ed.elem_nodes(e))
 
@@ -743,7 +485,7 @@ class Cutter:
             has_p = any(c > 0 for c in cl)
             if has_n and has_p:
                 try:
-                    pn, pp = _split_cycle(keys, cl)
+                    pn, pp = G.split_cycle(keys, cl)
                 except InputError:
                     return -1.0, -1.0
                 neg.append(pn)
@@ -755,7 +497,7 @@ class Cutter:
             else:
                 (pos if self._flat_side(cyc, sides) > 0 else neg).append(keys)
         try:
-            loop = _open_loop(neg)
+            loop = G.open_loop(neg)
         except InputError:
             return -1.0, -1.0
         ox, oy, oz = point(loop[0]).tolist()
@@ -801,89 +543,6 @@ class Cutter:
                     pts.append((1 - t) * ed.point(a) + t * ed.point(b))
         return pts if len(pts) >= 3 else None
 
-    def _separate(self, sigma: set[int]) -> int:
-        """Duplicate the nodes of the cut faces ``sigma`` per separated part of their element star."""
-        ed = self.ed
-        plan = self._duplication_plan(sigma)
-        pocket = [f for f in sigma if not any(v in plan for v in ed.face(f))]
-        for f in pocket:
-            cyc = ed.face(f)
-            pts = ed.points_of(cyc)
-            cen = pts.mean(axis=0)
-            w = _face_weights(pts, cen)
-            cnode = ed.add_node(cen, ed.combine(cyc, list(w)))
-            tris = [[cnode, cyc[i], cyc[(i + 1) % len(cyc)]] for i in range(len(cyc))]
-            ids = ed.replace_face(f, tris)
-            sigma.discard(f)
-            sigma.update(ids)
-        if pocket:
-            plan = self._duplication_plan(sigma)
-        # new nodes: one per extra component
-        assign: dict[int, dict[int, int]] = {}
-        for v, comps in plan.items():
-            table = {}
-            for k, comp in enumerate(comps):
-                node = v if k == 0 else ed.add_node(ed.point(v), dict(ed.node_weights(v)))
-                for e in comp:
-                    table[e] = node
-            assign[v] = table
-        affected = set()
-        for v in plan:
-            affected.update(ed.faces_of_node(v))
-        for f in affected:
-            cyc = ed.face(f)
-            refs = ed.refs(f)
-            versions = [[assign[v].get(e, v) if v in assign else v for v in cyc] for e, _ in refs]
-            if len(refs) == 2 and versions[0] != versions[1]:
-                (ea, sa), (eb, sb) = refs
-                ed.set_face(f, versions[0])
-                ed.set_refs(f, [(ea, sa)])
-                g = ed.new_face(versions[1], [(eb, sb)])
-                faces = ed.elem(eb)
-                k = faces.index((f, sb))
-                ed.set_elem(eb, [*faces[:k], (g, sb), *faces[k + 1:]])
-            elif refs and versions[0] != cyc:
-                ed.set_face(f, versions[0])
-        return sum(len(c) - 1 for c in plan.values())
-
-    def _duplication_plan(self, sigma: set[int]) -> dict[int, list[list[int]]]:
-        """For each node of the cut faces that the cut separates: the element groups (first keeps the node)."""
-        ed = self.ed
-        nodes = {v for f in sigma for v in ed.face(f)}
-        plan = {}
-        for v in sorted(nodes):
-            elems = sorted(ed.elems_of_node(v))
-            idx = {e: i for i, e in enumerate(elems)}
-            cut = list(range(len(elems)))
-            full = list(range(len(elems)))
-
-            def find(p: list[int], i: int) -> int:
-                while p[i] != i:
-                    p[i] = p[p[i]]
-                    i = p[i]
-                return i
-
-            for f in ed.faces_of_node(v):
-                refs = ed.refs(f)
-                if len(refs) != 2:
-                    continue
-                i, j = idx[refs[0][0]], idx[refs[1][0]]
-                full[find(full, i)] = find(full, j)
-                if f not in sigma:
-                    cut[find(cut, i)] = find(cut, j)
-            groups: dict[int, dict[int, list[int]]] = {}
-            for e in elems:
-                i = idx[e]
-                groups.setdefault(find(full, i), {}).setdefault(find(cut, i), []).append(e)
-            comps = []
-            for parts in groups.values():
-                if len(parts) > 1:
-                    comps.extend(parts.values())
-            if comps:
-                plan[v] = comps
-        return plan
-
-
     def commit(self, check: bool = True) -> EditResult:
         """The edited mesh and the state maps.
 
@@ -893,130 +552,6 @@ class Cutter:
         """
         tol = max(self.mesh.tolerance, CONVEXITY_FACTOR * self.snap)
         return self.ed.commit(tolerance=tol, abs_tolerance=0.0, check=check)
-
-
-def _face_weights(pts: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Weights of x on the (ear-clipped) triangulation of the convex polygon pts."""
-    from unmesh.fem import _kernels as K
-
-    k = len(pts)
-    tris = K.triangulate_faces(pts, np.arange(k, dtype=np.int64), np.array([0, k], np.int64), 1e-9)
-    best, bw = None, None
-    for t in tris:
-        a, b, cc = pts[t]
-        nrm = np.cross(b - a, cc - a)
-        nn = nrm @ nrm
-        if nn <= 0:
-            continue
-        l1 = np.cross(x - a, cc - a) @ nrm / nn
-        l2 = np.cross(b - a, x - a) @ nrm / nn
-        lam = np.array([1 - l1 - l2, l1, l2])
-        if best is None or lam.min() > bw.min():
-            best, bw = t, lam
-    w = np.zeros(k)
-    if best is None:
-        return np.full(k, 1.0 / k)
-    w[best] = bw
-    return w
-
-
-def _section_area(pts: np.ndarray, normal: np.ndarray) -> float:
-    """Area of the convex hull of points lying (about) in a plane with the given normal."""
-    c = pts.mean(axis=0)
-    e1 = pts[np.argmax(np.linalg.norm(pts - c, axis=1))] - c
-    if not np.linalg.norm(e1) > 0:
-        return 0.0
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    q = np.c_[(pts - c) @ e1, (pts - c) @ e2]
-    ang = np.arctan2(q[:, 1], q[:, 0])
-    q = q[np.argsort(ang)]
-    return 0.5 * abs(float(np.dot(q[:, 0], np.roll(q[:, 1], -1)) - np.dot(q[:, 1], np.roll(q[:, 0], -1))))
-
-
-def _cross2(a: np.ndarray, b: np.ndarray) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
-
-
-def _proj(poly: list[list[float]], ax: float, ay: float) -> tuple[float, float]:
-    lo = hi = poly[0][0] * ax + poly[0][1] * ay
-    for x, y in poly[1:]:
-        t = x * ax + y * ay
-        lo = min(lo, t)
-        hi = max(hi, t)
-    return lo, hi
-
-
-def _overlap(A: np.ndarray, B: np.ndarray, eps: float) -> bool:
-    """Do two convex 2D polygons overlap with positive area (separating axis test)?
-
-    Scalar arithmetic on lists (small numpy arrays cost most of the cut, issue 5).
-    """
-    a = A.tolist() if isinstance(A, np.ndarray) else [list(p) for p in A]
-    b = B.tolist() if isinstance(B, np.ndarray) else [list(p) for p in B]
-    for poly in (a, b):
-        k = len(poly)
-        for i in range(k):
-            dx = poly[(i + 1) % k][0] - poly[i][0]
-            dy = poly[(i + 1) % k][1] - poly[i][1]
-            ln = math.hypot(dx, dy)
-            if ln == 0:
-                continue
-            ax, ay = -dy / ln, dx / ln
-            a0, a1 = _proj(a, ax, ay)
-            b0, b1 = _proj(b, ax, ay)
-            if a1 <= b0 + eps or b1 <= a0 + eps:
-                return False
-    return True
-
-
-def _inside(p: np.ndarray, P: np.ndarray, eps: float) -> bool:
-    k = len(P)
-    sgn = np.sign(sum(_cross2(P[i], P[(i + 1) % k]) for i in range(k)))
-    for i in range(k):
-        d = P[(i + 1) % k] - P[i]
-        if sgn * _cross2(d, p - P[i]) / max(np.linalg.norm(d), 1e-300) <= eps:
-            return False
-    return True
-
-
-def _outside(p: np.ndarray, P: np.ndarray, margin: float) -> bool:
-    """Does the 2D point p lie outside the convex polygon P by more than ``margin``?"""
-    k = len(P)
-    sgn = np.sign(sum(_cross2(P[i], P[(i + 1) % k]) for i in range(k)))
-    for i in range(k):
-        d = P[(i + 1) % k] - P[i]
-        if sgn * _cross2(d, p - P[i]) / max(np.linalg.norm(d), 1e-300) < -margin:
-            return True
-    return False
-
-
-def _segment_crosses(a: np.ndarray, b: np.ndarray, poly: np.ndarray, eps: float) -> bool:
-    """Does segment ab pass through the interior of convex polygon poly (Cyrus–Beck clip)?"""
-    k = len(poly)
-    sgn = np.sign(sum(_cross2(poly[i], poly[(i + 1) % k]) for i in range(k)))
-    t0, t1 = 0.0, 1.0
-    d = b - a
-    for i in range(k):
-        e = poly[(i + 1) % k] - poly[i]
-        ln = np.linalg.norm(e)
-        if ln == 0:
-            continue
-        nin = sgn * np.array([-e[1], e[0]]) / ln  # inward normal
-        num = (a - poly[i]) @ nin - eps
-        den = d @ nin
-        if abs(den) < 1e-300:
-            if num < 0:
-                return False
-            continue
-        t = -num / den
-        if den > 0:
-            t0 = max(t0, t)
-        else:
-            t1 = min(t1, t)
-        if t0 >= t1:
-            return False
-    return (t1 - t0) * np.linalg.norm(d) > eps
 
 
 def apply_cuts(mesh: PolyMesh, cuts: list[PlaneCut | PolygonCut], *, snap: float = 0.02,
