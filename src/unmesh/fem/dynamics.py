@@ -226,6 +226,7 @@ class Dynamics:
         self._stiff = False  # "auto": block-Jacobi PCG failed, use the factorised preconditioner
         self.mesh = mesh
         self.u = np.zeros((mesh.n_nodes, 3))
+        self._forces_cache: tuple[Any, ...] | None = None
         self.v = np.zeros((mesh.n_nodes, 3))
         self.time = 0.0
         self.groups: list[tuple[np.ndarray, Prescribed]] = []
@@ -291,7 +292,24 @@ class Dynamics:
 
     def elastic_energy(self) -> float:
         """Warped elastic energy Σ_e ½ (Rᵀx - X)ᵀ K_e (Rᵀx - X)."""
-        return self.elastic_forces()[1]
+        return self._state_forces()[2]
+
+    def _state_forces(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """Rotations, elastic forces and elastic energy of the current state, computed once per state.
+
+        A frame's record asks for the energy of the state the next step starts from; the
+        step reuses the rotations and forces (about 6 % of a frame on the bunny-slicing
+        benchmark). The state is identified by the objects it is made of (every change of
+        ``u``, the mesh or the element data assigns new ones).
+        """
+        key = (self.u, self.mesh, self.integ, self.kstiff, self.warping)
+        c = self._forces_cache
+        if c is not None and len(c[0]) == len(key) and all(a is b for a, b in zip(c[0], key, strict=True)):
+            return c[1], c[2], c[3]
+        R = self.rotations()
+        f, en = self.elastic_forces(R)
+        self._forces_cache = (key, R, f, en)
+        return R, f, en
 
     def potential_energy(self) -> float:
         """Gravitational potential -Σ m_i g·x_i."""
@@ -336,8 +354,7 @@ class Dynamics:
         t0 = time.perf_counter()
         n = self.mesh.n_nodes
         x = self.positions()
-        R = self.rotations()
-        f_el, _ = self.elastic_forces(R)
+        R, f_el, _ = self._state_forces()
         K = FK.warped_global_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R,
                                     self.pattern.block_map, len(self.pattern.indices))
         cm = 1.0 + dt * self.alpha
