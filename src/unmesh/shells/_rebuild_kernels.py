@@ -1,11 +1,13 @@
 """Numba kernels of the local fiber rebuild after a crack (thesis 7.3.2): splicing CSR rows.
 
 The connectivity arrays (neighbour lists, umbrella pairs, fibers with their state) are
-grouped by node. A rebuild replaces the groups of the affected nodes; :func:`splice_sources`
-gives, for every entry of the result, where it comes from (an entry of the old array, or
-of the array of new rows), and :func:`gather` / :func:`gather2` copy the values. The result
-is what ``numpy.concatenate`` of the kept and the new entries followed by a stable sort by
-node gives (the reference, :func:`unmesh.shells.fracture.rebuild_near`), in one pass.
+grouped by node. A rebuild replaces the groups of the affected nodes; :func:`splice_runs`
+gives, for the entries of the result, where they come from (runs of consecutive entries of
+the old array, or of the array of new rows), and :func:`gather_runs` / :func:`gather_runs2`
+copy them as contiguous blocks (a rebuild replaces a few hundred rows of arrays with ~10^5
+entries: the cost of a memory copy). The result is what ``numpy.concatenate`` of the kept
+and the new entries followed by a stable sort by node gives (the reference,
+:func:`unmesh.shells.fracture.rebuild_near`), in one pass.
 """
 
 from __future__ import annotations
@@ -15,51 +17,73 @@ from numba import njit
 
 
 @njit(cache=True)
-def splice_sources(old_offsets, row_of, new_offsets, out_offsets):
+def splice_runs(old_offsets, row_of, new_offsets, out_offsets):
     """Sources of the spliced CSR: old rows, except rows ``c`` with ``row_of[c] = r >= 0`` taken
-    from row ``r`` of the new CSR. Returns ``src`` (M,) int64: ``k >= 0`` is old entry ``k``,
-    ``-1 - q`` is new entry ``q``; ``out_offsets`` (N + 1,) receives the offsets."""
+    from row ``r`` of the new CSR, as runs (R, 3) int64 ``(out start, source start, length)``
+    with source ``k >= 0`` the old entries ``k, k + 1, ..``, ``-1 - q`` the new entries ``q, ..``
+    (consecutive old rows form one run). ``out_offsets`` (N + 1,) receives the offsets."""
     n = old_offsets.shape[0] - 1
+    runs = np.empty((2 * n + 1, 3), dtype=np.int64)
+    nr = 0
     total = 0
     for c in range(n):
         out_offsets[c] = total
         r = row_of[c]
-        total += new_offsets[r + 1] - new_offsets[r] if r >= 0 else old_offsets[c + 1] - old_offsets[c]
-    out_offsets[n] = total
-    src = np.empty(total, dtype=np.int64)
-    p = 0
-    for c in range(n):
-        r = row_of[c]
         if r >= 0:
-            for q in range(new_offsets[r], new_offsets[r + 1]):
-                src[p] = -1 - q
-                p += 1
+            length = new_offsets[r + 1] - new_offsets[r]
+            if length > 0:
+                runs[nr, 0] = total
+                runs[nr, 1] = -1 - new_offsets[r]
+                runs[nr, 2] = length
+                nr += 1
         else:
-            for k in range(old_offsets[c], old_offsets[c + 1]):
-                src[p] = k
-                p += 1
-    return src
+            length = old_offsets[c + 1] - old_offsets[c]
+            if length > 0:
+                if nr > 0 and runs[nr - 1, 1] >= 0 and runs[nr - 1, 1] + runs[nr - 1, 2] == old_offsets[c]:
+                    runs[nr - 1, 2] += length
+                else:
+                    runs[nr, 0] = total
+                    runs[nr, 1] = old_offsets[c]
+                    runs[nr, 2] = length
+                    nr += 1
+        total += length
+    out_offsets[n] = total
+    return runs[:nr].copy()
 
 
 @njit(cache=True)
-def gather(src, old, new, out):
-    """``out[m] = old[src[m]]`` or ``new[-1 - src[m]]`` (1-D)."""
-    for m in range(src.shape[0]):
-        k = src[m]
-        out[m] = old[k] if k >= 0 else new[-1 - k]
+def gather_runs(runs, old, new, out):
+    """``out[o + e] = old[s + e]`` or ``new[-1 - s + e]`` for every run ``(o, s, m)``, ``e < m`` (1-D)."""
+    for r in range(runs.shape[0]):
+        o = runs[r, 0]
+        s = runs[r, 1]
+        m = runs[r, 2]
+        if s >= 0:
+            for e in range(m):
+                out[o + e] = old[s + e]
+        else:
+            q = -1 - s
+            for e in range(m):
+                out[o + e] = new[q + e]
 
 
 @njit(cache=True)
-def gather2(src, old, new, out):
-    """:func:`gather` of rows of 2-D arrays."""
-    for m in range(src.shape[0]):
-        k = src[m]
-        if k >= 0:
-            for c in range(old.shape[1]):
-                out[m, c] = old[k, c]
+def gather_runs2(runs, old, new, out):
+    """:func:`gather_runs` of rows of 2-D arrays."""
+    for r in range(runs.shape[0]):
+        o = runs[r, 0]
+        s = runs[r, 1]
+        m = runs[r, 2]
+        w = out.shape[1]
+        if s >= 0:
+            for e in range(m):
+                for c in range(w):
+                    out[o + e, c] = old[s + e, c]
         else:
-            for c in range(new.shape[1]):
-                out[m, c] = new[-1 - k, c]
+            q = -1 - s
+            for e in range(m):
+                for c in range(w):
+                    out[o + e, c] = new[q + e, c]
 
 
 @njit(cache=True)

@@ -286,7 +286,12 @@ def create_fibers(rest: Any, offsets: Any, indices: Any, min_angle: float = DEFA
     centers = np.broadcast_to(q[:, None], pad.shape)[ok]
     lo = np.minimum(pad[ok], partner[ok])
     hi = np.maximum(pad[ok], partner[ok])
-    fib = np.unique(np.stack([centers, lo, hi], axis=1), axis=0)[:, [1, 0, 2]]
+    n = len(x)
+    if n < 2**21:   # unique rows (centre, lo, hi) in lexicographic order, as int64 keys
+        key = np.unique((centers * n + lo) * n + hi)
+        fib = np.stack([key // n % n, key // (n * n), key % n], axis=1)
+    else:
+        fib = np.unique(np.stack([centers, lo, hi], axis=1), axis=0)[:, [1, 0, 2]]
     if len(fib):
         t0, t1, tc = tangents(x[fib[:, 0]], x[fib[:, 1]], x[fib[:, 2]])
         lim = np.cos(np.radians(max_end_angle))

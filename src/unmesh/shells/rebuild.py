@@ -24,8 +24,8 @@ from unmesh.shells.energy import _FIELDS, FiberState
 from unmesh.shells.forces import arc_gram
 from unmesh.shells.fracture import MIN_VISIBLE, CrackSet, FiberMaterial, fracture_candidates
 from unmesh.shells.fracture import rebuild_near as rebuild_near_reference
-from unmesh.shells.nodes import create_fibers, node_neighborhoods, umbrella_pairs, umbrella_softening
-from unmesh.shells.topology import ShellTopology
+from unmesh.shells.nodes import create_fibers, node_neighborhoods, umbrella_pairs
+from unmesh.shells.topology import UMBRELLA_SOFTENING, ShellTopology
 
 __all__ = ["rebuild_local", "rebuild_near"]
 
@@ -36,17 +36,21 @@ def _row_offsets(keys: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 
 def _splice(old_offsets: np.ndarray, row_of: np.ndarray, new_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets of the spliced CSR and its source runs (:func:`~unmesh.shells._rebuild_kernels.splice_runs`)."""
     out = np.empty(len(old_offsets), dtype=np.int64)
-    src = _rebuild_kernels.splice_sources(old_offsets, row_of, new_offsets, out)
-    return out, src
+    runs = _rebuild_kernels.splice_runs(old_offsets, row_of, new_offsets, out)
+    return out, runs
 
 
-def _take(src: np.ndarray, old: np.ndarray, new: np.ndarray) -> np.ndarray:
-    out = np.empty((len(src), *old.shape[1:]), dtype=old.dtype)
+def _take(runs: np.ndarray, old: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """The spliced array: old entries and new ones as the ``runs`` of :func:`_splice` say."""
+    total = int(runs[-1, 0] + runs[-1, 2]) if len(runs) else 0
+    out = np.empty((total, *old.shape[1:]), dtype=old.dtype)
     if old.ndim == 1:
-        _rebuild_kernels.gather(src, old, np.ascontiguousarray(new, dtype=old.dtype), out)
+        _rebuild_kernels.gather_runs(runs, old, np.ascontiguousarray(new, dtype=old.dtype), out)
     else:
-        _rebuild_kernels.gather2(src, old, np.ascontiguousarray(new, dtype=old.dtype).reshape(-1, old.shape[1]), out)
+        _rebuild_kernels.gather_runs2(runs, old, np.ascontiguousarray(new, dtype=old.dtype).reshape(-1, old.shape[1]),
+                                      out)
     return out
 
 
@@ -78,6 +82,14 @@ def _crossed(rest: np.ndarray, topology: ShellTopology, rows: np.ndarray, cracks
     out = np.zeros(len(rows), dtype=bool)
     out[np.repeat(np.arange(len(rows)), counts)[hit]] = True
     return out
+
+
+def _softening_rows(rest: np.ndarray, pairs: np.ndarray, centers: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``umbrella_softening(rest, pairs, centers)[rows]`` for centres among the (sorted) ``rows``."""
+    s = np.zeros((len(rows), 3))
+    np.add.at(s, np.searchsorted(rows, centers), np.cross(rest[pairs[:, 0]] - rest[centers],
+                                                          rest[pairs[:, 1]] - rest[centers]))
+    return UMBRELLA_SOFTENING * np.linalg.norm(s, axis=1)
 
 
 def _keys(f: np.ndarray, n: int) -> np.ndarray:
@@ -163,8 +175,8 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
     new = create_fibers(rest, noff, nbr, min_angle, nodes=rows)
     # reuse the state of fibers that existed before (the last of equal old fibers, as a dict would)
     k0, k1 = topology.fiber_offsets[rows], topology.fiber_offsets[rows + 1]
-    aff_old = np.concatenate([np.arange(a, b) for a, b in zip(k0, k1, strict=True)]) if len(rows) else np.zeros(0, int)
-    aff_old = aff_old.astype(np.int64)
+    cnt = k1 - k0
+    aff_old = (np.repeat(k0 - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))).astype(np.int64)
     old_keys = _keys(topology.fibers[aff_old], n)
     order = np.argsort(old_keys, kind="stable")
     sk = old_keys[order]
@@ -188,17 +200,19 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
     redo = np.zeros(n, dtype=bool)
     redo[rows] = True
     redo |= loose
-    fresh_soft = umbrella_softening(rest, pairs, centers)
-    soft[redo] = fresh_soft[redo]
+    soft[loose] = 0.0                              # no pairs (those outside the rows have none here)
+    soft[rows] = _softening_rows(rest, pairs, centers, rows)
     # states of the new fibers: the old state where a fiber existed, else the material's
     f = len(new)
     st = {name: np.zeros(f) for name in _FIELDS}
     st["length_orig"][:] = 1.0
     if f:
-        mat = fiber_material(new, rest)
-        for name in ("stretch_scale", "bend_scale", "fracture_stretch", "fracture_bend"):
-            st[name][:] = mat[name]
         have = reuse >= 0
+        fresh = np.flatnonzero(~have)
+        if len(fresh):                             # per-fiber values: only the fresh fibers need them
+            mat = fiber_material(new[fresh], rest)
+            for name in ("stretch_scale", "bend_scale", "fracture_stretch", "fracture_bend"):
+                st[name][fresh] = mat[name]
         for name in _FIELDS:
             st[name][have] = getattr(state, name)[reuse[have]]
         # rest measures with the new umbrella normals; fresh fibers start unloaded (or torn)
@@ -222,12 +236,13 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
     row_of[rows] = np.arange(len(rows))
     off, src = _splice(topology.neighbor_offsets, row_of, noff)
     idx = _take(src, topology.neighbors, nbr)
-    _, src = _splice(topology.pair_offsets, row_of, poff_rows)
+    poff, src = _splice(topology.pair_offsets, row_of, poff_rows)
     out_pairs = _take(src, topology.pairs, pairs)
     out_centers = _take(src, topology.pair_center, centers)
-    _, src = _splice(topology.fiber_offsets, row_of, _row_offsets(new[:, 1], rows))
+    foff, src = _splice(topology.fiber_offsets, row_of, _row_offsets(new[:, 1], rows))
     fibers = _take(src, topology.fibers, new)
     merged = FiberState._checked(_take(src, getattr(state, name), st[name]) for name in _FIELDS)
     origin = _take(src, np.arange(len(topology.fibers), dtype=np.int64), reuse)
-    topo = ShellTopology.build(n, off, idx, out_pairs, out_centers, fibers, soft, validate=False)
+    # spliced in node order: already grouped, with the offsets of the splice
+    topo = ShellTopology(n, off, idx, out_pairs, poff, out_centers, fibers, foff, soft)
     return topo, merged, origin, np.flatnonzero(redo)

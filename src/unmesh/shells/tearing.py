@@ -34,11 +34,11 @@ def warm_up() -> None:
 
     i1, i2, f1, b1 = np.zeros(1, np.int64), np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.bool_)
     p3 = np.zeros((0, 3))
-    _rebuild_kernels.splice_sources(np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64), i1.copy())
+    runs = _rebuild_kernels.splice_runs(np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64), i1.copy())
     for arr in (np.zeros(0, np.int64), f1):
-        _rebuild_kernels.gather(np.zeros(0, np.int64), arr, arr, arr.copy())
+        _rebuild_kernels.gather_runs(runs, arr, arr, arr.copy())
     for arr in (i2, np.zeros((0, 3), np.int64)):
-        _rebuild_kernels.gather2(np.zeros(0, np.int64), arr, arr, arr.copy())
+        _rebuild_kernels.gather_runs2(runs, arr, arr, arr.copy())
     _kernels.fiber_excess(f1, f1, f1, f1, f1, f1, f1, f1, np.zeros(0, np.int64), f1.copy())
     _kernels.discs_near_segments(p3, p3, np.zeros((1, 3)), np.ones(1))
     for kernel in (_kernels.segments_blocked, _kernels.segments_blocked_grid):
