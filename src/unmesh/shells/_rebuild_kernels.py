@@ -132,3 +132,44 @@ def touching(fibers, pairs, pair_offsets, moved, out):
         for q in range(pair_offsets[c], pair_offsets[c + 1]):
             if moved[pairs[q, 0]] or moved[pairs[q, 1]]:
                 out[c] = True
+
+
+@njit(cache=True)
+def moved_rows(x, old_x, offsets, old_offsets, moved, only):
+    """``moved[i]``: node ``i`` is not where it was (``x`` vs ``old_x``); ``only[i] |= `` its node-term
+    offsets changed (``offsets`` vs ``old_offsets``, (N, 2)). Returns the number of moved nodes."""
+    count = 0
+    for i in range(x.shape[0]):
+        moved[i] = x[i, 0] != old_x[i, 0] or x[i, 1] != old_x[i, 1] or x[i, 2] != old_x[i, 2]
+        count += moved[i]
+        if offsets[i, 0] != old_offsets[i, 0] or offsets[i, 1] != old_offsets[i, 1]:
+            only[i] = True
+    return count
+
+
+@njit(cache=True)
+def refresh_merge(only, centre, origin, last_len, last_ang, new_len, new_ang, last_force, before_force, new_force,
+                  last_es, new_es, last_eb, new_eb, last_normal, new_normal, last_s, new_s, last_node, new_node):
+    """Merge the masked force pass ``new_*`` of the centres ``only`` into the last pass, in place in ``new_*``.
+
+    Fibers (F,) whose centre is listed keep the new ``l~`` and ``theta``, the others take those of
+    their ``origin`` in the last pass; ``new_force = last_force - before_force + new_force`` for
+    every node; the node values (energies, normals, umbrella vectors, node terms) of nodes not
+    listed are those of the last pass (what ``numpy.where`` gives, element for element).
+    """
+    for k in range(centre.shape[0]):
+        if not only[centre[k]]:
+            o = max(origin[k], 0)
+            new_len[k] = last_len[o]
+            new_ang[k] = last_ang[o]
+    for i in range(only.shape[0]):
+        for c in range(3):
+            new_force[i, c] = last_force[i, c] - before_force[i, c] + new_force[i, c]
+        if not only[i]:
+            new_es[i] = last_es[i]
+            new_eb[i] = last_eb[i]
+            for c in range(3):
+                new_normal[i, c] = last_normal[i, c]
+                new_s[i, c] = last_s[i, c]
+            for c in range(4):
+                new_node[i, c] = last_node[i, c]

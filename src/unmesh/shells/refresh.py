@@ -50,6 +50,10 @@ def _masked_pass(x: np.ndarray, t: ShellTopology, st: FiberState, ks: float, kb:
     return out
 
 
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def refreshed_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, offsets: np.ndarray,
                      reference: np.ndarray, origin: np.ndarray, old: dict[str, Any], ks: float, kb: float,
                      samples: int) -> ForceResult | None:
@@ -81,15 +85,15 @@ def refreshed_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, 
     n = topology.n_nodes
     if len(origin) != len(topology.fibers) or len(last.angles) != len(ot.fibers) or len(old["x"]) != n:
         return None
-    moved = (x != old["x"]).any(axis=1)
     only = np.zeros(n, dtype=np.bool_)
     touched = old.get("touched")
     if touched is not None:     # only these nodes were built again, the other arrays are copies
         only[touched] = True
-        only |= (old["offsets"] != offsets).any(axis=1)
-        if moved.any():
+        moved = np.empty(n, dtype=np.bool_)
+        if _rebuild_kernels.moved_rows(_f64(x), _f64(old["x"]), _f64(offsets), _f64(old["offsets"]), moved, only):
             _rebuild_kernels.touching(topology.fibers, topology.pairs, topology.pair_offsets, moved, only)
     else:
+        moved = (x != old["x"]).any(axis=1)
         forces_of = ("length_orig", "length_plastic", "angle_orig", "angle_plastic", "stretch_scale", "bend_scale")
         _rebuild_kernels.changed_centres(ot.fiber_offsets, ot.fibers, ot.pair_offsets, ot.pairs, ot.soft,
                                          old["offsets"], *(getattr(ost, f) for f in forces_of), topology.fiber_offsets,
@@ -99,18 +103,15 @@ def refreshed_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, 
     if only.sum() > MAX_CHANGED * n:
         return None
     if not only.any():
-        new = last
-    else:
-        before = _masked_pass(old["x"], ot, ost, ks, kb, samples, last.angles, old["offsets"], only)
-        new = _masked_pass(x, topology, state, ks, kb, samples, reference, offsets, only)
-    forces = last.forces - before.forces + new.forces if only.any() else last.forces.copy()
-    centre = topology.fibers[:, 1]
-    redo = only[centre]
-    keep = np.maximum(origin, 0)
-    lengths = np.where(redo, new.lengths, last.lengths[keep]) if len(keep) else new.lengths
-    angles = np.where(redo, new.angles, last.angles[keep]) if len(keep) else new.angles
-    w = only[:, None]
-    return ForceResult(forces, np.where(only, new.stretch_energy, last.stretch_energy),
-                       np.where(only, new.bend_energy, last.bend_energy), lengths, angles,
-                       np.where(w, new.normals, last.normals), np.where(w, new.umbrella, last.umbrella),
-                       np.where(w, new.node_terms, last.node_terms))
+        keep = np.maximum(origin, 0)
+        return ForceResult(last.forces.copy(), last.stretch_energy.copy(), last.bend_energy.copy(),
+                           last.lengths[keep], last.angles[keep], last.normals.copy(), last.umbrella.copy(),
+                           last.node_terms.copy())
+    before = _masked_pass(old["x"], ot, ost, ks, kb, samples, last.angles, old["offsets"], only)
+    new = _masked_pass(x, topology, state, ks, kb, samples, reference, offsets, only)
+    # F_last - F_before + F_new; the listed centres' values from the new pass, the others' from the last
+    _rebuild_kernels.refresh_merge(only, topology.fibers[:, 1], origin, last.lengths, last.angles, new.lengths,
+                                   new.angles, last.forces, before.forces, new.forces, last.stretch_energy,
+                                   new.stretch_energy, last.bend_energy, new.bend_energy, last.normals, new.normals,
+                                   last.umbrella, new.umbrella, last.node_terms, new.node_terms)
+    return new

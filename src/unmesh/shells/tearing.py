@@ -39,6 +39,11 @@ def warm_up() -> None:
         _rebuild_kernels.gather_runs(runs, arr, arr, arr.copy())
     for arr in (i2, np.zeros((0, 3), np.int64)):
         _rebuild_kernels.gather_runs2(runs, arr, arr, arr.copy())
+    b0, x1, n1 = np.zeros(0, np.bool_), np.zeros((0, 3)), np.zeros((0, 4))
+    _rebuild_kernels.moved_rows(x1, x1, np.zeros((0, 2)), np.zeros((0, 2)), b0, b0.copy())
+    _rebuild_kernels.refresh_merge(b0, np.zeros(0, np.int64), np.zeros(0, np.int64), f1, f1, f1.copy(), f1.copy(), x1,
+                                   x1, x1.copy(), f1, f1.copy(), f1, f1.copy(), x1, x1.copy(), x1, x1.copy(), n1,
+                                   n1.copy())
     _kernels.fiber_excess(f1, f1, f1, f1, f1, f1, f1, f1, np.zeros(0, np.int64), f1.copy())
     _kernels.discs_near_segments(p3, p3, np.zeros((1, 3)), np.ones(1))
     for kernel in (_kernels.segments_blocked, _kernels.segments_blocked_grid):
