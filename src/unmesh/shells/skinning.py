@@ -405,8 +405,8 @@ class SkinnedSurface:
         if len(near):
             starts, counts = self._owned_offsets[near], np.diff(self._owned_offsets)[near]
             pos = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-            rows = np.unique(self._owned[pos])
-            rows = rows[_sk.within_reach(self.dense.points, rows, self.dense.reach, float(radius), c)]
+            rows = self._owned[pos]            # distinct surfels (each has one owner)
+            rows = np.sort(rows[_sk.within_reach(self.dense.points, rows, self.dense.reach, float(radius), c)])
             if len(rows):
                 self._rebind(self.dense, rows, blocked)
                 count += len(rows)
@@ -477,7 +477,37 @@ class SkinnedSurface:
                     _sk.deform(self.node_rest, cur, nrm, part.view("bind"), part.view("weights"), part.view("coords"),
                                part.view("points"), part.view("axes"), part.view("orient"), out_p[lo:hi],
                                out_n[lo:hi], out_r[lo:hi])
+        return _trusted_cloud(out_p, out_n, out_r, *self._static_columns())
+
+    def _static_columns(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Colours (S, 3) and the ``discontinuity`` flags (S,) of the deformed cloud.
+
+        They change only when crack surfels are appended: both are kept in buffers that grow
+        like the crack surfels' (the dense part is copied once), and each cloud gets views of
+        their first S rows (later appends write only beyond them).
+        """
         key = (self.dense.n, self.disc.n)
-        if getattr(self, "_static", (None,))[0] != key:         # colours and flags change only with new cracks
-            self._static = (key, self._cat("colors"), self.discontinuity)
-        return _trusted_cloud(out_p, out_n, out_r, self._static[1], {"discontinuity": self._static[2]})
+        st = getattr(self, "_static", None)
+        if st is not None and st[0] == key:
+            return st[1], st[2]
+        s = len(self)
+        if self.disc.n:
+            dense, disc = self.dense.view("colors"), self.disc.view("colors")
+            dtype = np.result_type(dense, disc)
+            buf, flags, filled = getattr(self, "_static_buf", (None, None, 0))
+            if (buf is None or len(buf) < s or buf.dtype != dtype or filled > s or filled < self.dense.n
+                    or getattr(self, "_static_dense", None) != self.dense.n):
+                cap = max(s, self.dense.n + 2 * self.disc.n, 16)
+                buf = np.zeros((cap, *dense.shape[1:]), dtype=dtype)
+                flags = np.zeros(cap, dtype=np.uint8)
+                buf[:self.dense.n] = dense
+                flags[self.dense.n:] = 1
+                filled = self.dense.n
+                self._static_dense = self.dense.n
+            buf[filled:s] = disc[filled - self.dense.n:]
+            self._static_buf = (buf, flags, s)
+            colors, discontinuity = buf[:s], flags[:s]
+        else:
+            colors, discontinuity = self.dense.view("colors"), np.zeros(s, dtype=np.uint8)
+        self._static = (key, colors, {"discontinuity": discontinuity})
+        return colors, self._static[2]
