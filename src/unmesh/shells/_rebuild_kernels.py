@@ -173,3 +173,21 @@ def refresh_merge(only, centre, origin, last_len, last_ang, new_len, new_ang, la
                 new_s[i, c] = last_s[i, c]
             for c in range(4):
                 new_node[i, c] = last_node[i, c]
+
+
+@njit(cache=True)
+def mark_on_fiber(fibers, out):
+    """``out[i] = True`` (N,) bool for every node of a fiber (``out`` cleared first)."""
+    out[:] = False
+    for k in range(fibers.shape[0]):
+        out[fibers[k, 0]] = True
+        out[fibers[k, 1]] = True
+        out[fibers[k, 2]] = True
+
+
+@njit(cache=True)
+def carry(origin, values, fresh, out):
+    """``out[k] = values[origin[k]]`` where ``origin[k] >= 0``, else ``fresh[k]`` (``numpy.where``)."""
+    for k in range(origin.shape[0]):
+        o = origin[k]
+        out[k] = values[o] if o >= 0 else fresh[k]

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.shells import _kernels
+from unmesh.shells import _kernels, _rebuild_kernels
 from unmesh.shells.forces import node_terms, threads_for
 from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
 from unmesh.shells.fracture import select_cracks
@@ -30,7 +30,7 @@ DEGENERATE_RATIO = 0.3
 
 def warm_up() -> None:
     """Load the compiled kernels of a crack event now (from numba's cache) rather than at the first crack."""
-    from unmesh.shells import _rebuild_kernels, _skinning_kernels
+    from unmesh.shells import _skinning_kernels
 
     i1, i2, f1, b1 = np.zeros(1, np.int64), np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.bool_)
     p3 = np.zeros((0, 3))
@@ -44,6 +44,8 @@ def warm_up() -> None:
     _rebuild_kernels.refresh_merge(b0, np.zeros(0, np.int64), np.zeros(0, np.int64), f1, f1, f1.copy(), f1.copy(), x1,
                                    x1, x1.copy(), f1, f1.copy(), f1, f1.copy(), x1, x1.copy(), x1, x1.copy(), n1,
                                    n1.copy())
+    _rebuild_kernels.mark_on_fiber(np.zeros((0, 3), np.int64), b0.copy())
+    _rebuild_kernels.carry(np.zeros(0, np.int64), f1, f1, f1.copy())
     _kernels.fiber_excess(f1, f1, f1, f1, f1, f1, f1, f1, np.zeros(0, np.int64), f1.copy())
     _kernels.discs_near_segments(p3, p3, np.zeros((1, 3)), np.ones(1))
     for kernel in (_kernels.segments_blocked, _kernels.segments_blocked_grid):
@@ -205,8 +207,8 @@ class Tearing:
         (7.3.2 visibility), else the nearest node on a fiber. Fixed nodes are never crumbs.
         """
         self._crumb_cache = None
-        on_fiber = np.zeros(len(self.rest), dtype=bool)
-        on_fiber[self.topology.fibers.ravel()] = True
+        on_fiber = np.empty(len(self.rest), dtype=np.bool_)
+        _rebuild_kernels.mark_on_fiber(self.topology.fibers, on_fiber)
         self.anchor[on_fiber] = -1                     # a rebuild gave it fibers again
         lost = np.flatnonzero(self.anchor >= 0)
         self.anchor[lost[~on_fiber[self.anchor[lost]]]] = -1   # its anchor lost its fibers: choose again
@@ -271,7 +273,12 @@ class Tearing:
             self._resume_angles = angles[origin].copy()
             return
         rest = self.fibers.rest_angle()
-        self._resume_angles = np.where(origin >= 0, angles[np.maximum(origin, 0)], rest) if len(angles) else rest
+        if len(angles):
+            out = np.empty(len(origin))
+            _rebuild_kernels.carry(np.ascontiguousarray(origin, dtype=np.int64), np.ascontiguousarray(angles,
+                                   dtype=np.float64), rest, out)
+            rest = out
+        self._resume_angles = rest
 
     def _keep_node_terms(self, before: np.ndarray, had: np.ndarray, rows: np.ndarray) -> None:
         """Offsets that keep each rebuilt node's area and curvature terms continuous.
