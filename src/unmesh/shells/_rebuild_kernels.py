@@ -12,6 +12,8 @@ and the new entries followed by a stable sort by node gives (the reference,
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -191,3 +193,51 @@ def carry(origin, values, fresh, out):
     for k in range(origin.shape[0]):
         o = origin[k]
         out[k] = values[o] if o >= 0 else fresh[k]
+
+
+@njit(cache=True)
+def fiber_partners(x, q, off, nbr, cos_limit, out):
+    """Most-opposite-neighbour candidates of :func:`unmesh.shells.nodes.create_fibers` (7.4), (M, 3).
+
+    For every centre ``q[r]`` with neighbours ``nbr[off[r]:off[r + 1]]`` and every neighbour
+    ``j``: ``j'`` the first neighbour minimising ``e_j'.e_j - |e_j|^2`` (``e = x_n - x_i``); the
+    row ``(i, min(j, j'), max(j, j'))`` is written when ``j' != j`` and the cosine of the angle
+    between ``e_j`` and ``e_j'`` is at most ``cos_limit``. Same arithmetic and order as the
+    numpy reference (``create_fibers_reference``); returns the number of rows.
+    """
+    m = 0
+    kmax = 0
+    for r in range(q.shape[0]):
+        kmax = max(kmax, off[r + 1] - off[r])
+    e = np.empty((max(kmax, 1), 3))
+    nrm = np.empty(max(kmax, 1))
+    for r in range(q.shape[0]):
+        i = q[r]
+        a0 = off[r]
+        cnt = off[r + 1] - a0
+        for a in range(cnt):
+            j = nbr[a0 + a]
+            for c in range(3):
+                e[a, c] = x[j, c] - x[i, c]
+            nrm[a] = math.sqrt(e[a, 0] * e[a, 0] + (e[a, 1] * e[a, 1] + e[a, 2] * e[a, 2]))
+        for a in range(cnt):
+            daa = e[a, 0] * e[a, 0] + e[a, 1] * e[a, 1] + e[a, 2] * e[a, 2]
+            best = np.inf
+            jb = 0
+            dbest = 0.0
+            for b in range(cnt):
+                dab = e[a, 0] * e[b, 0] + e[a, 1] * e[b, 1] + e[a, 2] * e[b, 2]
+                if dab - daa < best:
+                    best = dab - daa
+                    jb = b
+                    dbest = dab
+            j = nbr[a0 + a]
+            jp = nbr[a0 + jb]
+            if jp == j:
+                continue
+            if dbest / max(nrm[a] * nrm[jb], 1e-300) <= cos_limit:
+                out[m, 0] = i
+                out[m, 1] = min(j, jp)
+                out[m, 2] = max(j, jp)
+                m += 1
+    return m

@@ -229,8 +229,28 @@ def umbrella_pairs(rest: Any, normals: Any, offsets: Any, indices: Any,
     return np.stack([sp[ok], b[ok]], axis=1).astype(np.int64), centers.astype(np.int64)
 
 
+def _fiber_partners_reference(x: np.ndarray, q: np.ndarray, off: np.ndarray, nbr: np.ndarray,
+                              cos_limit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Numpy reference of :func:`unmesh.shells._rebuild_kernels.fiber_partners`: centres, lo, hi."""
+    pad = _padded(off, nbr)
+    valid = pad >= 0
+    e = np.where(valid[:, :, None], x[np.where(valid, pad, 0)] - x[q][:, None, :], 0.0)  # (Q, K, 3)
+    # score[n, j, j'] = (x_j' - x_j).(x_j - x_i) = e_j'.e_j - |e_j|^2
+    dots = np.einsum("nac,nbc->nab", e, e)
+    score = dots - np.einsum("naa->na", dots)[:, :, None]
+    score = np.where(valid[:, None, :], score, np.inf)
+    jp = np.argmin(score, axis=2)
+    partner = np.take_along_axis(pad, jp, axis=1)
+    norm = np.linalg.norm(e, axis=2)
+    cos = np.take_along_axis(dots, jp[:, :, None], axis=2)[:, :, 0] / np.maximum(
+        norm * np.take_along_axis(norm, jp, axis=1), 1e-300)
+    ok = valid & (partner >= 0) & (partner != pad) & (cos <= cos_limit)
+    centers = np.broadcast_to(q[:, None], pad.shape)[ok]
+    return centers, np.minimum(pad[ok], partner[ok]), np.maximum(pad[ok], partner[ok])
+
+
 def create_fibers(rest: Any, offsets: Any, indices: Any, min_angle: float = DEFAULT_MIN_ANGLE,
-                  nodes: Any = None, max_end_angle: float = DEFAULT_MAX_END_ANGLE) -> np.ndarray:
+                  nodes: Any = None, max_end_angle: float = DEFAULT_MAX_END_ANGLE, reference: bool = False) -> np.ndarray:
     """Fibers by the most-opposite-neighbour heuristic (7.4), duplicates removed.
 
     For node ``i`` and each neighbour ``j``, ``j' = argmin_{j' in N_i} (x_j' - x_j).(x_j - x_i)``;
@@ -252,6 +272,9 @@ def create_fibers(rest: Any, offsets: Any, indices: Any, min_angle: float = DEFA
         Centre nodes the neighbourhoods belong to.
     max_end_angle : float
         Largest angle between an end tangent and the chord, degrees.
+    reference : bool
+        Find the partners with numpy instead of the kernel
+        (:func:`unmesh.shells._rebuild_kernels.fiber_partners`; the same fibers).
 
     Returns
     -------
@@ -270,22 +293,15 @@ def create_fibers(rest: Any, offsets: Any, indices: Any, min_angle: float = DEFA
     nbr = as_array(indices, "indices", (None,), np.int64)
     if len(nbr) == 0:
         return np.zeros((0, 3), dtype=np.int64)
-    pad = _padded(off, nbr)
-    valid = pad >= 0
-    e = np.where(valid[:, :, None], x[np.where(valid, pad, 0)] - x[q][:, None, :], 0.0)  # (Q, K, 3)
-    # score[n, j, j'] = (x_j' - x_j).(x_j - x_i) = e_j'.e_j - |e_j|^2
-    dots = np.einsum("nac,nbc->nab", e, e)
-    score = dots - np.einsum("naa->na", dots)[:, :, None]
-    score = np.where(valid[:, None, :], score, np.inf)
-    jp = np.argmin(score, axis=2)
-    partner = np.take_along_axis(pad, jp, axis=1)
-    norm = np.linalg.norm(e, axis=2)
-    cos = np.take_along_axis(dots, jp[:, :, None], axis=2)[:, :, 0] / np.maximum(
-        norm * np.take_along_axis(norm, jp, axis=1), 1e-300)
-    ok = valid & (partner >= 0) & (partner != pad) & (cos <= np.cos(np.radians(min_angle)) + 1e-12)
-    centers = np.broadcast_to(q[:, None], pad.shape)[ok]
-    lo = np.minimum(pad[ok], partner[ok])
-    hi = np.maximum(pad[ok], partner[ok])
+    cos_limit = float(np.cos(np.radians(min_angle)) + 1e-12)
+    if reference:
+        centers, lo, hi = _fiber_partners_reference(x, q, off, nbr, cos_limit)
+    else:
+        from unmesh.shells import _rebuild_kernels
+
+        cand = np.empty((len(nbr), 3), dtype=np.int64)
+        m = _rebuild_kernels.fiber_partners(x, q, off, nbr, cos_limit, cand)
+        centers, lo, hi = cand[:m, 0], cand[:m, 1], cand[:m, 2]
     n = len(x)
     if n < 2**21:   # unique rows (centre, lo, hi) in lexicographic order, as int64 keys
         key = np.unique((centers * n + lo) * n + hi)
