@@ -165,13 +165,15 @@ def test_check_statistics_match_numpy():
     rng = np.random.default_rng(2)
     x, v, m = rng.normal(size=(50, 3)), rng.normal(size=(50, 3)), rng.uniform(1, 2, 50)
     ang, prev = rng.normal(size=80) * 3, rng.normal(size=80) * 3
-    finite, ke, vmax2, jumps = check_stats(x, v, m, ang, prev)
+    es, eb = rng.uniform(0, 1, 50), rng.uniform(0, 1, 50)
+    finite, ke, vmax2, jumps, elastic = check_stats(x, v, m, ang, prev, es, eb)
     assert finite and jumps == int((np.abs(ang - prev) > np.pi / 2).sum())
     assert ke == pytest.approx(0.5 * (m * (v**2).sum(axis=1)).sum(), rel=1e-14)
     assert vmax2 == pytest.approx((v**2).sum(axis=1).max(), rel=1e-14)
+    assert elastic == pytest.approx(es.sum() + eb.sum(), rel=1e-14)
     v[7, 1] = np.nan
-    assert not check_stats(x, v, m, ang, np.zeros(0))[0]
-    assert check_stats(x, np.zeros_like(v), m, ang, np.zeros(0))[3] == 0
+    assert not check_stats(x, v, m, ang, np.zeros(0), es, eb)[0]
+    assert check_stats(x, np.zeros_like(v), m, ang, np.zeros(0), es, eb)[3] == 0
 
 
 def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):

@@ -271,12 +271,18 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
 
 
 @njit(cache=True)
-def check_stats(x, v, mass, angles, prev):
-    """``(finite, kinetic energy, max |v|^2, jumps)`` of a state for ShellSimulation.check.
+def check_stats(x, v, mass, angles, prev, es, eb):
+    """``(finite, kinetic energy, max |v|^2, jumps, elastic energy)`` of a state for ShellSimulation.check.
 
     ``finite``: no NaN or infinity in ``x`` and ``v``; ``jumps``: fibers whose angle differs
-    from ``prev`` by more than pi/2 (0 when ``prev`` is empty).
+    from ``prev`` by more than pi/2 (0 when ``prev`` is empty); the elastic energy is the sum
+    of the node energies ``es`` and ``eb`` (N,).
     """
+    elastic = 0.0
+    for i in range(es.shape[0]):
+        elastic += es[i]
+    for i in range(eb.shape[0]):
+        elastic += eb[i]
     finite = True
     ke = 0.0
     vmax = 0.0
@@ -294,4 +300,4 @@ def check_stats(x, v, mass, angles, prev):
         for k in range(angles.shape[0]):
             if abs(angles[k] - prev[k]) > half_pi:
                 jumps += 1
-    return finite, 0.5 * ke, vmax, jumps
+    return finite, 0.5 * ke, vmax, jumps, elastic

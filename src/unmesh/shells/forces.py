@@ -13,7 +13,9 @@ import math
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
+from numba.np.ufunc import parallel as _parallel
 
 from unmesh.shells import _kernels
 from unmesh.shells.energy import FiberState
@@ -63,6 +65,24 @@ class _Tuner:
 _TUNERS: dict[tuple[str, int], _Tuner] = {}
 
 
+def _num_threads() -> int:
+    """``numba.get_num_threads()``; once numba's threads run, without its start-up lock (a
+    multiprocessing lock: a few microseconds per call, three calls per time step)."""
+    get = getattr(_parallel, "_get_num_threads", None)
+    if getattr(_parallel, "_is_initialized", False) and get is not None:
+        return int(get())
+    return numba.get_num_threads()
+
+
+def _set_num_threads(n: int) -> None:
+    """``numba.set_num_threads(n)`` for an ``n`` already valid (1, or a value :func:`_num_threads` gave)."""
+    set_ = getattr(_parallel, "_set_num_threads", None)
+    if getattr(_parallel, "_is_initialized", False) and set_ is not None:
+        set_(int(n))
+        return
+    numba.set_num_threads(n)
+
+
 class threads_for:
     """Run numba kernels on one thread or on all (``with threads_for(n, key): ...``).
 
@@ -87,28 +107,22 @@ class threads_for:
     """
 
     def __init__(self, items: int, minimum: int | None = None, key: str = "forces") -> None:
-        import numba
-
+        self.previous = _num_threads()
         self.serial = items < (PARALLEL_MIN if minimum is None else minimum)
         self.tuner = None
-        if not self.serial and numba.get_num_threads() > 1:
+        if not self.serial and self.previous > 1:
             self.tuner = _TUNERS.setdefault((key, int(items).bit_length()), _Tuner())
             self.serial = self.tuner.choose_serial()
 
     def __enter__(self) -> None:
-        import numba
-
-        if self.serial:
-            self.previous = numba.get_num_threads()
-            numba.set_num_threads(1)
+        if self.serial and self.previous != 1:
+            _set_num_threads(1)
         self.start = time.perf_counter()
 
     def __exit__(self, *exc: object) -> None:
-        import numba
-
         elapsed = time.perf_counter() - self.start
-        if self.serial:
-            numba.set_num_threads(self.previous)
+        if self.serial and self.previous != 1:
+            _set_num_threads(self.previous)
         if self.tuner is not None and exc[0] is None:
             self.tuner.record(self.serial, elapsed)
 

@@ -402,11 +402,13 @@ class ShellSimulation(Tearing, Simulation):
         angles = self._last.angles
         prev = self._prev_angles
         same = prev is not None and len(prev) == len(angles) and self._prev_topology is self.topology and len(angles)
-        finite, ke, vmax2, jumps = _step_kernels.check_stats(self.x, self.v, self.mass, angles,
-                                                             prev if same else _NO_ANGLES)
+        last = self._last
+        finite, ke, vmax2, jumps, elastic = _step_kernels.check_stats(self.x, self.v, self.mass, angles,
+                                                                      prev if same else _NO_ANGLES,
+                                                                      last.stretch_energy, last.bend_energy)
         if not finite:
             return "NaN or infinity in the node positions or velocities"
-        e = ke + self.elastic_energy()
+        e = ke + elastic
         if not math.isfinite(e):
             return "non-finite energy"
         if self._energy_floor is None:
