@@ -413,43 +413,53 @@ def nearest_slot(y0, y1, y2, tmat, table, dim):
 
 
 @njit(cache=True, inline="always")
-def _nearest_d3(z0, z1, z2, table):
-    """:func:`nearest_slot` (3D) for a point given in D3 coordinates ``z = T y``.
+def _d3_round(z0, z1, z2, half, size):
+    """:func:`nearest_slot` (3D) for a point given in D3 coordinates ``z = T y``, in floating point.
 
-    The Conway–Sloane rounding without branches (the parity test is a coin flip for
-    the branch predictor): the coordinate with the largest rounding error (the first
-    of equal ones) moves one step the other way when the rounded sum is odd.
+    The Conway–Sloane rounding without branches and without integer conversions (so that the
+    loop over a neighbourhood vectorises): the coordinate with the largest rounding error (the
+    first of equal ones) moves one step the other way when the rounded sum is odd. Returns the
+    flat index into the slot table (``(i0 · size + i1) · size + i2``, as a float; -1 outside the
+    table of ``size³`` entries centred on ``half``) and the squared distance (units of d).
     """
-    r0 = math.floor(z0 + 0.5)
-    r1 = math.floor(z1 + 0.5)
-    r2 = math.floor(z2 + 0.5)
-    k0 = int(r0)
-    k1 = int(r1)
-    k2 = int(r2)
-    odd = (k0 + k1 + k2) & 1
-    d0 = abs(z0 - r0)
-    d1 = abs(z1 - r1)
-    d2 = abs(z2 - r2)
-    # integer arithmetic, not conditional expressions (which numba lowers to branches)
-    b0 = np.int64((d0 >= d1) & (d0 >= d2))
-    p0 = odd & b0
-    p1 = odd & (1 - b0) & np.int64(d1 >= d2)
-    p2 = odd - p0 - p1
-    k0 += p0 * (2 * np.int64(z0 > r0) - 1)
-    k1 += p1 * (2 * np.int64(z1 > r1) - 1)
-    k2 += p2 * (2 * np.int64(z2 > r2) - 1)
+    r0 = np.floor(z0 + 0.5)
+    r1 = np.floor(z1 + 0.5)
+    r2 = np.floor(z2 + 0.5)
+    s = r0 + r1 + r2
+    odd = s - 2.0 * np.floor(0.5 * s)  # 0 or 1, exactly
+    e0 = z0 - r0
+    e1 = z1 - r1
+    e2 = z2 - r2
+    d0 = abs(e0)
+    d1 = abs(e1)
+    d2 = abs(e2)
+    m0 = odd * ((d0 >= d1) & (d0 >= d2))
+    m1 = (odd - m0) * (d1 >= d2)
+    m2 = odd - m0 - m1
+    k0 = r0 + m0 * (2.0 * (e0 > 0.0) - 1.0)
+    k1 = r1 + m1 * (2.0 * (e1 > 0.0) - 1.0)
+    k2 = r2 + m2 * (2.0 * (e2 > 0.0) - 1.0)
     e0 = z0 - k0
     e1 = z1 - k1
     e2 = z2 - k2
     best = 0.5 * (e0 * e0 + e1 * e1 + e2 * e2)
-    half = table.shape[0] // 2
-    i0 = ((k0 + k1 - k2) >> 1) + half
-    i1 = ((k0 - k1 + k2) >> 1) + half
-    i2 = ((k1 + k2 - k0) >> 1) + half
+    # back to lattice-basis integers: n = D3^-1 k, exact as the sum is even
+    i0 = 0.5 * (k0 + k1 - k2) + half
+    i1 = 0.5 * (k0 - k1 + k2) + half
+    i2 = 0.5 * (k1 + k2 - k0) + half
+    inside = (i0 >= 0.0) & (i1 >= 0.0) & (i2 >= 0.0) & (i0 < size) & (i1 < size) & (i2 < size)
+    return ((i0 * size + i1) * size + i2 + 1.0) * inside - 1.0, best
+
+
+@njit(cache=True)
+def _nearest_d3(z0, z1, z2, table):
+    """Slot and squared distance of :func:`_d3_round` (the lattice pass's rounding), for tests."""
     size = table.shape[0]
-    if (i0 < 0) | (i1 < 0) | (i2 < 0) | (i0 >= size) | (i1 >= size) | (i2 >= size):
+    idx, best = _d3_round(z0, z1, z2, float(size // 2), float(size))
+    if idx < 0.0:
         return -1, best
-    return table[i0, i1, i2], best
+    k = int(idx)
+    return table[k // (size * size), (k // size) % size, k % size], best
 
 
 @njit(cache=True)
@@ -655,10 +665,11 @@ LATTICE_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 
 @njit(cache=True, fastmath=LATTICE_FASTMATH, error_model="numpy")
 def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, lv,
-                   c6, w_self, tm, tmat, table, amat, ainv, occ, docked, lam, seed, step, dt, prime,
+                   c6, w_self, tm, tmat, table, amat, ainv, occ, docked, lam, seed, step, dt, prime, onebody,
                    amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid):
     """The particles ``r0 .. r1 - 1`` of :func:`lattice_update` (one block, serial); member forces are
-    added into ``win`` (W, 3), the accumulator rows ``lo_b, lo_b + 1, ...``."""
+    added into ``win`` (W, 3), the accumulator rows ``lo_b, lo_b + 1, ...``. ``onebody``: every
+    particle is solid and of one object (no neighbour needs the phase and object test)."""
     nq = slot_vecs.shape[0]
     cap = nbr.shape[1]
     h2 = h * h
@@ -666,13 +677,19 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         win[k, 0] = 0.0
         win[k, 1] = 0.0
         win[k, 2] = 0.0
-    rt = np.empty((4, cap))  # offsets r_ij of the neighbours and squared lattice distances, by row position
+    # offsets r_ij of the neighbours, squared lattice distances, table indices, masses; ids
+    rt = np.empty((6, cap))
+    ut = np.empty(cap, np.int64)
+    tsize = table.shape[0]
+    thalf = float(tsize // 2)
+    tflat = table.reshape(tsize * tsize * tsize)
     qt = np.empty(cap, np.int64)
-    bestd = np.empty(nq)
+    bestd = np.empty(nq + 1)
     bestj = np.empty(nq, np.int64)
-    bestt = np.empty(nq, np.int64)
+    bestt = np.empty(nq + 1, np.int64)
     # the docked members of the current neighbourhood (slot order), as contiguous columns
     mj = np.empty(nq, np.int64)
+    dflag = np.empty(nq, np.int64)
     mb = np.empty((11, nq))  # r (3), lattice offset l (3), W, m_j, force (3)
     a = np.empty((3, 3))
     u = np.empty((3, 3))
@@ -722,25 +739,38 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         p21 = (tm[2, 0] * ainv[i, 0, 1] + tm[2, 1] * ainv[i, 1, 1] + tm[2, 2] * ainv[i, 2, 1]) / spacing
         p22 = (tm[2, 0] * ainv[i, 0, 2] + tm[2, 1] * ainv[i, 1, 2] + tm[2, 2] * ainv[i, 2, 2]) / spacing
         # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
-        for q in range(nq):
+        for q in range(nq + 1):
             bestd[q] = np.inf
-            bestj[q] = -1
+            bestt[q] = -1
+        # the neighbours' data in one pass (their loads overlap): offset, mass and id by row position
         for t in range(cnt):
             j = nbr[i, t]
             rt[0, t] = x[j, 0] - xi0
             rt[1, t] = x[j, 1] - xi1
             rt[2, t] = x[j, 2] - xi2
-            qt[t] = np.int64((phase[j] == SOLID) & (obj[j] == oi))
+            rt[5, t] = m[j]
+            ut[t] = uid[j]
+        if onebody:
+            for t in range(cnt):
+                qt[t] = 1
+        else:
+            for t in range(cnt):
+                j = nbr[i, t]
+                qt[t] = np.int64((phase[j] == SOLID) & (obj[j] == oi))
         if dim == 3:
+            # vectorised rounding (flat table index as a float), then the table look-ups
             for t in range(cnt):
                 r0 = rt[0, t]
                 r1 = rt[1, t]
                 r2 = rt[2, t]
-                q, d2 = _nearest_d3(p00 * r0 + p01 * r1 + p02 * r2, p10 * r0 + p11 * r1 + p12 * r2,
-                                    p20 * r0 + p21 * r1 + p22 * r2, table)
-                ok = qt[t]
-                qt[t] = q * ok - (1 - ok)
+                idx, d2 = _d3_round(p00 * r0 + p01 * r1 + p02 * r2, p10 * r0 + p11 * r1 + p12 * r2,
+                                    p20 * r0 + p21 * r1 + p22 * r2, thalf, tsize)
+                rt[4, t] = idx
                 rt[3, t] = d2
+            for t in range(cnt):
+                k = int(rt[4, t])
+                q = tflat[max(k, 0)]
+                qt[t] = q if (k >= 0) & (qt[t] != 0) else -1
         else:
             for t in range(cnt):
                 r0 = rt[0, t]
@@ -749,12 +779,17 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                                      tmat, table, dim)
                 qt[t] = q if qt[t] != 0 else -1
                 rt[3, t] = d2
+        # branch-free: candidates outside the slot set go to the spare entry nq
         for t in range(cnt):
             q = qt[t]
-            if q >= 0 and rt[3, t] < bestd[q]:
-                bestd[q] = rt[3, t]
-                bestj[q] = nbr[i, t]
-                bestt[q] = t
+            qq = q if q >= 0 else nq
+            d2 = rt[3, t]
+            better = d2 < bestd[qq]
+            bestd[qq] = min(d2, bestd[qq])
+            bestt[qq] = t if better else bestt[qq]
+        for q in range(nq):
+            t = bestt[q]
+            bestj[q] = nbr[i, max(t, 0)] if t >= 0 else -1
         # 2. docking (section 8.2.5), 3. shape matching sums (8.23) over the docked members
         lmax = mats[mt, M.DOCK_MAX]
         gain = mats[mt, M.DOCK_GAIN]
@@ -775,40 +810,46 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         b20 = 0.0
         b21 = 0.0
         b22 = 0.0
-        count = 0
+        gain_fin = gain < np.inf
+        loss_fin = loss < np.inf
+        brittle = frac < np.inf
+        uid_i = uid[i]
         for q in range(nq):
             j = bestj[q]
-            newocc = uid[j] if j >= 0 else -1
+            has = j >= 0
+            newocc = ut[max(bestt[q], 0)] if has else -1
             if newocc != occ[i, q]:
                 occ[i, q] = newocc
                 docked[i, q] = 0
             lq = lam[i, q]
-            if j >= 0:
-                lnew = min(lq + gain * dt, lmax) if gain < np.inf else lmax
-            else:
-                lnew = max(lq - loss * dt, 0.0) if loss < np.inf else 0.0
+            lup = min(lq + gain * dt, lmax) if gain_fin else lmax
+            ldown = max(lq - loss * dt, 0.0) if loss_fin else 0.0
+            lnew = lup if has else ldown
             if lnew != lq:  # a settled rate is not rewritten (no dirty cache lines)
                 lam[i, q] = lnew
-            if j < 0:
-                continue
-            t = bestt[q]
-            r0 = rt[0, t]
-            r1 = rt[1, t]
-            r2 = rt[2, t]
-            rr = r0 * r0 + r1 * r1 + r2 * r2
-            if prime:
-                docked[i, q] = 1
-            if docked[i, q] == 0 and lnew > 0.0:
-                if lnew == np.inf or uniform(seed, step, uid[i], q, STREAM_DOCK) < 1.0 - math.exp(-lnew * dt):
+            if has and docked[i, q] == 0:
+                if prime:
                     docked[i, q] = 1
-            if docked[i, q] == 1 and frac < np.inf:
+                elif lnew > 0.0:
+                    if lnew == np.inf or uniform(seed, step, uid_i, q, STREAM_DOCK) < 1.0 - math.exp(-lnew * dt):
+                        docked[i, q] = 1
+            if brittle and has and docked[i, q] == 1:
+                t = bestt[q]
+                rr = rt[0, t] * rt[0, t] + rt[1, t] * rt[1, t] + rt[2, t] * rt[2, t]
                 rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
                 if math.sqrt(rr) > (1.0 + frac) * rest:
                     docked[i, q] = 0
                     lam[i, q] = 0.0
-            if docked[i, q] == 0:
-                continue
-            hw = max(h2 - rr, 0.0)
+            dflag[q] = has & (docked[i, q] == 1)
+        # the docked members, in slot order (branch-free: every slot is written, only members advance)
+        count = 0
+        for q in range(nq):
+            t = max(bestt[q], 0)
+            j = max(bestj[q], 0)
+            r0 = rt[0, t]
+            r1 = rt[1, t]
+            r2 = rt[2, t]
+            hw = max(h2 - (r0 * r0 + r1 * r1 + r2 * r2), 0.0)
             mj[count] = j
             mb[0, count] = r0
             mb[1, count] = r1
@@ -817,8 +858,8 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
             mb[4, count] = lv[q, 1]
             mb[5, count] = lv[q, 2]
             mb[6, count] = c6 * hw * hw * hw
-            mb[7, count] = m[j]
-            count += 1
+            mb[7, count] = rt[5, t]
+            count += dflag[q]
         for k in range(count):
             w = mb[6, k]
             l0 = mb[3, k]
@@ -1101,10 +1142,15 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     for blk in range(nblk):
         wmax = max(wmax, hi[blk] - lo[blk] + 1)
     win = np.empty((nblk, wmax, 3))
+    others = 0
+    for i in range(n):
+        others += (phase[i] != SOLID) | (obj[i] != obj[0])
+    onebody = others == 0
     for blk in prange(nblk):
         _lattice_block(blk * n // nblk, (blk + 1) * n // nblk, lo[blk], win[blk], x, m, phase, obj, matid, uid, mats,
                        nbr, nnbr, h, dim, spacing, slot_vecs, lv, c6, w_self, tm, tmat, table, amat, ainv, occ,
-                       docked, lam, seed, step, dt, prime, amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid)
+                       docked, lam, seed, step, dt, prime, onebody, amat_out, ainv_out, gmat, bstr, omega, cen, fown,
+                       valid)
     # the windows summed in block order (deterministic, whatever the thread count)
     fel[:] = 0.0
     for blk in range(nblk):
