@@ -376,10 +376,24 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
             buf[PK_SOLID, t] = 0.0
     for i in range(r0, r1):
         cnt = min(nnbr[i], cap)
-        for t in range(cnt):
-            j = nbr[i, t]
-            for c in range(ncol):
-                buf[c, t] = pk[j, c]
+        if ncol == PK_VISC:  # one material, no collisions: the first ten columns, unrolled
+            for t in range(cnt):
+                j = nbr[i, t]
+                buf[0, t] = pk[j, 0]
+                buf[1, t] = pk[j, 1]
+                buf[2, t] = pk[j, 2]
+                buf[3, t] = pk[j, 3]
+                buf[4, t] = pk[j, 4]
+                buf[5, t] = pk[j, 5]
+                buf[6, t] = pk[j, 6]
+                buf[7, t] = pk[j, 7]
+                buf[8, t] = pk[j, 8]
+                buf[9, t] = pk[j, 9]
+        else:
+            for t in range(cnt):
+                j = nbr[i, t]
+                for c in range(ncol):
+                    buf[c, t] = pk[j, c]
         fe0 = 0.0
         fe1 = 0.0
         fe2 = 0.0
