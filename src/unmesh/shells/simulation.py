@@ -221,6 +221,9 @@ class ShellSimulation(Tearing, Simulation):
         self._prev_topology: ShellTopology | None = None
         self._surface_cache: tuple[int, SurfelCloud] | None = None
         self.acc = self._accelerations()
+        # load the kernel of check() now (from numba's cache: ~10 ms) rather than in the first frame
+        no3 = np.zeros((0, 3))
+        _step_kernels.check_stats(no3, no3.copy(), _NO_ANGLES, _NO_ANGLES, _NO_ANGLES, _NO_ANGLES, _NO_ANGLES)
         if material.fractures:
             warm_up()
 
