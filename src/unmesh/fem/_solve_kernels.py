@@ -13,26 +13,30 @@ import numpy as np
 from numba import njit, prange
 
 
+@njit(cache=True)
+def _block_row(indptr, indices, blocks, x, i):
+    """Row i of A x for a 3×3-block CSR matrix (blocks (nnz, 9), x (n, 3)): three floats."""
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    for k in range(indptr[i], indptr[i + 1]):
+        j = indices[k]
+        x0 = x[j, 0]
+        x1 = x[j, 1]
+        x2 = x[j, 2]
+        a0 += blocks[k, 0] * x0 + blocks[k, 1] * x1 + blocks[k, 2] * x2
+        a1 += blocks[k, 3] * x0 + blocks[k, 4] * x1 + blocks[k, 5] * x2
+        a2 += blocks[k, 6] * x0 + blocks[k, 7] * x1 + blocks[k, 8] * x2
+    return a0, a1, a2
+
+
 @njit(cache=True, parallel=True)
 def bsr_matvec(indptr, indices, blocks, x):
     """y = A x for a 3×3-block CSR matrix; x, y of shape (n, 3)."""
     n = indptr.shape[0] - 1
     y = np.zeros((n, 3))
     for i in prange(n):
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            x0 = x[j, 0]
-            x1 = x[j, 1]
-            x2 = x[j, 2]
-            a0 += blocks[k, 0] * x0 + blocks[k, 1] * x1 + blocks[k, 2] * x2
-            a1 += blocks[k, 3] * x0 + blocks[k, 4] * x1 + blocks[k, 5] * x2
-            a2 += blocks[k, 6] * x0 + blocks[k, 7] * x1 + blocks[k, 8] * x2
-        y[i, 0] = a0
-        y[i, 1] = a1
-        y[i, 2] = a2
+        y[i, 0], y[i, 1], y[i, 2] = _block_row(indptr, indices, blocks, x, i)
     return y
 
 
@@ -42,21 +46,7 @@ def bsr_matvec_rows(indptr, indices, blocks, x, rows):
     m = rows.shape[0]
     y = np.zeros((m, 3))
     for t in range(m):
-        i = rows[t]
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            x0 = x[j, 0]
-            x1 = x[j, 1]
-            x2 = x[j, 2]
-            a0 += blocks[k, 0] * x0 + blocks[k, 1] * x1 + blocks[k, 2] * x2
-            a1 += blocks[k, 3] * x0 + blocks[k, 4] * x1 + blocks[k, 5] * x2
-            a2 += blocks[k, 6] * x0 + blocks[k, 7] * x1 + blocks[k, 8] * x2
-        y[t, 0] = a0
-        y[t, 1] = a1
-        y[t, 2] = a2
+        y[t, 0], y[t, 1], y[t, 2] = _block_row(indptr, indices, blocks, x, rows[t])
     return y
 
 

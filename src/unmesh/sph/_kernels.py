@@ -649,6 +649,16 @@ def kick_drift(x, v, acc, xsph, half_dt, dt, fixed, plane_p, plane_n, margin):
     return bad
 
 
+@njit(**PLAIN)
+def _particle_stats(x, v, acc, rho, matid, mats, i):
+    """``(|v_i|², |a_i|², |ρ_i/ρ0 − 1|, finite)`` of particle i for the diagnostics reductions."""
+    v2 = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
+    a2 = acc[i, 0] * acc[i, 0] + acc[i, 1] * acc[i, 1] + acc[i, 2] * acc[i, 2]
+    d = abs(rho[i] / mats[matid[i], M.RHO0] - 1.0)
+    ok = math.isfinite(v2) and math.isfinite(a2) and math.isfinite(x[i, 0] + x[i, 1] + x[i, 2])
+    return v2, a2, d, ok
+
+
 @njit(cache=True, parallel=True)
 def kick_diagnostics(x, v, acc, half_dt, fixed, m, rho, matid, mats):
     """Half kick ``v += half_dt · a`` (fixed particles at rest), then :func:`diagnostics` (one pass)."""
@@ -667,13 +677,12 @@ def kick_diagnostics(x, v, acc, half_dt, fixed, m, rho, matid, mats):
             v[i, 0] += half_dt * acc[i, 0]
             v[i, 1] += half_dt * acc[i, 1]
             v[i, 2] += half_dt * acc[i, 2]
-        v2 = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
-        a2 = acc[i, 0] * acc[i, 0] + acc[i, 1] * acc[i, 1] + acc[i, 2] * acc[i, 2]
+        v2, a2, d, ok = _particle_stats(x, v, acc, rho, matid, mats, i)
         ke += 0.5 * m[i] * v2
         vmax = max(vmax, v2)
         amax = max(amax, a2)
-        derr = max(derr, abs(rho[i] / mats[matid[i], M.RHO0] - 1.0))
-        if not (math.isfinite(v2) and math.isfinite(a2) and math.isfinite(x[i, 0] + x[i, 1] + x[i, 2])):
+        derr = max(derr, d)
+        if not ok:
             bad += 1
     return ke, math.sqrt(vmax), math.sqrt(amax), derr, bad
 
@@ -688,13 +697,12 @@ def diagnostics(x, v, acc, m, rho, matid, mats):
     derr = 0.0
     bad = 0
     for i in prange(n):
-        v2 = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
-        a2 = acc[i, 0] * acc[i, 0] + acc[i, 1] * acc[i, 1] + acc[i, 2] * acc[i, 2]
+        v2, a2, d, ok = _particle_stats(x, v, acc, rho, matid, mats, i)
         ke += 0.5 * m[i] * v2
         vmax = max(vmax, v2)
         amax = max(amax, a2)
-        derr = max(derr, abs(rho[i] / mats[matid[i], M.RHO0] - 1.0))
-        if not (math.isfinite(v2) and math.isfinite(a2) and math.isfinite(x[i, 0] + x[i, 1] + x[i, 2])):
+        derr = max(derr, d)
+        if not ok:
             bad += 1
     return ke, math.sqrt(vmax), math.sqrt(amax), derr, bad
 
