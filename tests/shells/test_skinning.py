@@ -7,7 +7,14 @@ import pytest
 
 from tests.shells.conftest import sphere_with_nodes
 from unmesh.shells import CrackSet
-from unmesh.shells.skinning import SkinnedSurface, bind_points, deform_reference, skin_weight
+from unmesh.shells.skinning import (
+    COVER_CAP,
+    SkinnedSurface,
+    bind_points,
+    cover_radii_reference,
+    deform_reference,
+    skin_weight,
+)
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +66,8 @@ def test_kernel_matches_reference(surface, rng):
     ref_p, ref_a = deform_reference(surf.node_rest, x, n, surf.node_normals, surf.bind[sel], surf.weights[sel],
                                     surf.points[sel], surf.axes[sel])
     np.testing.assert_allclose(out.positions[sel], ref_p, atol=1e-10)
-    np.testing.assert_allclose(out.radii[sel], np.linalg.norm(ref_a, axis=2).max(axis=1), rtol=1e-8)
+    axis_r = np.linalg.norm(ref_a, axis=2).max(axis=1)     # radii start there (exactly: next tests)
+    assert np.all(out.radii[sel] >= axis_r * (1 - 1e-8)) and np.all(out.radii[sel] <= COVER_CAP * axis_r * (1 + 1e-8))
 
 
 def test_surfels_at_nodes_follow_their_node(surface, rng):
@@ -87,3 +95,83 @@ def test_visibility_binds_to_one_side_of_a_crack():
     bind, _w = bind_points(pts, nodes, 6, blocked=cracks.blocked)
     assert np.all(nodes[bind[0][bind[0] >= 0], 0] < 0)
     assert np.all(nodes[bind[1][bind[1] >= 0], 0] >= 0)
+
+
+# -- splat radii that cover stretched seams (module notes of unmesh.shells.skinning) ----------
+def _plane_surface(seed=0, n_side=24, spacing=0.1):
+    """A jittered grid of surfels (radius 0.75 spacing) on a 7 x 7 sheet of nodes (spacing 0.4)."""
+    from unmesh.shells.nodes import grid_sheet
+    from unmesh.surfels import SurfelCloud
+
+    rng = np.random.default_rng(seed)
+    nodes, _ = grid_sheet(7, 7, spacing=0.4, jitter=0.1, seed=seed)
+    g = (np.arange(n_side) + 0.5) * spacing
+    xy = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    xy += rng.uniform(-0.1, 0.1, xy.shape) * spacing
+    pts = np.column_stack([xy, np.zeros(len(xy))])
+    up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    cloud = SurfelCloud(pts, up, radii=np.full(len(pts), 0.75 * spacing))
+    return cloud, nodes, SkinnedSurface(cloud, nodes, np.tile([0.0, 0.0, 1.0], (len(nodes), 1)))
+
+
+def _uncovered(cloud, probes):
+    """Fraction of probe points (in the plane z = 0) inside no splat disc."""
+    from unmesh.spatial import KDTree
+
+    d, i = KDTree(cloud.positions).knn(probes, 8)
+    return float(np.mean(~np.any(d <= cloud.radii[i], axis=1)))
+
+
+def test_cover_radii_kernel_matches_reference(surface, rng):
+    cloud, idx, surf = surface
+    x = cloud.positions[idx] * (1 + 0.2 * rng.uniform(size=(len(idx), 1)))
+    out = surf.deform(x, cloud.normals[idx])
+    _, ref_a = deform_reference(surf.node_rest, x, cloud.normals[idx], surf.node_normals, surf.bind, surf.weights,
+                                surf.points, surf.axes)
+    axis_r = np.linalg.norm(ref_a, axis=2).max(axis=1)
+    ref = cover_radii_reference(out.positions, surf._cover_nbr, surf._cover_scale2, axis_r)
+    np.testing.assert_allclose(out.radii, ref, rtol=1e-10)
+    assert np.all(out.radii >= axis_r * (1 - 1e-12)) and np.any(out.radii > 1.05 * axis_r)
+
+
+def test_nonuniform_stretch_opens_no_holes():
+    """Nodes stretched by a random factor each (up to 1.5): the splats still cover the sheet.
+
+    Probes are rest points skinned with the same nodes (the surface the splats sample); with
+    the deformed-axis radii alone some of them fall into gaps.
+    """
+    from unmesh.surfels import SurfelCloud
+
+    cloud, nodes, surf = _plane_surface()
+    rng = np.random.default_rng(3)
+    stretch = rng.uniform(1.0, 1.5, size=(len(nodes), 1))
+    x = nodes.copy()
+    x[:, :2] = (nodes[:, :2] - 1.2) * stretch + 1.2
+    up = np.tile([0.0, 0.0, 1.0], (len(nodes), 1))
+    out = surf.deform(x, up)
+    g = np.linspace(0.3, 2.1, 120)       # well inside the sheet (its border is not covered at rest either)
+    probe_rest = np.column_stack([np.stack(np.meshgrid(g, g), -1).reshape(-1, 2), np.zeros(g.size ** 2)])
+    assert _uncovered(cloud, probe_rest) == 0.0
+    probes = SkinnedSurface(SurfelCloud(probe_rest, np.tile([0.0, 0.0, 1.0], (len(probe_rest), 1)),
+                                        radii=np.full(len(probe_rest), 0.01)), nodes, up).deform(x, up).positions
+    probes[:, 2] = 0.0
+    assert np.abs(out.positions[:, 2]).max() < 1e-12
+    assert _uncovered(out, probes) == 0.0
+    _, axes = deform_reference(surf.node_rest, x, up, surf.node_normals, surf.bind, surf.weights, surf.points,
+                               surf.axes)
+    axis_only = SurfelCloud(out.positions, out.normals, radii=np.linalg.norm(axes, axis=2).max(axis=1))
+    assert _uncovered(axis_only, probes) > 0.0
+
+
+def test_cracks_stay_open():
+    """Across a crack the two sides bind to disjoint nodes: pulled apart, no splat bridges the gap."""
+    cloud, nodes, surf = _plane_surface()
+    cracks = CrackSet()
+    cracks.add([1.2, 1.2, 0.0], [1.0, 0.0, 0.0], 5.0, 0, 0.0)
+    surf.rebind_near(np.array([[1.2, 1.2, 0.0]]), 5.0, cracks.blocked)
+    x = nodes + np.where(nodes[:, :1] >= 1.2, 0.5, 0.0) * [1.0, 0.0, 0.0]
+    out = surf.deform(x, np.tile([0.0, 0.0, 1.0], (len(nodes), 1)))
+    np.testing.assert_allclose(out.radii, cloud.radii, rtol=1e-12)     # each side moved rigidly
+    left = cloud.positions[:, 0] < 1.2
+    gap = out.positions[~left, 0].min() - out.positions[left, 0].max()
+    assert gap > 0.45

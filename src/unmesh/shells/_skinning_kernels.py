@@ -435,3 +435,29 @@ def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, 
             s0 = bb * SBLK
             _deform_block(s0, min(SBLK, n - s0), cur, cur_normals, bind, weights, coords, points, axes, orient, rest,
                           blk, out_points, out_normals, out_radii)
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH)
+def cover_radii(points, nbr, scale2, cap, radii):
+    """Enlarge deformed splat radii so that no gap opens towards rest neighbours (in place).
+
+    ``radii[s] = max(radii[s], max_j sqrt(scale2[s, a]) |p_s - p_j|)`` over the rest neighbours
+    ``j = nbr[s, a]`` with ``scale2[s, a] = (rest radius / rest distance)^2`` (0 for pairs that
+    do not count: torn apart by a crack, or sharing no bound node) whose term is at most
+    ``cap radii[s]`` (farther ones count as torn apart). Numpy reference:
+    :func:`unmesh.shells.skinning.cover_radii_reference`.
+    """
+    n, m = nbr.shape
+    for s in prange(n):
+        r = radii[s]
+        best = r * r
+        lim = cap * cap * best
+        for a in range(m):
+            j = nbr[s, a]
+            dx = points[j, 0] - points[s, 0]
+            dy = points[j, 1] - points[s, 1]
+            dz = points[j, 2] - points[s, 2]
+            need = scale2[s, a] * (dx * dx + dy * dy + dz * dz)
+            if need > best and need <= lim:
+                best = need
+        radii[s] = math.sqrt(best)

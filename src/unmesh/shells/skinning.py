@@ -18,6 +18,20 @@ With cracks, only nodes *visible* from ``p`` (7.3.2) are bound, so the two sides
 separate cleanly; each crack also adds a pair of *discontinuity surfels* with opposite
 normals on either side of the crack plane (for the edge clipping of 4.3; written with the
 per-surfel attribute ``discontinuity = 1``).
+
+Splat radii (beyond the thesis): the deformed circle takes the longer deformed tangent axis,
+but the blend of (7.28) is not continuous where ``x_0`` changes between neighbouring
+surfels, and the node-level strain of a stretched shell varies strongly from node to node,
+so pinholes opened along those seams (the inflated balloon of Fig. 7.10: neighbouring
+surfels bound to different ``x_0`` were stretched by up to 2.2, those with the same
+``x_0`` by up to 1.3). Each dense surfel therefore also keeps its :data:`COVER_NEIGHBORS`
+nearest rest neighbours, and its radius grows with the largest stretch of those distances
+(:func:`cover_radii_reference`). Neighbours that would need more than :data:`COVER_CAP` times
+the axis radius count as torn apart, and so do neighbours separated by a crack (the segment between their rest positions crosses a crack disc, 7.3.2)
+or that share no bound node are ignored, so cracks stay open.
+Under rigid motions the radii are those of the axes. (So are they under uniform shrinking;
+under uniform stretching by ``s`` the axes of (7.26) stretch only along ``e1``, to about
+0.89 ``s`` of the rest radius for ``s = 1.4``, and the neighbour distances set the radii.)
 """
 
 from __future__ import annotations
@@ -32,12 +46,19 @@ from unmesh.shells import _skinning_kernels as _sk
 from unmesh.shells.forces import threads_for
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["DEFAULT_SKIN_NODES", "SkinnedSurface", "bind_points", "deform_reference", "skin_weight"]
+__all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "SkinnedSurface", "bind_points",
+           "cover_radii_reference", "deform_reference", "skin_weight"]
 
 #: Nodes per passive point: x_0 and K further nodes (K - 1 weighted frames).
 DEFAULT_SKIN_NODES = 6
 #: Below this many passive points the skinning kernel runs on one thread (see forces.threads_for).
 SKIN_PARALLEL_MIN = 4000
+#: Rest neighbours per dense surfel whose stretch sets its splat radius (:func:`cover_radii_reference`).
+COVER_NEIGHBORS = 6
+#: Rest neighbours that moved apart so far that a splat would need more than this many times its
+#: deformed-axis radius count as torn apart (before the balloon of Fig. 7.10 tears, seams need
+#: up to 2.1, 99 % of them less than 1.6; in its opening the torn material needs far more).
+COVER_CAP = 2.0
 
 
 def skin_weight(r: np.ndarray) -> np.ndarray:
@@ -187,6 +208,52 @@ def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray,
     return out_p, out_a
 
 
+def cover_radii_reference(points: np.ndarray, nbr: np.ndarray, scale2: np.ndarray, radii: np.ndarray,
+                          cap: float = COVER_CAP) -> np.ndarray:
+    """Plain numpy version of the splat-radius kernel, for tests (see the module notes).
+
+    Parameters
+    ----------
+    points : ndarray (S, 3)
+        Deformed positions.
+    nbr : ndarray (S, m) int64
+        Rest neighbours.
+    scale2 : ndarray (S, m)
+        ``(rest radius / rest distance)^2`` per pair, 0 for pairs that do not count.
+    radii : ndarray (S,)
+        Deformed-axis radii.
+    cap : float
+        Pairs that would need more than ``cap radii`` count as torn apart.
+
+    Returns
+    -------
+    ndarray (S,)
+        ``max(radii, sqrt(scale2) |p_s - p_j|)`` over the pairs that need at most ``cap radii``.
+
+    Example
+    -------
+    >>> p = np.array([[0.0, 0, 0], [2.0, 0, 0]])
+    >>> cover_radii_reference(p, np.array([[1], [0]]), np.full((2, 1), 0.36), np.full(2, 0.6)).tolist()
+    [1.2, 1.2]
+    """
+    need = np.sqrt(scale2) * np.linalg.norm(points[nbr] - points[:, None], axis=2)
+    need = np.where(need <= cap * radii[:, None], need, 0.0)
+    return np.maximum(radii, need.max(axis=1))
+
+
+def _cover_pairs(bind: np.ndarray, nbr: np.ndarray, rows: np.ndarray, chunk: int = 16384) -> np.ndarray:
+    """(R, m) bool: surfel ``rows[r]`` and its rest neighbour ``nbr[rows[r], a]`` share a bound node
+    (and are not the same surfel); done in chunks of rows (an (R, m, K+1, K+1) comparison)."""
+    out = np.zeros((len(rows), nbr.shape[1]), dtype=bool)
+    for lo in range(0, len(rows), chunk):
+        r = rows[lo:lo + chunk]
+        mine = bind[r]                                   # (c, K+1)
+        theirs = bind[nbr[r]]                            # (c, m, K+1)
+        eq = (mine[:, None, :, None] == theirs[:, :, None, :]) & (mine[:, None, :, None] >= 0)
+        out[lo:lo + chunk] = eq.any(axis=(2, 3)) & (nbr[r] != r[:, None])
+    return out
+
+
 _CLOUD_FIELDS = ("positions", "normals", "radii", "axes", "colors", "attributes")
 
 
@@ -293,6 +360,13 @@ class SkinnedSurface:
                           plane=plane, coords=self._coords(bind, weights, plane, pts, axes),
                           reach=self._reaches(bind, pts))
         self.disc = _Passive(self.k)
+        # rest neighbours of the dense surfels and (rest radius / rest distance)^2, for the splat
+        # radii (module notes); 0 for the surfel itself and pairs with no common bound node
+        dist, self._cover_nbr = KDTree(pts).knn(pts, int(min(COVER_NEIGHBORS + 1, len(pts))))
+        rest_r = np.linalg.norm(axes, axis=2).max(axis=1)
+        with np.errstate(divide="ignore"):
+            scale2 = np.where(dist > 0, (rest_r[:, None] / dist) ** 2, 0.0)
+        self._cover_scale2 = np.where(_cover_pairs(bind, self._cover_nbr, np.arange(len(pts))), scale2, 0.0)
         self._reach = float(self.dense.view("reach").max()) if self.dense.n else 0.0
         from unmesh.shells.topology import csr_from_groups
 
@@ -409,6 +483,7 @@ class SkinnedSurface:
             rows = np.sort(rows[_sk.within_reach(self.dense.points, rows, self.dense.reach, float(radius), c)])
             if len(rows):
                 self._rebind(self.dense, rows, blocked)
+                self._cut_cover_pairs(rows, blocked)
                 count += len(rows)
         if self.disc.n:
             rows = np.arange(self.disc.n)
@@ -417,6 +492,18 @@ class SkinnedSurface:
                 self._rebind(self.disc, rows, blocked)
                 count += len(rows)
         return count
+
+    def _cut_cover_pairs(self, rows: np.ndarray, blocked: Any) -> None:
+        """Drop the rest-neighbour pairs of re-bound ``rows`` (and of their neighbours) that a crack
+        separates or that share no bound node any more: no splat grows across a crack (module notes)."""
+        nbr, scale2 = self._cover_nbr, self._cover_scale2
+        rows = np.unique(np.concatenate([rows, nbr[rows].reshape(-1)]))
+        keep = _cover_pairs(self.dense.bind, nbr, rows) & (scale2[rows] > 0)
+        r_, c_ = np.nonzero(keep)
+        if len(r_):
+            pts = self.dense.points
+            keep[r_, c_] = ~blocked(pts[rows[r_]], pts[nbr[rows[r_], c_]])
+        scale2[rows] = np.where(keep, scale2[rows], 0.0)
 
     def add_discontinuity(self, center: np.ndarray, normal: np.ndarray, radius: float, surface_normal: np.ndarray,
                           blocked: Any) -> None:
@@ -461,7 +548,8 @@ class SkinnedSurface:
         Returns
         -------
         SurfelCloud
-            Circular surfels (radius = longer deformed tangent axis) with the per-surfel
+            Circular surfels (radius = longer deformed tangent axis, enlarged where rest
+            neighbours moved apart, see the module notes) with the per-surfel
             attribute ``discontinuity`` (uint8, 1 for crack surfels).
         """
         s = len(self)
@@ -477,6 +565,9 @@ class SkinnedSurface:
                     _sk.deform(self.node_rest, cur, nrm, part.view("bind"), part.view("weights"), part.view("coords"),
                                part.view("points"), part.view("axes"), part.view("orient"), out_p[lo:hi],
                                out_n[lo:hi], out_r[lo:hi])
+            if self.dense.n:
+                n = self.dense.n
+                _sk.cover_radii(out_p[:n], self._cover_nbr, self._cover_scale2, COVER_CAP, out_r[:n])
         return _trusted_cloud(out_p, out_n, out_r, *self._static_columns())
 
     def _static_columns(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
