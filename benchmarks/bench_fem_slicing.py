@@ -90,12 +90,12 @@ def main() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for _ in range(args.frames - 1):
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             sim.step()
-            wall = time.perf_counter() - t
+            wall, cpu = time.perf_counter() - t, time.process_time() - c
             r = sim.frame_record()
             rec.append((wall, r["cut_seconds"], r["reintegration_seconds"], r["solve_seconds"], r["cg_iterations"],
-                        r["nodes"], r["elements"]))
+                        r["nodes"], r["elements"], cpu))
             print(f"  frame {len(rec)}: {wall:.2f} s = cut {r['cut_seconds']:.2f} + re-integration "
                   f"{r['reintegration_seconds']:.2f} + solve {r['solve_seconds']:.2f} s, {r['cg_iterations']} "
                   f"iterations, {r['nodes']} nodes", flush=True)
@@ -103,7 +103,8 @@ def main() -> None:
     cutting = a[:, 1] > 0
     print(f"frames with a cut: {int(cutting.sum())} of {len(a)}")
     print(f"per frame (mean over all frames): total {a[:, 0].mean():.2f} s = cut {a[:, 1].mean():.2f} + "
-          f"re-integration {a[:, 2].mean():.2f} + solve {a[:, 3].mean():.2f} s; {a[:, 4].mean():.0f} CG iterations")
+          f"re-integration {a[:, 2].mean():.2f} + solve {a[:, 3].mean():.2f} s; {a[:, 4].mean():.0f} CG iterations; "
+          f"CPU {a[:, 7].mean():.2f} s per frame (all threads)")
     if cutting.any():
         print(f"per cutting frame: total {a[cutting, 0].mean():.2f} s (solve {a[cutting, 3].mean():.2f} s, includes "
               f"the refactorisation)")

@@ -484,3 +484,62 @@ def test_local_factorisation_solves_the_filtered_block_in_either_order(rng, monk
     dof = (3 * nodes[:, None] + np.arange(3)).ravel()
     r = rng.normal(size=3 * len(nodes))
     np.testing.assert_allclose(lu.solve(r), spsolve(sp.csc_array(full[dof][:, dof]), r), rtol=1e-8, atol=1e-10)
+
+
+def _foam_system(rng, seed=5):
+    sim = Dynamics(voronoi_foam(12, seed=seed), 50.0, 0.3, 1.0)
+    p, n = sim.pattern, sim.mesh.n_nodes
+    K = FK.scatter_blocks(p.block_map, sim.kstiff.data.reshape(-1, 9), len(p.indices))
+    A = SK.add_diagonal(K, p.diag, 1e-3, sim.masses, 1.0)
+    kind = np.where(rng.random(n) < 0.1, 1, np.where(rng.random(n) < 0.2, 2, 0)).astype(np.int64)
+    return p, n, A, kind, np.array([0.0, 1.0, 0.0])
+
+
+def test_resumed_pcg_is_the_same_sequence_as_one_solve(rng):
+    """A loose solve continued to a tight tolerance (or a solve stopped by maxiter and
+    continued) does exactly the iterations of one solve: same iterate, same count."""
+    from unmesh.fem.krylov import PCG, pcg
+
+    p, n, A, kind, normal = _foam_system(rng)
+    pinv = SK.block_jacobi(A, p.diag)
+
+    def jacobi(r):
+        return np.einsum("nij,nj->ni", pinv, r)
+
+    b = rng.normal(size=(n, 3))
+    x0 = np.zeros((n, 3))
+    ref, its, res = pcg(p.indptr, p.indices, A, b, x0, kind, normal, jacobi, 1e-10, 500)
+    assert res <= 1e-10 and its > 5
+    cg = PCG(p.indptr, p.indices, A, b, x0, kind, normal, jacobi)
+    _, its1, res1 = cg.run(1e-3, 500)
+    _, its2, _ = cg.run(1e-3, 500)  # already converged to this tolerance
+    x, its3, res3 = cg.run(1e-10, 500)
+    assert res1 <= 1e-3 and its2 == 0 and its1 + its3 == its and res3 == res
+    np.testing.assert_array_equal(x, ref)
+    cg = PCG(p.indptr, p.indices, A, b, x0, kind, normal, jacobi)
+    _, its1, res1 = cg.run(1e-10, 3)
+    x, its3, _ = cg.run(1e-10, 500)
+    assert its1 == 3 and res1 > 1e-10 and its1 + its3 == its
+    np.testing.assert_array_equal(x, ref)
+
+
+def test_lagged_lu_refactorises_when_many_nodes_differ_from_the_factorised_constraints(rng):
+    """Nodes whose constraint differs from the factorised one are solved locally with
+    LOCAL_RINGS layers; when those exceed ``touched_fraction`` of the mesh, refactorise."""
+    from unmesh.fem.solvers import LaggedLU
+
+    p, n, A, kind, normal = _foam_system(rng)
+    Q = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    lag = LaggedLU()
+    lag.factor(p.indptr, p.indices, A, (1.0, 1e-3), kind=kind, normal=normal)
+    lag.preconditioner(Q, p.indptr, p.indices, A, kind, normal)
+    assert lag.mismatch == 0.0 and not lag.needs_factor((1.0, 1e-3))
+    one = kind.copy()
+    one[np.flatnonzero(kind == 2)[0]] = 0
+    lag.rings = 0  # a small mesh: three rings around any node cover it
+    lag.preconditioner(Q, p.indptr, p.indices, A, one, normal)
+    assert lag.mismatch == 1 / n and not lag.needs_factor((1.0, 1e-3))
+    lag.preconditioner(Q, p.indptr, p.indices, A, np.zeros(n, np.int64), normal)
+    assert lag.mismatch > 0.1 and lag.needs_factor((1.0, 1e-3))
+    lag.factor(p.indptr, p.indices, A, (1.0, 1e-3), kind=np.zeros(n, np.int64), normal=normal)
+    assert lag.mismatch == 0.0 and not lag.needs_factor((1.0, 1e-3))

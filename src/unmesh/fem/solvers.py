@@ -41,7 +41,13 @@ and per-node constraints (fixed, or normal-constrained ground contact):
   nodes or a solve needs more than 1.5 ``refactor_iterations``: on the bunny-slicing
   benchmark the iterations grow to 25-35 per solve as the touched part reaches 10-14%
   (measured with 20%: 1 LU instead of 2 in 12 frames, but 2.6-4.2 s instead of 1.2-2.8 s
-  per cutting frame).
+  per cutting frame). It also refactorises when the nodes whose constraint differs from the
+  factorised one, with their ``LOCAL_RINGS`` layers, exceed ``touched_fraction``: the
+  constraints factorised are the last step's contact set (the free-fall prediction when
+  there is none, which overestimates a first contact: 221 predicted, 64-131 in contact over
+  the first frames of the bunny benchmark), and each node factorised in the wrong state
+  widens the local set (the bunny benchmark solved 1137-2857 nodes locally for 85-690 of
+  them; factorised with the contact set, the local set is the ~90 contacts and one ring).
 - ``"direct"``: exact sparse LU of the constrained system in every step.
 
 Measured on the bunny-slicing benchmark (49k DOFs, one thread, loaded machine; systems of
@@ -75,7 +81,8 @@ more than 10% of the nodes and a cut separating the head).
 The rounds of the contact active-set iteration (:mod:`unmesh.fem.dynamics`) are solved
 to a relative residual of 10⁻³ and the final active set is confirmed by a solve to
 ``cg_tol``; the local factorisation of a round is reused by later rounds with the same
-active set.
+active set, and the confirming solve of an unchanged set continues the PCG of the loose
+one (:class:`PCG`) instead of restarting from its solution.
 
 Example
 -------
@@ -96,9 +103,10 @@ import scipy.sparse as sp
 
 from unmesh.errors import InputError
 from unmesh.fem import _solve_kernels as SK
+from unmesh.fem.krylov import PCG, pcg
 from unmesh.fem.rotations import polar_rotations
 
-__all__ = ["LOCAL_RINGS", "SOLVERS", "LaggedLU", "direct_solve", "grow", "nested_dissection", "pcg"]
+__all__ = ["LOCAL_RINGS", "PCG", "SOLVERS", "LaggedLU", "direct_solve", "grow", "nested_dissection", "pcg"]
 
 SOLVERS = ("auto", "lu-pcg", "cg", "direct")
 #: Layers of neighbours added, for the local solve, around nodes whose constraint differs from the factorised one.
@@ -149,53 +157,6 @@ def grow(indptr: np.ndarray, indices: np.ndarray, mask: np.ndarray, rings: int) 
     for _ in range(rings):
         out[indices[out[rows]]] = True
     return out
-
-
-def pcg(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, b: np.ndarray, x0: np.ndarray, kind: np.ndarray,
-        normal: np.ndarray, precond: Any, tol: float, maxiter: int) -> tuple[np.ndarray, int, float]:
-    """Filtered PCG (Baraff & Witkin 1998) with a Python preconditioner ``precond(r) -> z``.
-
-    ``x0`` must satisfy the constraints. Returns (x, iterations, relative residual).
-
-    Example
-    -------
-    >>> import numpy as np
-    >>> eye = np.eye(3).ravel()[None]
-    >>> x, its, res = pcg(np.array([0, 1]), np.array([0]), 2 * eye, np.ones((1, 3)), np.zeros((1, 3)),
-    ...                   np.zeros(1, np.int64), np.array([0.0, 1.0, 0.0]), lambda r: r, 1e-12, 10)
-    >>> x.tolist()
-    [[0.5, 0.5, 0.5]]
-    """
-    x = x0.copy()
-    r = b - SK.bsr_matvec(indptr, indices, blocks, x)
-    SK.filter_inplace(r, kind, normal)
-    fb = b.copy()
-    SK.filter_inplace(fb, kind, normal)
-    bn = float(np.sqrt(SK.dot(fb, fb))) or 1.0
-    rn = float(np.sqrt(SK.dot(r, r)))
-    if rn <= tol * bn:
-        return x, 0, rn / bn
-    z = precond(r)
-    SK.filter_inplace(z, kind, normal)
-    d = z.copy()
-    delta = SK.dot(r, z)
-    it = 0
-    while it < maxiter:
-        it += 1
-        q = SK.bsr_matvec(indptr, indices, blocks, d)
-        SK.filter_inplace(q, kind, normal)
-        dq = SK.dot(d, q)
-        if dq <= 0.0:
-            break
-        rn = SK.cg_update(x, r, d, q, delta / dq)
-        if rn <= tol * bn:
-            break
-        z = precond(r)
-        SK.filter_inplace(z, kind, normal)
-        dnew = SK.dot(r, z)
-        SK.cg_direction(z, d, dnew / delta)
-        delta = dnew
-    return x, it, rn / bn
 
 
 def direct_solve(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, b: np.ndarray, x0: np.ndarray,
@@ -267,6 +228,7 @@ class LaggedLU:
         self._local_cache: tuple[Any, bytes, Any] | None = None  # (matrix, node set, local factor) of the cut region
         self.normal = np.array([0.0, 1.0, 0.0])
         self.iperm: np.ndarray | None = None
+        self.mismatch = 0.0  # share of the nodes solved locally because their constraint differs from the factorised one
 
     def invalidate(self) -> None:
         """Drop the factorisation (e.g. after a change of material)."""
@@ -284,6 +246,10 @@ class LaggedLU:
         independently (measured: 300 iterations per step on the bunny-slicing benchmark).
         """
         if pieces is not None and self.pieces is not None and pieces != self.pieces:
+            return True
+        if self.mismatch > self.touched_fraction:
+            # the factorised constraints were a poor guess (the fall prediction of a first contact):
+            # the nodes solved locally for them alone exceed the share allowed to the cuts
             return True
         limit = self.refactor_iterations
         if self.touched is not None:
@@ -351,6 +317,7 @@ class LaggedLU:
         self.kind = kind0
         self.normal = nrm
         self.factorizations += 1
+        self.mismatch = 0.0
         self.last_iterations = 0
         self.weights = None
         self.touched = None
@@ -401,7 +368,11 @@ class LaggedLU:
             changed = (kind != self.kind) | ((kind == 2) & (self.normal @ (normal if normal is not None else self.normal)
                                                             < 1.0 - 1e-12))
             if changed.any():
-                c_mask |= grow(indptr, indices, changed, self.rings)
+                wrong = grow(indptr, indices, changed, self.rings)
+                self.mismatch = float(wrong.mean())
+                c_mask |= wrong
+            else:
+                self.mismatch = 0.0
         if not (t_mask.any() or c_mask.any()):
             return old
         nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.asarray(normal, np.float64)
