@@ -53,15 +53,14 @@ class LatticeState:
         self.lam = np.full((n, q), np.inf)
         self.out = {
             "amat": np.zeros((n, 3, 3)), "ainv": np.zeros((n, 3, 3)), "gmat": np.zeros((n, 3, 3)),
-            "bstr": np.zeros((n, 3, 3)), "omega": np.zeros((n, 3)), "cen": np.zeros((n, 3)),
             "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8), "fel": np.full((n, 3), np.nan),
         }
         o = self.out
         EK.lattice_update(self.x, self.m, np.ones(n, np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
                           np.arange(n, dtype=np.int64), self.mats, self.nbr, self.nn, self.h, self.dim, self.d,
-                          self.vecs, self.tmat, self.table, self.amat, self.ainv, self.occ, self.docked, self.lam,
-                          0, 0, 1e-4, 1, o["amat"], o["ainv"], o["gmat"], o["bstr"], o["omega"], o["cen"], o["fown"],
-                          o["valid"], o["fel"])
+                          self.vecs, self.tmat, self.table, np.arange(n, dtype=np.int64), self.amat, self.ainv,
+                          self.occ, self.docked, self.lam, 0, 0, 1e-4, 1, o["amat"], o["ainv"], self.occ, self.docked,
+                          o["gmat"], o["fown"], o["valid"], o["fel"])
 
     def forces(self) -> np.ndarray:
         """Total elastic force on every particle, as the force pass adds it (own share + member forces)."""

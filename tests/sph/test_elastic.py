@@ -113,6 +113,67 @@ def test_momentum_conserved_to_roundoff(dim):
     assert np.abs(np.cross(x, f).sum(axis=0)).max() <= 1e-13 * scale * arm
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_untracked_docking_rates_and_goal_matrices_change_nothing(dim):
+    """With an infinite docking gain the lattice pass needs no docking rates (``lam`` of shape (N, 0)) and
+    without freezing no goal matrices (``gmat`` of shape (0, 3, 3)): every output is bit-identical."""
+    rng = np.random.default_rng(7)
+    d = 0.1
+    x = lattice_block(dim, d) + 0.1 * d * rng.standard_normal((1, 3))
+    x = x + 0.12 * d * rng.standard_normal(x.shape)
+    if dim == 2:
+        x[:, 2] = 0.0
+    mat = Material(elastic_stiffness=2e4, young=300.0, poisson=0.3, goal_deformation=0.6, docking_rate=50.0,
+                   fracture_stretch=0.1)
+    s = LatticeState(x, dim, d, mat, rng.uniform(0.5, 1.5, len(x)))
+    n, q = s.n, len(s.vecs)
+    outs = []
+    for lam, gmat in ((np.full((n, q), 50.0), np.zeros((n, 3, 3))), (np.zeros((n, 0)), np.zeros((0, 3, 3)))):
+        occ = np.full((n, q), -1, np.int32)
+        docked = np.zeros((n, q), np.uint8)
+        o = {k: np.zeros((n, 3, 3)) for k in ("amat", "ainv")}
+        o.update(fown=np.zeros((n, 3)), valid=np.zeros(n, np.uint8), fel=np.zeros((n, 3)))
+        for step in range(2):  # docking at random (probability 1 - exp(-λ Δt) = 0.39 per step)
+            EK.lattice_update(s.x, s.m, np.ones(n, np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
+                              np.arange(n, dtype=np.int64), s.mats, s.nbr, s.nn, s.h, dim, d, s.vecs, s.tmat, s.table,
+                              np.arange(n, dtype=np.int64), s.amat, s.ainv, occ, docked, lam, 0, step, 1e-2, 0,
+                              o["amat"], o["ainv"], occ, docked, gmat, o["fown"], o["valid"], o["fel"])
+        outs.append((occ, docked, *o.values()))
+    assert outs[0][1].any() and not outs[0][1].all() and outs[0][4].any()  # some slots docked, some forces
+    for a, b in zip(*outs, strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_lattice_state_read_through_the_sort_order():
+    """The lattice pass reads the previous state at rows ``order`` (the re-sort) and writes it in the new
+    order: the same as re-sorting the state first and passing the identity."""
+    rng = np.random.default_rng(9)
+    d = 0.1
+    x = lattice_block(3, d) + 0.1 * d * rng.standard_normal((1, 3))
+    x = x + 0.1 * d * rng.standard_normal(x.shape)
+    s = LatticeState(x, 3, d, Material(elastic_stiffness=2e4, young=300.0, poisson=0.3), np.ones(len(x)))
+    s.run()  # a previous state: occupants, docking flags and lattice transformations
+    n, q = s.n, len(s.vecs)
+    amat, ainv = s.out["amat"], s.out["ainv"]
+    order = rng.permutation(n).astype(np.int64)
+    prev = {"amat": np.empty_like(amat), "ainv": np.empty_like(ainv), "occ": s.occ.copy(), "docked": s.docked.copy()}
+    prev["amat"][order], prev["ainv"][order] = amat, ainv  # the previous step's rows: row order[i] is particle i
+    prev["occ"][order], prev["docked"][order] = s.occ, s.docked
+    results = []
+    for o_, a_, ai_, oc_, dk_ in ((order, prev["amat"], prev["ainv"], prev["occ"], prev["docked"]),
+                                  (np.arange(n, dtype=np.int64), amat, ainv, s.occ.copy(), s.docked.copy())):
+        out = [np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), np.full((n, q), -7, np.int32), np.full((n, q), 7, np.uint8),
+               np.zeros((n, 3)), np.zeros(n, np.uint8), np.zeros((n, 3))]
+        EK.lattice_update(s.x, s.m, np.ones(n, np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
+                          np.arange(n, dtype=np.int64), s.mats, s.nbr, s.nn, s.h, 3, d, s.vecs, s.tmat, s.table, o_,
+                          a_, ai_, oc_, dk_, np.zeros((n, 0)), 0, 1, 1e-4, 0, out[0], out[1], out[2], out[3],
+                          np.zeros((0, 3, 3)), out[4], out[5], out[6])
+        results.append(out)
+    assert results[0][5].all()
+    for a, b in zip(*results, strict=True):
+        assert np.array_equal(a, b)
+
+
 def test_printed_torque_correction_is_not_exact():
     """Eqs. (8.32)-(8.33) as printed leave a torque; the exact correction removes it (NOTES.md)."""
     rng = np.random.default_rng(5)

@@ -654,10 +654,23 @@ def polar_factors(a, dim, rot, sym, work):
 
 # -- the update pass ---------------------------------------------------------------------
 
+
+@njit(**PLAIN)
+def _keep_previous(i, o, amat, ainv, amat_out, ainv_out):
+    """Row ``i`` of the new lattice transformation and its inverse: the previous ones, rows ``o``
+    (no shape matching)."""
+    for p in range(3):
+        for q in range(3):
+            amat_out[i, p, q] = amat[o, p, q]
+            ainv_out[i, p, q] = ainv[o, p, q]
+
+
 #: Blocks of the lattice pass. Each block of particles owns a window of member-force
 #: accumulators (the rows of its particles' neighbours), summed in block order: the result
 #: does not depend on the number of threads.
 LATTICE_BLOCKS = 16
+#: Rows of the member-force sum per parallel task.
+SUM_ROWS = 4096
 #: Fast-math flags of the lattice pass (reassociation vectorises the sums over members;
 #: no ``nnan``/``ninf``).
 LATTICE_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
@@ -665,8 +678,8 @@ LATTICE_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 
 @njit(cache=True, fastmath=LATTICE_FASTMATH, error_model="numpy")
 def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, lv,
-                   c6, w_self, tm, tmat, table, amat, ainv, occ, docked, lam, seed, step, dt, prime, onebody,
-                   amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid):
+                   c6, w_self, tm, tmat, table, order, amat, ainv, occ, docked, lam, seed, step, dt, prime, onebody,
+                   amat_out, ainv_out, occ_out, docked_out, gmat, fown, valid):
     """The particles ``r0 .. r1 - 1`` of :func:`lattice_update` (one block, serial); member forces are
     added into ``win`` (W, 3), the accumulator rows ``lo_b, lo_b + 1, ...``. ``onebody``: every
     particle is solid and of one object (no neighbour needs the phase and object test)."""
@@ -702,26 +715,24 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
     mm = np.empty((3, 3))
     minv = np.empty((3, 3))
     work = np.empty((4, 3, 3))
+    keep_goal = gmat.shape[0] > 0
+    track = lam.shape[1] > 0
     for i in range(r0, r1):
+        o = order[i]  # the particle's row in the state of the previous step
         valid[i] = 0
         cnt = min(nnbr[i], cap)
-        for p in range(3):
-            fown[i, p] = 0.0
-            omega[i, p] = 0.0
-            cen[i, p] = 0.0
-            for q in range(3):
-                amat_out[i, p, q] = amat[i, p, q]
-                ainv_out[i, p, q] = ainv[i, p, q]
-                gmat[i, p, q] = 0.0
-                bstr[i, p, q] = 0.0
+        fown[i, 0] = 0.0
+        fown[i, 1] = 0.0
+        fown[i, 2] = 0.0
         mt = matid[i]
         ke = mats[mt, M.KE]
         lmu = mats[mt, M.LMU]
         llam = mats[mt, M.LLAM]
         if phase[i] != SOLID or (ke <= 0.0 and lmu <= 0.0 and llam <= 0.0):
             for q in range(nq):
-                occ[i, q] = -1
-                docked[i, q] = 0
+                occ_out[i, q] = -1
+                docked_out[i, q] = 0
+            _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
             continue
         rho0 = mats[mt, M.RHO0]
         xi0 = x[i, 0]
@@ -729,15 +740,15 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         xi2 = x[i, 2]
         oi = obj[i]
         # world offset -> lattice frame in units of d (A^(t-1)^-1 / d), in 3D straight on to D3 coordinates
-        p00 = (tm[0, 0] * ainv[i, 0, 0] + tm[0, 1] * ainv[i, 1, 0] + tm[0, 2] * ainv[i, 2, 0]) / spacing
-        p01 = (tm[0, 0] * ainv[i, 0, 1] + tm[0, 1] * ainv[i, 1, 1] + tm[0, 2] * ainv[i, 2, 1]) / spacing
-        p02 = (tm[0, 0] * ainv[i, 0, 2] + tm[0, 1] * ainv[i, 1, 2] + tm[0, 2] * ainv[i, 2, 2]) / spacing
-        p10 = (tm[1, 0] * ainv[i, 0, 0] + tm[1, 1] * ainv[i, 1, 0] + tm[1, 2] * ainv[i, 2, 0]) / spacing
-        p11 = (tm[1, 0] * ainv[i, 0, 1] + tm[1, 1] * ainv[i, 1, 1] + tm[1, 2] * ainv[i, 2, 1]) / spacing
-        p12 = (tm[1, 0] * ainv[i, 0, 2] + tm[1, 1] * ainv[i, 1, 2] + tm[1, 2] * ainv[i, 2, 2]) / spacing
-        p20 = (tm[2, 0] * ainv[i, 0, 0] + tm[2, 1] * ainv[i, 1, 0] + tm[2, 2] * ainv[i, 2, 0]) / spacing
-        p21 = (tm[2, 0] * ainv[i, 0, 1] + tm[2, 1] * ainv[i, 1, 1] + tm[2, 2] * ainv[i, 2, 1]) / spacing
-        p22 = (tm[2, 0] * ainv[i, 0, 2] + tm[2, 1] * ainv[i, 1, 2] + tm[2, 2] * ainv[i, 2, 2]) / spacing
+        p00 = (tm[0, 0] * ainv[o, 0, 0] + tm[0, 1] * ainv[o, 1, 0] + tm[0, 2] * ainv[o, 2, 0]) / spacing
+        p01 = (tm[0, 0] * ainv[o, 0, 1] + tm[0, 1] * ainv[o, 1, 1] + tm[0, 2] * ainv[o, 2, 1]) / spacing
+        p02 = (tm[0, 0] * ainv[o, 0, 2] + tm[0, 1] * ainv[o, 1, 2] + tm[0, 2] * ainv[o, 2, 2]) / spacing
+        p10 = (tm[1, 0] * ainv[o, 0, 0] + tm[1, 1] * ainv[o, 1, 0] + tm[1, 2] * ainv[o, 2, 0]) / spacing
+        p11 = (tm[1, 0] * ainv[o, 0, 1] + tm[1, 1] * ainv[o, 1, 1] + tm[1, 2] * ainv[o, 2, 1]) / spacing
+        p12 = (tm[1, 0] * ainv[o, 0, 2] + tm[1, 1] * ainv[o, 1, 2] + tm[1, 2] * ainv[o, 2, 2]) / spacing
+        p20 = (tm[2, 0] * ainv[o, 0, 0] + tm[2, 1] * ainv[o, 1, 0] + tm[2, 2] * ainv[o, 2, 0]) / spacing
+        p21 = (tm[2, 0] * ainv[o, 0, 1] + tm[2, 1] * ainv[o, 1, 1] + tm[2, 2] * ainv[o, 2, 1]) / spacing
+        p22 = (tm[2, 0] * ainv[o, 0, 2] + tm[2, 1] * ainv[o, 1, 2] + tm[2, 2] * ainv[o, 2, 2]) / spacing
         # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
         for q in range(nq + 1):
             bestd[q] = np.inf
@@ -818,29 +829,33 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
             j = bestj[q]
             has = j >= 0
             newocc = ut[max(bestt[q], 0)] if has else -1
-            if newocc != occ[i, q]:
-                occ[i, q] = newocc
-                docked[i, q] = 0
-            lq = lam[i, q]
-            lup = min(lq + gain * dt, lmax) if gain_fin else lmax
-            ldown = max(lq - loss * dt, 0.0) if loss_fin else 0.0
-            lnew = lup if has else ldown
-            if lnew != lq:  # a settled rate is not rewritten (no dirty cache lines)
-                lam[i, q] = lnew
-            if has and docked[i, q] == 0:
+            dk = docked[o, q] if newocc == occ[o, q] else 0  # a new occupant starts undocked
+            occ_out[i, q] = newocc
+            if track:
+                lq = lam[i, q]
+                lup = min(lq + gain * dt, lmax) if gain_fin else lmax
+                ldown = max(lq - loss * dt, 0.0) if loss_fin else 0.0
+                lnew = lup if has else ldown
+                if lnew != lq:  # a settled rate is not rewritten (no dirty cache lines)
+                    lam[i, q] = lnew
+            else:  # an infinite gain: the rate of an assigned slot is the maximum, whatever it was
+                lnew = lmax
+            if has and dk == 0:
                 if prime:
-                    docked[i, q] = 1
+                    dk = 1
                 elif lnew > 0.0:
                     if lnew == np.inf or uniform(seed, step, uid_i, q, STREAM_DOCK) < 1.0 - math.exp(-lnew * dt):
-                        docked[i, q] = 1
-            if brittle and has and docked[i, q] == 1:
+                        dk = 1
+            if brittle and has and dk == 1:
                 t = bestt[q]
                 rr = rt[0, t] * rt[0, t] + rt[1, t] * rt[1, t] + rt[2, t] * rt[2, t]
                 rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
                 if math.sqrt(rr) > (1.0 + frac) * rest:
-                    docked[i, q] = 0
-                    lam[i, q] = 0.0
-            dflag[q] = has & (docked[i, q] == 1)
+                    dk = 0
+                    if track:
+                        lam[i, q] = 0.0
+            docked_out[i, q] = dk
+            dflag[q] = has & (dk == 1)
         # the docked members, in slot order (branch-free: every slot is written, only members advance)
         count = 0
         for q in range(nq):
@@ -898,10 +913,12 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         mm[2, 1] = s12
         mm[2, 2] = s22
         if count < dim:
+            _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
             continue
         tr = (s00 + s11 + (s22 if dim == 3 else 0.0)) / dim
         det = _inv3(mm, minv)
         if not det > 1e-6 * tr ** dim:
+            _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
             continue
         for p in range(3):
             bp0 = b00 if p == 0 else (b10 if p == 1 else b20)
@@ -957,8 +974,11 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         # 5. strain stress: b = V_i P M^-1, P = 2mu (A - R) + lam tr(R^T A - I) R
         for p in range(3):
             for q in range(3):
-                gmat[i, p, q] = g[p, q]
                 mm[p, q] = 2.0 * lmu * (a[p, q] - rot[p, q]) + llam * trs * rot[p, q]
+        if keep_goal:
+            for p in range(3):
+                for q in range(3):
+                    gmat[i, p, q] = g[p, q]
         if dim == 2:
             for p in range(3):
                 mm[2, p] = 0.0
@@ -969,7 +989,6 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                 b[p, q] = vol * (mm[p, 0] * minv[0, q] + mm[p, 1] * minv[1, q] + mm[p, 2] * minv[2, q])
                 if dim == 2 and (p == 2 or q == 2):
                     b[p, q] = 0.0
-                bstr[i, p, q] = b[p, q]
         # 6. member forces (8.31 + strain), torque about x_i, weights for the correction
         g00, g01, g02 = g[0, 0], g[0, 1], g[0, 2]
         g10, g11, g12 = g[1, 0], g[1, 1], g[1, 2]
@@ -1061,12 +1080,6 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                 om0 = 0.0
                 om1 = 0.0
                 om2 = 0.0
-        omega[i, 0] = om0
-        omega[i, 1] = om1
-        omega[i, 2] = om2
-        cen[i, 0] = c0
-        cen[i, 1] = c1
-        cen[i, 2] = c2
         # own share: -sum of member forces + correction at y = -c
         fown[i, 0] = -fs0 + wi * (om1 * (-c2) - om2 * (-c1))
         fown[i, 1] = -fs1 + wi * (om2 * (-c0) - om0 * (-c2))
@@ -1085,17 +1098,23 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
 
 @njit(cache=True, parallel=True)
 def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing,
-                   slot_vecs, tmat, table, amat, ainv, occ, docked, lam,
+                   slot_vecs, tmat, table, order, amat, ainv, occ, docked, lam,
                    seed, step, dt, prime,
-                   amat_out, ainv_out, gmat, bstr, omega, cen, fown, valid, fel):
+                   amat_out, ainv_out, occ_out, docked_out, gmat, fown, valid, fel):
     """Lattice assignment, docking, shape matching and neighbourhood forces for every solid particle.
 
-    Inputs are in cell-sorted order; ``nbr`` rows ascending. ``occ`` (N, Q) int32 holds
-    occupant ids (-1 empty), ``docked`` (N, Q) uint8 and ``lam`` (N, Q) docking rates are
-    updated in place. Outputs per particle: new ``A`` and its stabilised inverse, goal
-    matrix ``U S Vᵀ``, ``V_i P M⁻¹``, torque-correction ``ω`` and centroid offset ``c_i``
-    (from ``x_i``), the particle's own share ``fown`` and ``valid`` (1 when the
-    neighbourhood spans the space). ``prime`` (initial state) docks every assigned
+    Inputs are in cell-sorted order; ``nbr`` rows ascending. The state of the previous step
+    (``amat``, ``ainv``, occupant ids ``occ`` (N, Q) int32, -1 empty, ``docked`` (N, Q) uint8) is
+    read at rows ``order`` (N,): particle ``i`` was row ``order[i]`` before the re-sort, so the
+    state needs no re-sort of its own (the pass writes it in the new order: ``amat_out``,
+    ``ainv_out``, ``occ_out``, ``docked_out``; an identity ``order`` may update ``occ`` and
+    ``docked`` in place). The docking rates ``lam`` (N, Q) are updated in place. ``lam`` may have no columns, (N, 0), when every material docks with an
+    infinite gain (the default): the rate of an assigned slot is then the maximum ``λ_d``
+    whatever it was before, so the rates are never needed (the results are the same).
+    Outputs per particle: new ``A`` and its stabilised inverse (the previous ones where the
+    neighbourhood does not span the space), the goal matrix ``U S Vᵀ`` (8.29–8.30, into
+    ``gmat`` unless it has no rows, (0, 3, 3): only freezing needs it), the particle's own
+    share ``fown`` and ``valid`` (1 when the neighbourhood spans the space). ``prime`` (initial state) docks every assigned
     neighbour at once. ``fel`` (N, 3) receives the forces the neighbourhoods exert on their
     members: for particle ``j`` the sum over the neighbourhoods it is docked in of the
     direct + strain force and the exact torque correction ``w_j ω_i × (r_ij − c_i)``. The
@@ -1148,14 +1167,21 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     onebody = others == 0
     for blk in prange(nblk):
         _lattice_block(blk * n // nblk, (blk + 1) * n // nblk, lo[blk], win[blk], x, m, phase, obj, matid, uid, mats,
-                       nbr, nnbr, h, dim, spacing, slot_vecs, lv, c6, w_self, tm, tmat, table, amat, ainv, occ,
-                       docked, lam, seed, step, dt, prime, onebody, amat_out, ainv_out, gmat, bstr, omega, cen, fown,
-                       valid)
-    # the windows summed in block order (deterministic, whatever the thread count)
-    fel[:] = 0.0
-    for blk in range(nblk):
-        for row in range(hi[blk] - lo[blk] + 1):
-            j = lo[blk] + row
-            fel[j, 0] += win[blk, row, 0]
-            fel[j, 1] += win[blk, row, 1]
-            fel[j, 2] += win[blk, row, 2]
+                       nbr, nnbr, h, dim, spacing, slot_vecs, lv, c6, w_self, tm, tmat, table, order, amat,
+                       ainv, occ, docked, lam, seed, step, dt, prime, onebody, amat_out, ainv_out, occ_out, docked_out,
+                       gmat, fown, valid)
+    # the windows summed in block order (deterministic, whatever the thread count), in parallel over rows
+    nchunk = (n + SUM_ROWS - 1) // SUM_ROWS
+    for ch in prange(nchunk):
+        j0 = ch * SUM_ROWS
+        j1 = min(n, j0 + SUM_ROWS)
+        for j in range(j0, j1):
+            fel[j, 0] = 0.0
+            fel[j, 1] = 0.0
+            fel[j, 2] = 0.0
+        for blk in range(nblk):
+            for j in range(max(j0, lo[blk]), min(j1, hi[blk] + 1)):
+                row = j - lo[blk]
+                fel[j, 0] += win[blk, row, 0]
+                fel[j, 1] += win[blk, row, 1]
+                fel[j, 2] += win[blk, row, 2]

@@ -63,6 +63,8 @@ _PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "ph
 _ELASTIC_ARRAYS = ("amat", "ainv", "occ", "docked", "lam")
 #: Per-particle arrays that every step recomputes after the re-sort (not re-sorted in a step).
 _RECOMPUTED = ("a", "xsph", "rho", "p", "dtemp")
+#: Lattice state that the lattice pass reads in the previous order and writes in the new one (not re-sorted in a step).
+_RESORTED_BY_LATTICE = ("amat", "ainv", "occ", "docked")
 
 
 @dataclass(frozen=True)
@@ -390,7 +392,9 @@ class SPHSimulation(Simulation):
         self.ainv = np.ascontiguousarray(np.repeat(self.frame.T[None], n, axis=0))
         self.occ = np.full((n, q), -1, np.int32) if self.elastic else np.full((n, 0), -1, np.int32)
         self.docked = np.zeros(self.occ.shape, np.uint8)
-        self.lam = np.repeat(self.mats[self.mat, MT.DOCK_MAX][:, None], self.occ.shape[1], axis=1)
+        # docking rates: only a finite docking gain needs them (lattice_update)
+        rates = q if self.elastic and np.any(np.isfinite(self.mats[:, MT.DOCK_GAIN])) else 0
+        self.lam = np.repeat(self.mats[self.mat, MT.DOCK_MAX][:, None], rates, axis=1)
         cap = self.config.neighbor_capacity or (24 if self.dim == 2 else 64)
         self.nbr = np.zeros((n, cap + 1), np.int32)  # + the scratch column of the branch-free fill
         self.nnbr = np.zeros(n, np.int64)
@@ -451,15 +455,18 @@ class SPHSimulation(Simulation):
         """Re-sort the per-particle arrays by grid cell (``self.grid``).
 
         ``full=False`` (the step) leaves out the arrays that the density and force passes
-        overwrite before anything reads them (:data:`_RECOMPUTED`).
+        overwrite before anything reads them (:data:`_RECOMPUTED`) and the lattice state that
+        the lattice pass re-sorts as it reads it (:data:`_RESORTED_BY_LATTICE`, through
+        ``self._order``).
         """
         from unmesh.spatial import build_cell_grid
 
         g = build_cell_grid(self.x, K.CELL_FRACTION * self.h)
         order = g.order
         spare = self._spare
+        self._order = np.ascontiguousarray(order, dtype=np.int64)
         for name in self._arrays():
-            if not full and name in _RECOMPUTED:
+            if not full and (name in _RECOMPUTED or name in _RESORTED_BY_LATTICE):
                 continue
             if name == "x":
                 self.x = np.ascontiguousarray(g.points)
@@ -484,8 +491,10 @@ class SPHSimulation(Simulation):
         n = len(self.x)
         if self._scratch is None or self._scratch["fown"].shape[0] != n:
             self._scratch = {
-                "amat_out": np.zeros((n, 3, 3)), "ainv_out": np.zeros((n, 3, 3)), "gmat": np.zeros((n, 3, 3)),
-                "bstr": np.zeros((n, 3, 3)), "omega": np.zeros((n, 3)), "cen": np.zeros((n, 3)),
+                "amat_out": np.zeros((n, 3, 3)), "ainv_out": np.zeros((n, 3, 3)),
+                "occ_out": np.empty_like(self.occ), "docked_out": np.empty_like(self.docked),
+                # the goal matrices only for freezing (phase_pass)
+                "gmat": np.zeros((n if self.phase_changes else 0, 3, 3)),
                 "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8),
                 "fel": np.zeros((n, 3)),
             }
@@ -518,18 +527,20 @@ class SPHSimulation(Simulation):
         if self.elastic:
             EK.lattice_update(self.x, self.m, self.phase, self.obj, self.mat, self.uid, self.mats, self.nbr, self.nnbr,
                               self.h, self.dim, self.spacing, self.slot_vecs, self.tmat, self.slot_table,
-                              self.amat, self.ainv, self.occ, self.docked, self.lam, self.config.seed, self.steps,
-                              self.dt_last, 1 if prime else 0, s["amat_out"], s["ainv_out"], s["gmat"], s["bstr"],
-                              s["omega"], s["cen"], s["fown"], s["valid"], s["fel"])
+                              self._order, self.amat, self.ainv, self.occ, self.docked, self.lam, self.config.seed,
+                              self.steps, self.dt_last, 1 if prime else 0, s["amat_out"], s["ainv_out"], s["occ_out"],
+                              s["docked_out"], s["gmat"], s["fown"], s["valid"], s["fel"])
         K.force_pass(self.x, self.v, self.m, self.rho, self.p, self.temp, self.phase, self.obj, self.mat, self.uid,
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
                      self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.bnoslip,
                      self.grad_scale, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
         if self.elastic:
-            # the new lattice transformations become the previous ones of the next step
+            # the new lattice state (in the new order) becomes the previous one of the next step
             self.amat, s["amat_out"] = s["amat_out"], self.amat
             self.ainv, s["ainv_out"] = s["ainv_out"], self.ainv
+            self.occ, s["occ_out"] = s["occ_out"], self.occ
+            self.docked, s["docked_out"] = s["docked_out"], self.docked
 
     def max_sound_speed(self) -> float:
         """Largest wave speed of the materials present: ``√(ΓK/ρ0)``, elastic ``√((λ+2μ)/ρ0)``."""
@@ -653,7 +664,8 @@ class SPHSimulation(Simulation):
             self.ainv[has] = self.ainv[donor[has]]
             self.occ[changed] = -1
             self.docked[changed] = 0
-            self.lam[changed] = self.mats[self.mat[changed], MT.DOCK_MAX][:, None]
+            if self.lam.shape[1]:
+                self.lam[changed] = self.mats[self.mat[changed], MT.DOCK_MAX][:, None]
         self.phase[changed] = new_phase[changed]
 
     def _bind_skins(self) -> dict[str, Any]:
