@@ -148,6 +148,8 @@ class _Topology:
     mesh: PolyMesh
     parent: np.ndarray  # new element -> element of the integrated mesh it came from (material)
     kept: np.ndarray  # new element -> integrated element with identical data, -1 if changed
+    rots: np.ndarray | None = None  # rotations of the integrated elements in the state before the change
+    u: np.ndarray | None = None  # displacements right after the change (the rotations hold while they do)
 
 
 @dataclass
@@ -227,6 +229,7 @@ class Dynamics:
         self.mesh = mesh
         self.u = np.zeros((mesh.n_nodes, 3))
         self._forces_cache: tuple[Any, ...] | None = None
+        self._rot_cache: tuple[Any, ...] | None = None
         self.v = np.zeros((mesh.n_nodes, 3))
         self.time = 0.0
         self.groups: list[tuple[np.ndarray, Prescribed]] = []
@@ -302,14 +305,27 @@ class Dynamics:
         benchmark). The state is identified by the objects it is made of (every change of
         ``u``, the mesh or the element data assigns new ones).
         """
-        key = (self.u, self.mesh, self.integ, self.kstiff, self.warping)
+        key = self._state_key()
         c = self._forces_cache
-        if c is not None and len(c[0]) == len(key) and all(a is b for a, b in zip(c[0], key, strict=True)):
+        if c is not None and _same(c[0], key):
             return c[1], c[2], c[3]
-        R = self.rotations()
+        R = self._cached_rotations()
+        if R is None:
+            R = self.rotations()
         f, en = self.elastic_forces(R)
         self._forces_cache = (key, R, f, en)
         return R, f, en
+
+    def _state_key(self) -> tuple[Any, ...]:
+        return (self.u, self.mesh, self.integ, self.kstiff, self.warping)
+
+    def _cached_rotations(self) -> np.ndarray | None:
+        """The rotations of the current state if already computed (by :meth:`_state_forces` or a re-integration)."""
+        key = self._state_key()
+        for c in (self._forces_cache, self._rot_cache):
+            if c is not None and _same(c[0], key):
+                return c[1]
+        return None
 
     def potential_energy(self) -> float:
         """Gravitational potential -Σ m_i g·x_i."""
@@ -514,8 +530,11 @@ class Dynamics:
             ch |= prev.kept[parent] < 0
             kept = np.where(ch, -1, prev.kept[parent])
             parent = prev.parent[parent]
+            rots = prev.rots
         else:
             kept = np.where(ch, -1, parent)
+            # an unchanged element keeps its nodes' positions (copies), hence its rotation
+            rots = self._cached_rotations()
         self.u = W @ self.u
         self.v = W @ self.v
         # keep the factorised preconditioner: mapped through W, exact solve on the touched nodes
@@ -533,7 +552,7 @@ class Dynamics:
         self.groups = [(m[first] & copy, p) for m, p in self.groups]
         self.loads = [(m[first] & copy, ld) for m, ld in self.loads]
         self.contact = self.contact[first] & copy
-        self._pending = _Topology(mesh, parent, kept)
+        self._pending = _Topology(mesh, parent, kept, rots, self.u)
         self.mesh = mesh
         self._used = np.zeros(mesh.n_nodes, bool)
         self._used[mesh.element_nodes()[1]] = True
@@ -563,6 +582,12 @@ class Dynamics:
         self.integ = ElementIntegration(noff, nodes, vols, mu, soff, w, smp, goff, g, old_integ.corrected)
         koff, kdata = merge_csr(old_k.offsets, old_k.data, ks_new.offsets, ks_new.data, from_new, src)
         self._setup_element_data(ElementStiffness(noff, nodes, koff, kdata))
+        if pend.rots is not None and pend.u is self.u and self.warping:
+            # Horn only for the re-integrated elements (bit-identical to a full pass: per element)
+            R = np.empty((mesh.n_elements, 3, 3))
+            R[~from_new] = pend.rots[pend.kept[~from_new]]
+            R[from_new] = _horn_all(mesh.points, self.positions(), new.node_offsets, new.nodes, new.mu)
+            self._rot_cache = (self._state_key(), R)
 
     def flush(self) -> float:
         """Apply a pending topology change now; returns the seconds spent re-integrating."""
@@ -571,6 +596,11 @@ class Dynamics:
         t = time.perf_counter()
         self._apply_pending()
         return time.perf_counter() - t
+
+
+def _same(key: tuple[Any, ...], other: tuple[Any, ...]) -> bool:
+    """Whether two state keys hold the same objects."""
+    return len(key) == len(other) and all(a is b for a, b in zip(key, other, strict=True))
 
 
 def _expand(value: Any, n: int, name: str) -> np.ndarray:
