@@ -175,3 +175,20 @@ def test_cracks_stay_open():
     left = cloud.positions[:, 0] < 1.2
     gap = out.positions[~left, 0].min() - out.positions[left, 0].max()
     assert gap > 0.45
+
+
+def test_the_two_sides_of_a_thin_part_are_not_cover_neighbours():
+    """Surfels on the two faces of a thin plate (normals apart) never widen each other's splats."""
+    from unmesh.surfels import SurfelCloud
+
+    cloud, nodes, _ = _plane_surface()
+    top = cloud.positions + np.array([0.0, 0.0, 0.02])        # a fifth of the spacing above, facing the other way
+    both = SurfelCloud(np.vstack([cloud.positions, top]),
+                       np.vstack([cloud.normals, -cloud.normals]), radii=np.concatenate([cloud.radii, cloud.radii]))
+    surf = SkinnedSurface(both, nodes, np.tile([0.0, 0.0, 1.0], (len(nodes), 1)))
+    n = len(cloud.positions)
+    side = np.arange(len(both.positions)) >= n
+    across = side[surf._cover_nbr] != side[:, None]
+    assert across.any()                                # the nearest neighbour is often on the other face
+    assert np.all(surf._cover_scale2[across] == 0.0)
+    assert np.all(surf._cover_scale2[~across & (surf._cover_nbr != np.arange(len(side))[:, None])] > 0.0)

@@ -27,7 +27,8 @@ surfels bound to different ``x_0`` were stretched by up to 2.2, those with the s
 ``x_0`` by up to 1.3). Each dense surfel therefore also keeps its :data:`COVER_NEIGHBORS`
 nearest rest neighbours, and its radius grows with the largest stretch of those distances
 (:func:`cover_radii_reference`). Neighbours that would need more than :data:`COVER_CAP` times
-the axis radius count as torn apart, and so do neighbours separated by a crack (the segment between their rest positions crosses a crack disc, 7.3.2)
+the axis radius count as torn apart, and so do neighbours whose rest normals differ by more
+than 60° (the two sides of a thin part), and neighbours separated by a crack (the segment between their rest positions crosses a crack disc, 7.3.2)
 or that share no bound node are ignored, so cracks stay open.
 Under rigid motions the radii are those of the axes. (So are they under uniform shrinking;
 under uniform stretching by ``s`` the axes of (7.26) stretch only along ``e1``, to about
@@ -59,6 +60,9 @@ COVER_NEIGHBORS = 6
 #: deformed-axis radius count as torn apart (before the balloon of Fig. 7.10 tears, seams need
 #: up to 2.1, 99 % of them less than 1.6; in its opening the torn material needs far more).
 COVER_CAP = 2.0
+#: Rest neighbours whose normals make a larger angle (cosine below this) do not count: the two
+#: sides of a thin part (an ear) are not neighbours on the surface.
+COVER_FACING = 0.5
 
 
 def skin_weight(r: np.ndarray) -> np.ndarray:
@@ -361,12 +365,16 @@ class SkinnedSurface:
                           reach=self._reaches(bind, pts))
         self.disc = _Passive(self.k)
         # rest neighbours of the dense surfels and (rest radius / rest distance)^2, for the splat
-        # radii (module notes); 0 for the surfel itself and pairs with no common bound node
+        # radii (module notes); 0 for the surfel itself, pairs with no common bound node and
+        # pairs facing apart (the two sides of a thin part)
         dist, self._cover_nbr = KDTree(pts).knn(pts, int(min(COVER_NEIGHBORS + 1, len(pts))))
         rest_r = np.linalg.norm(axes, axis=2).max(axis=1)
         with np.errstate(divide="ignore"):
             scale2 = np.where(dist > 0, (rest_r[:, None] / dist) ** 2, 0.0)
-        self._cover_scale2 = np.where(_cover_pairs(bind, self._cover_nbr, np.arange(len(pts))), scale2, 0.0)
+        nrm = cloud.normals
+        facing = np.einsum("sk,sak->sa", nrm, nrm[self._cover_nbr]) >= COVER_FACING
+        keep = _cover_pairs(bind, self._cover_nbr, np.arange(len(pts))) & facing
+        self._cover_scale2 = np.where(keep, scale2, 0.0)
         self._reach = float(self.dense.view("reach").max()) if self.dense.n else 0.0
         from unmesh.shells.topology import csr_from_groups
 
