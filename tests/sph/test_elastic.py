@@ -36,6 +36,15 @@ def _rotation(dim: int, angles: np.ndarray) -> np.ndarray:
     return rz @ ry @ rx
 
 
+def _disturbed_lattice(dim: int, d: float, rng: np.random.Generator, shift: float, noise: float) -> np.ndarray:
+    """The rest lattice moved by ``shift d`` and disturbed by ``noise d`` (random normal; z = 0 in 2D)."""
+    x = lattice_block(dim, d) + shift * d * rng.standard_normal((1, 3))
+    x = x + noise * d * rng.standard_normal(x.shape)
+    if dim == 2:
+        x[:, 2] = 0.0
+    return x
+
+
 def _params(dim: int) -> ElasticParams:
     mu, lam = lame_parameters(500.0, 0.3)
     return ElasticParams(dim, stiffness=1e5, goal_deformation=0.5, mu=mu, lam=lam)
@@ -79,10 +88,7 @@ def test_numba_matches_numpy_reference(dim, young):
     """lattice_update + gather equals the per-neighbourhood numpy reference on a disturbed lattice."""
     rng = np.random.default_rng(3)
     d = 0.1
-    x = lattice_block(dim, d) + 0.12 * d * rng.standard_normal((1, 3))
-    x = x + 0.1 * d * rng.standard_normal(x.shape)
-    if dim == 2:
-        x[:, 2] = 0.0
+    x = _disturbed_lattice(dim, d, rng, 0.12, 0.1)
     mat = Material(elastic_stiffness=2e4, young=young, poisson=0.25, goal_deformation=0.7)
     s = LatticeState(x, dim, d, mat, rng.uniform(0.5, 1.5, len(x)))
     f = s.forces()
@@ -119,10 +125,7 @@ def test_untracked_docking_rates_and_goal_matrices_change_nothing(dim):
     without freezing no goal matrices (``gmat`` of shape (0, 3, 3)): every output is bit-identical."""
     rng = np.random.default_rng(7)
     d = 0.1
-    x = lattice_block(dim, d) + 0.1 * d * rng.standard_normal((1, 3))
-    x = x + 0.12 * d * rng.standard_normal(x.shape)
-    if dim == 2:
-        x[:, 2] = 0.0
+    x = _disturbed_lattice(dim, d, rng, 0.1, 0.12)
     mat = Material(elastic_stiffness=2e4, young=300.0, poisson=0.3, goal_deformation=0.6, docking_rate=50.0,
                    fracture_stretch=0.1)
     s = LatticeState(x, dim, d, mat, rng.uniform(0.5, 1.5, len(x)))
