@@ -402,7 +402,7 @@ class Dynamics:
         rounds = 0
         resume = False  # the active set is confirmed: continue the loose solve's PCG to cg_tol
         solver: PCG | None = None
-        solver_its = its_worst = 0  # iterations of the current PCG over its runs
+        solver_its = 0  # iterations of the current PCG over its runs
         while True:
             tol = self.cg_tol if tight else CONTACT_TOL
             rounds += 1
@@ -437,11 +437,10 @@ class Dynamics:
                     solver = PCG(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec(kind, normal))
                     vnew, its, res = solver.run(tol, self.cg_maxiter)
                     solver_its = its
-                its_worst = solver_its
             elif mode == "direct":
                 vnew, its = direct_solve(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal), 1
             info.iterations += int(its)
-            worst = max(worst, int(its_worst if mode == "lu-pcg" else its))
+            worst = max(worst, int(solver_its if mode == "lu-pcg" else its))
             resume = False
             if self.ground is None:
                 break

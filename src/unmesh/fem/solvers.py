@@ -174,7 +174,7 @@ def direct_solve(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, b:
     from scipy.sparse.linalg import spsolve
 
     n = len(indptr) - 1
-    mat = sp.bsr_array((blocks.reshape(-1, 3, 3), indices, indptr), shape=(3 * n, 3 * n)).tocsr()
+    mat = block_csr(indptr, indices, blocks)
     t1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
     t1 /= np.linalg.norm(t1)
     t2 = np.cross(normal, t1)
@@ -298,7 +298,7 @@ class LaggedLU:
             blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind0, nrm)
         # double precision: single precision solves 1.5x faster but, with lumped masses spanning
         # 5 decades (slivers after cuts), stalled PCG on the bunny-slicing benchmark
-        A0 = sp.bsr_array((blocks0.reshape(-1, 3, 3), indices, indptr), shape=(3 * n, 3 * n)).tocsr()
+        A0 = block_csr(indptr, indices, blocks0)
         perm = nested_dissection(indptr, indices)
         try:
             if perm is None:
@@ -459,7 +459,7 @@ def _local_factor(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, n
     m = len(nodes)
     if kt.any():  # the filter on the blocks (two sparse products cost a fifth of a local factorisation)
         sub = SK.filter_blocks(sub_ptr, sub_idx, sub, kt, np.ascontiguousarray(normal, dtype=np.float64))
-    L = sp.csr_array(sp.bsr_array((sub.reshape(-1, 3, 3), sub_idx, sub_ptr), shape=(3 * m, 3 * m)).tocsr())
+    L = block_csr(sub_ptr, sub_idx, sub)
     perm = nested_dissection(sub_ptr, sub_idx) if m >= LOCAL_ND_NODES else None
     dof = None if perm is None else (3 * perm[:, None] + np.arange(3)).ravel()
     return nodes, _PermutedLU(L, dof)
@@ -478,18 +478,19 @@ def _sub_block_array(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray
     return sub_ptr, lc, np.ascontiguousarray(blocks[keep])
 
 
-def _sub_blocks(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray,
-                pattern: bool = False) -> Any:
+def _sub_blocks(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray) -> sp.csr_array:
     """The (3m, 3m) CSR submatrix of a 3×3-block CSR matrix on the sorted node set ``nodes`` (m,).
 
     Picks the blocks directly (no conversion of the whole matrix, which cost more than
-    the local factorisation on the bunny benchmark). With ``pattern``, also returns the
-    node-level CSR ``(indptr, indices)`` of the submatrix.
+    the local factorisation on the bunny benchmark).
     """
-    sub_ptr, lc, sub = _sub_block_array(indptr, indices, blocks, nodes)
-    m = len(nodes)
-    out = sp.csr_array(sp.bsr_array((sub.reshape(-1, 3, 3), lc, sub_ptr), shape=(3 * m, 3 * m)).tocsr())
-    return (out, sub_ptr, lc) if pattern else out
+    return block_csr(*_sub_block_array(indptr, indices, blocks, nodes))
+
+
+def block_csr(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray) -> sp.csr_array:
+    """The scalar (3n, 3n) CSR matrix of a node-level CSR pattern with 3×3 blocks (nnz, 9)."""
+    n3 = 3 * (len(indptr) - 1)
+    return sp.csr_array(sp.bsr_array((blocks.reshape(-1, 3, 3), indices, indptr), shape=(n3, n3)).tocsr())
 
 
 def node_rotations(rots: np.ndarray, node_offsets: np.ndarray, nodes: np.ndarray, weights: np.ndarray,
