@@ -229,3 +229,46 @@ def test_bad_input():
         fb.arc_length([0, 0, 0], [1, 0, 0], [2, 0, 0], samples=0)
     with pytest.raises(InputError, match="finite"):
         fb.bending_angle([0, 0, 0], [1, np.nan, 0], [2, 0, 0], [0, 0, 1])
+
+
+def test_degenerate_fibers_are_those_whose_projected_end_tangent_vanishes(rng):
+    """The degenerate test looks at the end tangents the angle (7.10) sees: projected onto the
+    fiber's normal plane. A centre slid to one end and sideways within a flat sheet has a long
+    end tangent (its sideways part) whose projection vanishes; the angle there jumps by pi."""
+    n = [0.0, 0.0, 1.0]
+    x1, x, x2 = [-1.0, 0, 0], [0.7, 0.45, 0], [1.0, 0, 0]
+    t0, t1, tc = fb.tangents(x1, x, x2)
+    assert np.linalg.norm(t1) > 0.6 * np.linalg.norm(tc)           # the full tangent is long
+    assert fb.degenerate(x1, x, x2, n)[0]
+    # near the flip the angle jumps from 0 to pi between two nearby positions of the centre
+    before, after = ([0.683 + d, 0.45, 0] for d in (-0.01, 0.01))
+    assert abs(fb.bending_angle(x1, before, x2, n, 0.0, fb.TANGENT_SOFTENING)[0]) < 1e-12
+    assert abs(fb.bending_angle(x1, after, x2, n, 0.0, fb.TANGENT_SOFTENING)[0]) == pytest.approx(np.pi)
+    assert fb.degenerate(x1, before, x2, n)[0] and fb.degenerate(x1, after, x2, n)[0]
+    # bending in the normal plane: the projection is the tangent itself (the plain test)
+    a1, a, a2, _ = _random_fibers(rng, 400, bend=0.8)
+    t0, t1, tc = fb.tangents(a1, a, a2)
+    plane = np.cross(a - a1, a2 - a1)                 # normal of the fiber's plane: N in the plane
+    nrm_in = np.cross(plane, tc)
+    plain = np.minimum(np.einsum("ij,ij->i", t0, t0), np.einsum("ij,ij->i", t1, t1)) < 0.09 * np.einsum(
+        "ij,ij->i", tc, tc)
+    assert 0 < plain.sum() < len(plain)
+    np.testing.assert_array_equal(fb.degenerate(a1, a, a2, nrm_in), plain)
+
+
+def test_degenerate_kernels_match_the_reference(rng):
+    """Per-step scan (:func:`unmesh.shells._kernels.fracture_scan`) counts the fibers the numpy test finds."""
+    from unmesh.shells import _kernels
+
+    f = 30_000
+    x = rng.normal(size=(3 * f, 3))
+    fibers = np.arange(3 * f).reshape(f, 3)
+    s = rng.normal(size=(3 * f, 3))
+    s[::7] *= 1e-3                                    # umbrella vectors almost zero: the soft axis
+    soft = rng.uniform(0.0, 0.3, 3 * f)
+    soft[::5] = 0.0
+    ref = fb.degenerate(x[fibers[:, 0]], x[fibers[:, 1]], x[fibers[:, 2]], s[fibers[:, 1]], soft[fibers[:, 1]], 0.3)
+    z, one = np.zeros(f), np.ones(f)
+    _, bad = _kernels.fracture_scan(x, fibers, s, soft, z, z, one, z, one, one, 0.09)
+    assert 0 < ref.sum() < f
+    assert bad == ref.sum()

@@ -153,3 +153,42 @@ def test_crumbs_cut_off_from_every_fiber_follow_a_visible_piece():
         sim.step()
     np.testing.assert_allclose(sim.x[i] - sim.x[a], rest[i] - rest[a], atol=1e-12)
     np.testing.assert_allclose(sim.v[i], sim.v[a], atol=1e-12)
+
+
+def test_a_centre_sliding_inside_the_sheet_loses_its_fiber_before_the_angle_flips():
+    """Issue 6 (the 11,860-node poster blew up at frame 49): a node left with one fiber next to a
+    crack slid sideways and along it inside the flat sheet; the end tangent the angle (7.10)
+    sees, projected onto the fiber's normal plane, shrank through zero while the full tangent
+    stayed long, so the old end-tangent test never fired, the angle jumped from 0 to pi in one
+    step and its unbounded gradient released ~1e8 of energy. Here the centre is moved that way
+    kinematically between pinned ends: the fiber is dropped (counts as torn) before the flip."""
+    from unmesh.shells.topology import ShellTopology
+
+    cloud = grid_cloud(21, 21, 0.025)
+    idx = grid_nodes(21, 21, 2)
+    rest = cloud.positions[idx]
+    i = int(np.argmin(np.linalg.norm(rest, axis=1)))
+    topo = build_topology(rest, cloud.normals[idx])
+    f = topo.fibers
+    along = (f[:, 1] == i) & (np.abs(rest[f[:, 2], 2] - rest[f[:, 0], 2]) < 1e-9)   # i's fiber along x
+    ends = f[along][0, [0, 2]]
+    h = np.linalg.norm(rest[ends[1]] - rest[ends[0]]) / 2
+    mat = ShellMaterial(ks=1000.0, kb=10000.0, damping=0.3, density=10.0, fracture_stretch=10.0)
+    # 0.8 h along the fiber and 0.45 h sideways (in the sheet) in 0.1 s: the flip is at ~0.68 h along
+    sim = ShellSimulation(cloud, mat, 0.001, node_indices=idx, gravity=(0, 0, 0), total_area=0.25, pinned=[ends],
+                          handles=[{"region": np.array([i]), "velocity": (8 * h, 0.0, 4.5 * h), "stop": 0.1}])
+    t = sim.topology
+    keep = ~(t.fibers == i).any(axis=1) | along     # i is the centre of that one fiber and on no other
+    sim.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
+                                       t.fibers[keep], t.soft)
+    sim.fibers = sim.fibers.take(keep)
+    sim.acc = sim._accelerations()
+    dropped = None
+    for step in range(150):
+        sim.step()
+        assert sim.check() is None
+        assert np.abs(sim._last.angles).max() < 0.5 * np.pi                     # no fiber flipped
+        assert sim.kinetic_energy() + sim.elastic_energy() < 0.1     # ~0.01-0.02 (the flip: ~1e6)
+        if dropped is None and not (sim.topology.fibers[:, 1] == i).any():
+            dropped = step
+    assert dropped is not None and dropped < 68                                  # before the flip

@@ -191,6 +191,35 @@ def angle(d10, d11, d12, d20, d21, d22, n0, n1, n2, soft, with_grad):
             gn0, gn1, gn2)
 
 
+@njit(cache=True, inline="always")
+def degenerate(x, j1, i, j2, n0, n1, n2, soft, ratio2):
+    """True when fiber (j1, i, j2) is degenerate: an end tangent projected onto the fiber's normal
+    plane (as :func:`angle` sees it) is shorter than ``sqrt(ratio2) |tc|``, with the centre's
+    umbrella vector ``N`` and regularisation ``soft`` (:func:`unmesh.shells.fibers.degenerate`)."""
+    t00 = -1.25 * x[j1, 0] + 1.5 * x[i, 0] - 0.25 * x[j2, 0]
+    t01 = -1.25 * x[j1, 1] + 1.5 * x[i, 1] - 0.25 * x[j2, 1]
+    t02 = -1.25 * x[j1, 2] + 1.5 * x[i, 2] - 0.25 * x[j2, 2]
+    t10 = 0.25 * x[j1, 0] - 1.5 * x[i, 0] + 1.25 * x[j2, 0]
+    t11 = 0.25 * x[j1, 1] - 1.5 * x[i, 1] + 1.25 * x[j2, 1]
+    t12 = 0.25 * x[j1, 2] - 1.5 * x[i, 2] + 1.25 * x[j2, 2]
+    tc0 = 0.5 * (x[j2, 0] - x[j1, 0])
+    tc1 = 0.5 * (x[j2, 1] - x[j1, 1])
+    tc2 = 0.5 * (x[j2, 2] - x[j1, 2])
+    u0, u1, u2 = _cross(n0, n1, n2, tc0, tc1, tc2)
+    tt = tc0 * tc0 + tc1 * tc1 + tc2 * tc2
+    rho = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2 + soft * soft * tt)
+    ir = 1.0 / rho if rho > 0.0 else 1.0
+    a0 = u0 * ir
+    a1 = u1 * ir
+    a2 = u2 * ir
+    w = 2.0 - (a0 * a0 + a1 * a1 + a2 * a2)
+    ta0 = t00 * a0 + t01 * a1 + t02 * a2
+    ta1 = t10 * a0 + t11 * a1 + t12 * a2
+    q0 = t00 * t00 + t01 * t01 + t02 * t02 - ta0 * ta0 * w
+    q1 = t10 * t10 + t11 * t11 + t12 * t12 - ta1 * ta1 * w
+    return min(q0, q1) < ratio2 * tt
+
+
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def fiber_measure(x, j1, i, j2, n0, n1, n2, soft, gram):
     """``(l~, theta)`` of fiber (j1, i, j2) with normal N and regularisation ``soft`` (no gradients)."""

@@ -24,6 +24,7 @@ from unmesh.shells._fiber_kernels import (  # noqa: F401 - re-exported for the c
     _cross,
     angle,
     arc,
+    degenerate,
     fiber_angle_batch,
     fiber_length_batch,
     fiber_measure,
@@ -463,33 +464,22 @@ def segments_blocked_grid(p, q, centers, normals, radii, out):
 
 
 @njit(cache=True, parallel=True)
-def fracture_scan(x, fibers, lengths, angles, rest_length, rest_angle, gamma_s, gamma_b, degenerate):
+def fracture_scan(x, fibers, s, soft, lengths, angles, rest_length, rest_angle, gamma_s, gamma_b, ratio2):
     """Cheap per-step test: (fibers over a fracture threshold (7.24), degenerate fibers).
 
-    degenerate is the squared ratio below which an end tangent counts as vanished relative to
-    the centre tangent (0 disables that test). Parallel over fibers (integer reductions).
+    ratio2 is the squared ratio below which an end tangent, projected as the tangent angle
+    sees it (with the umbrella vectors ``s`` (N, 3) and regularisation ``soft`` (N,) of the
+    centres), counts as vanished relative to the centre tangent (0 disables that test;
+    :func:`unmesh.shells.fibers.degenerate`). Parallel over fibers (integer reductions).
     """
     over = 0
     bad = 0
     for k in prange(fibers.shape[0]):
         if lengths[k] > rest_length[k] * (1.0 + gamma_s[k]) or abs(angles[k] - rest_angle[k]) > gamma_b[k]:
             over += 1
-        if degenerate > 0.0:
-            a = fibers[k, 0]
-            i = fibers[k, 1]
-            b = fibers[k, 2]
-            s0 = 0.0
-            s1 = 0.0
-            sc = 0.0
-            for c in range(3):
-                t0 = -1.25 * x[a, c] + 1.5 * x[i, c] - 0.25 * x[b, c]
-                t1 = 0.25 * x[a, c] - 1.5 * x[i, c] + 1.25 * x[b, c]
-                tc = 0.5 * (x[b, c] - x[a, c])
-                s0 += t0 * t0
-                s1 += t1 * t1
-                sc += tc * tc
-            if min(s0, s1) < degenerate * sc:
-                bad += 1
+        i = fibers[k, 1]
+        if ratio2 > 0.0 and degenerate(x, fibers[k, 0], i, fibers[k, 2], s[i, 0], s[i, 1], s[i, 2], soft[i], ratio2):
+            bad += 1
     return over, bad
 
 

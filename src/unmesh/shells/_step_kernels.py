@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.shells._block_kernels import BLK, ROWS
+from unmesh.shells._fiber_kernels import degenerate as degenerate_fiber
 from unmesh.shells._kernels import FASTMATH, SCRATCH, chunk_forces, sum_chunks, touched_range
 
 #: Collider kinds in ``col_type``; ``col_data`` rows are (point, normal, restitution, friction)
@@ -137,7 +138,9 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
         ``creep_stretch, creep_bend, yield_stretch, yield_bend, weakening`` and a flag word
         (1: stretch creep active, 2: bend creep active).
     degenerate : float
-        Squared end/centre tangent ratio below which a fiber counts as degenerate (0: no test).
+        Squared end/centre tangent ratio below which a fiber counts as degenerate (0: no test);
+        the end tangents projected onto the fiber's normal plane with the new ``out_s`` and
+        ``soft`` (:func:`unmesh.shells.fibers.degenerate`).
     scan : bool
         Count fibers over a fracture threshold and degenerate ones.
     buf, out_* :
@@ -251,22 +254,10 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
             if scan:
                 if ln > (lorig[k] + lplast[k]) * (1.0 + gamma_s[k]) or abs(th - (aorig[k] + aplast[k])) > gamma_b[k]:
                     over += 1
-                if degenerate > 0.0:
-                    a = fibers[k, 0]
-                    i = fibers[k, 1]
-                    b2 = fibers[k, 2]
-                    s0 = 0.0
-                    s1 = 0.0
-                    sc = 0.0
-                    for d in range(3):
-                        t0 = -1.25 * x[a, d] + 1.5 * x[i, d] - 0.25 * x[b2, d]
-                        t1 = 0.25 * x[a, d] - 1.5 * x[i, d] + 1.25 * x[b2, d]
-                        tc = 0.5 * (x[b2, d] - x[a, d])
-                        s0 += t0 * t0
-                        s1 += t1 * t1
-                        sc += tc * tc
-                    if min(s0, s1) < degenerate * sc:
-                        bad += 1
+                i = fibers[k, 1]
+                if degenerate > 0.0 and degenerate_fiber(x, fibers[k, 0], i, fibers[k, 2], out_s[i, 0], out_s[i, 1],
+                                                         out_s[i, 2], soft[i], degenerate):
+                    bad += 1
     return over, bad, folds
 
 

@@ -62,6 +62,7 @@ __all__ = [
     "arc_length_gradient",
     "bending_angle",
     "bending_angle_gradient",
+    "degenerate",
     "evaluate",
     "spline_coefficients",
     "tangents",
@@ -218,6 +219,58 @@ def tangents(x1: Any, x: Any, x2: Any) -> tuple[np.ndarray, np.ndarray, np.ndarr
     """
     p = np.stack(_nodes(x1, x, x2), axis=1)
     return (np.einsum("r,frc->fc", _T0, p), np.einsum("r,frc->fc", _T1, p), np.einsum("r,frc->fc", _TC, p))
+
+
+def degenerate(x1: Any, x: Any, x2: Any, normal: Any, soft: Any = 0.0, ratio: float = 0.3) -> np.ndarray:
+    """Fibers whose tangent angle is near its singularity: an end tangent, as the angle sees it, vanished.
+
+    The tangent angle (7.10, :func:`bending_angle_gradient`) uses the end tangents projected
+    onto the fiber's normal plane, ``p = t - (t.a) a`` with the (regularised) axis
+    ``a = u / sqrt(|u|^2 + soft^2 |tc|^2)``, ``u = N x tc``. A centre node can slide along its
+    fiber, or sideways inside the surface, without changing the arc length much; where it
+    has lost its other fibers (next to a crack) nothing stops it, and the projected tangent
+    ``p0`` or ``p1`` can shrink to zero and turn round while the full tangent stays long (its
+    sideways, geodesic part is invisible to the angle). When ``p0 . p1 + e |tc|^2`` changes
+    sign with ``a.(p0 x p1) = 0`` (a flat sheet), ``theta`` jumps by pi and its gradient is
+    unbounded. A fiber is degenerate when ``min(|p0|, |p1|) < ratio |tc|``; for a fiber
+    bending in its normal plane ``p = t`` (the plain end-tangent test).
+
+    Parameters
+    ----------
+    x1, x, x2 : array_like, shape (F, 3)
+        Fiber nodes.
+    normal : array_like, shape (F, 3)
+        Umbrella vector ``N`` of each fiber's centre node (as for :func:`bending_angle_gradient`).
+    soft : float or array_like (F,)
+        Axis regularisation of the angle (``topology.soft`` of the centre).
+    ratio : float
+        Shortest projected end tangent relative to ``|tc|``.
+
+    Returns
+    -------
+    ndarray (F,) bool
+
+    Example
+    -------
+    >>> n = [0.0, 0.0, 1.0]
+    >>> bool(degenerate([-1, 0, 0], [0, 0, 0], [1, 0, 0], n)[0])      # straight, centred
+    False
+    >>> bool(degenerate([-1, 0, 0], [0.7, 0.5, 0], [1, 0, 0], n)[0])  # slid to one end and sideways
+    True
+    """
+    p1, p, p2 = _nodes(x1, x, x2)
+    nrm = as_points(normal, "normal", length=len(p1))
+    sft = np.broadcast_to(np.asarray(soft, dtype=np.float64), (len(p1),))
+    t0, t1, tc = tangents(p1, p, p2)
+    u = np.cross(nrm, tc)
+    tt = np.einsum("ij,ij->i", tc, tc)
+    rho = np.sqrt(np.einsum("ij,ij->i", u, u) + sft**2 * tt)
+    a = u / np.where(rho > 0, rho, 1.0)[:, None]
+    aa = np.einsum("ij,ij->i", a, a)
+    # |t - (t.a) a|^2 = |t|^2 - (t.a)^2 (2 - |a|^2)
+    q0 = np.einsum("ij,ij->i", t0, t0) - np.einsum("ij,ij->i", t0, a) ** 2 * (2.0 - aa)
+    q1 = np.einsum("ij,ij->i", t1, t1) - np.einsum("ij,ij->i", t1, a) ** 2 * (2.0 - aa)
+    return np.minimum(q0, q1) < float(ratio) ** 2 * tt
 
 
 def bending_angle_gradient(x1: Any, x: Any, x2: Any, normal: Any, soft: Any = 0.0,

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from unmesh.shells import _kernels, _rebuild_kernels
+from unmesh.shells.fibers import degenerate as degenerate_fibers
 from unmesh.shells.forces import node_terms, threads_for
 from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
 from unmesh.shells.fracture import select_cracks
@@ -57,18 +58,19 @@ class Tearing:
     """Fracture handling of :class:`~unmesh.shells.simulation.ShellSimulation` (a mixin; see the module)."""
 
     def _drop_degenerate(self) -> bool:
-        """Remove fibers whose spline degenerated (an end tangent below 0.3 of the centre tangent).
+        """Remove fibers whose tangent angle degenerated (:func:`unmesh.shells.fibers.degenerate`).
 
-        A centre node can slide along its fiber without changing the arc length; near a
-        crack, where it has lost other fibers, it may slide until an end tangent vanishes
-        and the tangent angle becomes singular. Such fibers count as torn.
+        A centre node can slide along its fiber, or sideways within the surface, without
+        changing the arc length much; near a crack, where it has lost its other fibers, it
+        may slide until an end tangent -- as the angle (7.10) sees it, projected onto the
+        fiber's normal plane -- vanishes: the angle jumps by pi and its gradient is unbounded
+        there. Fibers whose projected end tangent falls below 0.3 of the centre tangent
+        count as torn (7.3.2: the crack has cut the material they measured).
         """
         f = self.topology.fibers
         x = self.x
-        t0 = -1.25 * x[f[:, 0]] + 1.5 * x[f[:, 1]] - 0.25 * x[f[:, 2]]
-        t1 = 0.25 * x[f[:, 0]] - 1.5 * x[f[:, 1]] + 1.25 * x[f[:, 2]]
-        tc2 = 0.25 * np.einsum("ij,ij->i", x[f[:, 2]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
-        bad = np.minimum(np.einsum("ij,ij->i", t0, t0), np.einsum("ij,ij->i", t1, t1)) < DEGENERATE_RATIO**2 * tc2
+        c = f[:, 1]
+        bad = degenerate_fibers(x[f[:, 0]], x[c], x[f[:, 2]], self._last.umbrella[c], self.topology.soft[c], DEGENERATE_RATIO)
         if not bad.any():
             return False
         keep = ~bad
@@ -83,7 +85,8 @@ class Tearing:
     def _fracture(self) -> None:
         st = self.fibers
         with threads_for(len(st), key="fracture_scan"):
-            over, bad = _kernels.fracture_scan(self.x, self.topology.fibers, self._last.lengths, self._last.angles,
+            over, bad = _kernels.fracture_scan(self.x, self.topology.fibers, self._last.umbrella, self.topology.soft,
+                                               self._last.lengths, self._last.angles,
                                                st.rest_length(), st.rest_angle(), st.fracture_stretch,
                                                st.fracture_bend, DEGENERATE_RATIO**2)
         if over == 0 and bad == 0:
