@@ -8,9 +8,11 @@ as in the reference, their rest and current measures are taken from the new umbr
 of those nodes alone, and the new rows are spliced into the node-ordered arrays
 (:mod:`unmesh.shells._rebuild_kernels`), which are then already sorted.
 
-When the crack leaves a node that still had neighbours with fewer than
-:data:`~unmesh.shells.fracture.MIN_VISIBLE` visible ones (it is detached from the whole
-shell, a global change), the reference is used.
+When the crack leaves a node that had neighbours with fewer than
+:data:`~unmesh.shells.fracture.MIN_VISIBLE` visible ones, the reference detaches it from
+the whole shell: it leaves every neighbour list, umbrella pair and fiber. Those are the
+lists, pairs and fibers of the nodes around it (found in one pass over the arrays); their
+rows are spliced too, stripped of the detached nodes.
 """
 
 from __future__ import annotations
@@ -71,16 +73,21 @@ def _measure(x: np.ndarray, fibers: np.ndarray, pairs: np.ndarray, pair_offsets:
     return length, angle
 
 
+def _entries(offsets: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions of the entries of the listed CSR rows (in row order) and the row of each."""
+    counts = offsets[rows + 1] - offsets[rows]
+    pos = np.repeat(offsets[rows] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+    return pos.astype(np.int64), np.repeat(rows, counts)
+
+
 def _crossed(rest: np.ndarray, topology: ShellTopology, rows: np.ndarray, cracks: CrackSet, new: int) -> np.ndarray:
     """(R,) bool: a segment from the node to one of its neighbours crosses one of the last ``new`` cracks."""
-    counts = topology.neighbor_offsets[rows + 1] - topology.neighbor_offsets[rows]
-    pos = np.repeat(topology.neighbor_offsets[rows] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-    src = np.repeat(rows, counts)
+    pos, src = _entries(topology.neighbor_offsets, rows)
     latest = CrackSet(cracks.centers[-new:], cracks.normals[-new:], cracks.radii[-new:], cracks.nodes[-new:],
                       cracks.times[-new:])
     hit = latest.blocked(rest[src], rest[topology.neighbors[pos]])
     out = np.zeros(len(rows), dtype=bool)
-    out[np.repeat(np.arange(len(rows)), counts)[hit]] = True
+    out[np.searchsorted(rows, src[hit])] = True
     return out
 
 
@@ -90,6 +97,39 @@ def _softening_rows(rest: np.ndarray, pairs: np.ndarray, centers: np.ndarray, ro
     np.add.at(s, np.searchsorted(rows, centers), np.cross(rest[pairs[:, 0]] - rest[centers],
                                                           rest[pairs[:, 1]] - rest[centers]))
     return UMBRELLA_SOFTENING * np.linalg.norm(s, axis=1)
+
+
+def _stripped(topology: ShellTopology, loose: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The present neighbours, umbrella pairs and fibers of ``rows`` without the ``loose`` nodes
+    (a loose row keeps none): neighbour offsets and indices, pairs, their centres, fibers and
+    the fibers' indices."""
+    pos, of = _entries(topology.neighbor_offsets, rows)
+    nb = topology.neighbors[pos]
+    ok = ~loose[nb] & ~loose[of]
+    noff, nbr = _row_offsets(of[ok], rows), nb[ok]
+    pos, of = _entries(topology.pair_offsets, rows)
+    ok = ~loose[topology.pairs[pos]].any(axis=1) & ~loose[of]
+    pairs, centers = topology.pairs[pos[ok]], of[ok]
+    pos, _ = _entries(topology.fiber_offsets, rows)
+    pos = pos[~loose[topology.fibers[pos]].any(axis=1)]
+    return noff, nbr, pairs, centers, topology.fibers[pos], pos
+
+
+def _traces(topology: ShellTopology, gone: np.ndarray) -> np.ndarray:
+    """(N,) bool: the ``gone`` nodes and the nodes whose neighbour list, umbrella pairs or fibers hold one."""
+    out = gone.copy()
+    _rebuild_kernels.touching(topology.fibers, topology.pairs, topology.pair_offsets, gone, out)
+    _, of = _entries(topology.neighbor_offsets, np.arange(topology.n_nodes))
+    out[of[gone[topology.neighbors]]] = True
+    return out
+
+
+def _union_order(union: np.ndarray, keys_a: np.ndarray, keys_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CSR offsets over the sorted ``union`` of two row sets, and the order that groups the entries
+    ``concatenate([a, b])`` of rows ``keys_a`` (grouped in row order) and ``keys_b`` (likewise) by row."""
+    keys = np.concatenate([keys_a, keys_b])
+    order = np.argsort(keys, kind="stable")
+    return _row_offsets(keys[order], union), order
 
 
 def _keys(f: np.ndarray, n: int) -> np.ndarray:
@@ -128,6 +168,26 @@ def rebuild_near(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopo
                          current, samples, tree, new_cracks)[:3]
 
 
+def _neighbourhoods(rest: np.ndarray, topology: ShellTopology, cracks: CrackSet, rows: np.ndarray, neighbors: int,
+                    tree: Any, new_cracks: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """Visible neighbourhoods of the ``rows`` (CSR over the rows): searched again, or, for a row
+    with a full list none of whose segments crosses one of the ``new_cracks`` last discs, its
+    present list (see :func:`rebuild_local`)."""
+    if new_cracks is None or not len(cracks) >= new_cracks > 0:
+        return node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
+    full = np.diff(topology.neighbor_offsets)[rows] >= min(neighbors, topology.n_nodes - 1)
+    search = _crossed(rest, topology, rows, cracks, new_cracks) | ~full
+    if search.all():
+        return node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
+    # the present lists of the others and the new lists of the searched ones, in row order
+    soff, snbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows[search], tree=tree)
+    pos, of = _entries(topology.neighbor_offsets, rows)
+    local = np.full(len(rows), -1, dtype=np.int64)
+    local[search] = np.arange(int(search.sum()))
+    noff, src = _splice(_row_offsets(of, rows), local, soff)
+    return noff, _take(src, topology.neighbors[pos], snbr)
+
+
 def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTopology, state: FiberState,
                   cracks: CrackSet, affected: np.ndarray, neighbors: int, min_angle: float,
                   fiber_material: FiberMaterial, current: np.ndarray | None = None, samples: int = 4,
@@ -136,10 +196,11 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
     """:func:`rebuild_near`, and the nodes built again (None when the reference rebuild ran: then
     anything may have changed). The arrays of all other nodes are copies of the old ones.
 
-    ``new_cracks`` (the number of cracks at the end of ``cracks`` that are new) may only be
-    given when no node has ever been detached: then the neighbourhood of an affected node none
-    of whose neighbour segments crosses a new disc is its present one (its first visible
-    candidates stay visible, hidden ones stay hidden), and only the others are searched again.
+    With ``new_cracks`` (the number of cracks at the end of ``cracks`` that are new), an
+    affected node none of whose neighbour segments crosses a new disc keeps its present
+    neighbourhood when that is full (``neighbors`` nodes): it is then the search's result as
+    it was, none of it taken away since (a detached node leaves the lists it is in), and the
+    new discs hide none of its first visible candidates. Only the others are searched again.
     (Its fibers are still made again: fibers dropped before may come back, as in the reference.)
     """
     n = topology.n_nodes
@@ -147,36 +208,22 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
     if current is None or len(rows) == 0 or n >= 2**21:
         return (*rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
                                         fiber_material, current, samples, tree), None)
-    if new_cracks is not None and len(cracks) >= new_cracks > 0:
-        crossed = _crossed(rest, topology, rows, cracks, new_cracks)
-        if crossed.all():
-            noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
-        else:
-            # the present lists of the others and the new lists of the crossed ones, in row order
-            soff, snbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows[crossed], tree=tree)
-            sub_off = np.zeros(len(rows) + 1, dtype=np.int64)
-            np.cumsum(np.diff(topology.neighbor_offsets)[rows], out=sub_off[1:])
-            pos = np.repeat(topology.neighbor_offsets[rows] - sub_off[:-1], np.diff(sub_off)) + np.arange(int(sub_off[-1]))
-            local = np.full(len(rows), -1, dtype=np.int64)
-            local[crossed] = np.arange(int(crossed.sum()))
-            noff, src = _splice(sub_off, local, soff)
-            nbr = _take(src, topology.neighbors[pos], snbr)
-    else:
-        noff, nbr = node_neighborhoods(rest, neighbors, cracks.blocked, nodes=rows, tree=tree)
+    noff, nbr = _neighbourhoods(rest, topology, cracks, rows, neighbors, tree, new_cracks)
     old_counts = np.diff(topology.neighbor_offsets)
     counts = old_counts.copy()
     counts[rows] = np.diff(noff)
     loose = counts < MIN_VISIBLE
-    if (loose & (old_counts > 0)).any():          # a node is detached from the shell: a global change
-        return (*rebuild_near_reference(rest, rest_normals, topology, state, cracks, affected, neighbors, min_angle,
-                                        fiber_material, current, samples, tree), None)
+    # nodes detached now leave the lists, pairs and fibers of the nodes around them, too
+    extra = np.zeros(0, dtype=np.int64)
+    if (loose & (old_counts > 0)).any():
+        around = _traces(topology, loose & (old_counts > 0))
+        around[rows] = False
+        extra = np.flatnonzero(around)
     # pairs and fibers of the affected nodes, from their unfiltered neighbourhoods (as the reference)
     pairs, centers = umbrella_pairs(rest, rest_normals, noff, nbr, nodes=rows)
     new = create_fibers(rest, noff, nbr, min_angle, nodes=rows)
     # reuse the state of fibers that existed before (the last of equal old fibers, as a dict would)
-    k0, k1 = topology.fiber_offsets[rows], topology.fiber_offsets[rows + 1]
-    cnt = k1 - k0
-    aff_old = (np.repeat(k0 - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))).astype(np.int64)
+    aff_old, _ = _entries(topology.fiber_offsets, rows)
     old_keys = _keys(topology.fibers[aff_old], n)
     order = np.argsort(old_keys, kind="stable")
     sk = old_keys[order]
@@ -184,7 +231,7 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
     at = np.searchsorted(sk, new_keys, side="right") - 1
     hit = (at >= 0) & (sk[np.maximum(at, 0)] == new_keys) if len(sk) else np.zeros(len(new), bool)
     reuse = np.where(hit, aff_old[order][np.maximum(at, 0)] if len(sk) else -1, -1).astype(np.int64)
-    if loose.any():                                # nodes detached before: no fibers, pairs or neighbours
+    if loose.any():                                # detached nodes: no fibers, pairs or neighbours
         good = ~loose[pairs].any(axis=1) & ~loose[centers]
         pairs, centers = pairs[good], centers[good]
         att = ~loose[new].any(axis=1) if len(new) else np.zeros(0, bool)
@@ -199,8 +246,9 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
     soft = topology.soft.copy()
     redo = np.zeros(n, dtype=bool)
     redo[rows] = True
+    redo[extra] = True
     redo |= loose
-    soft[loose] = 0.0                              # no pairs (those outside the rows have none here)
+    soft[loose] = 0.0                              # no pairs
     soft[rows] = _softening_rows(rest, pairs, centers, rows)
     # states of the new fibers: the old state where a fiber existed, else the material's
     f = len(new)
@@ -231,6 +279,19 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
                 keep[fr[~ok]] = False
                 new, reuse = new[keep], reuse[keep]
                 st = {name: arr[keep] for name, arr in st.items()}
+    fiber_off = _row_offsets(new[:, 1], rows)
+    if len(extra):
+        # the rows around detached nodes: their present entries without the loose nodes
+        xoff, xnbr, xpairs, xcenters, xfib, xpos = _stripped(topology, loose, extra)
+        union = np.union1d(rows, extra)
+        noff, o = _union_order(union, np.repeat(rows, np.diff(noff)), np.repeat(extra, np.diff(xoff)))
+        nbr = np.concatenate([nbr, xnbr])[o]
+        poff_rows, o = _union_order(union, centers, xcenters)
+        pairs, centers = np.concatenate([pairs, xpairs])[o], np.concatenate([centers, xcenters])[o]
+        fiber_off, o = _union_order(union, new[:, 1], xfib[:, 1])
+        new, reuse = np.concatenate([new, xfib])[o], np.concatenate([reuse, xpos])[o]
+        st = {name: np.concatenate([arr, getattr(state, name)[xpos]])[o] for name, arr in st.items()}
+        rows = union
     # splice the rows into the node-ordered arrays
     row_of = np.full(n, -1, dtype=np.int64)
     row_of[rows] = np.arange(len(rows))
@@ -239,7 +300,7 @@ def rebuild_local(rest: np.ndarray, rest_normals: np.ndarray, topology: ShellTop
     poff, src = _splice(topology.pair_offsets, row_of, poff_rows)
     out_pairs = _take(src, topology.pairs, pairs)
     out_centers = _take(src, topology.pair_center, centers)
-    foff, src = _splice(topology.fiber_offsets, row_of, _row_offsets(new[:, 1], rows))
+    foff, src = _splice(topology.fiber_offsets, row_of, fiber_off)
     fibers = _take(src, topology.fibers, new)
     merged = FiberState._checked(_take(src, getattr(state, name), st[name]) for name in _FIELDS)
     origin = _take(src, np.arange(len(topology.fibers), dtype=np.int64), reuse)

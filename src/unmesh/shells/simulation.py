@@ -548,7 +548,6 @@ class ShellSimulation(Tearing, Simulation):
             self.surface.add_discontinuities(self.cracks.centers, self.cracks.normals, self.cracks.radii,
                                              self.rest_normals[self.cracks.nodes], self.cracks.blocked)
         self._surface_cache = None
-        self._detached = True          # the history of the restored topology is unknown
         self._energy_hist.clear()
         self._energy_window = (0.0, 0.0)
         self._last = None

@@ -131,7 +131,7 @@ class Tearing:
         self.topology, self.fibers, origin, last["touched"] = rebuild_local(
             self.rest, self.rest_normals, self.topology, self.fibers, self.cracks, np.unique(near), self.neighbors,
             self.min_angle, self.material.fiber_material, self.x, self.material.arc_samples, tree=self._rest_tree(),
-            new_cracks=len(chosen) if self._never_detached() else None)
+            new_cracks=len(chosen))
         self._carry_angles(angles, origin)
         rebuilt = np.unique(near)
         self._keep_node_terms(before, had, rebuilt)
@@ -157,16 +157,6 @@ class Tearing:
             return self._accelerations()
         self._x_force = self.x.copy()
         return self._acc_of(res)
-
-    def _never_detached(self) -> bool:
-        """True while no node has had fewer than MIN_VISIBLE neighbours (checked after every rebuild;
-        unknown, so False, after a restore). Then a node's neighbour list is what a new search gives."""
-        from unmesh.shells.fracture import MIN_VISIBLE
-
-        if getattr(self, "_detached", False):
-            return False
-        self._detached = bool((np.diff(self.topology.neighbor_offsets) < MIN_VISIBLE).any())
-        return not self._detached
 
     def _rest_tree(self) -> Any:
         """KD-tree over the rest node positions (built once; the rest positions never change)."""
