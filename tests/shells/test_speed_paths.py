@@ -79,6 +79,26 @@ def test_per_frame_skin_rebind_equals_global_rebind(torn_strip):
     assert surf.disc.n == 2 * len(sim.cracks)
 
 
+def test_per_frame_cover_cut_leaves_no_pair_across_a_crack_or_without_a_common_node(torn_strip):
+    """After the per-frame re-binding (only points whose bound nodes a new disc hides are bound
+    again), every splat-cover pair that still counts shares a bound node and crosses no crack:
+    the pairs of a global evaluation with the final binding, less those cut before."""
+    from unmesh.shells.skinning import _cover_pairs
+
+    sim = torn_strip
+    sim.deformed_surface()
+    surf = sim.surface
+    live = surf._cover_scale2 > 0
+    rows = np.arange(surf.dense.n)
+    shared = _cover_pairs(surf.dense.bind, surf._cover_nbr, rows)
+    assert np.all(shared[live])
+    r_, c_ = np.nonzero(live)
+    pts = surf.dense.view("points")
+    assert not sim.cracks.blocked(pts[r_], pts[surf._cover_nbr[r_, c_]]).any()
+    cut = ~live & (surf._cover_nbr != rows[:, None])
+    assert cut.sum() > 10                                      # the cracks cut pairs
+
+
 def test_neighbor_reach_of_rebuilt_nodes_bounds_the_global_reach(torn_strip):
     sim = torn_strip
     assert sim._reach >= sim._neighbor_reach()

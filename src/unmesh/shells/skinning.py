@@ -467,18 +467,24 @@ class SkinnedSurface:
         part.reach[rows] = self._reaches(b, pts)
         self._reach = max(self._reach, float(part.reach[rows].max()))
 
-    def rebind_near(self, centers: np.ndarray, radius: float, blocked: Any) -> int:
-        """Bind again, with visibility, every point within reach of the given crack centres.
+    def rebind_near(self, centers: np.ndarray, radius: float, blocked: Any, new_blocked: Any = None) -> int:
+        """Bind again, with visibility, the points whose bound nodes the new crack discs hide.
 
-        Only the surfels owned by nodes near the centres are examined (no pass over the
-        whole cloud), and a point only when a centre is within its own reach (the distance
-        to its farthest bound node) plus ``radius``: segments to its bound nodes are no
-        longer, so farther cracks cannot hide them, and the binding stays. Returns the
-        number of points re-bound.
+        ``centers`` and ``radius`` (the largest radius) are those of the new discs; ``blocked``
+        is the visibility test of all discs, ``new_blocked`` that of the new discs alone
+        (default ``blocked``: all discs count as new). Only the surfels owned by nodes near the
+        centres are examined (no pass over the whole cloud), and a point only when a centre is
+        within its own reach (the distance to its farthest bound node) plus ``radius``:
+        segments to its bound nodes are no longer, so farther discs cannot hide them. Of those,
+        a point is bound again only when a new disc hides one of its bound nodes: discs only
+        hide nodes, so a point that still sees all of them keeps its first ``K + 1`` visible
+        candidates, i.e. its binding. Then the splat-cover pairs are cut
+        (:meth:`_cut_cover_pairs`). Returns the number of points bound again.
         """
         if len(centers) == 0 or len(self) == 0:
             return 0
         c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+        new_blocked = blocked if new_blocked is None else new_blocked
         reach = self._reach + radius
         # candidates: surfels owned by nodes within reach + (surfel-to-owner distance <= reach)
         _, near = self.tree.radius_neighbors(c, 2.0 * reach)
@@ -489,29 +495,64 @@ class SkinnedSurface:
             pos = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
             rows = self._owned[pos]            # distinct surfels (each has one owner)
             rows = np.sort(rows[_sk.within_reach(self.dense.points, rows, self.dense.reach, float(radius), c)])
-            if len(rows):
-                self._rebind(self.dense, rows, blocked)
-                self._cut_cover_pairs(rows, blocked)
-                count += len(rows)
+            hidden = rows[self._hides_bound(self.dense, rows, new_blocked)]
+            if len(hidden):
+                self._rebind(self.dense, hidden, blocked)
+                count += len(hidden)
+            self._cut_cover_pairs(hidden, rows, c, float(radius), new_blocked)
         if self.disc.n:
             rows = np.arange(self.disc.n)
             rows = rows[_sk.within_reach(self.disc.points, rows, self.disc.reach, float(radius), c)]
+            rows = rows[self._hides_bound(self.disc, rows, new_blocked)]
             if len(rows):
                 self._rebind(self.disc, rows, blocked)
                 count += len(rows)
         return count
 
-    def _cut_cover_pairs(self, rows: np.ndarray, blocked: Any) -> None:
-        """Drop the rest-neighbour pairs of re-bound ``rows`` (and of their neighbours) that a crack
-        separates or that share no bound node any more: no splat grows across a crack (module notes)."""
+    def _hides_bound(self, part: _Passive, rows: np.ndarray, blocked: Any) -> np.ndarray:
+        """(R,) bool: ``blocked`` hides one of the bound nodes of point ``rows[r]`` of ``part``."""
+        b = part.bind[rows]
+        r_, c_ = np.nonzero(b >= 0)
+        out = np.zeros(len(rows), dtype=bool)
+        if len(r_):
+            hit = blocked(part.points[rows[r_]], self.node_rest[b[r_, c_]])
+            out[r_[hit]] = True
+        return out
+
+    def _zero_reach(self) -> np.ndarray:
+        if len(getattr(self, "_zeros", ())) != self.dense.n:
+            self._zeros = np.zeros(self.dense.n)
+        return self._zeros
+
+    def _cut_cover_pairs(self, rebound: np.ndarray, near: np.ndarray, centers: np.ndarray, radius: float,
+                         new_blocked: Any) -> None:
+        """Drop the rest-neighbour pairs (module notes) that share no bound node any more (pairs with
+        a re-bound end) or that a new disc separates (only pairs among the points ``near`` the new
+        ``centers`` can cross one): no splat grows across a crack. Pairs cut are never restored."""
         nbr, scale2 = self._cover_nbr, self._cover_scale2
-        rows = np.unique(np.concatenate([rows, nbr[rows].reshape(-1)]))
-        keep = _cover_pairs(self.dense.bind, nbr, rows) & (scale2[rows] > 0)
-        r_, c_ = np.nonzero(keep)
+        if len(rebound):
+            if getattr(self, "_cover_rev", None) is None:     # who lists whom (the pairs never change)
+                from unmesh.shells.topology import csr_from_groups
+
+                off, order = csr_from_groups(nbr.reshape(-1), self.dense.n)
+                self._cover_rev = (off, order // nbr.shape[1])
+            off, src = self._cover_rev
+            counts = off[rebound + 1] - off[rebound]
+            pos = np.repeat(off[rebound] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+            rows = np.unique(np.concatenate([rebound, src[pos]]))
+            keep = _cover_pairs(self.dense.bind, nbr, rows) & (scale2[rows] > 0)
+            scale2[rows] = np.where(keep, scale2[rows], 0.0)
+        if getattr(self, "_cover_len", None) is None:          # longest pair that counts
+            pts = self.dense.points[:self.dense.n]
+            live = scale2 > 0
+            self._cover_len = float(np.linalg.norm(pts[nbr[live]] - np.repeat(pts, live.sum(axis=1), axis=0),
+                                                   axis=1).max()) if live.any() else 0.0
+        rows = near[_sk.within_reach(self.dense.points, near, self._zero_reach(), radius + self._cover_len, centers)]
+        r_, c_ = np.nonzero(scale2[rows] > 0)
         if len(r_):
             pts = self.dense.points
-            keep[r_, c_] = ~blocked(pts[rows[r_]], pts[nbr[rows[r_], c_]])
-        scale2[rows] = np.where(keep, scale2[rows], 0.0)
+            hit = new_blocked(pts[rows[r_]], pts[nbr[rows[r_], c_]])
+            scale2[rows[r_[hit]], c_[hit]] = 0.0
 
     def add_discontinuity(self, center: np.ndarray, normal: np.ndarray, radius: float, surface_normal: np.ndarray,
                           blocked: Any) -> None:

@@ -18,8 +18,8 @@ import numpy as np
 from unmesh.shells import _kernels, _rebuild_kernels
 from unmesh.shells.fibers import degenerate as degenerate_fibers
 from unmesh.shells.forces import node_terms, threads_for
+from unmesh.shells.fracture import CrackSet, select_cracks
 from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
-from unmesh.shells.fracture import select_cracks
 from unmesh.shells.rebuild import rebuild_local
 from unmesh.shells.topology import ShellTopology
 
@@ -185,7 +185,8 @@ class Tearing:
         new = np.asarray(self._pending_cracks, dtype=np.int64)
         self._pending_cracks = []
         c = self.cracks
-        self.surface.rebind_near(c.centers[new], float(c.radii[new].max()), c.blocked)
+        latest = CrackSet(c.centers[new], c.normals[new], c.radii[new], c.nodes[new], c.times[new])
+        self.surface.rebind_near(c.centers[new], float(c.radii[new].max()), c.blocked, latest.blocked)
         self.surface.add_discontinuities(c.centers[new], c.normals[new], c.radii[new], self.rest_normals[c.nodes[new]],
                                          c.blocked)
 
