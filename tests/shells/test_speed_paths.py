@@ -99,6 +99,23 @@ def test_per_frame_cover_cut_leaves_no_pair_across_a_crack_or_without_a_common_n
     assert cut.sum() > 10                                      # the cracks cut pairs
 
 
+def test_nearest_nodes_on_fibers_equal_a_tree_over_those_nodes(torn_strip):
+    """Crumb anchors are looked up in the tree over all nodes (asking for more until enough lie on
+    fibers): the same (distance, index)-sorted lists as a tree over the nodes on fibers (a grid:
+    many equal distances)."""
+    from unmesh.spatial import knn
+
+    sim = torn_strip
+    rng = np.random.default_rng(5)
+    for frac in (0.9, 0.3, 0.02):
+        on = rng.random(len(sim.rest)) < frac
+        pool = np.flatnonzero(on)
+        k = int(min(12, len(pool)))
+        nodes = np.arange(len(sim.rest))
+        _, idx = knn(sim.rest[pool], k, queries=sim.rest[nodes])
+        np.testing.assert_array_equal(sim._nearest_on_fiber(nodes, on, k), pool[idx])
+
+
 def test_neighbor_reach_of_rebuilt_nodes_bounds_the_global_reach(torn_strip):
     sim = torn_strip
     assert sim._reach >= sim._neighbor_reach()

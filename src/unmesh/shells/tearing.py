@@ -210,20 +210,35 @@ class Tearing:
         crumbs = rows[~on_fiber[rows] & (self.anchor[rows] < 0) & ~self.fixed[rows]]
         if not len(crumbs):
             return
-        from unmesh.spatial import knn
-
-        pool = np.flatnonzero(on_fiber)
-        if not len(pool):
+        pool = int(on_fiber.sum())
+        if not pool:
             return
-        k = int(min(12, len(pool)))
-        _, idx = knn(self.rest[pool], k, queries=self.rest[crumbs])
-        cand = pool[idx]                                            # (C, k) by distance
+        k = int(min(12, pool))
+        cand = self._nearest_on_fiber(crumbs, on_fiber, k)          # (C, k) by distance
         src = np.repeat(crumbs, k)
         hidden = self.cracks.blocked(self.rest[src], self.rest[cand.ravel()]).reshape(cand.shape)
         # the nearest visible one; a crumb walled in by cracks on all sides (an island of one
         # node, an artifact of overlapping crack discs) follows its nearest node
         first = np.where((~hidden).any(axis=1), np.argmax(~hidden, axis=1), 0)
         self.anchor[crumbs] = cand[np.arange(len(crumbs)), first]
+
+    def _nearest_on_fiber(self, nodes: np.ndarray, on_fiber: np.ndarray, k: int) -> np.ndarray:
+        """(Q, k) int64: the ``k`` nearest nodes on a fiber of each of ``nodes`` (rest positions), sorted
+        by (distance, index) -- what a kd-tree over the nodes on fibers gives -- from the tree over
+        all nodes, asked for more candidates until ``k`` of them are on fibers."""
+        tree, n = self._rest_tree(), len(self.rest)
+        out = np.empty((len(nodes), k), dtype=np.int64)
+        todo = np.arange(len(nodes))
+        m = min(2 * k, n)
+        while len(todo):
+            _, idx = tree.knn(self.rest[nodes[todo]], m)
+            ok = (idx >= 0) & on_fiber[np.maximum(idx, 0)]
+            done = (ok.sum(axis=1) >= k) | (m == n)          # with all nodes asked, a pool of >= k
+            sel = ok[done] & (np.cumsum(ok[done], axis=1) <= k)
+            out[todo[done]] = idx[done][sel].reshape(-1, k)
+            todo = todo[~done]
+            m = min(2 * m, n)
+        return out
 
     def _follow(self) -> None:
         """Move the crumbs with their anchors (see :meth:`_anchor_crumbs`)."""
