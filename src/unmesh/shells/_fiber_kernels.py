@@ -195,7 +195,9 @@ def angle(d10, d11, d12, d20, d21, d22, n0, n1, n2, soft, with_grad):
 def degenerate(x, j1, i, j2, n0, n1, n2, soft, ratio2):
     """True when fiber (j1, i, j2) is degenerate: an end tangent projected onto the fiber's normal
     plane (as :func:`angle` sees it) is shorter than ``sqrt(ratio2) |tc|``, with the centre's
-    umbrella vector ``N`` and regularisation ``soft`` (:func:`unmesh.shells.fibers.degenerate`)."""
+    umbrella vector ``N`` and regularisation ``soft`` (:func:`unmesh.shells.fibers.degenerate`).
+    The projection keeps ``t.tc``, so end tangents with ``(t.tc)^2 >= ratio2 |tc|^4`` pass at
+    once (nearly every fiber); only the others are projected."""
     t00 = -1.25 * x[j1, 0] + 1.5 * x[i, 0] - 0.25 * x[j2, 0]
     t01 = -1.25 * x[j1, 1] + 1.5 * x[i, 1] - 0.25 * x[j2, 1]
     t02 = -1.25 * x[j1, 2] + 1.5 * x[i, 2] - 0.25 * x[j2, 2]
@@ -205,8 +207,13 @@ def degenerate(x, j1, i, j2, n0, n1, n2, soft, ratio2):
     tc0 = 0.5 * (x[j2, 0] - x[j1, 0])
     tc1 = 0.5 * (x[j2, 1] - x[j1, 1])
     tc2 = 0.5 * (x[j2, 2] - x[j1, 2])
-    u0, u1, u2 = _cross(n0, n1, n2, tc0, tc1, tc2)
     tt = tc0 * tc0 + tc1 * tc1 + tc2 * tc2
+    c0 = t00 * tc0 + t01 * tc1 + t02 * tc2
+    c1 = t10 * tc0 + t11 * tc1 + t12 * tc2
+    lim = ratio2 * tt * tt
+    if c0 * c0 >= lim and c1 * c1 >= lim:
+        return False
+    u0, u1, u2 = _cross(n0, n1, n2, tc0, tc1, tc2)
     rho = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2 + soft * soft * tt)
     ir = 1.0 / rho if rho > 0.0 else 1.0
     a0 = u0 * ir

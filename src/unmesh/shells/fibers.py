@@ -262,6 +262,7 @@ def degenerate(x1: Any, x: Any, x2: Any, normal: Any, soft: Any = 0.0, ratio: fl
     nrm = as_points(normal, "normal", length=len(p1))
     sft = np.broadcast_to(np.asarray(soft, dtype=np.float64), (len(p1),))
     t0, t1, tc = tangents(p1, p, p2)
+    r2 = float(ratio) ** 2
     u = np.cross(nrm, tc)
     tt = np.einsum("ij,ij->i", tc, tc)
     rho = np.sqrt(np.einsum("ij,ij->i", u, u) + sft**2 * tt)
@@ -270,7 +271,10 @@ def degenerate(x1: Any, x: Any, x2: Any, normal: Any, soft: Any = 0.0, ratio: fl
     # |t - (t.a) a|^2 = |t|^2 - (t.a)^2 (2 - |a|^2)
     q0 = np.einsum("ij,ij->i", t0, t0) - np.einsum("ij,ij->i", t0, a) ** 2 * (2.0 - aa)
     q1 = np.einsum("ij,ij->i", t1, t1) - np.einsum("ij,ij->i", t1, a) ** 2 * (2.0 - aa)
-    return np.minimum(q0, q1) < float(ratio) ** 2 * tt
+    # a is normal to tc, so p.tc = t.tc and |p| >= |t.tc| / |tc|: those fibers pass at once
+    # (the kernel's shortcut; the same answer)
+    along = (np.einsum("ij,ij->i", t0, tc) ** 2 >= r2 * tt * tt) & (np.einsum("ij,ij->i", t1, tc) ** 2 >= r2 * tt * tt)
+    return ~along & (np.minimum(q0, q1) < r2 * tt)
 
 
 def bending_angle_gradient(x1: Any, x: Any, x2: Any, normal: Any, soft: Any = 0.0,
