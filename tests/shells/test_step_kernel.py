@@ -205,3 +205,41 @@ def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):
             numba.set_num_threads(threads)
     for a, b in zip(*runs, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_force_pass_counts_the_degenerate_fibers_of_the_reference():
+    """The one-kernel step finds degenerate fibers in its force pass (block and scalar paths),
+    from the gathered edge vectors and the new umbrella vectors: the fibers the numpy test finds."""
+    from unmesh.shells import _kernels
+    from unmesh.shells._block_kernels import BLK
+    from unmesh.shells.fibers import degenerate
+    from unmesh.shells.forces import FORCE_CHUNKS, arc_gram
+
+    i = np.arange(150) + 0.5
+    phi, theta = np.arccos(1 - 2 * i / 150), np.pi * (1 + 5**0.5) * i
+    n = np.stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)], axis=1)
+    topo = build_topology(n, n, neighbors=8)
+    reps = BLK // int(np.diff(topo.fiber_offsets).min()) + 1
+    big = ShellTopology.build(topo.n_nodes, topo.neighbor_offsets, topo.neighbors, topo.pairs, topo.pair_center,
+                              np.concatenate([np.tile(topo.fibers[:40], (reps, 1)), topo.fibers[40:]]), topo.soft)
+    assert np.diff(big.fiber_offsets).max() > BLK                      # both paths
+    state = FiberState.at_rest(n, big)
+    y = n + np.random.default_rng(9).normal(scale=0.08, size=n.shape)   # shaken: some fibers degenerate
+    nn, nf = len(n), len(big.fibers)
+    out = [np.empty((nn, 3)), np.empty(nf), np.empty(nf), np.empty((nn, 3)), np.empty((nn, 3)), np.empty((nn, 4)),
+           np.empty(nn), np.empty(nn)]
+    counts = np.diff(big.fiber_offsets)
+    bad = 0
+    for c in range(FORCE_CHUNKS):
+        _, b = _kernels.chunk_forces(c * nn // FORCE_CHUNKS, (c + 1) * nn // FORCE_CHUNKS, y, big.pairs,
+                                     big.pair_offsets[:-1], np.diff(big.pair_offsets), big.soft, big.fibers,
+                                     big.fiber_offsets[:-1], counts, state.length_orig, state.length_plastic,
+                                     state.angle_orig, state.angle_plastic, state.stretch_scale, state.bend_scale, 1.0,
+                                     1.0, arc_gram(4), state.rest_angle(), np.zeros((nn, 2)), np.zeros((nn, 3)),
+                                     np.empty(27 * BLK), np.empty((int(counts.max()), 15)), *out[1:], np.zeros(0, bool),
+                                     False, 0.09)
+        bad += b
+    f, s = big.fibers, out[3]
+    ref = degenerate(y[f[:, 0]], y[f[:, 1]], y[f[:, 2]], s[f[:, 1]], big.soft[f[:, 1]], 0.3)
+    assert 0 < ref.sum() < nf
+    assert bad == ref.sum()

@@ -21,7 +21,7 @@ import math
 
 from numba import njit
 
-from unmesh.shells._fiber_kernels import FASTMATH, SOFT_X, atan2, umbrella_at
+from unmesh.shells._fiber_kernels import FASTMATH, SOFT_X, atan2, degenerate_edges, umbrella_at
 
 #: Fibers per block (one row of the scratch array).
 BLK = 128
@@ -194,13 +194,15 @@ def block_geometry(k0, m, x, fibers, s, soft, gram, blk):
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
                  sscale, bscale, ks, kb, gram, ref, offs, buf, blk, out_len, out_ang, out_s, out_normal, out_node,
-                 out_es, out_eb, scatter, only):
+                 out_es, out_eb, scatter, only, ratio2):
     """Umbrellas, fiber measures, node terms, energies and (``scatter``) forces of nodes ``a .. b-1``
     (with a non-empty mask ``only`` (N,), the forces of the listed nodes only).
 
     The fibers of the block (at most :data:`BLK`) go through :func:`block_geometry`; then
     per node as :func:`unmesh.shells._kernels.node_forces`: ``buf -= dE/dx``. Returns the
-    number of fibers whose angle moved by more than pi/2 from ``ref``.
+    number of fibers whose angle moved by more than pi/2 from ``ref`` and (``ratio2 > 0``)
+    the number of degenerate fibers
+    (:func:`unmesh.shells._fiber_kernels.degenerate_edges`, from the gathered edge vectors).
     """
     B = BLK
     for i in range(a, b):
@@ -212,6 +214,14 @@ def block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, l
     inv_two_pi = 1.0 / two_pi
     half_pi = 0.5 * math.pi
     folds = 0
+    bad = 0
+    if ratio2 > 0.0:
+        for q in range(m):
+            if degenerate_edges(blk[(_D + 0) * B + q], blk[(_D + 1) * B + q], blk[(_D + 2) * B + q],
+                                blk[(_D + 3) * B + q], blk[(_D + 4) * B + q], blk[(_D + 5) * B + q],
+                                blk[(_N + 0) * B + q], blk[(_N + 1) * B + q], blk[(_N + 2) * B + q],
+                                blk[_SOFT * B + q], ratio2):
+                bad += 1
     for q in range(m):                                  # the branch nearest the reference angle
         k = k0 + q
         th = blk[_TH * B + q]
@@ -339,4 +349,4 @@ def block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, l
         buf[i, 0] += fi0
         buf[i, 1] += fi1
         buf[i, 2] += fi2
-    return folds
+    return folds, bad

@@ -192,21 +192,22 @@ def angle(d10, d11, d12, d20, d21, d22, n0, n1, n2, soft, with_grad):
 
 
 @njit(cache=True, inline="always")
-def degenerate(x, j1, i, j2, n0, n1, n2, soft, ratio2):
-    """True when fiber (j1, i, j2) is degenerate: an end tangent projected onto the fiber's normal
-    plane (as :func:`angle` sees it) is shorter than ``sqrt(ratio2) |tc|``, with the centre's
-    umbrella vector ``N`` and regularisation ``soft`` (:func:`unmesh.shells.fibers.degenerate`).
-    The projection keeps ``t.tc``, so end tangents with ``(t.tc)^2 >= ratio2 |tc|^4`` pass at
-    once (nearly every fiber); only the others are projected."""
-    t00 = -1.25 * x[j1, 0] + 1.5 * x[i, 0] - 0.25 * x[j2, 0]
-    t01 = -1.25 * x[j1, 1] + 1.5 * x[i, 1] - 0.25 * x[j2, 1]
-    t02 = -1.25 * x[j1, 2] + 1.5 * x[i, 2] - 0.25 * x[j2, 2]
-    t10 = 0.25 * x[j1, 0] - 1.5 * x[i, 0] + 1.25 * x[j2, 0]
-    t11 = 0.25 * x[j1, 1] - 1.5 * x[i, 1] + 1.25 * x[j2, 1]
-    t12 = 0.25 * x[j1, 2] - 1.5 * x[i, 2] + 1.25 * x[j2, 2]
-    tc0 = 0.5 * (x[j2, 0] - x[j1, 0])
-    tc1 = 0.5 * (x[j2, 1] - x[j1, 1])
-    tc2 = 0.5 * (x[j2, 2] - x[j1, 2])
+def degenerate_edges(d10, d11, d12, d20, d21, d22, n0, n1, n2, soft, ratio2):
+    """True when the fiber with edge vectors ``d1 = x1 - x``, ``d2 = x2 - x`` is degenerate: an end
+    tangent projected onto the fiber's normal plane (as :func:`angle` sees it) is shorter than
+    ``sqrt(ratio2) |tc|``, with the centre's umbrella vector ``N`` and regularisation ``soft``
+    (:func:`unmesh.shells.fibers.degenerate`). The projection keeps ``t.tc``, so end tangents
+    with ``(t.tc)^2 >= ratio2 |tc|^4`` pass at once (nearly every fiber); only the others are
+    projected."""
+    t00 = -1.25 * d10 - 0.25 * d20
+    t01 = -1.25 * d11 - 0.25 * d21
+    t02 = -1.25 * d12 - 0.25 * d22
+    t10 = 0.25 * d10 + 1.25 * d20
+    t11 = 0.25 * d11 + 1.25 * d21
+    t12 = 0.25 * d12 + 1.25 * d22
+    tc0 = 0.5 * (d20 - d10)
+    tc1 = 0.5 * (d21 - d11)
+    tc2 = 0.5 * (d22 - d12)
     tt = tc0 * tc0 + tc1 * tc1 + tc2 * tc2
     c0 = t00 * tc0 + t01 * tc1 + t02 * tc2
     c1 = t10 * tc0 + t11 * tc1 + t12 * tc2
@@ -225,6 +226,13 @@ def degenerate(x, j1, i, j2, n0, n1, n2, soft, ratio2):
     q0 = t00 * t00 + t01 * t01 + t02 * t02 - ta0 * ta0 * w
     q1 = t10 * t10 + t11 * t11 + t12 * t12 - ta1 * ta1 * w
     return min(q0, q1) < ratio2 * tt
+
+
+@njit(cache=True, inline="always")
+def degenerate(x, j1, i, j2, n0, n1, n2, soft, ratio2):
+    """:func:`degenerate_edges` of fiber ``(j1, i, j2)`` at positions ``x``."""
+    return degenerate_edges(x[j1, 0] - x[i, 0], x[j1, 1] - x[i, 1], x[j1, 2] - x[i, 2], x[j2, 0] - x[i, 0],
+                            x[j2, 1] - x[i, 1], x[j2, 2] - x[i, 2], n0, n1, n2, soft, ratio2)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")

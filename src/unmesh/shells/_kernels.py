@@ -25,6 +25,7 @@ from unmesh.shells._fiber_kernels import (  # noqa: F401 - re-exported for the c
     angle,
     arc,
     degenerate,
+    degenerate_edges,
     fiber_angle_batch,
     fiber_length_batch,
     fiber_measure,
@@ -41,7 +42,8 @@ SCRATCH = 15
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast, sscale,
-                bscale, ks, kb, gram, ref, offs, buf, scr, out_len, out_ang, out_s, out_normal, out_node, scatter):
+                bscale, ks, kb, gram, ref, offs, buf, scr, out_len, out_ang, out_s, out_normal, out_node, scatter,
+                ratio2):
     """Energy and force contributions of node ``i``'s umbrella and fibers (7.5-7.17).
 
     One pass per centre node: the umbrella vector ``s_i`` (normal of the tangent angles),
@@ -60,9 +62,10 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
 
     Returns
     -------
-    (es, eb, folds)
-        Membrane and bending energy of the node, and the number of its fibers whose angle
-        moved by more than pi/2 from ``ref``.
+    (es, eb, folds, bad)
+        Membrane and bending energy of the node, the number of its fibers whose angle moved
+        by more than pi/2 from ``ref``, and (``ratio2 > 0``) the number of degenerate ones
+        (:func:`unmesh.shells._fiber_kernels.degenerate_edges`, squared ratio ``ratio2``).
     """
     xi0 = x[i, 0]
     xi1 = x[i, 1]
@@ -78,7 +81,7 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
         out_node[i, 1] = 0.0
         out_node[i, 2] = 0.0
         out_node[i, 3] = 0.0
-        return 0.0, 0.0, 0
+        return 0.0, 0.0, 0, 0
     f0 = fstart[i]
     sf = soft[i]
     q4 = math.pi / 4.0
@@ -91,6 +94,7 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
     h = 0.0
     h0 = 0.0
     folds = 0
+    bad = 0
     for q in range(m):
         k = f0 + q
         j1 = fibers[k, 0]
@@ -101,6 +105,8 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
         d20 = x[j2, 0] - xi0
         d21 = x[j2, 1] - xi1
         d22 = x[j2, 2] - xi2
+        if ratio2 > 0.0 and degenerate_edges(d10, d11, d12, d20, d21, d22, s0, s1, s2, sf, ratio2):
+            bad += 1
         ln, g11, g12, g22 = arc(d10, d11, d12, d20, d21, d22, gram)
         th, ga0, ga1, ga2, gc0, gc1, gc2, gn0, gn1, gn2 = angle(d10, d11, d12, d20, d21, d22, s0, s1, s2, sf, True)
         r = ref[k]
@@ -190,7 +196,7 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
     es = 0.5 * ks * (sig * da * da + esum * inv_m)
     eb = 0.5 * kb * area0 * bsum * inv_m * dh * dh
     if not scatter:
-        return es, eb, folds
+        return es, eb, folds, bad
     if gs0 != 0.0 or gs1 != 0.0 or gs2 != 0.0:
         # through the umbrella vector s_i = sum e_a x e_b: dE/dx_a = e_b x g, dE/dx_b = g x e_a
         for q in range(p0, p0 + pcount[i]):
@@ -210,13 +216,15 @@ def node_forces(i, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig
     buf[i, 0] += fi0
     buf[i, 1] += fi1
     buf[i, 2] += fi2
-    return es, eb, folds
+    return es, eb, folds, bad
+
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
                  sscale, bscale, ks, kb, gram, ref, offs, buf, blk, scr, out_len, out_ang, out_s, out_normal, out_node,
-                 out_es, out_eb, only, scatter):
-    """Forces of the nodes ``lo .. hi-1`` into ``buf`` (``buf -= dE/dx``); returns the fold count.
+                 out_es, out_eb, only, scatter, ratio2):
+    """Forces of the nodes ``lo .. hi-1`` into ``buf`` (``buf -= dE/dx``); returns the fold count and
+    (``ratio2 > 0``) the number of degenerate fibers (:func:`node_forces`).
 
     Consecutive nodes are grouped into blocks of at most :data:`BLK` fibers for
     :func:`unmesh.shells._block_kernels.block_forces` (a node with more fibers takes the
@@ -225,17 +233,19 @@ def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
     ``scatter`` False skips the forces.
     """
     folds = 0
+    bad = 0
     a = lo
     masked = only.shape[0] > 0
     while a < hi:
         if fcount[a] > BLK:
             if not masked or only[a]:
-                es, eb, fo = node_forces(a, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast,
-                                         aorig, aplast, sscale, bscale, ks, kb, gram, ref, offs, buf, scr, out_len,
-                                         out_ang, out_s, out_normal, out_node, scatter)
+                es, eb, fo, bd = node_forces(a, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast,
+                                             aorig, aplast, sscale, bscale, ks, kb, gram, ref, offs, buf, scr, out_len,
+                                             out_ang, out_s, out_normal, out_node, scatter, ratio2)
                 out_es[a] = es
                 out_eb[a] = eb
                 folds += fo
+                bad += bd
             a += 1
             continue
         b = a + 1
@@ -246,11 +256,13 @@ def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
             if masked and only[i]:
                 wanted = True
         if wanted:
-            folds += block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig,
+            fo, bd = block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig,
                                   aplast, sscale, bscale, ks, kb, gram, ref, offs, buf, blk, out_len, out_ang, out_s,
-                                  out_normal, out_node, out_es, out_eb, scatter, only)
+                                  out_normal, out_node, out_es, out_eb, scatter, only, ratio2)
+            folds += fo
+            bad += bd
         a = b
-    return folds
+    return folds, bad
 
 
 @njit(cache=True, inline="always")
@@ -316,7 +328,7 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
         scr = np.empty((max(cap, 1), SCRATCH))
         chunk_forces(c0, c1, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
                      sscale, bscale, ks, kb, gram, ref, offs, b, blk, scr, out_len, out_ang, out_s, out_normal,
-                     out_node, out_es, out_eb, only, scatter)
+                     out_node, out_es, out_eb, only, scatter, 0.0)
     if not scatter:
         return
     for i in prange(n):

@@ -20,7 +20,6 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.shells._block_kernels import BLK, ROWS
-from unmesh.shells._fiber_kernels import degenerate as degenerate_fiber
 from unmesh.shells._kernels import FASTMATH, SCRATCH, chunk_forces, sum_chunks, touched_range
 
 #: Collider kinds in ``col_type``; ``col_data`` rows are (point, normal, restitution, friction)
@@ -139,8 +138,8 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
         (1: stretch creep active, 2: bend creep active).
     degenerate : float
         Squared end/centre tangent ratio below which a fiber counts as degenerate (0: no test);
-        the end tangents projected onto the fiber's normal plane with the new ``out_s`` and
-        ``soft`` (:func:`unmesh.shells.fibers.degenerate`).
+        the end tangents projected onto the fiber's normal plane, tested in the force pass at
+        the positions ``out_x`` with ``out_s`` and ``soft`` (:func:`unmesh.shells.fibers.degenerate`).
     scan : bool
         Count fibers over a fracture threshold and degenerate ones.
     buf, out_* :
@@ -150,8 +149,8 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
     Returns
     -------
     (over, bad, folds)
-        Fibers over a fracture threshold (7.24) and degenerate fibers (both 0 unless
-        ``scan``), and fibers whose angle moved by more than pi/2 since ``ref``.
+        Fibers over a fracture threshold (7.24) (0 unless ``scan``) and degenerate fibers (0
+        unless ``degenerate``), and fibers whose angle moved by more than pi/2 since ``ref``.
     """
     n = x.shape[0]
     nf = fibers.shape[0]
@@ -166,8 +165,9 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
                 _kinematic(i, kin_handle[i], rest, hdisp, hvel, x, v)
             for d in range(3):
                 out_x[i, d] = x[i, d]
-    # elastic forces: every node range scatters into its own buffer
+    # elastic forces: every node range scatters into its own buffer (and counts degenerate fibers)
     folds = 0
+    bad = 0
     span = np.zeros((chunks, 2), dtype=np.int64)
     for c in prange(chunks):
         b = buf[c]
@@ -177,9 +177,12 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
         b[lo:hi, :] = 0.0
         blk = np.empty(ROWS * BLK)
         scr = np.empty((max(cap, 1), SCRATCH))
-        folds += chunk_forces(c * n // chunks, (c + 1) * n // chunks, x, pairs, pstart, pcount, soft, fibers, fstart,
+        fo, bd = chunk_forces(c * n // chunks, (c + 1) * n // chunks, x, pairs, pstart, pcount, soft, fibers, fstart,
                               fcount, lorig, lplast, aorig, aplast, sscale, bscale, ks, kb, gram, ref, offs, b, blk,
-                              scr, out_len, out_ang, out_s, out_normal, out_node, out_es, out_eb, _NO_MASK, True)
+                              scr, out_len, out_ang, out_s, out_normal, out_node, out_es, out_eb, _NO_MASK, True,
+                              degenerate)
+        folds += fo
+        bad += bd
     # accelerations, second half kick, kinematic nodes, colliders
     has_extra = extra.shape[0] == n
     g0 = gravity[0]
@@ -232,7 +235,6 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
     cs, cb, ys, yb, weak = plastic[0], plastic[1], plastic[2], plastic[3], plastic[4]
     flags = int(plastic[5])
     over = 0
-    bad = 0
     if flags == 0 and not scan:
         return over, bad, folds
     for c in prange(chunks):
@@ -254,10 +256,6 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
             if scan:
                 if ln > (lorig[k] + lplast[k]) * (1.0 + gamma_s[k]) or abs(th - (aorig[k] + aplast[k])) > gamma_b[k]:
                     over += 1
-                i = fibers[k, 1]
-                if degenerate > 0.0 and degenerate_fiber(x, fibers[k, 0], i, fibers[k, 2], out_s[i, 0], out_s[i, 1],
-                                                         out_s[i, 2], soft[i], degenerate):
-                    bad += 1
     return over, bad, folds
 
 

@@ -261,7 +261,8 @@ def degenerate(x1: Any, x: Any, x2: Any, normal: Any, soft: Any = 0.0, ratio: fl
     p1, p, p2 = _nodes(x1, x, x2)
     nrm = as_points(normal, "normal", length=len(p1))
     sft = np.broadcast_to(np.asarray(soft, dtype=np.float64), (len(p1),))
-    t0, t1, tc = tangents(p1, p, p2)
+    d1, d2 = p1 - p, p2 - p                             # from the edge vectors, as the force kernels
+    t0, t1, tc = -1.25 * d1 - 0.25 * d2, 0.25 * d1 + 1.25 * d2, 0.5 * (d2 - d1)
     r2 = float(ratio) ** 2
     u = np.cross(nrm, tc)
     tt = np.einsum("ij,ij->i", tc, tc)

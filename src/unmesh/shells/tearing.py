@@ -65,10 +65,12 @@ class Tearing:
         may slide until an end tangent -- as the angle (7.10) sees it, projected onto the
         fiber's normal plane -- vanishes: the angle jumps by pi and its gradient is unbounded
         there. Fibers whose projected end tangent falls below 0.3 of the centre tangent
-        count as torn (7.3.2: the crack has cut the material they measured).
+        count as torn (7.3.2: the crack has cut the material they measured). Tested where the
+        angle was evaluated: at the positions of the last force pass (the step's kernel counts
+        them there).
         """
         f = self.topology.fibers
-        x = self.x
+        x = self._x_force
         c = f[:, 1]
         bad = degenerate_fibers(x[f[:, 0]], x[c], x[f[:, 2]], self._last.umbrella[c], self.topology.soft[c], DEGENERATE_RATIO)
         if not bad.any():
@@ -85,7 +87,7 @@ class Tearing:
     def _fracture(self) -> None:
         st = self.fibers
         with threads_for(len(st), key="fracture_scan"):
-            over, bad = _kernels.fracture_scan(self.x, self.topology.fibers, self._last.umbrella, self.topology.soft,
+            over, bad = _kernels.fracture_scan(self._x_force, self.topology.fibers, self._last.umbrella, self.topology.soft,
                                                self._last.lengths, self._last.angles,
                                                st.rest_length(), st.rest_angle(), st.fracture_stretch,
                                                st.fracture_bend, DEGENERATE_RATIO**2)
