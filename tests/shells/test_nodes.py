@@ -95,3 +95,21 @@ def test_umbrella_pairs_skip_open_sides():
     x = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0]])
     pr, _pc = umbrella_pairs(x, np.tile([0.0, 0, 1], (4, 1)), [0, 3, 3, 3, 3], [1, 2, 3])
     assert pr.tolist() == [[1, 2], [2, 3]]   # the 180 degree gap from -x back to +x is open
+
+
+def test_kept_candidate_lists_give_the_same_neighbourhoods():
+    """NodeCandidates keeps each node's kd-tree candidates: the same visible neighbourhoods,
+    also for nodes asked again and on a grid (equal distances)."""
+    from unmesh.shells import CrackSet
+    from unmesh.shells.nodes import NodeCandidates, node_neighborhoods
+    from unmesh.spatial import KDTree
+
+    x, _ = grid_sheet(15, 12)
+    cracks = CrackSet()
+    cracks.add([6.5, 5.5, 0.0], [1.0, 0.2, 0.0], 2.0, 0, 0.0)
+    cache = NodeCandidates(x, KDTree(x))
+    for rows in (np.arange(0, 180, 3), np.arange(40, 120), np.arange(len(x))):
+        a = node_neighborhoods(x, 12, cracks.blocked, nodes=rows, tree=KDTree(x))
+        b = node_neighborhoods(x, 12, cracks.blocked, nodes=rows, tree=cache)
+        for u, v in zip(a, b, strict=True):
+            np.testing.assert_array_equal(u, v)

@@ -34,6 +34,7 @@ from unmesh.shells.topology import UMBRELLA_SOFTENING, ShellTopology
 __all__ = [
     "DEFAULT_MIN_ANGLE",
     "DEFAULT_NEIGHBORS",
+    "NodeCandidates",
     "build_topology",
     "create_fibers",
     "grid_sheet",
@@ -107,6 +108,46 @@ def _padded(offsets: np.ndarray, indices: np.ndarray) -> np.ndarray:
     return out
 
 
+class NodeCandidates:
+    """The nearest nodes of rest nodes, each node's list taken from a kd-tree once and kept.
+
+    The rest positions never change, so a node's candidate list does not either; the crack
+    events of a tearing shell search the neighbourhoods of the same nodes again and again.
+    Pass it as ``tree`` to :func:`node_neighborhoods` (the same result as the tree itself).
+
+    Parameters
+    ----------
+    rest : ndarray (N, 3)
+        Rest positions of all nodes.
+    tree : unmesh.spatial.KDTree
+        A tree over ``rest``.
+
+    Example
+    -------
+    >>> from unmesh.spatial import KDTree
+    >>> x = np.array([[0.0, 0, 0], [1, 0, 0], [3, 0, 0]])
+    >>> NodeCandidates(x, KDTree(x)).nearest(np.array([2]), 2).tolist()
+    [[2, 1]]
+    """
+
+    def __init__(self, rest: np.ndarray, tree: Any) -> None:
+        self.rest = rest
+        self.tree = tree
+        self._idx = np.zeros((len(rest), 0), dtype=np.int64)
+        self._known = np.zeros(len(rest), dtype=bool)
+
+    def nearest(self, nodes: np.ndarray, k: int) -> np.ndarray:
+        """(Q, k) int64: the ``k`` nearest nodes of each of ``nodes`` by (distance, index), itself included."""
+        if self._idx.shape[1] != k:
+            self._idx = np.full((len(self.rest), k), -1, dtype=np.int64)
+            self._known[:] = False
+        miss = np.unique(nodes[~self._known[nodes]])
+        if len(miss):
+            self._idx[miss] = self.tree.knn(self.rest[miss], k)[1]
+            self._known[miss] = True
+        return self._idx[nodes]
+
+
 def node_neighborhoods(rest: Any, k: int = DEFAULT_NEIGHBORS, blocked: Blocker | None = None,
                        nodes: Any = None, candidates: int | None = None,
                        tree: Any = None) -> tuple[np.ndarray, np.ndarray]:
@@ -126,8 +167,9 @@ def node_neighborhoods(rest: Any, k: int = DEFAULT_NEIGHBORS, blocked: Blocker |
         Only compute the neighbourhoods of these nodes (default all).
     candidates : int, optional
         Nearest nodes examined when ``blocked`` is given (default ``3 k``).
-    tree : unmesh.spatial.KDTree, optional
-        A tree over ``rest`` to reuse (the same result as without).
+    tree : unmesh.spatial.KDTree or NodeCandidates, optional
+        A tree over ``rest`` to reuse, or the kept candidate lists of :class:`NodeCandidates`
+        (the same result as without).
 
     Returns
     -------
@@ -151,7 +193,10 @@ def node_neighborhoods(rest: Any, k: int = DEFAULT_NEIGHBORS, blocked: Blocker |
     cand = want if blocked is None else int(min(candidates or 3 * want, len(x) - 1))
     if len(q) == 0 or want < 1:
         return np.zeros(len(q) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    _, idx = knn(x, cand + 1, queries=x[q]) if tree is None else tree.knn(x[q], cand + 1)
+    if isinstance(tree, NodeCandidates):
+        idx = tree.nearest(q, cand + 1)
+    else:
+        _, idx = knn(x, cand + 1, queries=x[q]) if tree is None else tree.knn(x[q], cand + 1)
     idx = idx[:, : cand + 1]
     keep = (idx != q[:, None]) & (idx >= 0)
     if blocked is not None:

@@ -20,6 +20,7 @@ from unmesh.shells.fibers import degenerate as degenerate_fibers
 from unmesh.shells.forces import node_terms, threads_for
 from unmesh.shells.fracture import CrackSet, select_cracks
 from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
+from unmesh.shells.nodes import NodeCandidates
 from unmesh.shells.rebuild import rebuild_local
 from unmesh.shells.topology import ShellTopology
 
@@ -132,7 +133,7 @@ class Tearing:
                 "result": self._last, "x": getattr(self, "_x_force", None)}
         self.topology, self.fibers, origin, last["touched"] = rebuild_local(
             self.rest, self.rest_normals, self.topology, self.fibers, self.cracks, np.unique(near), self.neighbors,
-            self.min_angle, self.material.fiber_material, self.x, self.material.arc_samples, tree=self._rest_tree(),
+            self.min_angle, self.material.fiber_material, self.x, self.material.arc_samples, tree=self._node_candidates(),
             new_cracks=len(chosen))
         self._carry_angles(angles, origin)
         rebuilt = np.unique(near)
@@ -159,6 +160,12 @@ class Tearing:
             return self._accelerations()
         self._x_force = self.x.copy()
         return self._acc_of(res)
+
+    def _node_candidates(self) -> NodeCandidates:
+        """Nearest-node lists of the rest nodes for the neighbourhood searches of the crack events (kept)."""
+        if getattr(self, "_candidates", None) is None:
+            self._candidates = NodeCandidates(self.rest, self._rest_tree())
+        return self._candidates
 
     def _rest_tree(self) -> Any:
         """KD-tree over the rest node positions (built once; the rest positions never change)."""
