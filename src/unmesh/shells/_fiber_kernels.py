@@ -192,6 +192,14 @@ def angle(d10, d11, d12, d20, d21, d22, n0, n1, n2, soft, with_grad):
 
 
 @njit(cache=True, inline="always")
+def _tangents(d10, d11, d12, d20, d21, d22):
+    """End and centre tangents ``t0 = -5/4 d1 - 1/4 d2``, ``t1 = 1/4 d1 + 5/4 d2``, ``tc = (d2 - d1)/2`` (B.3)."""
+    return (-1.25 * d10 - 0.25 * d20, -1.25 * d11 - 0.25 * d21, -1.25 * d12 - 0.25 * d22,
+            0.25 * d10 + 1.25 * d20, 0.25 * d11 + 1.25 * d21, 0.25 * d12 + 1.25 * d22,
+            0.5 * (d20 - d10), 0.5 * (d21 - d11), 0.5 * (d22 - d12))
+
+
+@njit(cache=True, inline="always")
 def degenerate_edges(d10, d11, d12, d20, d21, d22, n0, n1, n2, soft, ratio2):
     """True when the fiber with edge vectors ``d1 = x1 - x``, ``d2 = x2 - x`` is degenerate: an end
     tangent projected onto the fiber's normal plane (as :func:`angle` sees it) is shorter than
@@ -199,15 +207,7 @@ def degenerate_edges(d10, d11, d12, d20, d21, d22, n0, n1, n2, soft, ratio2):
     (:func:`unmesh.shells.fibers.degenerate`). The projection keeps ``t.tc``, so end tangents
     with ``(t.tc)^2 >= ratio2 |tc|^4`` pass at once (nearly every fiber); only the others are
     projected."""
-    t00 = -1.25 * d10 - 0.25 * d20
-    t01 = -1.25 * d11 - 0.25 * d21
-    t02 = -1.25 * d12 - 0.25 * d22
-    t10 = 0.25 * d10 + 1.25 * d20
-    t11 = 0.25 * d11 + 1.25 * d21
-    t12 = 0.25 * d12 + 1.25 * d22
-    tc0 = 0.5 * (d20 - d10)
-    tc1 = 0.5 * (d21 - d11)
-    tc2 = 0.5 * (d22 - d12)
+    t00, t01, t02, t10, t11, t12, tc0, tc1, tc2 = _tangents(d10, d11, d12, d20, d21, d22)
     tt = tc0 * tc0 + tc1 * tc1 + tc2 * tc2
     c0 = t00 * tc0 + t01 * tc1 + t02 * tc2
     c1 = t10 * tc0 + t11 * tc1 + t12 * tc2
