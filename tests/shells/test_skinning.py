@@ -192,3 +192,33 @@ def test_the_two_sides_of_a_thin_part_are_not_cover_neighbours():
     assert across.any()                                # the nearest neighbour is often on the other face
     assert np.all(surf._cover_scale2[across] == 0.0)
     assert np.all(surf._cover_scale2[~across & (surf._cover_nbr != np.arange(len(side))[:, None])] > 0.0)
+
+
+def test_cover_pair_kernel_matches_the_reference():
+    from unmesh.shells.skinning import _cover_pairs, _cover_pairs_reference
+
+    rng = np.random.default_rng(11)
+    bind = rng.integers(-1, 40, size=(3000, 7))
+    nbr = rng.integers(0, 3000, size=(3000, 6))
+    nbr[::50, 0] = np.arange(0, 3000, 50)                  # a surfel listed as its own neighbour
+    rows = np.sort(rng.choice(3000, 1200, replace=False))
+    got = _cover_pairs(bind, nbr, rows)
+    np.testing.assert_array_equal(got, _cover_pairs_reference(bind, nbr, rows))
+    assert 0 < got.sum() < got.size
+
+
+def test_within_reach_grid_equals_the_plain_loop():
+    """Many points and centres: the centres binned in a grid give every point the plain loop's answer."""
+    from unmesh.shells import _skinning_kernels as sk
+
+    rng = np.random.default_rng(12)
+    pts = rng.uniform(-5, 5, size=(5000, 3))
+    pts[:, 2] *= 0.01                                         # nearly flat, as a sheet
+    reach = rng.uniform(0.2, 1.0, 5000)
+    centers = rng.uniform(-4, 4, size=(30, 3))
+    centers[:, 2] = 0.0
+    rows = np.sort(rng.choice(5000, 4000, replace=False))
+    got = sk.within_reach(pts, rows, reach, 0.3, centers)
+    d = np.linalg.norm(pts[rows][:, None] - centers[None], axis=2)
+    np.testing.assert_array_equal(got, (d <= (reach[rows] + 0.3)[:, None]).any(axis=1))
+    assert 0 < got.sum() < len(rows)

@@ -77,22 +77,100 @@ def plane_normal(x, normals, nodes):
     return vx, vy, vz
 
 
+@njit(cache=True, inline="always")
+def _near(points, r, lim, centers, c):
+    dx = points[r, 0] - centers[c, 0]
+    dy = points[r, 1] - centers[c, 1]
+    dz = points[r, 2] - centers[c, 2]
+    return math.sqrt(dx * dx + dy * dy + dz * dz) <= lim
+
+
 @njit(cache=True)
 def within_reach(points, rows, reach, radius, centers):
     """(R,) bool: some centre lies within ``reach[r] + radius`` of ``points[r]`` (r in ``rows``), with
-    distances ``sqrt(dx^2 + dy^2 + dz^2)`` as ``numpy.linalg.norm``."""
+    distances ``sqrt(dx^2 + dy^2 + dz^2)`` as ``numpy.linalg.norm``.
+
+    With many rows and centres the centres are binned in a uniform grid whose cells are at
+    least the largest ``reach + radius``: a centre within reach of a point lies in the 27
+    cells around the point's cell (the same answer, each point meeting only the centres
+    near it)."""
     out = np.zeros(rows.shape[0], dtype=np.bool_)
+    nc = centers.shape[0]
+    if nc <= 8 or rows.shape[0] < 256:
+        for t in range(rows.shape[0]):
+            r = rows[t]
+            lim = reach[r] + radius
+            for c in range(nc):
+                if _near(points, r, lim, centers, c):
+                    out[t] = True
+                    break
+        return out
+    h = 0.0
+    for t in range(rows.shape[0]):
+        h = max(h, reach[rows[t]] + radius)
+    h = h * (1.0 + 1e-9) + 1e-300
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for d in range(3):
+        lo[d] = centers[:, d].min()
+        hi[d] = centers[:, d].max()
+    ext = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
+    while ((int((hi[0] - lo[0]) / h) + 1) * (int((hi[1] - lo[1]) / h) + 1) * (int((hi[2] - lo[2]) / h) + 1)
+           > 8 * nc + 64):
+        h = max(2.0 * h, ext / 64.0)
+    dims = np.empty(3, dtype=np.int64)
+    for d in range(3):
+        dims[d] = int((hi[d] - lo[d]) / h) + 1
+    start = np.zeros(dims[0] * dims[1] * dims[2] + 1, dtype=np.int64)
+    key = np.empty(nc, dtype=np.int64)
+    for c in range(nc):
+        i0 = min(int((centers[c, 0] - lo[0]) / h), dims[0] - 1)
+        i1 = min(int((centers[c, 1] - lo[1]) / h), dims[1] - 1)
+        i2 = min(int((centers[c, 2] - lo[2]) / h), dims[2] - 1)
+        key[c] = i0 + dims[0] * (i1 + dims[1] * i2)
+        start[key[c] + 1] += 1
+    for g in range(start.shape[0] - 1):
+        start[g + 1] += start[g]
+    fill = start[:-1].copy()
+    order = np.empty(nc, dtype=np.int64)
+    for c in range(nc):
+        order[fill[key[c]]] = c
+        fill[key[c]] += 1
     for t in range(rows.shape[0]):
         r = rows[t]
         lim = reach[r] + radius
-        for c in range(centers.shape[0]):
-            dx = points[r, 0] - centers[c, 0]
-            dy = points[r, 1] - centers[c, 1]
-            dz = points[r, 2] - centers[c, 2]
-            if math.sqrt(dx * dx + dy * dy + dz * dz) <= lim:
-                out[t] = True
-                break
+        c0 = math.floor((points[r, 0] - lo[0]) / h)       # any value is safe: the cell ranges are clipped
+        c1 = math.floor((points[r, 1] - lo[1]) / h)
+        c2 = math.floor((points[r, 2] - lo[2]) / h)
+        for j2 in range(max(c2 - 1, 0), min(c2 + 2, dims[2])):
+            for j1 in range(max(c1 - 1, 0), min(c1 + 2, dims[1])):
+                for j0 in range(max(c0 - 1, 0), min(c0 + 2, dims[0])):
+                    g = j0 + dims[0] * (j1 + dims[1] * j2)
+                    for e in range(start[g], start[g + 1]):
+                        if not out[t] and _near(points, r, lim, centers, order[e]):
+                            out[t] = True
     return out
+
+
+@njit(cache=True)
+def shared_bound(bind, nbr, rows, out):
+    """``out[t, a]`` (R, m) bool: surfel ``rows[t]`` and its rest neighbour ``nbr[rows[t], a]`` are
+    bound to a common node (entries >= 0 of ``bind`` (S, K+1)) and are not the same surfel
+    (:func:`unmesh.shells.skinning._cover_pairs`, its numpy reference)."""
+    k = bind.shape[1]
+    for t in range(rows.shape[0]):
+        r = rows[t]
+        for a in range(nbr.shape[1]):
+            j = nbr[r, a]
+            hit = False
+            if j != r:
+                for p in range(k):
+                    b = bind[r, p]
+                    if b >= 0:
+                        for q in range(k):
+                            if bind[j, q] == b:
+                                hit = True
+            out[t, a] = hit
 
 
 @njit(cache=True, parallel=True)

@@ -93,7 +93,9 @@ class CrackSet:
             # only discs that reach the segments' bounding box can block one (the kernel's own test)
             near = _kernels.discs_near_segments(p, q, self.centers, self.radii)
             if len(near):
-                kernel = _kernels.segments_blocked_grid if len(near) > 48 else _kernels.segments_blocked
+                # the grid pays for many discs, or for a few dozen discs and many segments
+                grid = len(near) > 48 or (len(near) > 8 and len(p) >= 4096)
+                kernel = _kernels.segments_blocked_grid if grid else _kernels.segments_blocked
                 kernel(p, q, np.ascontiguousarray(self.centers[near]), np.ascontiguousarray(self.normals[near]),
                        np.ascontiguousarray(self.radii[near]), out)
         return out

@@ -38,6 +38,7 @@ __all__ = [
     "build_topology",
     "create_fibers",
     "grid_sheet",
+    "hide_blocked",
     "node_neighborhoods",
     "select_nodes",
     "umbrella_pairs",
@@ -148,6 +149,30 @@ class NodeCandidates:
         return self._idx[nodes]
 
 
+def hide_blocked(keep: np.ndarray, a: np.ndarray, b: np.ndarray, idx: np.ndarray, blocked: Blocker,
+                 want: int) -> None:
+    """Clear in ``keep`` the candidates a crack hides, as far as the first ``want`` visible ones need.
+
+    ``keep`` (R, c) bool marks the valid candidates ``idx[r, j]`` (rows of ``b``) of query
+    ``a[r]``, nearest first; ``blocked(p, q)`` is the visibility test (7.3.2). The nearest
+    ``want + want // 2 + 2`` columns are tested for every row, the others only for rows with
+    fewer than ``want`` visible among them: a row's first ``want`` visible candidates (and
+    whether it sees any) are those of testing every candidate, and later columns of the
+    other rows stay set (callers keep the first ``want`` set entries).
+    """
+    rows = np.arange(keep.shape[0])
+    head = min(keep.shape[1], want + want // 2 + 2)
+    for lo, hi in ((0, head), (head, keep.shape[1])):
+        if lo >= hi or not len(rows):
+            break
+        r_, c_ = np.nonzero(keep[rows, lo:hi])
+        if len(r_):
+            r_, c_ = rows[r_], c_ + lo
+            hit = blocked(a[r_], b[idx[r_, c_]])
+            keep[r_[hit], c_[hit]] = False
+        rows = rows[keep[rows, :hi].sum(axis=1) < want]
+
+
 def node_neighborhoods(rest: Any, k: int = DEFAULT_NEIGHBORS, blocked: Blocker | None = None,
                        nodes: Any = None, candidates: int | None = None,
                        tree: Any = None) -> tuple[np.ndarray, np.ndarray]:
@@ -200,12 +225,7 @@ def node_neighborhoods(rest: Any, k: int = DEFAULT_NEIGHBORS, blocked: Blocker |
     idx = idx[:, : cand + 1]
     keep = (idx != q[:, None]) & (idx >= 0)
     if blocked is not None:
-        rows = np.broadcast_to(q[:, None], idx.shape)
-        m = np.flatnonzero(keep)
-        hit = blocked(x[rows.reshape(-1)[m]], x[idx.reshape(-1)[m]])
-        flat = keep.reshape(-1)
-        flat[m[hit]] = False
-        keep = flat.reshape(idx.shape)
+        hide_blocked(keep, x[q], x, idx, blocked, want)
     rank = np.cumsum(keep, axis=1)
     keep &= rank <= want
     counts = keep.sum(axis=1)

@@ -45,6 +45,7 @@ from unmesh._validate import as_points
 from unmesh.errors import InputError
 from unmesh.shells import _skinning_kernels as _sk
 from unmesh.shells.forces import threads_for
+from unmesh.shells.nodes import hide_blocked
 from unmesh.surfels import SurfelCloud
 
 __all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "SkinnedSurface", "bind_points",
@@ -131,12 +132,7 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
         dist, idx = (tree if tree is not None else KDTree(x)).knn(p, cand)
     keep = idx >= 0
     if blocked is not None and len(p):
-        rows = np.repeat(np.arange(len(p)), cand).reshape(idx.shape)
-        m = np.flatnonzero(keep)
-        hit = blocked(p[rows.reshape(-1)[m]], x[idx.reshape(-1)[m]])
-        flat = keep.reshape(-1)
-        flat[m[hit]] = False
-        keep = flat.reshape(idx.shape)
+        hide_blocked(keep, p, x, idx, blocked, want)
     # a point hidden from every candidate (a sliver between two cracks) follows its nearest node
     lost = ~keep.any(axis=1) & (idx[:, 0] >= 0)
     keep[lost, 0] = True
@@ -245,9 +241,16 @@ def cover_radii_reference(points: np.ndarray, nbr: np.ndarray, scale2: np.ndarra
     return np.maximum(radii, need.max(axis=1))
 
 
-def _cover_pairs(bind: np.ndarray, nbr: np.ndarray, rows: np.ndarray, chunk: int = 16384) -> np.ndarray:
+def _cover_pairs(bind: np.ndarray, nbr: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """(R, m) bool: surfel ``rows[r]`` and its rest neighbour ``nbr[rows[r], a]`` share a bound node
-    (and are not the same surfel); done in chunks of rows (an (R, m, K+1, K+1) comparison)."""
+    (and are not the same surfel); :func:`unmesh.shells._skinning_kernels.shared_bound`."""
+    out = np.empty((len(rows), nbr.shape[1]), dtype=np.bool_)
+    _sk.shared_bound(bind, nbr, np.ascontiguousarray(rows, dtype=np.int64), out)
+    return out
+
+
+def _cover_pairs_reference(bind: np.ndarray, nbr: np.ndarray, rows: np.ndarray, chunk: int = 16384) -> np.ndarray:
+    """Numpy reference of :func:`_cover_pairs`, in chunks of rows (an (R, m, K+1, K+1) comparison)."""
     out = np.zeros((len(rows), nbr.shape[1]), dtype=bool)
     for lo in range(0, len(rows), chunk):
         r = rows[lo:lo + chunk]
