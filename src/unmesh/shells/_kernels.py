@@ -412,6 +412,50 @@ def segments_blocked(p, q, centers, normals, radii, out):
         out[k] = hit
 
 
+@njit(cache=True)
+def center_grid(centers, h):
+    """Uniform grid over the bounding box of ``centers`` (C, 3) with cells of edge at least ``h``
+    (doubled until there are at most 8 C + 64 cells), the centres binned by a counting sort.
+
+    Returns ``(lo, edge, dims, start, order)``: the box corner (3,), the cell edge, the cell
+    counts (3,) int64, and the centres of cell ``g = i0 + dims[0] (i1 + dims[1] i2)``,
+    ``order[start[g]:start[g + 1]]``. A point within ``h`` of a centre lies in one of the 27
+    cells around the centre's cell (the last cell of each axis reaches to the box's end).
+    """
+    nc = centers.shape[0]
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for d in range(3):
+        lo[d] = np.inf
+        hi[d] = -np.inf
+        for c in range(nc):
+            lo[d] = min(lo[d], centers[c, d])
+            hi[d] = max(hi[d], centers[c, d])
+    ext = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
+    while ((int((hi[0] - lo[0]) / h) + 1) * (int((hi[1] - lo[1]) / h) + 1) * (int((hi[2] - lo[2]) / h) + 1)
+           > 8 * nc + 64):
+        h = max(2.0 * h, ext / 64.0)
+    dims = np.empty(3, dtype=np.int64)
+    for d in range(3):
+        dims[d] = int((hi[d] - lo[d]) / h) + 1
+    start = np.zeros(dims[0] * dims[1] * dims[2] + 1, dtype=np.int64)
+    key = np.empty(nc, dtype=np.int64)
+    for c in range(nc):
+        i0 = min(int((centers[c, 0] - lo[0]) / h), dims[0] - 1)
+        i1 = min(int((centers[c, 1] - lo[1]) / h), dims[1] - 1)
+        i2 = min(int((centers[c, 2] - lo[2]) / h), dims[2] - 1)
+        key[c] = i0 + dims[0] * (i1 + dims[1] * i2)
+        start[key[c] + 1] += 1
+    for g in range(start.shape[0] - 1):
+        start[g + 1] += start[g]
+    fill = start[:-1].copy()
+    order = np.empty(nc, dtype=np.int64)
+    for c in range(nc):
+        order[fill[key[c]]] = c
+        fill[key[c]] += 1
+    return lo, h, dims, start, order
+
+
 @njit(cache=True, parallel=True)
 def segments_blocked_grid(p, q, centers, normals, radii, out):
     """:func:`segments_blocked` with the discs in a uniform grid (many segments and discs).
@@ -419,51 +463,22 @@ def segments_blocked_grid(p, q, centers, normals, radii, out):
     The cell edge is at least the largest half segment length plus the largest radius, so a
     disc that passes the first test of a segment (its centre within half length plus radius
     of the segment's midpoint) lies in the 27 cells around the midpoint's cell: the result
-    is the same, and each segment meets only the discs near it.
+    is the same, and each segment meets only the discs near it (:func:`center_grid`).
     """
     m = p.shape[0]
-    nc = centers.shape[0]
     hmax = 0.0
     for k in range(m):
         hmax = max(hmax, _segment(p, q, k)[3])
     rmax = 0.0
-    lo0 = lo1 = lo2 = np.inf
-    hi0 = hi1 = hi2 = -np.inf
-    for c in range(nc):
+    for c in range(centers.shape[0]):
         rmax = max(rmax, radii[c])
-        lo0 = min(lo0, centers[c, 0])
-        lo1 = min(lo1, centers[c, 1])
-        lo2 = min(lo2, centers[c, 2])
-        hi0 = max(hi0, centers[c, 0])
-        hi1 = max(hi1, centers[c, 1])
-        hi2 = max(hi2, centers[c, 2])
-    h = (hmax + rmax) * (1.0 + 1e-9) + 1e-300
-    ext = max(hi0 - lo0, hi1 - lo1, hi2 - lo2)
-    while (int((hi0 - lo0) / h) + 1) * (int((hi1 - lo1) / h) + 1) * (int((hi2 - lo2) / h) + 1) > 8 * nc + 64:
-        h = max(2.0 * h, ext / 64.0)
-    n0 = int((hi0 - lo0) / h) + 1
-    n1 = int((hi1 - lo1) / h) + 1
-    n2 = int((hi2 - lo2) / h) + 1
-    start = np.zeros(n0 * n1 * n2 + 1, dtype=np.int64)
-    key = np.empty(nc, dtype=np.int64)
-    for c in range(nc):
-        i0 = min(int((centers[c, 0] - lo0) / h), n0 - 1)
-        i1 = min(int((centers[c, 1] - lo1) / h), n1 - 1)
-        i2 = min(int((centers[c, 2] - lo2) / h), n2 - 1)
-        key[c] = i0 + n0 * (i1 + n1 * i2)
-        start[key[c] + 1] += 1
-    for g in range(n0 * n1 * n2):
-        start[g + 1] += start[g]
-    fill = start[:-1].copy()
-    order = np.empty(nc, dtype=np.int64)
-    for c in range(nc):
-        order[fill[key[c]]] = c
-        fill[key[c]] += 1
+    lo, h, dims, start, order = center_grid(centers, (hmax + rmax) * (1.0 + 1e-9) + 1e-300)
+    n0, n1, n2 = dims[0], dims[1], dims[2]
     for k in prange(m):
         mx, my, mz, half = _segment(p, q, k)
-        c0 = math.floor((mx - lo0) / h)       # any value is safe: the cell ranges are clipped
-        c1 = math.floor((my - lo1) / h)
-        c2 = math.floor((mz - lo2) / h)
+        c0 = math.floor((mx - lo[0]) / h)       # any value is safe: the cell ranges are clipped
+        c1 = math.floor((my - lo[1]) / h)
+        c2 = math.floor((mz - lo[2]) / h)
         hit = False
         for j2 in range(max(c2 - 1, 0), min(c2 + 2, n2)):
             for j1 in range(max(c1 - 1, 0), min(c1 + 2, n1)):

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.shells._fiber_kernels import FASTMATH, atan2
+from unmesh.shells._kernels import center_grid
 from unmesh.surfels._kernels import smallest_eigenvector
 
 #: Doubles stored per frame: local coordinates of the offset p - x_0 and of the two tangent axes.
@@ -108,34 +109,7 @@ def within_reach(points, rows, reach, radius, centers):
     h = 0.0
     for t in range(rows.shape[0]):
         h = max(h, reach[rows[t]] + radius)
-    h = h * (1.0 + 1e-9) + 1e-300
-    lo = np.empty(3)
-    hi = np.empty(3)
-    for d in range(3):
-        lo[d] = centers[:, d].min()
-        hi[d] = centers[:, d].max()
-    ext = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
-    while ((int((hi[0] - lo[0]) / h) + 1) * (int((hi[1] - lo[1]) / h) + 1) * (int((hi[2] - lo[2]) / h) + 1)
-           > 8 * nc + 64):
-        h = max(2.0 * h, ext / 64.0)
-    dims = np.empty(3, dtype=np.int64)
-    for d in range(3):
-        dims[d] = int((hi[d] - lo[d]) / h) + 1
-    start = np.zeros(dims[0] * dims[1] * dims[2] + 1, dtype=np.int64)
-    key = np.empty(nc, dtype=np.int64)
-    for c in range(nc):
-        i0 = min(int((centers[c, 0] - lo[0]) / h), dims[0] - 1)
-        i1 = min(int((centers[c, 1] - lo[1]) / h), dims[1] - 1)
-        i2 = min(int((centers[c, 2] - lo[2]) / h), dims[2] - 1)
-        key[c] = i0 + dims[0] * (i1 + dims[1] * i2)
-        start[key[c] + 1] += 1
-    for g in range(start.shape[0] - 1):
-        start[g + 1] += start[g]
-    fill = start[:-1].copy()
-    order = np.empty(nc, dtype=np.int64)
-    for c in range(nc):
-        order[fill[key[c]]] = c
-        fill[key[c]] += 1
+    lo, h, dims, start, order = center_grid(centers, h * (1.0 + 1e-9) + 1e-300)
     for t in range(rows.shape[0]):
         r = rows[t]
         lim = reach[r] + radius
