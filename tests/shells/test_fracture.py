@@ -192,3 +192,47 @@ def test_a_centre_sliding_inside_the_sheet_loses_its_fiber_before_the_angle_flip
         if dropped is None and not (sim.topology.fibers[:, 1] == i).any():
             dropped = step
     assert dropped is not None and dropped < 68                                  # before the flip
+
+
+def test_the_surface_does_not_follow_crumbs():
+    """Surfels are bound to nodes on fibers only: a crumb that follows a node across a crack
+    would stretch every splat bound to it across the opening (the 11,860-node poster: 434 of
+    its 445 splats over 3x their size were bound to a crumb). The per-frame re-binding of the
+    surfels near a new crumb gives the binding of a global re-bind without the crumbs."""
+    from unmesh.shells.skinning import bind_points
+    from unmesh.shells.topology import ShellTopology
+
+    cloud = grid_cloud(41, 41, 0.025)
+    idx = grid_nodes(41, 41, 2)
+    sim = ShellSimulation(cloud, ShellMaterial(ks=100.0, kb=1.0, damping=1.0, fracture_stretch=10.0), 0.0005,
+                          node_indices=idx, gravity=(0, 0, 0), total_area=1.0)
+    rest, t = sim.rest, sim.topology
+    i = int(np.argmin(np.linalg.norm(rest, axis=1)))
+    assert (sim.surface.dense.view("bind") == i).any()
+    keep = ~(t.fibers == i).any(axis=1)                 # cut node i off from every fiber
+    sim.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
+                                       t.fibers[keep], t.soft)
+    sim.fibers = sim.fibers.take(keep)
+    sim.cracks.add(rest[i] + [0.02, 0, 0], [1.0, 0, 0], 0.2, i, 0.0)
+    sim._pending_cracks = [0]
+    sim._anchor_crumbs(None)
+    assert sim.anchor[i] >= 0
+    sim.acc = sim._accelerations()
+    sim.step()
+    sim.deformed_surface()
+    surf = sim.surface
+    bind = surf.dense.view("bind")
+    assert not (bind == i).any()
+    b, w = bind_points(surf.dense.view("points"), rest, surf.k, blocked=sim.cracks.blocked, exclude=sim.anchor >= 0)
+    np.testing.assert_array_equal(bind, b)
+    np.testing.assert_array_equal(surf.dense.view("weights"), w)
+    # back on its fibers (a later rebuild can do that): the surfels that reach it bind to it again
+    sim.topology, sim.fibers = t, FiberState.at_rest(rest, t)
+    sim._anchor_crumbs(None)
+    assert sim.anchor[i] == -1
+    sim.acc = sim._accelerations()
+    sim.step()
+    sim.deformed_surface()
+    b, w = bind_points(surf.dense.view("points"), rest, surf.k, blocked=sim.cracks.blocked, exclude=sim.anchor >= 0)
+    np.testing.assert_array_equal(surf.dense.view("bind"), b)
+    assert (b == i).any()

@@ -543,6 +543,7 @@ class ShellSimulation(Tearing, Simulation):
         self._reach = max(self._reach, self._neighbor_reach())
         self.surface = SkinnedSurface(self.cloud, self.rest, self.rest_normals, self.surface.k)
         self._pending_cracks = []
+        self.surface.exclude_nodes(self.anchor >= 0, self.cracks.blocked)
         if len(self.cracks):
             self.surface.rebind_near(self.cracks.centers, float(self.cracks.radii.max()), self.cracks.blocked)
             self.surface.add_discontinuities(self.cracks.centers, self.cracks.normals, self.cracks.radii,

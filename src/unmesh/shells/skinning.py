@@ -81,7 +81,7 @@ def skin_weight(r: np.ndarray) -> np.ndarray:
 
 def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocked: Any = None,
                 tree: Any = None, candidates: tuple[np.ndarray, np.ndarray] | None = None,
-                ) -> tuple[np.ndarray, np.ndarray]:
+                exclude: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Bind points to their nearest (visible) nodes: indices (S, K+1) and frame weights (S, K).
 
     Parameters
@@ -99,8 +99,11 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
         Tree over ``node_rest`` to reuse.
     candidates : (ndarray, ndarray), optional
         The distances and indices (S, c) of the ``c`` nearest nodes of every point, as
-        ``tree.knn(points, c)`` gives them (``c = K + 1``, or ``3 (K + 1)`` with ``blocked``),
-        when they are known already.
+        ``tree.knn(points, c)`` gives them (``c = K + 1``, or ``3 (K + 1)`` with ``blocked`` or
+        ``exclude``), when they are known already.
+    exclude : ndarray (N,) bool, optional
+        Nodes not to bind to (the crumbs of a torn shell: they carry no material); skipped
+        like hidden ones.
 
     Returns
     -------
@@ -123,7 +126,7 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
     if int(k) != k or k < 1:
         raise InputError(f"skin_nodes: expected a positive integer, got {k!r}")
     want = int(min(k + 1, len(x)))
-    cand = want if blocked is None else int(min(3 * want, len(x)))
+    cand = want if blocked is None and exclude is None else int(min(3 * want, len(x)))
     if candidates is not None:
         dist, idx = candidates
         if idx.shape != (len(p), cand):
@@ -131,6 +134,8 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
     else:
         dist, idx = (tree if tree is not None else KDTree(x)).knn(p, cand)
     keep = idx >= 0
+    if exclude is not None:
+        keep &= ~exclude[np.maximum(idx, 0)]
     if blocked is not None and len(p):
         hide_blocked(keep, p, x, idx, blocked, want)
     # a point hidden from every candidate (a sliver between two cracks) follows its nearest node
@@ -367,6 +372,7 @@ class SkinnedSurface:
                           plane=plane, coords=self._coords(bind, weights, plane, pts, axes),
                           reach=self._reaches(bind, pts))
         self.disc = _Passive(self.k)
+        self.excluded = np.zeros(len(self.node_rest), dtype=bool)     # nodes not bound to (crumbs)
         # rest neighbours of the dense surfels and (rest radius / rest distance)^2, for the splat
         # radii (module notes); 0 for the surfel itself, pairs with no common bound node and
         # pairs facing apart (the two sides of a thin part)
@@ -434,12 +440,18 @@ class SkinnedSurface:
                                   np.ascontiguousarray(axes), out)
         return out
 
-    def _reaches(self, bind: np.ndarray, pts: np.ndarray) -> np.ndarray:
-        """Distance from each point to its farthest bound node, (S,) (0 without nodes)."""
+    def _reaches(self, bind: np.ndarray, pts: np.ndarray, cand_dist: np.ndarray | None = None) -> np.ndarray:
+        """Distance from each point to its farthest bound node, (S,) (0 without nodes); a point bound
+        to fewer than K + 1 nodes (``cand_dist`` (S, c): its candidates' distances) reaches to its
+        farthest candidate: a node there that becomes visible or bindable joins its binding."""
         if not len(bind):
             return np.zeros(0)
         d = np.where(bind >= 0, np.linalg.norm(self.node_rest[np.maximum(bind, 0)] - pts[:, None], axis=2), 0)
-        return d.max(axis=1)
+        out = d.max(axis=1)
+        if cand_dist is not None:
+            short = bind[:, -1] < 0
+            out[short] = np.maximum(out[short], np.where(np.isfinite(cand_dist[short]), cand_dist[short], 0).max(axis=1))
+        return out
 
     def _candidates(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The ``3 (K + 1)`` nearest nodes of dense surfels ``rows`` (distances, indices), each kd-tree
@@ -459,16 +471,50 @@ class SkinnedSurface:
             slot = self._slot[rows]
         return self._cand_d[slot], self._cand_i[slot]
 
+    def _bind(self, pts: np.ndarray, blocked: Any, cand: tuple[np.ndarray, np.ndarray] | None = None,
+              ) -> tuple[np.ndarray, ...]:
+        """Binding of points with visibility and without the excluded nodes: nodes, weights, plane
+        normals and reaches."""
+        if cand is None:
+            cand = self.tree.knn(pts, int(min(3 * min(self.k + 1, len(self.node_rest)), len(self.node_rest))))
+        b, w = bind_points(pts, self.node_rest, self.k, blocked=blocked, tree=self.tree, candidates=cand,
+                           exclude=self.excluded)
+        return b, w, self._planes(b), self._reaches(b, pts, cand[0])
+
     def _rebind(self, part: _Passive, rows: np.ndarray, blocked: Any) -> None:
         pts = part.points[rows]
         axes = part.axes[rows]
-        cand = self._candidates(rows) if part is self.dense else None
-        b, w = bind_points(pts, self.node_rest, self.k, blocked=blocked, tree=self.tree, candidates=cand)
-        plane = self._planes(b)
+        b, w, plane, reach = self._bind(pts, blocked, self._candidates(rows) if part is self.dense else None)
         part.bind[rows], part.weights[rows], part.plane[rows] = b, w, plane
         part.coords[rows] = self._coords(b, w, plane, pts, axes)
-        part.reach[rows] = self._reaches(b, pts)
-        self._reach = max(self._reach, float(part.reach[rows].max()))
+        part.reach[rows] = reach
+        self._reach = max(self._reach, float(reach.max()))
+
+    def exclude_nodes(self, mask: np.ndarray, blocked: Any) -> int:
+        """Bind no point to the nodes of ``mask`` (N,) bool from now on (crumbs: nodes a crack cut off
+        from every fiber; they carry no material, and one that follows a node across a crack
+        would stretch every splat bound to it across the opening).
+
+        Only the points whose binding can change are bound again (with ``blocked``, the
+        visibility test of all cracks): those within their reach (:meth:`_reaches`) of a node
+        whose exclusion changed -- a newly excluded node is bound to no farther point, and a
+        newly allowed one enters only bindings that reach it. Returns the number of points
+        bound again.
+        """
+        changed = np.flatnonzero(np.asarray(mask, dtype=bool) != self.excluded)
+        if not len(changed):
+            return 0
+        self.excluded = np.asarray(mask, dtype=bool).copy()
+        c = self.node_rest[changed]
+        rebound = np.zeros(0, dtype=np.int64)
+        for part in (self.dense, self.disc):
+            rows = self._near_owners(c, 0.0) if part is self.dense else np.arange(part.n)
+            rows = rows[_sk.within_reach(part.points, rows, part.reach, 0.0, c)] if len(rows) else rows
+            if len(rows):
+                self._rebind(part, rows, blocked)
+                rebound = rows if part is self.dense else rebound
+        self._cut_cover_pairs(rebound)
+        return len(rebound)
 
     def rebind_near(self, centers: np.ndarray, radius: float, blocked: Any, new_blocked: Any = None) -> int:
         """Bind again, with visibility, the points whose bound nodes the new crack discs hide.
@@ -488,21 +534,15 @@ class SkinnedSurface:
             return 0
         c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
         new_blocked = blocked if new_blocked is None else new_blocked
-        reach = self._reach + radius
-        # candidates: surfels owned by nodes within reach + (surfel-to-owner distance <= reach)
-        _, near = self.tree.radius_neighbors(c, 2.0 * reach)
-        near = np.unique(near)
         count = 0
-        if len(near):
-            starts, counts = self._owned_offsets[near], np.diff(self._owned_offsets)[near]
-            pos = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-            rows = self._owned[pos]            # distinct surfels (each has one owner)
+        rows = self._near_owners(c, radius)
+        if len(rows):
             rows = np.sort(rows[_sk.within_reach(self.dense.points, rows, self.dense.reach, float(radius), c)])
             hidden = rows[self._hides_bound(self.dense, rows, new_blocked)]
             if len(hidden):
                 self._rebind(self.dense, hidden, blocked)
                 count += len(hidden)
-            self._cut_cover_pairs(hidden, rows, c, float(radius), new_blocked)
+            self._cut_cover_pairs(hidden, (rows, c, float(radius), new_blocked))
         if self.disc.n:
             rows = np.arange(self.disc.n)
             rows = rows[_sk.within_reach(self.disc.points, rows, self.disc.reach, float(radius), c)]
@@ -511,6 +551,15 @@ class SkinnedSurface:
                 self._rebind(self.disc, rows, blocked)
                 count += len(rows)
         return count
+
+    def _near_owners(self, centers: np.ndarray, radius: float) -> np.ndarray:
+        """Dense surfels that can be within their reach plus ``radius`` of a centre: those owned by
+        nodes within ``2 (reach + radius)`` of one (the surfel-to-owner distance is within reach)."""
+        _, near = self.tree.radius_neighbors(centers, 2.0 * (self._reach + radius))
+        near = np.unique(near)
+        starts, counts = self._owned_offsets[near], np.diff(self._owned_offsets)[near]
+        pos = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+        return self._owned[pos]            # distinct surfels (each has one owner)
 
     def _hides_bound(self, part: _Passive, rows: np.ndarray, blocked: Any) -> np.ndarray:
         """(R,) bool: ``blocked`` hides one of the bound nodes of point ``rows[r]`` of ``part``."""
@@ -527,11 +576,11 @@ class SkinnedSurface:
             self._zeros = np.zeros(self.dense.n)
         return self._zeros
 
-    def _cut_cover_pairs(self, rebound: np.ndarray, near: np.ndarray, centers: np.ndarray, radius: float,
-                         new_blocked: Any) -> None:
+    def _cut_cover_pairs(self, rebound: np.ndarray, new_discs: tuple[Any, ...] | None = None) -> None:
         """Drop the rest-neighbour pairs (module notes) that share no bound node any more (pairs with
-        a re-bound end) or that a new disc separates (only pairs among the points ``near`` the new
-        ``centers`` can cross one): no splat grows across a crack. Pairs cut are never restored."""
+        a re-bound end) or that a new disc separates: no splat grows across a crack. Pairs cut
+        are never restored. ``new_discs`` = ``(near, centers, radius, new_blocked)``: only pairs
+        among the points ``near`` the new discs' ``centers`` can cross one."""
         nbr, scale2 = self._cover_nbr, self._cover_scale2
         if len(rebound):
             if getattr(self, "_cover_rev", None) is None:     # who lists whom (the pairs never change)
@@ -545,6 +594,9 @@ class SkinnedSurface:
             rows = np.unique(np.concatenate([rebound, src[pos]]))
             keep = _cover_pairs(self.dense.bind, nbr, rows) & (scale2[rows] > 0)
             scale2[rows] = np.where(keep, scale2[rows], 0.0)
+        if new_discs is None:
+            return
+        near, centers, radius, new_blocked = new_discs
         if getattr(self, "_cover_len", None) is None:          # longest pair that counts
             pts = self.dense.points[:self.dense.n]
             live = scale2 > 0
@@ -589,10 +641,10 @@ class SkinnedSurface:
         p, a = np.asarray(pts), np.asarray(axes)
         cross = np.cross(a[:, 0], a[:, 1])
         orient = np.where(np.einsum("ij,ij->i", cross, np.asarray(facing)) >= 0, 1.0, -1.0)
-        b, w = bind_points(p, self.node_rest, self.k, blocked=blocked, tree=self.tree)
-        plane = self._planes(b)
+        b, w, plane, reach = self._bind(p, blocked)
         self.disc.append(points=p, axes=a, orient=orient, colors=np.asarray(colors), bind=b, weights=w, plane=plane,
-                         coords=self._coords(b, w, plane, p, a), reach=self._reaches(b, p))
+                         coords=self._coords(b, w, plane, p, a), reach=reach)
+        self._reach = max(self._reach, float(reach.max()))
 
     def deform(self, node_positions: np.ndarray, node_normals: np.ndarray) -> SurfelCloud:
         """The deformed cloud for current node positions and (umbrella) normals.

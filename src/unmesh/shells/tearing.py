@@ -176,24 +176,31 @@ class Tearing:
         return self._tree
 
     def _update_surface(self) -> None:
-        """Bind the dense surface to the cracks that appeared since the last rendered frame.
+        """Bind the dense surface to the cracks that appeared and the crumbs that changed since the
+        last rendered frame.
 
         Re-binding (7.3.2 visibility) is local: a surfel farther than the skinning reach plus
         a crack's radius from the crack centre sees all its bound nodes, so its binding is
-        the same with or without that crack. Doing it once per frame for all the frame's
-        cracks (with the crack set at the end of the frame) therefore gives the binding a
-        global re-bind with all cracks gives (``tests/shells/test_speed_paths.py``), as
-        :meth:`load_state_dict` does; the skinning is used only for the output surface.
+        the same with or without that crack; likewise a crumb (which the surface does not
+        follow: :meth:`SkinnedSurface.exclude_nodes`) changes only bindings that reach it.
+        Doing it once per frame for all the frame's cracks and crumbs (with the state at the
+        end of the frame) therefore gives the binding a global re-bind gives
+        (``tests/shells/test_speed_paths.py``), as :meth:`load_state_dict` does; the
+        skinning is used only for the output surface.
         """
-        if not self._pending_cracks:
+        crumbs = self.anchor >= 0
+        if not self._pending_cracks and np.array_equal(crumbs, self.surface.excluded):
             return
         with threads_for(0, key="rebind"):     # small parallel regions: one thread (see _fracture_events)
-            self._rebind_surface()
+            self._rebind_surface(crumbs)
 
-    def _rebind_surface(self) -> None:
+    def _rebind_surface(self, crumbs: np.ndarray) -> None:
+        c = self.cracks
+        self.surface.exclude_nodes(crumbs, c.blocked)
         new = np.asarray(self._pending_cracks, dtype=np.int64)
         self._pending_cracks = []
-        c = self.cracks
+        if not len(new):
+            return
         latest = CrackSet(c.centers[new], c.normals[new], c.radii[new], c.nodes[new], c.times[new])
         self.surface.rebind_near(c.centers[new], float(c.radii[new].max()), c.blocked, latest.blocked)
         self.surface.add_discontinuities(c.centers[new], c.normals[new], c.radii[new], self.rest_normals[c.nodes[new]],
