@@ -124,21 +124,28 @@ def test_torn_sheet_ends_in_two_pieces():
     np.testing.assert_allclose(np.einsum("ij,ij->i", n[:, 0], n[:, 1]), -1.0, atol=0.2)
 
 
-def test_crumbs_cut_off_from_every_fiber_follow_a_visible_piece():
-    """A node left on no fiber (a crumb between cracks) follows the nearest node it still sees
-    that lies on a fiber (rigidly translated), and is counted with that piece."""
+def _sheet_cut_at_its_centre():
+    """A flat sheet whose centre node ``i`` is cut off from every fiber (not yet a crumb): (sim, i, old topology)."""
     from unmesh.shells.topology import ShellTopology
 
     cloud = grid_cloud(41, 41, 0.025)
     idx = grid_nodes(41, 41, 2)
     sim = ShellSimulation(cloud, ShellMaterial(ks=100.0, kb=1.0, damping=1.0, fracture_stretch=10.0), 0.0005,
                           node_indices=idx, gravity=(0, 0, 0), total_area=1.0)
-    rest, t = sim.rest, sim.topology
-    i = int(np.argmin(np.linalg.norm(rest, axis=1)))
-    keep = ~(t.fibers == i).any(axis=1)                 # cut node i off from every fiber
+    t = sim.topology
+    i = int(np.argmin(np.linalg.norm(sim.rest, axis=1)))
+    keep = ~(t.fibers == i).any(axis=1)
     sim.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
                                        t.fibers[keep], t.soft)
     sim.fibers = sim.fibers.take(keep)
+    return sim, i, t
+
+
+def test_crumbs_cut_off_from_every_fiber_follow_a_visible_piece():
+    """A node left on no fiber (a crumb between cracks) follows the nearest node it still sees
+    that lies on a fiber (rigidly translated), and is counted with that piece."""
+    sim, i, _ = _sheet_cut_at_its_centre()
+    rest = sim.rest
     # a crack hides the nearest nodes on the +x side: the anchor must be on the -x side or in line
     sim.cracks.add(rest[i] + [0.02, 0, 0], [1.0, 0, 0], 0.2, i, 0.0)
     assert sim.topology.components()[0] == 2         # the bare fiber graph: i is a piece of its own
@@ -200,19 +207,10 @@ def test_the_surface_does_not_follow_crumbs():
     its 445 splats over 3x their size were bound to a crumb). The per-frame re-binding of the
     surfels near a new crumb gives the binding of a global re-bind without the crumbs."""
     from unmesh.shells.skinning import bind_points
-    from unmesh.shells.topology import ShellTopology
 
-    cloud = grid_cloud(41, 41, 0.025)
-    idx = grid_nodes(41, 41, 2)
-    sim = ShellSimulation(cloud, ShellMaterial(ks=100.0, kb=1.0, damping=1.0, fracture_stretch=10.0), 0.0005,
-                          node_indices=idx, gravity=(0, 0, 0), total_area=1.0)
-    rest, t = sim.rest, sim.topology
-    i = int(np.argmin(np.linalg.norm(rest, axis=1)))
+    sim, i, t = _sheet_cut_at_its_centre()
+    rest = sim.rest
     assert (sim.surface.dense.view("bind") == i).any()
-    keep = ~(t.fibers == i).any(axis=1)                 # cut node i off from every fiber
-    sim.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
-                                       t.fibers[keep], t.soft)
-    sim.fibers = sim.fibers.take(keep)
     sim.cracks.add(rest[i] + [0.02, 0, 0], [1.0, 0, 0], 0.2, i, 0.0)
     sim._pending_cracks = [0]
     sim._anchor_crumbs(None)
