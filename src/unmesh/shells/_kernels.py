@@ -266,19 +266,36 @@ def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
 
 
 @njit(cache=True, inline="always")
-def touched_range(lo, hi, pairs, pstart, pcount, fibers, fstart, fcount):
+def touched_range(lo, hi, pairs, pstart, pcount, fibers, fstart, fcount, only):
     """Smallest node range ``[a, b)`` holding every node the forces of nodes ``lo .. hi-1`` touch
-    (their fibers' ends and umbrella pairs): the part of a chunk buffer that is not zero."""
-    a = lo
-    b = hi
+    (their fibers' ends and umbrella pairs): the part of a chunk buffer that is not zero. With
+    a non-empty mask ``only`` (N,), of the listed nodes only (the only ones that scatter)."""
     if hi <= lo:
         return lo, lo
-    for k in range(fstart[lo], fstart[hi - 1] + fcount[hi - 1]):
-        a = min(a, fibers[k, 0], fibers[k, 2])
-        b = max(b, fibers[k, 0] + 1, fibers[k, 2] + 1)
-    for q in range(pstart[lo], pstart[hi - 1] + pcount[hi - 1]):
-        a = min(a, pairs[q, 0], pairs[q, 1])
-        b = max(b, pairs[q, 0] + 1, pairs[q, 1] + 1)
+    if only.shape[0] == 0:
+        a = lo
+        b = hi
+        for k in range(fstart[lo], fstart[hi - 1] + fcount[hi - 1]):
+            a = min(a, fibers[k, 0], fibers[k, 2])
+            b = max(b, fibers[k, 0] + 1, fibers[k, 2] + 1)
+        for q in range(pstart[lo], pstart[hi - 1] + pcount[hi - 1]):
+            a = min(a, pairs[q, 0], pairs[q, 1])
+            b = max(b, pairs[q, 0] + 1, pairs[q, 1] + 1)
+        return a, b
+    a = hi
+    b = lo
+    for i in range(lo, hi):
+        if only[i]:
+            a = min(a, i)
+            b = max(b, i + 1)
+            for k in range(fstart[i], fstart[i] + fcount[i]):
+                a = min(a, fibers[k, 0], fibers[k, 2])
+                b = max(b, fibers[k, 0] + 1, fibers[k, 2] + 1)
+            for q in range(pstart[i], pstart[i] + pcount[i]):
+                a = min(a, pairs[q, 0], pairs[q, 1])
+                b = max(b, pairs[q, 0] + 1, pairs[q, 1] + 1)
+    if b <= a:
+        return lo, lo
     return a, b
 
 
@@ -320,7 +337,7 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
         if masked and not only[c0:c1].any():
             continue
         if scatter:
-            lo, hi = touched_range(c0, c1, pairs, pstart, pcount, fibers, fstart, fcount)
+            lo, hi = touched_range(c0, c1, pairs, pstart, pcount, fibers, fstart, fcount, only)
             span[c, 0] = lo
             span[c, 1] = hi
             b[lo:hi, :] = 0.0
@@ -331,7 +348,16 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
                      out_node, out_es, out_eb, only, scatter, 0.0)
     if not scatter:
         return
-    for i in prange(n):
+    # nodes outside every chunk's range get no contribution: zero (the sum of zeros)
+    first = n
+    last = 0
+    for c in range(chunks):
+        if span[c, 1] > span[c, 0]:
+            first = min(first, span[c, 0])
+            last = max(last, span[c, 1])
+    out_force[:first, :] = 0.0
+    out_force[max(last, first):, :] = 0.0
+    for i in prange(first, max(last, first)):
         f0, f1, f2 = sum_chunks(i, chunks, buf, span)
         out_force[i, 0] = f0
         out_force[i, 1] = f1

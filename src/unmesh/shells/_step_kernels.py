@@ -171,7 +171,8 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
     span = np.zeros((chunks, 2), dtype=np.int64)
     for c in prange(chunks):
         b = buf[c]
-        lo, hi = touched_range(c * n // chunks, (c + 1) * n // chunks, pairs, pstart, pcount, fibers, fstart, fcount)
+        lo, hi = touched_range(c * n // chunks, (c + 1) * n // chunks, pairs, pstart, pcount, fibers, fstart, fcount,
+                               _NO_MASK)
         span[c, 0] = lo
         span[c, 1] = hi
         b[lo:hi, :] = 0.0
