@@ -459,15 +459,22 @@ class SkinnedSurface:
         cand = int(min(3 * min(self.k + 1, len(self.node_rest)), len(self.node_rest)))
         if getattr(self, "_slot", None) is None:
             self._slot = np.full(self.dense.n, -1, dtype=np.int64)
+            self._cand_n = 0                               # rows used of the growing buffers below
             self._cand_d = np.zeros((0, cand))
             self._cand_i = np.zeros((0, cand), dtype=np.int64)
         slot = self._slot[rows]
         miss = rows[slot < 0]
         if len(miss):
             d, i = self.tree.knn(self.dense.points[miss], cand)
-            self._slot[miss] = len(self._cand_i) + np.arange(len(miss))
-            self._cand_d = np.concatenate([self._cand_d, d])
-            self._cand_i = np.concatenate([self._cand_i, i])
+            need = self._cand_n + len(miss)
+            if need > len(self._cand_i):                   # capacity doubles: appends cost O(total)
+                grow = max(need, 2 * len(self._cand_i))
+                self._cand_d = np.concatenate([self._cand_d[:self._cand_n], np.zeros((grow - self._cand_n, cand))])
+                self._cand_i = np.concatenate([self._cand_i[:self._cand_n],
+                                               np.zeros((grow - self._cand_n, cand), dtype=np.int64)])
+            self._cand_d[self._cand_n:need], self._cand_i[self._cand_n:need] = d, i
+            self._slot[miss] = self._cand_n + np.arange(len(miss))
+            self._cand_n = need
             slot = self._slot[rows]
         return self._cand_d[slot], self._cand_i[slot]
 
