@@ -503,20 +503,28 @@ class SkinnedSurface:
         would stretch every splat bound to it across the opening).
 
         Only the points whose binding can change are bound again (with ``blocked``, the
-        visibility test of all cracks): those within their reach (:meth:`_reaches`) of a node
-        whose exclusion changed -- a newly excluded node is bound to no farther point, and a
-        newly allowed one enters only bindings that reach it. Returns the number of points
-        bound again.
+        visibility test of all cracks): those bound to a newly excluded node, and those within
+        their reach (:meth:`_reaches`) of a newly allowed one (it enters only bindings that
+        reach it). Returns the number of points bound again.
         """
-        changed = np.flatnonzero(np.asarray(mask, dtype=bool) != self.excluded)
+        mask = np.asarray(mask, dtype=bool)
+        changed = np.flatnonzero(mask != self.excluded)
         if not len(changed):
             return 0
-        self.excluded = np.asarray(mask, dtype=bool).copy()
+        gone = np.zeros(len(mask), dtype=bool)
+        gone[changed[mask[changed]]] = True                 # excluded now: only bindings holding them
+        back = changed[~mask[changed]]                       # allowed again: bindings that reach them
+        self.excluded = mask.copy()
         c = self.node_rest[changed]
         rebound = np.zeros(0, dtype=np.int64)
         for part in (self.dense, self.disc):
             rows = self._near_owners(c, 0.0) if part is self.dense else np.arange(part.n)
             rows = rows[_sk.within_reach(part.points, rows, part.reach, 0.0, c)] if len(rows) else rows
+            b = part.bind[rows]
+            holds = (gone[np.maximum(b, 0)] & (b >= 0)).any(axis=1)
+            if len(back):
+                holds |= _sk.within_reach(part.points, rows, part.reach, 0.0, self.node_rest[back])
+            rows = rows[holds]
             if len(rows):
                 self._rebind(part, rows, blocked)
                 rebound = rows if part is self.dense else rebound
