@@ -225,6 +225,7 @@ def test_lu_pcg_keeps_its_factorisation_across_cuts_and_matches_the_direct_solve
     sims = [Dynamics(mesh, 50.0, 0.3, 1.0, ground=Ground(friction=0.5), solver=s, cg_tol=1e-11)
             for s in ("lu-pcg", "direct")]
     sims[0].lagged.touched_fraction = 1.0  # a small mesh: keep the factorisation however much a cut touches
+    sims[0].lagged.background = False  # (and start no refactorisation in the background either)
     cuts = [PlaneCut((0.5, 0.5, 0.5), (1.0, 0.3, 0.1)), PlaneCut((0.4, 0.5, 0.5), (0.2, 1.0, -0.3))]
     for k in range(12):
         if k in (4, 8):
@@ -358,6 +359,7 @@ def test_every_solver_matches_spsolve_on_a_cut_mesh_with_rotated_pieces(rng, sol
     dt = 0.04
     sim = Dynamics(hex_grid((4, 2, 2)), 2e3, 0.3, 1.0, solver=solver, cg_tol=1e-11)
     sim.lagged.touched_fraction = 1.0  # a small mesh: keep the factorisation however much a cut touches
+    sim.lagged.background = False  # (and start no refactorisation in the background either)
     sim.step(dt)
     separate = PolygonCut(np.array([[0.6, -1, -1], [0.6, 2, -1], [0.6, 2, 2], [0.6, -1, 2.0]]))
     slit = PolygonCut(np.array([[-1, 0.5, -1], [0.3, 0.5, -1], [0.3, 0.5, 2], [-1, 0.5, 2.0]]))

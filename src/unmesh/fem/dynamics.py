@@ -232,6 +232,7 @@ class Dynamics:
         self._rot_cache: tuple[Any, ...] | None = None
         self.v = np.zeros((mesh.n_nodes, 3))
         self.time = 0.0
+        self.steps = 0  # steps taken (the schedule of background factorisations)
         self.groups: list[tuple[np.ndarray, Prescribed]] = []
         for p in prescribed or []:
             member = np.zeros(mesh.n_nodes, bool)
@@ -264,7 +265,6 @@ class Dynamics:
         self.n_pieces, self.piece = connected_components(graph, directed=False)
         # pieces with mass (orphan nodes left by a cut are components of their own)
         self.n_solid_pieces = int(np.count_nonzero(np.bincount(self.piece, weights=self.masses) > 0))
-        self._K0: np.ndarray | None = None
         self._used = np.zeros(n, bool)
         self._used[integ.nodes] = True
 
@@ -392,7 +392,7 @@ class Dynamics:
         if self.ground is not None and not active.any():
             fall |= ~fixed & self._used & ((x + dt * (self.v + dt * self.gravity)) @ normal < self.ground.height)
         kind0 = np.where(fixed, 1, np.where(fall, 2, 0)).astype(np.int64)
-        prec = self._lu_preconditioner(R, cm, ck, info, A, kind0, normal) if mode == "lu-pcg" else None
+        prec = self._lu_preconditioner(cm, ck, info, A, kind0, normal) if mode == "lu-pcg" else None
         vnew = self.v
         worst = 0
         # contact active-set rounds are solved to CONTACT_TOL; once the set is stable (or after
@@ -422,7 +422,7 @@ class Dynamics:
                     info.iterations += int(its)
                     self._stiff = True
                     mode = "lu-pcg"
-                    prec = self._lu_preconditioner(R, cm, ck, info, A, kind0, normal)
+                    prec = self._lu_preconditioner(cm, ck, info, A, kind0, normal)
             if mode == "lu-pcg":
                 if not (resume and solver is not None):
                     solver = PCG(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec(kind, normal))
@@ -433,7 +433,7 @@ class Dynamics:
                     # the lagged preconditioner went bad: refactorise now and continue from there
                     info.iterations += int(its)
                     self.lagged.invalidate()
-                    prec = self._lu_preconditioner(R, cm, ck, info, A, kind, normal)
+                    prec = self._lu_preconditioner(cm, ck, info, A, kind, normal)
                     solver = PCG(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec(kind, normal))
                     vnew, its, res = solver.run(tol, self.cg_maxiter)
                     solver_its = its
@@ -471,24 +471,33 @@ class Dynamics:
         self.v = vnew
         self.u = self.u + dt * vnew
         self.time += dt
+        self.steps += 1
         info.solve_seconds = time.perf_counter() - t0
         self.last = info
         return info
 
-    def _lu_preconditioner(self, R: np.ndarray, cm: float, ck: float, info: StepInfo, A: np.ndarray, kind0: np.ndarray,
+    def _lu_preconditioner(self, cm: float, ck: float, info: StepInfo, A: np.ndarray, kind0: np.ndarray,
                            normal: np.ndarray) -> Any:
         coeffs = (cm, ck)
-        if self.lagged.needs_factor(coeffs, self.n_solid_pieces):
-            if self._K0 is None:
-                self._K0 = FK.scatter_blocks(self.pattern.block_map, self.kstiff.data.reshape(-1, 9),
-                                             len(self.pattern.indices))
-            A0 = SK.add_diagonal(self._K0, self.pattern.diag, ck, self.masses, cm)
-            # the constraints of the step's first contact round are factorised (module docstring of solvers)
-            self.lagged.factor(self.pattern.indptr, self.pattern.indices, A0, coeffs, self.n_solid_pieces, kind0, normal)
-            info.extra["factorized"] = True
+        lag = self.lagged
+        if lag.collect(self.steps):  # a background refactorisation due at this step
+            info.extra["installed"] = True
+        need = lag.needs_factor(coeffs, self.n_solid_pieces)
+        if need or lag.wants_background(coeffs, self.n_solid_pieces):
+            # the step's warped matrix with the last step's contact set is factorised, and rotated per
+            # piece from the positions it was taken at (module docstring of solvers)
+            ref = self.positions() if self.warping else None
+            pat = self.pattern
+            if need:
+                lag.factor(pat.indptr, pat.indices, A, coeffs, self.n_solid_pieces, kind0, normal, ref)
+                info.extra["factorized"] = True
+            else:
+                lag.start_background(pat.indptr, pat.indices, A, coeffs, self.steps, self.n_solid_pieces, kind0,
+                                     normal, ref)
         # one rotation per connected piece (not per node: a rotation varying from node to node
         # does not keep the translations in the near-null space, measured 3x the iterations)
-        Q = piece_rotations(self.mesh.points, self.positions(), self.masses, self.piece, self.n_pieces)[self.piece]
+        ref = self.mesh.points if lag.ref is None else lag.ref
+        Q = piece_rotations(ref, self.positions(), self.masses, self.piece, self.n_pieces)[self.piece]
         pat = self.pattern
         made: dict[bytes, Any] = {}
 

@@ -96,6 +96,8 @@ True
 
 from __future__ import annotations
 
+import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -103,6 +105,7 @@ import scipy.sparse as sp
 
 from unmesh.errors import InputError
 from unmesh.fem import _solve_kernels as SK
+from unmesh.fem.factor import Factorization, Job
 from unmesh.fem.krylov import PCG, pcg
 from unmesh.fem.rotations import polar_rotations
 
@@ -115,6 +118,12 @@ LOCAL_RINGS = 3
 CONSTRAINED_RINGS = 1
 #: Layers of neighbours added around the nodes touched by cuts.
 TOUCHED_RINGS = 1
+#: A background refactorisation starts when the touched (or mismatched) nodes exceed this share of ``touched_fraction``.
+BACKGROUND_SHARE = 0.25
+#: ... or when a solve needed more than this many iterations.
+BACKGROUND_ITERATIONS = 15
+#: Steps after its start at which a background factorisation is installed.
+BACKGROUND_LEAD = 2
 
 
 def nested_dissection(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
@@ -199,8 +208,56 @@ def direct_solve(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, b:
     return (x0.ravel() + P @ np.atleast_1d(y)).reshape(n, 3)
 
 
+@dataclass
+class _Pending:
+    """A factorisation running in the background, and the cuts since its matrix was taken."""
+
+    job: Job
+    due: int  # step at which it is installed (waiting for it if not done)
+    coeffs: tuple[float, float]
+    pieces: int | None
+    kind: np.ndarray  # (n,) constraints factorised, on the current nodes
+    normal: np.ndarray
+    ref: np.ndarray | None = None  # (n,3) positions its matrix was taken at, on the current nodes
+    weights: sp.csr_array | None = None  # current nodes -> its nodes (None: identity)
+    touched: np.ndarray | None = None  # nodes changed by cuts since its matrix was taken
+
+
+def _global_factor(indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, kind: np.ndarray,
+                   normal: np.ndarray, single: bool) -> Factorization:
+    """Factorisation of the filtered ``S A₀ S + (I - S)`` in nested-dissection order (runs in a thread too)."""
+    if kind.any():
+        blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind, normal)
+    perm = nested_dissection(indptr, indices)
+    dof = None if perm is None else (3 * perm[:, None] + np.arange(3)).ravel()
+    try:
+        return Factorization(block_csr(indptr, indices, blocks0), dof, single=single)
+    except RuntimeError as exc:
+        raise InputError(f"the implicit system is singular ({exc}); check masses and materials") from None
+
+
+def _remapped(W: sp.csr_array, touched: np.ndarray, weights: sp.csr_array | None, old_touched: np.ndarray | None,
+              kind: np.ndarray | None, ref: np.ndarray | None) -> tuple[Any, ...]:
+    """(weights, touched, kind, ref) of a factorisation carried across a cut with node weights W."""
+    if old_touched is None:
+        old_touched = np.zeros(W.shape[1], bool)
+    new_touched = np.asarray(touched, bool) | ((W @ old_touched.astype(np.float64)) != 0)
+    if kind is not None:
+        # constraints of the factorisation on the new nodes (touched ones are solved locally anyway)
+        kind = np.where(new_touched, 0, np.rint(W @ kind.astype(np.float64))).astype(np.int64)
+    if ref is not None:
+        ref = W @ ref
+    return (W if weights is None else sp.csr_array(W @ weights)), new_touched, kind, ref
+
+
 class LaggedLU:
     """The lagged, warped LU preconditioner of ``"lu-pcg"`` (see the module docstring).
+
+    ``single``: factorise the Jacobi-scaled matrix in single precision
+    (:class:`unmesh.fem.factor.Factorization`). ``background``: refactorise in a thread
+    before the factorisation is due (:meth:`wants_background`, :meth:`start_background`),
+    installed ``lead`` steps later; ``threaded=False`` computes it at once instead (same
+    results: the step it is installed at does not depend on the thread's timing).
 
     Example
     -------
@@ -209,33 +266,50 @@ class LaggedLU:
     """
 
     def __init__(self, refactor_iterations: int = 40, touched_fraction: float = 0.1, rings: int = LOCAL_RINGS,
-                 touched_rings: int = TOUCHED_RINGS, constrained_rings: int = CONSTRAINED_RINGS) -> None:
+                 touched_rings: int = TOUCHED_RINGS, constrained_rings: int = CONSTRAINED_RINGS, *,
+                 single: bool = True, background: bool = True, threaded: bool = True,
+                 background_share: float = BACKGROUND_SHARE, background_iterations: int = BACKGROUND_ITERATIONS,
+                 lead: int = BACKGROUND_LEAD) -> None:
         self.refactor_iterations = int(refactor_iterations)
         self.rings = int(rings)
         self.constrained_rings = int(constrained_rings)
         self.touched_rings = int(touched_rings)
         self.touched_fraction = float(touched_fraction)
-        self.lu: Any = None
+        self.single = bool(single)
+        self.background = bool(background)
+        self.threaded = bool(threaded)
+        self.background_share = float(background_share)
+        self.background_iterations = int(background_iterations)
+        self.lead = int(lead)
+        self.lu: Factorization | None = None
         self.coeffs: tuple[float, float] | None = None
-        self.factorizations = 0
+        self.factorizations = 0  # all factorisations made, in the foreground or the background
+        self.background_factorizations = 0
+        self.waited = 0.0  # seconds spent waiting for background factorisations
         self.last_iterations = 0
         self.weights: sp.csr_array | None = None  # current nodes -> factorised nodes (None: identity)
         self.touched: np.ndarray | None = None  # (n,) bool, nodes changed by cuts since the factorisation
         self.remaps = 0
         self.pieces: int | None = None  # connected pieces of the mesh at the factorisation
-        self.perm: np.ndarray | None = None  # DOF order of the factorisation (None: SuperLU's own)
         self.kind: np.ndarray | None = None  # (n,) constraints factorised, on the current nodes
+        self.ref: np.ndarray | None = None  # (n,3) positions the factorised matrix was taken at (None: rest)
+        self.pending: _Pending | None = None
         self._local_cache: tuple[Any, bytes, Any] | None = None  # (matrix, node set, local factor) of the cut region
         self.normal = np.array([0.0, 1.0, 0.0])
-        self.iperm: np.ndarray | None = None
         self.mismatch = 0.0  # share of the nodes solved locally because their constraint differs from the factorised one
 
+    @property
+    def perm(self) -> np.ndarray | None:
+        """DOF order of the factorisation (None: SuperLU's own)."""
+        return None if self.lu is None else self.lu.perm
+
     def invalidate(self) -> None:
-        """Drop the factorisation (e.g. after a change of material)."""
+        """Drop the factorisation and a pending one (e.g. after a change of material)."""
         self.lu = None
         self.weights = None
         self.touched = None
         self.kind = None
+        self.pending = None
 
     def needs_factor(self, coeffs: tuple[float, float], pieces: int | None = None) -> bool:
         """Whether to (re)factorise before the next solve.
@@ -259,8 +333,62 @@ class LaggedLU:
                 return True
         return self.lu is None or self.coeffs != coeffs or self.last_iterations > limit
 
+    def wants_background(self, coeffs: tuple[float, float], pieces: int | None = None) -> bool:
+        """Whether to start a background refactorisation (call when :meth:`needs_factor` is False).
+
+        When the cut-touched nodes or the nodes of mismatched constraints exceed
+        ``background_share`` of ``touched_fraction``, or the last solve needed more than
+        ``background_iterations`` iterations, and no refactorisation is pending.
+        """
+        if not self.background or self.pending is not None or self.lu is None or self.coeffs != coeffs:
+            return False
+        if pieces is not None and self.pieces is not None and pieces != self.pieces:
+            return False
+        share = self.background_share * self.touched_fraction
+        touched = 0.0 if self.touched is None else float(self.touched.mean())
+        return touched > share or self.mismatch > share or self.last_iterations > self.background_iterations
+
+    def start_background(self, indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray,
+                         coeffs: tuple[float, float], step: int, pieces: int | None = None,
+                         kind: np.ndarray | None = None, normal: np.ndarray | None = None,
+                         ref: np.ndarray | None = None) -> None:
+        """Start factorising A₀ (as :meth:`factor`) in a thread; it is installed at step ``step + lead``."""
+        n = len(indptr) - 1
+        kind0 = np.zeros(n, np.int64) if kind is None else np.ascontiguousarray(kind, dtype=np.int64).copy()
+        nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.ascontiguousarray(normal, dtype=np.float64).copy()
+        job = Job(_global_factor, indptr, indices, blocks0, kind0, nrm, self.single, threaded=self.threaded)
+        self.pending = _Pending(job, step + self.lead, coeffs, pieces, kind0, nrm, ref)
+        self.factorizations += 1
+        self.background_factorizations += 1
+
+    def collect(self, step: int) -> bool:
+        """Install the pending factorisation if it is due at ``step`` (waits for it); whether it was."""
+        pend = self.pending
+        if pend is None or step < pend.due:
+            return False
+        t = time.perf_counter()
+        lu = pend.job.result()
+        self.waited += time.perf_counter() - t
+        self._install(lu, pend.coeffs, pend.pieces, pend.kind, pend.normal, pend.ref)
+        self.weights, self.touched = pend.weights, pend.touched
+        return True
+
+    def _install(self, lu: Factorization, coeffs: tuple[float, float], pieces: int | None, kind: np.ndarray,
+                 normal: np.ndarray, ref: np.ndarray | None) -> None:
+        self.lu = lu
+        self.ref = ref
+        self.coeffs = coeffs
+        self.pieces = pieces
+        self.kind = kind
+        self.normal = normal
+        self.mismatch = 0.0
+        self.last_iterations = 0
+        self.weights = None
+        self.touched = None
+        self.pending = None
+
     def remap(self, node_weights: sp.sparray, touched: np.ndarray) -> None:
-        """Keep the factorisation across a topology change (see the module docstring).
+        """Keep the factorisation (and a pending one) across a topology change (see the module docstring).
 
         Parameters
         ----------
@@ -270,57 +398,32 @@ class LaggedLU:
             Nodes of the new mesh whose neighbourhood changed (new, duplicated, or in a
             re-integrated element).
         """
+        W = sp.csr_array(node_weights)
+        pend = self.pending
+        if pend is not None:
+            pend.weights, pend.touched, pend.kind, pend.ref = _remapped(W, touched, pend.weights, pend.touched,
+                                                                        pend.kind, pend.ref)
         if self.lu is None:
             return
-        W = sp.csr_array(node_weights)
-        old_touched = self.touched if self.touched is not None else np.zeros(W.shape[1], bool)
-        hit = (W @ old_touched.astype(np.float64)) != 0
-        self.touched = np.asarray(touched, bool) | hit
-        if self.kind is not None:
-            # constraints of the factorisation on the new nodes (touched ones are solved locally anyway)
-            self.kind = np.where(self.touched, 0, np.rint(W @ self.kind.astype(np.float64))).astype(np.int64)
-        self.weights = W if self.weights is None else sp.csr_array(W @ self.weights)
+        self.weights, self.touched, self.kind, self.ref = _remapped(W, touched, self.weights, self.touched, self.kind,
+                                                                    self.ref)
         self.remaps += 1
 
     def factor(self, indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, coeffs: tuple[float, float],
-               pieces: int | None = None, kind: np.ndarray | None = None, normal: np.ndarray | None = None) -> None:
-        """Factorise the unwarped matrix A₀ (3×3 blocks) with SuperLU (``pieces``: see :meth:`needs_factor`).
+               pieces: int | None = None, kind: np.ndarray | None = None, normal: np.ndarray | None = None,
+               ref: np.ndarray | None = None) -> None:
+        """Factorise the unwarped matrix A₀ (3×3 blocks) with SuperLU now (``pieces``: see :meth:`needs_factor`).
 
         With ``kind`` (n,) (1 fixed, 2 normal ``normal`` prescribed, 0 free) the filtered
         matrix ``S A₀ S + (I - S)`` of these constraints is factorised (module docstring).
+        A pending background factorisation is dropped.
         """
-        from scipy.sparse.linalg import splu
-
         n = len(indptr) - 1
         kind0 = np.zeros(n, np.int64) if kind is None else np.ascontiguousarray(kind, dtype=np.int64)
         nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.ascontiguousarray(normal, dtype=np.float64)
-        if kind0.any():
-            blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind0, nrm)
-        # double precision: single precision solves 1.5x faster but, with lumped masses spanning
-        # 5 decades (slivers after cuts), stalled PCG on the bunny-slicing benchmark
-        A0 = block_csr(indptr, indices, blocks0)
-        perm = nested_dissection(indptr, indices)
-        try:
-            if perm is None:
-                self.lu = splu(A0.tocsc(), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
-                self.perm = None
-            else:
-                dof = (3 * perm[:, None] + np.arange(3)).ravel()
-                self.lu = splu(sp.csc_array(A0[dof][:, dof]), permc_spec="NATURAL", options={"SymmetricMode": True})
-                self.perm = dof
-                self.iperm = np.empty_like(dof)
-                self.iperm[dof] = np.arange(len(dof))
-        except RuntimeError as exc:
-            raise InputError(f"the implicit system is singular ({exc}); check masses and materials") from None
-        self.coeffs = coeffs
-        self.pieces = pieces
-        self.kind = kind0
-        self.normal = nrm
+        self._install(_global_factor(indptr, indices, blocks0, kind0, nrm, self.single), coeffs, pieces, kind0, nrm,
+                      ref)
         self.factorizations += 1
-        self.mismatch = 0.0
-        self.last_iterations = 0
-        self.weights = None
-        self.touched = None
 
     def preconditioner(self, node_rot: np.ndarray, indptr: np.ndarray | None = None, indices: np.ndarray | None = None,
                        blocks: np.ndarray | None = None, kind: np.ndarray | None = None,
@@ -339,7 +442,6 @@ class LaggedLU:
         """
         lu = self.lu
         assert lu is not None
-        perm, iperm = self.perm, self.iperm
         W = self.weights
         WT = sp.csr_array(W.T) if W is not None else None
 
@@ -347,10 +449,7 @@ class LaggedLU:
             rl = np.einsum("nji,nj->ni", node_rot, r)
             if WT is not None:
                 rl = WT @ rl
-            if perm is None:
-                y = lu.solve(rl.ravel()).reshape(-1, 3)
-            else:
-                y = lu.solve(rl.ravel()[perm])[iperm].reshape(-1, 3)
+            y = lu.solve(rl.ravel()).reshape(-1, 3)
             if W is not None:
                 y = W @ y
             return np.einsum("nij,nj->ni", node_rot, y)
@@ -422,26 +521,6 @@ class LaggedLU:
         return apply_schwarz
 
 
-class _PermutedLU:
-    """SuperLU of ``A[perm][:, perm]`` that solves with A."""
-
-    def __init__(self, A: sp.csr_array, perm: np.ndarray | None) -> None:
-        from scipy.sparse.linalg import splu
-
-        self.perm = perm
-        if perm is None:
-            self.lu = splu(sp.csc_array(A), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
-            return
-        self.iperm = np.empty_like(perm)
-        self.iperm[perm] = np.arange(len(perm))
-        self.lu = splu(sp.csc_array(A[perm][:, perm]), permc_spec="NATURAL", options={"SymmetricMode": True})
-
-    def solve(self, r: np.ndarray) -> np.ndarray:
-        if self.perm is None:
-            return self.lu.solve(r)
-        return self.lu.solve(r[self.perm])[self.iperm]
-
-
 #: Local sets of at least this many nodes are factorised in nested-dissection order.
 LOCAL_ND_NODES = 400
 
@@ -462,7 +541,7 @@ def _local_factor(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, n
     L = block_csr(sub_ptr, sub_idx, sub)
     perm = nested_dissection(sub_ptr, sub_idx) if m >= LOCAL_ND_NODES else None
     dof = None if perm is None else (3 * perm[:, None] + np.arange(3)).ravel()
-    return nodes, _PermutedLU(L, dof)
+    return nodes, Factorization(L, dof)
 
 
 def _sub_block_array(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray,
