@@ -296,6 +296,11 @@ def test_merge_csr_kernel_matches_numpy(rng, shape):
     np.testing.assert_array_equal(fd, rd)
     i = int(np.flatnonzero(from_b)[0])
     np.testing.assert_array_equal(fd[fo[i]:fo[i + 1]], db[ob[idx[i]]:ob[idx[i] + 1]])
+    buf = np.full((len(rd) + 5, *shape), np.nan)  # written into when long enough, ignored when too short
+    for out, view in ((buf, True), (buf[:len(rd) - 1], False)):
+        _, bd = merge_csr(oa, da, ob, db, from_b, idx, out=out)
+        np.testing.assert_array_equal(bd, rd)
+        assert np.shares_memory(bd, buf) == view
 
 
 def test_piece_rotations_recover_rigid_rotations_of_each_piece(rng):
