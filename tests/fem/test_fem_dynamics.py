@@ -454,8 +454,11 @@ def test_fused_warped_assembly_matches_rotated_blocks_scattered(rng):
     ref = FK.scatter_blocks(p.block_map, FK.rotated_blocks(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R),
                             len(p.indices))
     got = FK.warped_global_blocks(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R, p.block_map,
-                                  len(p.indices))
-    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+                                  len(p.indices), 0.25)
+    np.testing.assert_allclose(got, 0.25 * ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    SK.add_masses(got, p.diag, sim.masses, 2.0)
+    np.testing.assert_allclose(got, SK.add_diagonal(ref, p.diag, 0.25, sim.masses, 2.0), rtol=1e-12,
+                               atol=1e-12 * np.abs(ref).max())
 
 
 def test_row_subset_matvec_matches_the_full_product(rng):

@@ -153,6 +153,16 @@ def add_diagonal(blocks, diag, scale_k, masses, scale_m):
 
 
 @njit(cache=True)
+def add_masses(blocks, diag, masses, scale_m):
+    """blocks += scale_m · diag(m) in place (the mass term of :func:`add_diagonal`)."""
+    for i in range(diag.shape[0]):
+        k = diag[i]
+        blocks[k, 0] += scale_m * masses[i]
+        blocks[k, 4] += scale_m * masses[i]
+        blocks[k, 8] += scale_m * masses[i]
+
+
+@njit(cache=True)
 def dot(a, b):
     """Σ a·b over (n,3) arrays (serial, no BLAS threads)."""
     return _dot(a, b)

@@ -372,11 +372,11 @@ class Dynamics:
         n = self.mesh.n_nodes
         x = self.positions()
         R, f_el, _ = self._state_forces()
-        K = FK.warped_global_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R,
-                                    self.pattern.block_map, len(self.pattern.indices))
         cm = 1.0 + dt * self.alpha
         ck = dt * self.beta + dt * dt
-        A = SK.add_diagonal(K, self.pattern.diag, ck, self.masses, cm)
+        A = FK.warped_global_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R,
+                                    self.pattern.block_map, len(self.pattern.indices), ck)
+        SK.add_masses(A, self.pattern.diag, self.masses, cm)
         b = self.masses[:, None] * self.v + dt * (f_el + self.external_forces())
         fixed, vfix = self._prescribed(self.time)
         normal = self.ground.unit_normal() if self.ground is not None else np.array([0.0, 1.0, 0.0])
