@@ -8,19 +8,24 @@ and per-node constraints (fixed, or normal-constrained ground contact):
 - ``"auto"`` (default): ``"cg"``; if a solve does not converge in 150 iterations the
   system is too stiff for it and the dynamics switch to ``"lu-pcg"`` for good.
 - ``"lu-pcg"``: filtered PCG warm-started from the last velocity,
-  preconditioned by a *lagged, warped* sparse LU factorisation: the unwarped
-  matrix ``A₀ = c_m M + c_k K``, with the constraints of the step it is made in
-  eliminated (``S A₀ S + I - S``, S the constraint projection; ground contact
-  included, see below), is factorised (SuperLU in METIS nested-dissection order of the
-  node graph, :func:`nested_dissection`, 3×3 blocks kept together; SuperLU's own
-  minimum-degree order of A+Aᵀ when ``pymetis`` is missing) and reused for later steps
-  as ``Q A₀⁻¹ Qᵀ`` with Q the best-fit rotation of
-  each connected piece (:func:`unmesh.fem.rotations.piece_rotations`), so rigidly
+  preconditioned by a *lagged, warped* sparse LU factorisation: the matrix ``A_f`` of
+  the step it is made in (warped stiffness, the rotations of that step), with the
+  constraints of the last step's contact set eliminated (``S A_f S + I - S``, S the
+  constraint projection; ground contact included, see below), is factorised (SuperLU in
+  METIS nested-dissection order of the node graph, :func:`nested_dissection`, 3×3 blocks
+  kept together; SuperLU's own minimum-degree order of A+Aᵀ when ``pymetis`` is missing;
+  single precision after symmetric Jacobi scaling, :class:`unmesh.fem.factor.Factorization`)
+  and reused for later steps as ``Q A_f⁻¹ Qᵀ`` with Q the best-fit rotation of each
+  connected piece from the positions ``A_f`` was taken at to the current ones
+  (:func:`unmesh.fem.rotations.piece_rotations`), so rigidly
   rotated pieces are preconditioned exactly. One rotation per piece, not per node:
   a node-to-node varying rotation maps the translations of the current configuration
   (eigenvalue ~ mass, 1/4800 of the stiffness scale on the bunny benchmark) outside the
-  near-null space of ``Q A₀ Qᵀ``; on the bunny-slicing benchmark node-averaged rotations
-  needed 64-76 iterations where the piece rotation needs 23. It is refactorised after
+  near-null space of ``Q A_f Qᵀ``; on the bunny-slicing benchmark node-averaged rotations
+  needed 64-76 iterations where the piece rotation needs 23. (The unwarped rest matrix
+  ``c_m M + c_k K`` rotated per piece from rest, factorised before, needed 10.0 iterations
+  per frame on the bunny benchmark where the warped one needs 8.3: the head bends at the
+  neck relative to the body, which one rotation per piece cannot follow.) It is refactorised after
   a change of the step size, when a cut separates a new piece (the remapped factorisation
   would still couple the pieces, which then rotate independently), or when a solve needed
   more than ``refactor_iterations`` iterations.
@@ -32,7 +37,7 @@ and per-node constraints (fixed, or normal-constrained ground contact):
   layers of neighbours, the constrained nodes plus ``CONSTRAINED_RINGS`` (1) layers, and
   the nodes whose constraint differs from the factorised one plus ``LOCAL_RINGS`` (3)
   layers. The two are combined as a symmetric multiplicative Schwarz preconditioner,
-  ``z₁ = A_tt⁻¹ r_t``, ``z₂ = z₁ + Q W A₀⁻¹ Wᵀ Qᵀ (r - A z₁)``, ``z = z₂ + A_tt⁻¹ (r - A z₂)_t``.
+  ``z₁ = A_tt⁻¹ r_t``, ``z₂ = z₁ + Q W A_f⁻¹ Wᵀ Qᵀ (r - A z₁)``, ``z = z₂ + A_tt⁻¹ (r - A z₂)_t``.
   (Keeping the old factorisation with only block-Jacobi on new nodes was measured
   to need 80-200 iterations instead of about 8-30; the local solve restores that.)
   A solve that has not converged after 200 iterations with a lagged factorisation is
@@ -225,7 +230,7 @@ class _Pending:
 
 def _global_factor(indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, kind: np.ndarray,
                    normal: np.ndarray, single: bool) -> Factorization:
-    """Factorisation of the filtered ``S A₀ S + (I - S)`` in nested-dissection order (runs in a thread too)."""
+    """Factorisation of the filtered ``S A_f S + (I - S)`` in nested-dissection order (runs in a thread too)."""
     if kind.any():
         blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind, normal)
     perm = nested_dissection(indptr, indices)
@@ -352,7 +357,10 @@ class LaggedLU:
                          coeffs: tuple[float, float], step: int, pieces: int | None = None,
                          kind: np.ndarray | None = None, normal: np.ndarray | None = None,
                          ref: np.ndarray | None = None) -> None:
-        """Start factorising A₀ (as :meth:`factor`) in a thread; it is installed at step ``step + lead``."""
+        """Start factorising A_f (as :meth:`factor`) in a thread; it is installed at step ``step + lead``.
+
+        The arrays must not be changed afterwards (the dynamics make new ones every step).
+        """
         n = len(indptr) - 1
         kind0 = np.zeros(n, np.int64) if kind is None else np.ascontiguousarray(kind, dtype=np.int64).copy()
         nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.ascontiguousarray(normal, dtype=np.float64).copy()
@@ -412,10 +420,13 @@ class LaggedLU:
     def factor(self, indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, coeffs: tuple[float, float],
                pieces: int | None = None, kind: np.ndarray | None = None, normal: np.ndarray | None = None,
                ref: np.ndarray | None = None) -> None:
-        """Factorise the unwarped matrix A₀ (3×3 blocks) with SuperLU now (``pieces``: see :meth:`needs_factor`).
+        """Factorise the matrix A_f (3×3 blocks) with SuperLU now (``pieces``: see :meth:`needs_factor`).
+
+        ``ref`` (n,3): the positions A_f was taken at (its warping), from which the
+        preconditioner rotates each piece; None: A_f is unwarped (the rest positions).
 
         With ``kind`` (n,) (1 fixed, 2 normal ``normal`` prescribed, 0 free) the filtered
-        matrix ``S A₀ S + (I - S)`` of these constraints is factorised (module docstring).
+        matrix ``S A_f S + (I - S)`` of these constraints is factorised (module docstring).
         A pending background factorisation is dropped.
         """
         n = len(indptr) - 1
@@ -431,7 +442,7 @@ class LaggedLU:
         """The preconditioner ``r -> z`` for (n,3) residuals of the filtered system.
 
         Without a cut since the factorisation and without constrained nodes it is
-        ``Q A₀⁻¹ Qᵀ r`` (``node_rot`` (n,3,3): Q per node; the dynamics pass the rotation
+        ``Q A_f⁻¹ Qᵀ r`` (``node_rot`` (n,3,3): Q per node; the dynamics pass the rotation
         of each node's piece). Otherwise it is the symmetric
         multiplicative Schwarz combination (module docstring) of that with an exact
         solve on the local set: the nodes touched by cuts since the factorisation plus
