@@ -142,3 +142,15 @@ def test_background_refactorisation_policy():
     lag.start_background(p.indptr, p.indices, A, coeffs, step=9)
     lag.factor(p.indptr, p.indices, A, coeffs)
     assert lag.pending is None and not lag.collect(100)
+
+
+@pytest.mark.parametrize("rings", [0, 1, 3])
+def test_grow_kernel_matches_numpy(rng, rings):
+    from unmesh.fem.solvers import grow
+
+    sim = Dynamics(voronoi_foam(10, seed=3), 50.0, 0.3, 1.0)
+    p, n = sim.pattern, sim.mesh.n_nodes
+    mask = rng.random(n) < 0.05
+    got = grow(p.indptr, p.indices, mask, rings)
+    np.testing.assert_array_equal(got, grow(p.indptr, p.indices, mask, rings, fast=False))
+    assert got.sum() >= mask.sum() and (rings == 0) == (got.sum() == mask.sum())

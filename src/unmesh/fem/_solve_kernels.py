@@ -153,6 +153,19 @@ def add_diagonal(blocks, diag, scale_k, masses, scale_m):
 
 
 @njit(cache=True)
+def grow_mask(indptr, indices, mask, rings):
+    """``mask`` (n,) bool grown by ``rings`` layers of neighbours (reference: :func:`unmesh.fem.solvers.grow`)."""
+    out = mask.copy()
+    for _ in range(rings):
+        prev = out.copy()
+        for i in range(prev.shape[0]):
+            if prev[i]:
+                for k in range(indptr[i], indptr[i + 1]):
+                    out[indices[k]] = True
+    return out
+
+
+@njit(cache=True)
 def add_masses(blocks, diag, masses, scale_m):
     """blocks += scale_m · diag(m) in place (the mass term of :func:`add_diagonal`)."""
     for i in range(diag.shape[0]):

@@ -191,7 +191,10 @@ class Dynamics:
 
     Attributes
     ----------
-    mesh, u (n,3) displacements, v (n,3) velocities, time.
+    mesh, u (n,3) displacements, v (n,3) velocities, time, steps (steps taken).
+    kstiff : ElementStiffness
+        The element stiffness; after a cut its ``data`` is a view of a buffer that the
+        cut after the next one overwrites (copy it to keep it).
 
     Example
     -------
