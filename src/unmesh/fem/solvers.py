@@ -75,6 +75,28 @@ frames 1 and 10 solved to 10⁻⁶ from the warm start):
 - CHOLMOD through ``cholespy`` (the only CHOLMOD wheel on PyPI; scikit-sparse has none):
   factorisation 4.1 s, solve 26 ms; hand-written numba triangular solves on SuperLU's
   factors (CSC or CSR, double or single precision): no faster than SuperLU's solve.
+- single precision without scaling stalled PCG (lumped masses spanning 5 decades after
+  slivers); after symmetric Jacobi scaling (unit diagonal) it needs the same CG iterations
+  as double precision in every step of the 30-frame bunny run (24,138 nodes), factorises in
+  1.2-1.55 s instead of 1.85-2.4 s CPU (fill 25.8M; half the memory, which matters on the
+  benchmark's virtual machine, where first-touched memory costs up to 10 ms per MB) and
+  solves in 24-33 ms instead of 34 ms; the run's solve time per frame went 0.90 → 0.71 s
+  (load 1.5-1.6, one run each). The local (Schwarz) factorisations in single precision:
+  same iterations, 2.21 → 2.01 s factorising and 0.97 → 0.85 s solving in 29 frames (main
+  thread CPU): not worth an inexact local solve, they stay double;
+- SuperLU's ``relax`` (8-128) and ``panel_size`` with the nested-dissection order: same fill
+  (25.8M), solve 24-27 ms either way;
+- the warped matrix of the factorisation step rotated per piece from its positions, instead
+  of the rest matrix rotated from rest: 10.0 → 8.3 CG iterations per frame (30 frames);
+- a background refactorisation (:meth:`LaggedLU.wants_background`): SuperLU releases the GIL
+  (a Python loop in the main thread ran at 24% of its speed beside ``splu`` in a thread, at
+  31% beside a BLAS product, load 2.7: the second core was busy with other work). Started at
+  ``background_share`` 0.15 / 0.25 / 0.4 of ``touched_fraction``: 7.6 / 8.3 / 8.9 CG
+  iterations per frame with 12 / 8 / 6 factorisations in 30 steps (none waited for: two
+  steps of lead); 0.25 kept. Moving the foreground refactorisation of frame 1 (the auto
+  switch factorised the free-fall prediction; 13.8% of the nodes mismatched) to the
+  background as well, with doubled foreground limits, made frames 1-2 cost 1.30 + 1.53 s
+  (a local set of 14% of the nodes) instead of 1.64 + 0.48 s: not kept.
 
 Per frame of the bunny-slicing benchmark (``benchmarks/bench_fem_slicing.py --bunny``, 12
 frames; kernels on one thread as :data:`unmesh.fem.dynamics.SERIAL_NODES` sets them; the
