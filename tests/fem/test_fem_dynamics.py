@@ -396,6 +396,11 @@ def test_sub_blocks_equals_scipy_submatrix(rng):
     t = np.flatnonzero(rng.random(n) < 0.3)
     d = (3 * t[:, None] + np.arange(3)).ravel()
     np.testing.assert_array_equal(_sub_blocks(p.indptr, p.indices, B, t).toarray(), A[d][:, d].toarray())
+    from unmesh.fem.solvers import _sub_block_array
+
+    for got, ref in zip(_sub_block_array(p.indptr, p.indices, B, t),
+                        _sub_block_array(p.indptr, p.indices, B, t, fast=False), strict=True):
+        np.testing.assert_array_equal(got, ref)
 
 
 def _filtered_blocks_reference(indptr, indices, blocks, kind, normal):

@@ -166,6 +166,34 @@ def grow_mask(indptr, indices, mask, rings):
 
 
 @njit(cache=True)
+def sub_pattern(indptr, indices, nodes, n):
+    """Pattern ``(indptr, indices)`` of the submatrix on the sorted node set ``nodes`` (m,), and the
+    positions (nnz_sub,) of its blocks in the full pattern (reference: ``solvers._sub_block_array``)."""
+    m = nodes.shape[0]
+    local = np.full(n, -1, np.int64)
+    for t in range(m):
+        local[nodes[t]] = t
+    ptr = np.zeros(m + 1, np.int64)
+    for t in range(m):
+        c = 0
+        for k in range(indptr[nodes[t]], indptr[nodes[t] + 1]):
+            if local[indices[k]] >= 0:
+                c += 1
+        ptr[t + 1] = ptr[t] + c
+    idx = np.empty(ptr[m], np.int64)
+    keep = np.empty(ptr[m], np.int64)
+    for t in range(m):
+        q = ptr[t]
+        for k in range(indptr[nodes[t]], indptr[nodes[t] + 1]):
+            j = local[indices[k]]
+            if j >= 0:
+                idx[q] = j
+                keep[q] = k
+                q += 1
+    return ptr, idx, keep
+
+
+@njit(cache=True)
 def add_masses(blocks, diag, masses, scale_m):
     """blocks += scale_m · diag(m) in place (the mass term of :func:`add_diagonal`)."""
     for i in range(diag.shape[0]):

@@ -583,10 +583,18 @@ def _local_factor(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, n
     return nodes, Factorization(L, dof)
 
 
-def _sub_block_array(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray,
-                     nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Node-level CSR ``(indptr, indices)`` and blocks (nnz, 9) of the submatrix on the sorted node set ``nodes``."""
+def _sub_block_array(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray, *,
+                     fast: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Node-level CSR ``(indptr, indices)`` and blocks (nnz, 9) of the submatrix on the sorted node set ``nodes``.
+
+    ``fast``: a numba kernel over the rows of ``nodes`` only (the numpy version, ``fast=False``,
+    passes over the whole pattern: ~12 ms per local factorisation on the bunny benchmark).
+    """
     n = len(indptr) - 1
+    if fast:
+        sub_ptr, sub_idx, keep = SK.sub_pattern(np.asarray(indptr, np.int64), np.asarray(indices, np.int64),
+                                                np.asarray(nodes, np.int64), n)
+        return sub_ptr, sub_idx, blocks[keep]
     local = np.full(n, -1, np.int64)
     local[nodes] = np.arange(len(nodes))
     rows = np.repeat(np.arange(n), np.diff(indptr))
