@@ -159,7 +159,7 @@ def scatter_blocks(block_map, blocks, nblocks):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def warped_global_blocks(node_off, k_off, ke, rots, block_map, nblocks, scale):
     """Global blocks (nblocks, 9) of the scaled warped stiffness ``scale · Σ_e R_e K_e R_eᵀ`` in one pass.
 
@@ -220,7 +220,7 @@ def rotated_blocks(node_off, k_off, ke, rots):
     return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def warped_forces(points_rest, x, node_off, nodes, k_off, ke, rots, n_nodes):
     """Per-element warped elastic forces f_e = -R K_e (Rᵀ x_e - X_e) and energies.
 

@@ -49,9 +49,9 @@ class Factorization:
     [0.5, 0.25]
     """
 
-    def __init__(self, A: sp.sparray, perm: np.ndarray | None, *, single: bool = False) -> None:
-        from scipy.sparse.linalg import splu
-
+    def __init__(self, A: sp.sparray | None, perm: np.ndarray | None, *, single: bool = False) -> None:
+        if A is None:  # filled in by from_blocks
+            return
         A = sp.csr_array(A)
         self.scale: np.ndarray | None = None
         if single:
@@ -64,11 +64,40 @@ class Factorization:
         self.perm = perm
         self.iperm: np.ndarray | None = None
         if perm is None:
-            self.lu = splu(sp.csc_array(A), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+            self.lu = _splu(sp.csc_array(A), "MMD_AT_PLUS_A")
         else:
             self.iperm = np.empty_like(perm)
             self.iperm[perm] = np.arange(len(perm))
-            self.lu = splu(sp.csc_array(A[perm][:, perm]), permc_spec="NATURAL", options={"SymmetricMode": True})
+            self.lu = _splu(sp.csc_array(A[perm][:, perm]), "NATURAL")
+
+    @classmethod
+    def from_blocks(cls, indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, node_perm: np.ndarray, *,
+                    single: bool = False) -> Factorization:
+        """The factorisation of a symmetric 3×3-block CSR matrix (blocks (nnz, 9)) in the node order ``node_perm``.
+
+        The same as ``Factorization(block_csr(...), dof order of node_perm, single=single)`` (up to
+        the round-off of A's asymmetry), with the permuted (and scaled) matrix built by a
+        kernel that releases the GIL (:func:`unmesh.fem._solve_kernels.permuted_scalar_csr`):
+        scipy's conversions and indexing took the GIL often enough to slow the main thread
+        and themselves when run beside it (the background factorisation).
+        """
+        from unmesh.fem import _solve_kernels as SK
+
+        self = cls(None, None)
+        data = np.empty(9 * len(indices), np.float32 if single else np.float64)
+        node_perm = np.ascontiguousarray(node_perm, dtype=np.int64)
+        ptr, idx, scale = SK.permuted_scalar_csr(np.ascontiguousarray(indptr, dtype=np.int64),
+                                                 np.ascontiguousarray(indices, dtype=np.int64),
+                                                 np.ascontiguousarray(blocks, dtype=np.float64), node_perm, single, data)
+        if single and not np.all(np.isfinite(scale)):
+            raise RuntimeError("single precision needs a positive diagonal")
+        self.scale = scale if single else None
+        self.perm = (3 * node_perm[:, None] + np.arange(3)).ravel()
+        self.iperm = np.empty_like(self.perm)
+        self.iperm[self.perm] = np.arange(len(self.perm))
+        n3 = len(ptr) - 1
+        self.lu = _splu(sp.csc_array((data, idx, ptr), shape=(n3, n3)), "NATURAL")
+        return self
 
     @property
     def nnz(self) -> int:
@@ -87,6 +116,12 @@ class Factorization:
         if self.scale is not None:
             y = y * self.scale
         return y
+
+
+def _splu(A: sp.csc_array, order: str) -> Any:
+    from scipy.sparse.linalg import splu
+
+    return splu(A, permc_spec=order, options={"SymmetricMode": True})
 
 
 class Job:

@@ -262,9 +262,10 @@ def _global_factor(indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray,
     if kind.any():
         blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind, normal)
     perm = nested_dissection(indptr, indices)
-    dof = None if perm is None else (3 * perm[:, None] + np.arange(3)).ravel()
     try:
-        return Factorization(block_csr(indptr, indices, blocks0), dof, single=single)
+        if perm is None:
+            return Factorization(block_csr(indptr, indices, blocks0), None, single=single)
+        return Factorization.from_blocks(indptr, indices, blocks0, perm, single=single)
     except RuntimeError as exc:
         raise InputError(f"the implicit system is singular ({exc}); check masses and materials") from None
 
