@@ -96,7 +96,21 @@ frames 1 and 10 solved to 10⁻⁶ from the warm start):
   steps of lead); 0.25 kept. Moving the foreground refactorisation of frame 1 (the auto
   switch factorised the free-fall prediction; 13.8% of the nodes mismatched) to the
   background as well, with doubled foreground limits, made frames 1-2 cost 1.30 + 1.53 s
-  (a local set of 14% of the nodes) instead of 1.64 + 0.48 s: not kept.
+  (a local set of 14% of the nodes) instead of 1.64 + 0.48 s: not kept. What the thread
+  does holding the GIL holds up the main thread: scipy's SuperLU takes it for each
+  allocation, ``pymetis`` for the whole ordering (160 ms: the main thread's Python loop
+  ran at 11% of its speed), scipy's conversions often (in the thread beside a busy main
+  thread block→CSR took 0.38 s, 0.02 s alone, and ``A[p][:, p]`` 0.85 s, load 2.7):
+  the permuted, scaled matrix is built by a kernel that releases
+  the GIL (:meth:`unmesh.fem.factor.Factorization.from_blocks`), and the main thread's
+  kernels release it. Reusing the last METIS order for the background refactorisation
+  (new nodes placed after their parents through W) would spare the 160 ms, but after 20
+  cuts (1,786 new nodes) it had fill 36.2M instead of 25.9M and solved in 45 instead of
+  29 ms: not done;
+- the numba kernels on both cores for the bunny (:data:`unmesh.fem.dynamics.SERIAL_NODES`
+  lowered below its node count), interleaved runs of 30 frames: wall 1.04 → 0.82 s per
+  frame at load 2.9, 1.44 → 1.72 s at load 3.5-3.7 (the other engineers' jobs on the two
+  cores); not adopted, as it depends on the load.
 
 Per frame of the bunny-slicing benchmark (``benchmarks/bench_fem_slicing.py --bunny``, 12
 frames; kernels on one thread as :data:`unmesh.fem.dynamics.SERIAL_NODES` sets them; the
