@@ -387,7 +387,7 @@ def test_every_solver_matches_spsolve_on_a_cut_mesh_with_rotated_pieces(rng, sol
 def test_sub_blocks_equals_scipy_submatrix(rng):
     import scipy.sparse as sp
 
-    from unmesh.fem.solvers import _sub_blocks
+    from unmesh.fem.factor import _sub_blocks
 
     sim = Dynamics(voronoi_foam(10, seed=2), 50.0, 0.3, 1.0)
     p, n = sim.pattern, sim.mesh.n_nodes
@@ -396,7 +396,7 @@ def test_sub_blocks_equals_scipy_submatrix(rng):
     t = np.flatnonzero(rng.random(n) < 0.3)
     d = (3 * t[:, None] + np.arange(3)).ravel()
     np.testing.assert_array_equal(_sub_blocks(p.indptr, p.indices, B, t).toarray(), A[d][:, d].toarray())
-    from unmesh.fem.solvers import _sub_block_array
+    from unmesh.fem.factor import _sub_block_array
 
     for got, ref in zip(_sub_block_array(p.indptr, p.indices, B, t),
                         _sub_block_array(p.indptr, p.indices, B, t, fast=False), strict=True):
@@ -482,7 +482,7 @@ def test_local_factorisation_solves_the_filtered_block_in_either_order(rng, monk
     import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 
-    import unmesh.fem.solvers as SV
+    import unmesh.fem.factor as SV
 
     monkeypatch.setattr(SV, "LOCAL_ND_NODES", nd_nodes)
     sim = Dynamics(voronoi_foam(12, seed=10), 50.0, 0.3, 1.0)

@@ -1,5 +1,9 @@
 """Sparse LU factorisations of the implicit step's matrices, and factorising in the background.
 
+:func:`nested_dissection` orders a 3×3-block pattern (METIS through ``pymetis``);
+:func:`_local_factor` factorises the filtered block of a node set (the local solve of the
+Schwarz preconditioner of :mod:`unmesh.fem.solvers`).
+
 :class:`Factorization` is SuperLU of a symmetric matrix in a given DOF order, in double
 precision or, symmetrically Jacobi-scaled, in single precision: ``D^{-1/2} A D^{-1/2}``
 (unit diagonal) is factorised in float32 and ``A⁻¹ r = D^{-1/2} (D^{-1/2} A D^{-1/2})⁻¹
@@ -31,7 +35,35 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["Factorization", "Job"]
+from unmesh.fem import _solve_kernels as SK
+
+__all__ = ["Factorization", "Job", "block_csr", "nested_dissection"]
+
+
+def nested_dissection(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
+    """METIS nested-dissection order (n,) of the nodes of a block pattern, or None without ``pymetis``.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> perm = nested_dissection(np.array([0, 2, 4]), np.array([0, 1, 0, 1]))
+    >>> perm is None or sorted(perm.tolist()) == [0, 1]
+    True
+    """
+    try:
+        import pymetis
+    except ImportError:
+        return None
+    n = len(indptr) - 1
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    off = indices != rows
+    xadj = np.r_[0, np.cumsum(np.bincount(rows[off], minlength=n))].astype(np.int32)
+    adjncy = indices[off].astype(np.int32)
+    if hasattr(pymetis, "CSRAdjacency"):
+        perm, _ = pymetis.nested_dissection(adjacency=pymetis.CSRAdjacency(xadj, adjncy))
+    else:  # pymetis < 2025
+        perm, _ = pymetis.nested_dissection(xadj=xadj, adjncy=adjncy)
+    return np.asarray(perm, dtype=np.int64)
 
 
 class Factorization:
@@ -81,8 +113,6 @@ class Factorization:
         scipy's conversions and indexing took the GIL often enough to slow the main thread
         and themselves when run beside it (the background factorisation).
         """
-        from unmesh.fem import _solve_kernels as SK
-
         self = cls(None, None)
         data = np.empty(9 * len(indices), np.float32 if single else np.float64)
         node_perm = np.ascontiguousarray(node_perm, dtype=np.int64)
@@ -161,3 +191,62 @@ class Job:
         if self._error is not None:
             raise self._error
         return self._value
+
+
+#: Local sets of at least this many nodes are factorised in nested-dissection order.
+LOCAL_ND_NODES = 400
+
+
+def _local_factor(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray, kind: np.ndarray,
+                  normal: np.ndarray) -> tuple[np.ndarray, Any]:
+    """``(nodes, LU)`` of the filtered block ``S A_tt S + (I - S)`` on the sorted node set ``nodes``.
+
+    Large local sets (the cut region after a few cuts: thousands of nodes) are ordered by
+    nested dissection too: measured on the bunny-slicing benchmark, the local factorisations
+    in minimum-degree order cost about as much as the global ones.
+    """
+    sub_ptr, sub_idx, sub = _sub_block_array(indptr, indices, blocks, nodes)
+    kt = np.ascontiguousarray(kind[nodes], dtype=np.int64)
+    m = len(nodes)
+    if kt.any():  # the filter on the blocks (two sparse products cost a fifth of a local factorisation)
+        sub = SK.filter_blocks(sub_ptr, sub_idx, sub, kt, np.ascontiguousarray(normal, dtype=np.float64))
+    L = block_csr(sub_ptr, sub_idx, sub)
+    perm = nested_dissection(sub_ptr, sub_idx) if m >= LOCAL_ND_NODES else None
+    dof = None if perm is None else (3 * perm[:, None] + np.arange(3)).ravel()
+    return nodes, Factorization(L, dof)
+
+
+def _sub_block_array(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray, *,
+                     fast: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Node-level CSR ``(indptr, indices)`` and blocks (nnz, 9) of the submatrix on the sorted node set ``nodes``.
+
+    ``fast``: a numba kernel over the rows of ``nodes`` only (the numpy version, ``fast=False``,
+    passes over the whole pattern: ~12 ms per local factorisation on the bunny benchmark).
+    """
+    n = len(indptr) - 1
+    if fast:
+        sub_ptr, sub_idx, keep = SK.sub_pattern(np.asarray(indptr, np.int64), np.asarray(indices, np.int64),
+                                                np.asarray(nodes, np.int64), n)
+        return sub_ptr, sub_idx, blocks[keep]
+    local = np.full(n, -1, np.int64)
+    local[nodes] = np.arange(len(nodes))
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    keep = (local[rows] >= 0) & (local[indices] >= 0)
+    lr, lc = local[rows[keep]], local[indices[keep]]
+    sub_ptr = np.r_[0, np.cumsum(np.bincount(lr, minlength=len(nodes)))].astype(np.int64)
+    return sub_ptr, lc, np.ascontiguousarray(blocks[keep])
+
+
+def _sub_blocks(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray) -> sp.csr_array:
+    """The (3m, 3m) CSR submatrix of a 3×3-block CSR matrix on the sorted node set ``nodes`` (m,).
+
+    Picks the blocks directly (no conversion of the whole matrix, which cost more than
+    the local factorisation on the bunny benchmark).
+    """
+    return block_csr(*_sub_block_array(indptr, indices, blocks, nodes))
+
+
+def block_csr(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray) -> sp.csr_array:
+    """The scalar (3n, 3n) CSR matrix of a node-level CSR pattern with 3×3 blocks (nnz, 9)."""
+    n3 = 3 * (len(indptr) - 1)
+    return sp.csr_array(sp.bsr_array((blocks.reshape(-1, 3, 3), indices, indptr), shape=(n3, n3)).tocsr())
