@@ -190,3 +190,26 @@ def test_factorisation_from_blocks_equals_the_scalar_one(rng, single):
                                atol=(1e-4 if single else 1e-10) * np.abs(b.solve(r)).max())
     with pytest.raises(RuntimeError):
         Factorization.from_blocks(p.indptr, p.indices, -A, perm, single=True)
+
+
+def test_ill_conditioned_systems_fall_back_to_double_precision(rng):
+    """Masses 10⁶ times too small for the stiffness (a sliver's nodes): the float32 factors of
+    the scaled matrix are garbage (relative residual ~1), so the lagged LU is made in double
+    precision and PCG converges at once; a well-conditioned system keeps float32."""
+    from unmesh.fem.solvers import SINGLE_RESIDUAL, LaggedLU, _solve_residual, block_csr, pcg
+
+    sim = Dynamics(voronoi_foam(12, seed=5), 2e3, 0.3, 1.0)
+    p, n = sim.pattern, sim.mesh.n_nodes
+    K = FK.scatter_blocks(p.block_map, sim.kstiff.data.reshape(-1, 9), len(p.indices))
+    Q = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    kind, normal = np.zeros(n, np.int64), np.array([0.0, 1.0, 0.0])
+    for scale, dtype in ((1.0, np.float32), (1e-6, np.float64)):
+        A = SK.add_diagonal(K, p.diag, 0.04**2, sim.masses * scale, 1.0)
+        assert (_solve_residual(p.indptr, p.indices, A, Factorization(block_csr(p.indptr, p.indices, A), None,
+                                                                      single=True)) > SINGLE_RESIDUAL) == (scale < 1)
+        lag = LaggedLU()
+        lag.factor(p.indptr, p.indices, A, (1.0, 0.04**2), kind=kind, normal=normal)
+        assert lag.lu.lu.L.dtype == dtype
+        _, its, res = pcg(p.indptr, p.indices, A, rng.normal(size=(n, 3)), np.zeros((n, 3)), kind, normal,
+                          lag.preconditioner(Q), 1e-8, 50)
+        assert res <= 1e-8 and its <= 4

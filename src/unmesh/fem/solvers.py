@@ -76,7 +76,12 @@ frames 1 and 10 solved to 10⁻⁶ from the warm start):
   factorisation 4.1 s, solve 26 ms; hand-written numba triangular solves on SuperLU's
   factors (CSC or CSR, double or single precision): no faster than SuperLU's solve.
 - single precision without scaling stalled PCG (lumped masses spanning 5 decades after
-  slivers); after symmetric Jacobi scaling (unit diagonal) it needs the same CG iterations
+  slivers). Scaling does not cure every case: on the bunny meshed at 14,905 nodes, after 18
+  cuts a sliver made the diagonal span 5·10¹⁰ and the float32 factors solved with a relative
+  residual of 20-220 (PCG did not converge in 5,400 iterations, refactorised or not), so a
+  factorisation whose solve of a fixed random vector leaves more than ``SINGLE_RESIDUAL``
+  (10⁻³; 4-5·10⁻⁵ otherwise) is redone in double precision. Otherwise, after symmetric
+  Jacobi scaling (unit diagonal) it needs the same CG iterations
   as double precision in every step of the 30-frame bunny run (24,138 nodes), factorises in
   1.2-1.55 s instead of 1.85-2.4 s CPU (fill 25.8M; half the memory, which matters on the
   benchmark's virtual machine, where first-touched memory costs up to 10 ms per MB) and
@@ -170,6 +175,9 @@ BACKGROUND_SHARE = 0.25
 BACKGROUND_ITERATIONS = 15
 #: Steps after its start at which a background factorisation is installed.
 BACKGROUND_LEAD = 2
+#: A single-precision factorisation whose solve of a random right-hand side leaves a larger relative
+#: residual is redone in double precision (bunny benchmark: 4-5e-5 normally, 20-220 after slivers).
+SINGLE_RESIDUAL = 1e-3
 
 
 def grow(indptr: np.ndarray, indices: np.ndarray, mask: np.ndarray, rings: int, *, fast: bool = True) -> np.ndarray:
@@ -255,12 +263,29 @@ def _global_factor(indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray,
     if kind.any():
         blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind, normal)
     perm = nested_dissection(indptr, indices)
-    try:
+
+    def factorise(single: bool) -> Factorization:
         if perm is None:
             return Factorization(block_csr(indptr, indices, blocks0), None, single=single)
         return Factorization.from_blocks(indptr, indices, blocks0, perm, single=single)
+
+    try:
+        lu = factorise(single)
+        if single and _solve_residual(indptr, indices, blocks0, lu) > SINGLE_RESIDUAL:
+            lu = factorise(False)  # too ill-conditioned for single precision (module docstring)
+        return lu
     except RuntimeError as exc:
         raise InputError(f"the implicit system is singular ({exc}); check masses and materials") from None
+
+
+def _solve_residual(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, lu: Factorization) -> float:
+    """Relative residual ``|A y - r| / |r|`` of ``y = lu.solve(r)`` for a fixed pseudo-random r (deterministic)."""
+    n = len(indptr) - 1
+    r = np.random.default_rng(20070101).standard_normal((n, 3))
+    y = lu.solve(r.ravel()).reshape(n, 3)
+    # the serial row kernel: this may run in the background thread beside the main thread's parallel kernels
+    Ay = SK.bsr_matvec_rows(indptr, indices, blocks, y, np.arange(n))
+    return float(np.linalg.norm(Ay - r) / np.linalg.norm(r))
 
 
 def _remapped(W: sp.csr_array, touched: np.ndarray, weights: sp.csr_array | None, old_touched: np.ndarray | None,
