@@ -128,6 +128,20 @@ machine shared, load average 2.8-3.1, the old and new code run one after the oth
 4.08 → 2.59 s CPU); 3 LU factorisations either way (the setup step's, then a cut touching
 more than 10% of the nodes and a cut separating the head).
 
+The same benchmark at the thesis' node count (24,138 → 27,312 nodes, 30 frames), the code
+before and after the single-precision, warped and background factorisations and the
+kernels above, run one after the other on the shared machine (load 1.3-2.7): wall 1.37 →
+1.28 s per frame (cut 0.11 → 0.18, re-integration 0.21 → 0.23, solve 1.03 → 0.86 s), CPU
+1.31 → 1.25 s (main thread 0.97 s), 12 → 8 CG iterations, 3 → 8 factorisations (6 in the
+background, none waited for); at 14,905 nodes: wall 0.95 → 0.86 s, CPU 0.90 → 1.06 s (main
+thread 0.62 s), 10 → 8 iterations. The background thread costs the main thread when the
+machine is busy: with the other jobs on the two cores (load 1.7-3.2, interleaved runs of
+the 30 frames) the background refactorisation took 1.27 and 1.24 s per frame, refactorising
+in the foreground (``background=False``: 10.2 iterations, 3 factorisations) 1.19 and
+1.03 s, though the main thread's CPU was 0.99 and 0.95 s against 1.15 and 1.00 s (in the
+frames where a factorisation ran, cutting and re-integration took up to twice as long as in
+the old code's run: SuperLU's allocations take the GIL, and the thread competes for a core).
+
 The rounds of the contact active-set iteration (:mod:`unmesh.fem.dynamics`) are solved
 to a relative residual of 10⁻³ and the final active set is confirmed by a solve to
 ``cg_tol``; the local factorisation of a round is reused by later rounds with the same
