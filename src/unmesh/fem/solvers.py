@@ -134,7 +134,10 @@ kernels above, run one after the other on the shared machine (load 1.3-2.7): wal
 1.28 s per frame (cut 0.11 → 0.18, re-integration 0.21 → 0.23, solve 1.03 → 0.86 s), CPU
 1.31 → 1.25 s (main thread 0.97 s), 12 → 8 CG iterations, 3 → 8 factorisations (6 in the
 background, none waited for); at 14,905 nodes: wall 0.95 → 0.86 s, CPU 0.90 → 1.06 s (main
-thread 0.62 s), 10 → 8 iterations. The background thread costs the main thread when the
+thread 0.62 s), 10 → 8 iterations. A second pair at 24,138 nodes (load 1.0-2.9): wall
+1.40 → 1.52 s, CPU 1.37 → 1.12 s (main thread 0.87 s); the new code at 14,905 nodes again:
+wall 1.15 s, CPU 1.13 s (main thread 0.65 s; 14 factorisations, 12 in the background, some
+redone in double precision after slivers). The background thread costs the main thread when the
 machine is busy: with the other jobs on the two cores (load 1.7-3.2, interleaved runs of
 the 30 frames) the background refactorisation took 1.27 and 1.24 s per frame, refactorising
 in the foreground (``background=False``: 10.2 iterations, 3 factorisations) 1.19 and
