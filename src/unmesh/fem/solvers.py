@@ -144,6 +144,12 @@ in the foreground (``background=False``: 10.2 iterations, 3 factorisations) 1.19
 1.03 s, though the main thread's CPU was 0.99 and 0.95 s against 1.15 and 1.00 s (in the
 frames where a factorisation ran, cutting and re-integration took up to twice as long as in
 the old code's run: SuperLU's allocations take the GIL, and the thread competes for a core).
+Two more pairs at load 1.0-1.7: background 1.09 and 1.13 s (main thread 0.95 and 0.91 s),
+foreground 1.07 and 1.09 s (main thread 1.04 and 1.06 s). So the background refactorisation
+saves the main thread ~0.1 s per frame, which shows in the wall time only when the second
+core is free; on this shared machine it never was, and the wall times were equal within the
+noise (foreground faster in 4 of 5 pairs). It stays on (``background=True``), the goal being
+a quiet machine; ``background=False`` spends less CPU in all (1.01-1.16 against 1.17-1.26 s).
 
 The rounds of the contact active-set iteration (:mod:`unmesh.fem.dynamics`) are solved
 to a relative residual of 10⁻³ and the final active set is confirmed by a solve to
