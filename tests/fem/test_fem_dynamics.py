@@ -225,6 +225,7 @@ def test_lu_pcg_keeps_its_factorisation_across_cuts_and_matches_the_direct_solve
     sims = [Dynamics(mesh, 50.0, 0.3, 1.0, ground=Ground(friction=0.5), solver=s, cg_tol=1e-11)
             for s in ("lu-pcg", "direct")]
     sims[0].lagged.touched_fraction = 1.0  # a small mesh: keep the factorisation however much a cut touches
+    sims[0].lagged.background = False  # (and start no refactorisation in the background either)
     cuts = [PlaneCut((0.5, 0.5, 0.5), (1.0, 0.3, 0.1)), PlaneCut((0.4, 0.5, 0.5), (0.2, 1.0, -0.3))]
     for k in range(12):
         if k in (4, 8):
@@ -295,6 +296,11 @@ def test_merge_csr_kernel_matches_numpy(rng, shape):
     np.testing.assert_array_equal(fd, rd)
     i = int(np.flatnonzero(from_b)[0])
     np.testing.assert_array_equal(fd[fo[i]:fo[i + 1]], db[ob[idx[i]]:ob[idx[i] + 1]])
+    buf = np.full((len(rd) + 5, *shape), np.nan)  # written into when long enough, ignored when too short
+    for out, view in ((buf, True), (buf[:len(rd) - 1], False)):
+        _, bd = merge_csr(oa, da, ob, db, from_b, idx, out=out)
+        np.testing.assert_array_equal(bd, rd)
+        assert np.shares_memory(bd, buf) == view
 
 
 def test_piece_rotations_recover_rigid_rotations_of_each_piece(rng):
@@ -358,6 +364,7 @@ def test_every_solver_matches_spsolve_on_a_cut_mesh_with_rotated_pieces(rng, sol
     dt = 0.04
     sim = Dynamics(hex_grid((4, 2, 2)), 2e3, 0.3, 1.0, solver=solver, cg_tol=1e-11)
     sim.lagged.touched_fraction = 1.0  # a small mesh: keep the factorisation however much a cut touches
+    sim.lagged.background = False  # (and start no refactorisation in the background either)
     sim.step(dt)
     separate = PolygonCut(np.array([[0.6, -1, -1], [0.6, 2, -1], [0.6, 2, 2], [0.6, -1, 2.0]]))
     slit = PolygonCut(np.array([[-1, 0.5, -1], [0.3, 0.5, -1], [0.3, 0.5, 2], [-1, 0.5, 2.0]]))
@@ -380,7 +387,7 @@ def test_every_solver_matches_spsolve_on_a_cut_mesh_with_rotated_pieces(rng, sol
 def test_sub_blocks_equals_scipy_submatrix(rng):
     import scipy.sparse as sp
 
-    from unmesh.fem.solvers import _sub_blocks
+    from unmesh.fem.factor import _sub_blocks
 
     sim = Dynamics(voronoi_foam(10, seed=2), 50.0, 0.3, 1.0)
     p, n = sim.pattern, sim.mesh.n_nodes
@@ -389,6 +396,11 @@ def test_sub_blocks_equals_scipy_submatrix(rng):
     t = np.flatnonzero(rng.random(n) < 0.3)
     d = (3 * t[:, None] + np.arange(3)).ravel()
     np.testing.assert_array_equal(_sub_blocks(p.indptr, p.indices, B, t).toarray(), A[d][:, d].toarray())
+    from unmesh.fem.factor import _sub_block_array
+
+    for got, ref in zip(_sub_block_array(p.indptr, p.indices, B, t),
+                        _sub_block_array(p.indptr, p.indices, B, t, fast=False), strict=True):
+        np.testing.assert_array_equal(got, ref)
 
 
 def _filtered_blocks_reference(indptr, indices, blocks, kind, normal):
@@ -447,8 +459,11 @@ def test_fused_warped_assembly_matches_rotated_blocks_scattered(rng):
     ref = FK.scatter_blocks(p.block_map, FK.rotated_blocks(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R),
                             len(p.indices))
     got = FK.warped_global_blocks(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R, p.block_map,
-                                  len(p.indices))
-    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+                                  len(p.indices), 0.25)
+    np.testing.assert_allclose(got, 0.25 * ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    SK.add_masses(got, p.diag, sim.masses, 2.0)
+    np.testing.assert_allclose(got, SK.add_diagonal(ref, p.diag, 0.25, sim.masses, 2.0), rtol=1e-12,
+                               atol=1e-12 * np.abs(ref).max())
 
 
 def test_row_subset_matvec_matches_the_full_product(rng):
@@ -467,7 +482,7 @@ def test_local_factorisation_solves_the_filtered_block_in_either_order(rng, monk
     import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 
-    import unmesh.fem.solvers as SV
+    import unmesh.fem.factor as SV
 
     monkeypatch.setattr(SV, "LOCAL_ND_NODES", nd_nodes)
     sim = Dynamics(voronoi_foam(12, seed=10), 50.0, 0.3, 1.0)

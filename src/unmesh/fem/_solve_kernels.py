@@ -5,6 +5,10 @@ Witkin (1998) solves ``A v = b`` with per-node constraints: kind 0 free, kind 1
 all three components prescribed, kind 2 the component along ``normal``
 prescribed (ground contact). The initial guess must already satisfy the
 constraints; the filter keeps every update in the free subspace.
+
+The kernels release the GIL (``nogil``): the background refactorisation's thread
+(:mod:`unmesh.fem.factor`) needs it briefly and often (scipy's SuperLU takes it for
+each allocation), and would otherwise wait for each kernel of the main thread to end.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ def _block_row(indptr, indices, blocks, x, i):
     return a0, a1, a2
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def bsr_matvec(indptr, indices, blocks, x):
     """y = A x for a 3×3-block CSR matrix; x, y of shape (n, 3)."""
     n = indptr.shape[0] - 1
@@ -40,7 +44,7 @@ def bsr_matvec(indptr, indices, blocks, x):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def bsr_matvec_rows(indptr, indices, blocks, x, rows):
     """Rows ``rows`` (m,) of y = A x for a 3×3-block CSR matrix: (m, 3) (serial; reference: :func:`bsr_matvec`)."""
     m = rows.shape[0]
@@ -99,7 +103,7 @@ def block_jacobi(blocks, diag):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def filtered_pcg(indptr, indices, blocks, pinv, b, x0, kind, normal, tol, maxiter):
     """Filtered block-Jacobi PCG. Returns (x, iterations, relative residual)."""
     x = x0.copy()
@@ -140,7 +144,7 @@ def filtered_pcg(indptr, indices, blocks, pinv, b, x0, kind, normal, tol, maxite
     return x, it, rnorm / bnorm
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def add_diagonal(blocks, diag, scale_k, masses, scale_m):
     """A = scale_k · K' + scale_m · diag(m) in place on the block array."""
     out = blocks * scale_k
@@ -152,19 +156,70 @@ def add_diagonal(blocks, diag, scale_k, masses, scale_m):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
+def grow_mask(indptr, indices, mask, rings):
+    """``mask`` (n,) bool grown by ``rings`` layers of neighbours (reference: :func:`unmesh.fem.solvers.grow`)."""
+    out = mask.copy()
+    for _ in range(rings):
+        prev = out.copy()
+        for i in range(prev.shape[0]):
+            if prev[i]:
+                for k in range(indptr[i], indptr[i + 1]):
+                    out[indices[k]] = True
+    return out
+
+
+@njit(cache=True, nogil=True)
+def sub_pattern(indptr, indices, nodes, n):
+    """Pattern ``(indptr, indices)`` of the submatrix on the sorted node set ``nodes`` (m,), and the
+    positions (nnz_sub,) of its blocks in the full pattern (reference: ``solvers._sub_block_array``)."""
+    m = nodes.shape[0]
+    local = np.full(n, -1, np.int64)
+    for t in range(m):
+        local[nodes[t]] = t
+    ptr = np.zeros(m + 1, np.int64)
+    for t in range(m):
+        c = 0
+        for k in range(indptr[nodes[t]], indptr[nodes[t] + 1]):
+            if local[indices[k]] >= 0:
+                c += 1
+        ptr[t + 1] = ptr[t] + c
+    idx = np.empty(ptr[m], np.int64)
+    keep = np.empty(ptr[m], np.int64)
+    for t in range(m):
+        q = ptr[t]
+        for k in range(indptr[nodes[t]], indptr[nodes[t] + 1]):
+            j = local[indices[k]]
+            if j >= 0:
+                idx[q] = j
+                keep[q] = k
+                q += 1
+    return ptr, idx, keep
+
+
+@njit(cache=True, nogil=True)
+def add_masses(blocks, diag, masses, scale_m):
+    """blocks += scale_m · diag(m) in place (the mass term of :func:`add_diagonal`)."""
+    for i in range(diag.shape[0]):
+        k = diag[i]
+        blocks[k, 0] += scale_m * masses[i]
+        blocks[k, 4] += scale_m * masses[i]
+        blocks[k, 8] += scale_m * masses[i]
+
+
+@njit(cache=True, nogil=True)
 def dot(a, b):
     """Σ a·b over (n,3) arrays (serial, no BLAS threads)."""
     return _dot(a, b)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def filter_inplace(r, kind, normal):
     """Zero the constrained components of r (n,3) in place."""
     _filter(r, kind, normal)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cg_update(x, r, d, q, alpha):
     """x += α d, r -= α q (in place); returns |r|."""
     s = 0.0
@@ -176,7 +231,7 @@ def cg_update(x, r, d, q, alpha):
     return np.sqrt(s)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cg_direction(z, d, beta):
     """d = z + β d (in place)."""
     for i in range(d.shape[0]):
@@ -184,11 +239,12 @@ def cg_direction(z, d, beta):
             d[i, k] = z[i, k] + beta * d[i, k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def filter_blocks(indptr, indices, blocks, kind, normal):
     """Blocks (nnz, 9) of ``S A S + (I - S)``: the matrix with the constraints of ``kind`` eliminated.
 
     ``S_i`` is 0 (kind 1), ``I - n nᵀ`` (kind 2) or I (kind 0); the numpy reference is in the tests.
+    Releases the GIL (it runs in the background factorisation's thread too).
     """
     n = indptr.shape[0] - 1
     P = np.zeros((n, 3, 3))
@@ -223,3 +279,60 @@ def filter_blocks(indptr, indices, blocks, kind, normal):
                         s += (1.0 if a == b else 0.0) - P[i, a, b]
                     out[k, 3 * a + b] = s
     return out
+
+
+@njit(cache=True, nogil=True)
+def permuted_scalar_csr(indptr, indices, blocks, perm, scaled, data):
+    """Scalar CSR ``(indptr (3n+1,), indices)`` of ``P A Pᵀ`` for a symmetric 3×3-block CSR matrix A.
+
+    ``perm`` (n,): node order (row r of the result is node ``perm[r]``, its DOFs 3r..3r+2);
+    with ``scaled``, A is scaled to a unit diagonal first, ``D^{-1/2} A D^{-1/2}``, and the
+    scale ``D^{-1/2}`` (3n,) of the original DOFs is returned (ones otherwise). ``data``
+    (9 nnz,) of the wanted dtype receives the values; indices are sorted within rows (so,
+    A being symmetric, the arrays are its CSC too). Releases the GIL (it prepares the
+    background factorisation). The reference is scipy's ``A[p][:, p]`` in the tests.
+    """
+    n = perm.shape[0]
+    iperm = np.empty(n, np.int64)
+    for r in range(n):
+        iperm[perm[r]] = r
+    scale = np.ones(3 * n)
+    if scaled:
+        for i in range(n):
+            for k in range(indptr[i], indptr[i + 1]):
+                if indices[k] == i:
+                    for a in range(3):
+                        scale[3 * i + a] = 1.0 / np.sqrt(blocks[k, 4 * a])
+    ptr = np.zeros(3 * n + 1, np.int64)
+    for r in range(n):
+        m = indptr[perm[r] + 1] - indptr[perm[r]]
+        for a in range(3):
+            ptr[3 * r + a + 1] = ptr[3 * r + a] + 3 * m
+    idx = np.empty(ptr[3 * n], np.int64)
+    order = np.empty(64, np.int64)
+    cols = np.empty(64, np.int64)
+    for r in range(n):
+        i = perm[r]
+        m = indptr[i + 1] - indptr[i]
+        if m > order.shape[0]:
+            order = np.empty(2 * m, np.int64)
+            cols = np.empty(2 * m, np.int64)
+        for t in range(m):  # the row's blocks sorted by new column (insertion sort: rows are short)
+            c = iperm[indices[indptr[i] + t]]
+            q = t - 1
+            while q >= 0 and cols[q] > c:
+                cols[q + 1] = cols[q]
+                order[q + 1] = order[q]
+                q -= 1
+            cols[q + 1] = c
+            order[q + 1] = indptr[i] + t
+        for a in range(3):
+            o = ptr[3 * r + a]
+            sa = scale[3 * i + a]
+            for t in range(m):
+                k = order[t]
+                j = indices[k]
+                for b in range(3):
+                    idx[o + 3 * t + b] = 3 * cols[t] + b
+                    data[o + 3 * t + b] = blocks[k, 3 * a + b] * sa * scale[3 * j + b]
+    return ptr, idx, scale

@@ -191,7 +191,10 @@ class Dynamics:
 
     Attributes
     ----------
-    mesh, u (n,3) displacements, v (n,3) velocities, time.
+    mesh, u (n,3) displacements, v (n,3) velocities, time, steps (steps taken).
+    kstiff : ElementStiffness
+        The element stiffness; after a cut its ``data`` is a view of a buffer that the
+        cut after the next one overwrites (copy it to keep it).
 
     Example
     -------
@@ -232,6 +235,7 @@ class Dynamics:
         self._rot_cache: tuple[Any, ...] | None = None
         self.v = np.zeros((mesh.n_nodes, 3))
         self.time = 0.0
+        self.steps = 0  # steps taken (the schedule of background factorisations)
         self.groups: list[tuple[np.ndarray, Prescribed]] = []
         for p in prescribed or []:
             member = np.zeros(mesh.n_nodes, bool)
@@ -244,6 +248,7 @@ class Dynamics:
             self.loads.append((member, ld))
         self.contact = np.zeros(mesh.n_nodes, bool)
         self._pending: _Topology | None = None
+        self._kspare: np.ndarray | None = None  # buffer the stiffness data of the next topology change goes into
         self.last = StepInfo()
         t0 = time.perf_counter()
         self.integ = integrate_elements(mesh, self.correction)
@@ -264,7 +269,6 @@ class Dynamics:
         self.n_pieces, self.piece = connected_components(graph, directed=False)
         # pieces with mass (orphan nodes left by a cut are components of their own)
         self.n_solid_pieces = int(np.count_nonzero(np.bincount(self.piece, weights=self.masses) > 0))
-        self._K0: np.ndarray | None = None
         self._used = np.zeros(n, bool)
         self._used[integ.nodes] = True
 
@@ -371,11 +375,11 @@ class Dynamics:
         n = self.mesh.n_nodes
         x = self.positions()
         R, f_el, _ = self._state_forces()
-        K = FK.warped_global_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R,
-                                    self.pattern.block_map, len(self.pattern.indices))
         cm = 1.0 + dt * self.alpha
         ck = dt * self.beta + dt * dt
-        A = SK.add_diagonal(K, self.pattern.diag, ck, self.masses, cm)
+        A = FK.warped_global_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R,
+                                    self.pattern.block_map, len(self.pattern.indices), ck)
+        SK.add_masses(A, self.pattern.diag, self.masses, cm)
         b = self.masses[:, None] * self.v + dt * (f_el + self.external_forces())
         fixed, vfix = self._prescribed(self.time)
         normal = self.ground.unit_normal() if self.ground is not None else np.array([0.0, 1.0, 0.0])
@@ -392,7 +396,7 @@ class Dynamics:
         if self.ground is not None and not active.any():
             fall |= ~fixed & self._used & ((x + dt * (self.v + dt * self.gravity)) @ normal < self.ground.height)
         kind0 = np.where(fixed, 1, np.where(fall, 2, 0)).astype(np.int64)
-        prec = self._lu_preconditioner(R, cm, ck, info, A, kind0, normal) if mode == "lu-pcg" else None
+        prec = self._lu_preconditioner(cm, ck, info, A, kind0, normal) if mode == "lu-pcg" else None
         vnew = self.v
         worst = 0
         # contact active-set rounds are solved to CONTACT_TOL; once the set is stable (or after
@@ -422,7 +426,7 @@ class Dynamics:
                     info.iterations += int(its)
                     self._stiff = True
                     mode = "lu-pcg"
-                    prec = self._lu_preconditioner(R, cm, ck, info, A, kind0, normal)
+                    prec = self._lu_preconditioner(cm, ck, info, A, kind0, normal)
             if mode == "lu-pcg":
                 if not (resume and solver is not None):
                     solver = PCG(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec(kind, normal))
@@ -433,7 +437,7 @@ class Dynamics:
                     # the lagged preconditioner went bad: refactorise now and continue from there
                     info.iterations += int(its)
                     self.lagged.invalidate()
-                    prec = self._lu_preconditioner(R, cm, ck, info, A, kind, normal)
+                    prec = self._lu_preconditioner(cm, ck, info, A, kind, normal)
                     solver = PCG(self.pattern.indptr, self.pattern.indices, A, b, x0, kind, normal, prec(kind, normal))
                     vnew, its, res = solver.run(tol, self.cg_maxiter)
                     solver_its = its
@@ -471,24 +475,33 @@ class Dynamics:
         self.v = vnew
         self.u = self.u + dt * vnew
         self.time += dt
+        self.steps += 1
         info.solve_seconds = time.perf_counter() - t0
         self.last = info
         return info
 
-    def _lu_preconditioner(self, R: np.ndarray, cm: float, ck: float, info: StepInfo, A: np.ndarray, kind0: np.ndarray,
+    def _lu_preconditioner(self, cm: float, ck: float, info: StepInfo, A: np.ndarray, kind0: np.ndarray,
                            normal: np.ndarray) -> Any:
         coeffs = (cm, ck)
-        if self.lagged.needs_factor(coeffs, self.n_solid_pieces):
-            if self._K0 is None:
-                self._K0 = FK.scatter_blocks(self.pattern.block_map, self.kstiff.data.reshape(-1, 9),
-                                             len(self.pattern.indices))
-            A0 = SK.add_diagonal(self._K0, self.pattern.diag, ck, self.masses, cm)
-            # the constraints of the step's first contact round are factorised (module docstring of solvers)
-            self.lagged.factor(self.pattern.indptr, self.pattern.indices, A0, coeffs, self.n_solid_pieces, kind0, normal)
-            info.extra["factorized"] = True
+        lag = self.lagged
+        if lag.collect(self.steps):  # a background refactorisation due at this step
+            info.extra["installed"] = True
+        need = lag.needs_factor(coeffs, self.n_solid_pieces)
+        if need or lag.wants_background(coeffs, self.n_solid_pieces):
+            # the step's warped matrix with the last step's contact set is factorised, and rotated per
+            # piece from the positions it was taken at (module docstring of solvers)
+            ref = self.positions() if self.warping else None
+            pat = self.pattern
+            if need:
+                lag.factor(pat.indptr, pat.indices, A, coeffs, self.n_solid_pieces, kind0, normal, ref)
+                info.extra["factorized"] = True
+            else:
+                lag.start_background(pat.indptr, pat.indices, A, coeffs, self.steps, self.n_solid_pieces, kind0,
+                                     normal, ref)
         # one rotation per connected piece (not per node: a rotation varying from node to node
         # does not keep the translations in the near-null space, measured 3x the iterations)
-        Q = piece_rotations(self.mesh.points, self.positions(), self.masses, self.piece, self.n_pieces)[self.piece]
+        ref = self.mesh.points if lag.ref is None else lag.ref
+        Q = piece_rotations(ref, self.positions(), self.masses, self.piece, self.n_pieces)[self.piece]
         pat = self.pattern
         made: dict[bytes, Any] = {}
 
@@ -579,7 +592,12 @@ class Dynamics:
         vols = np.where(from_new, new.volumes[np.where(from_new, src, 0)], old_integ.volumes[np.where(from_new, 0, src)])
         # unchanged elements keep their local node order; their node ids are the new mesh's
         self.integ = ElementIntegration(noff, nodes, vols, mu, soff, w, smp, goff, g, old_integ.corrected)
-        koff, kdata = merge_csr(old_k.offsets, old_k.data, ks_new.offsets, ks_new.data, from_new, src)
+        # the stiffness data (~100 MB on the bunny benchmark) goes into the buffer of the data two changes
+        # back, made 10 % longer than needed: a fresh array cost up to 1.7 s of first-touch page faults
+        size = 9 * int(np.sum(np.diff(noff) ** 2))
+        spare = self._kspare if self._kspare is not None and len(self._kspare) >= size else np.empty(size + size // 10)
+        koff, kdata = merge_csr(old_k.offsets, old_k.data, ks_new.offsets, ks_new.data, from_new, src, out=spare)
+        self._kspare = _buffer(old_k.data)
         self._setup_element_data(ElementStiffness(noff, nodes, koff, kdata))
         if pend.rots is not None and pend.u is self.u and self.warping:
             # Horn only for the re-integrated elements (bit-identical to a full pass: per element)
@@ -595,6 +613,13 @@ class Dynamics:
         t = time.perf_counter()
         self._apply_pending()
         return time.perf_counter() - t
+
+
+def _buffer(a: np.ndarray) -> np.ndarray | None:
+    """The 1-D float64 array whose memory ``a`` is (a view of), or None."""
+    while isinstance(a.base, np.ndarray):
+        a = a.base
+    return a if a.ndim == 1 and a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable else None
 
 
 def _same(key: tuple[Any, ...], other: tuple[Any, ...]) -> bool:

@@ -64,13 +64,18 @@ def gather_csr(offsets: np.ndarray, data: np.ndarray, idx: np.ndarray, *,
 
 
 def merge_csr(off_a: np.ndarray, data_a: np.ndarray, off_b: np.ndarray, data_b: np.ndarray, from_b: np.ndarray,
-              idx: np.ndarray, *, fast: bool = True) -> tuple[np.ndarray, np.ndarray]:
+              idx: np.ndarray, *, fast: bool = True, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Rows picked from two CSR arrays: row i is row ``idx[i]`` of b if ``from_b[i]``, else of a.
 
     ``off_a`` (Ra+1,), ``off_b`` (Rb+1,) int; ``data_a``, ``data_b`` of equal dtype and
     trailing shape; ``from_b`` (k,) bool; ``idx`` (k,) int. Returns ``(new_offsets (k+1,),
     new_data)``. One copy of the rows (the re-integration after a cut merges the kept
     elements' data with the re-integrated ones); ``fast=False`` is the numpy reference.
+    ``out``: a buffer (rows of the same dtype and trailing shape, neither input) whose
+    first rows receive the data when it is long enough; the returned data is then a view
+    of it. (Writing into memory the process already uses avoids the first-touch page
+    faults of a fresh ~100 MB array: measured on the bunny-slicing benchmark's virtual
+    machine, up to 10 ms per MB for memory the host had reclaimed.)
 
     Example
     -------
@@ -88,7 +93,11 @@ def merge_csr(off_a: np.ndarray, data_a: np.ndarray, off_b: np.ndarray, data_b: 
     new_off = np.r_[0, np.cumsum(lens)].astype(np.int64)
     if (fast and new_off[-1] > 0 and data_a.size and data_b.size and data_a.flags.c_contiguous
             and data_b.flags.c_contiguous):
-        out = np.empty((int(new_off[-1]), *data_a.shape[1:]), dtype=data_a.dtype)
+        size = int(new_off[-1])
+        if (out is None or len(out) < size or out.shape[1:] != data_a.shape[1:] or out.dtype != data_a.dtype
+                or not out.flags.c_contiguous):
+            out = np.empty((size, *data_a.shape[1:]), dtype=data_a.dtype)
+        out = out[:size]
         FK.merge_rows(off_a, data_a.reshape(len(data_a), -1), off_b, data_b.reshape(len(data_b), -1), from_b, idx,
                       new_off, out.reshape(len(out), -1))
         return new_off, out

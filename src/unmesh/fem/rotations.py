@@ -95,7 +95,7 @@ def quaternion_to_matrix(q):
 _CHUNK = 256
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _horn_all(rest, cur, node_off, nodes, weights):
     ne = node_off.shape[0] - 1
     out = np.empty((ne, 3, 3))

@@ -8,19 +8,24 @@ and per-node constraints (fixed, or normal-constrained ground contact):
 - ``"auto"`` (default): ``"cg"``; if a solve does not converge in 150 iterations the
   system is too stiff for it and the dynamics switch to ``"lu-pcg"`` for good.
 - ``"lu-pcg"``: filtered PCG warm-started from the last velocity,
-  preconditioned by a *lagged, warped* sparse LU factorisation: the unwarped
-  matrix ``A₀ = c_m M + c_k K``, with the constraints of the step it is made in
-  eliminated (``S A₀ S + I - S``, S the constraint projection; ground contact
-  included, see below), is factorised (SuperLU in METIS nested-dissection order of the
-  node graph, :func:`nested_dissection`, 3×3 blocks kept together; SuperLU's own
-  minimum-degree order of A+Aᵀ when ``pymetis`` is missing) and reused for later steps
-  as ``Q A₀⁻¹ Qᵀ`` with Q the best-fit rotation of
-  each connected piece (:func:`unmesh.fem.rotations.piece_rotations`), so rigidly
+  preconditioned by a *lagged, warped* sparse LU factorisation: the matrix ``A_f`` of
+  the step it is made in (warped stiffness, the rotations of that step), with the
+  constraints of the last step's contact set eliminated (``S A_f S + I - S``, S the
+  constraint projection; ground contact included, see below), is factorised (SuperLU in
+  METIS nested-dissection order of the node graph, :func:`nested_dissection`, 3×3 blocks
+  kept together; SuperLU's own minimum-degree order of A+Aᵀ when ``pymetis`` is missing;
+  single precision after symmetric Jacobi scaling, :class:`unmesh.fem.factor.Factorization`)
+  and reused for later steps as ``Q A_f⁻¹ Qᵀ`` with Q the best-fit rotation of each
+  connected piece from the positions ``A_f`` was taken at to the current ones
+  (:func:`unmesh.fem.rotations.piece_rotations`), so rigidly
   rotated pieces are preconditioned exactly. One rotation per piece, not per node:
   a node-to-node varying rotation maps the translations of the current configuration
   (eigenvalue ~ mass, 1/4800 of the stiffness scale on the bunny benchmark) outside the
-  near-null space of ``Q A₀ Qᵀ``; on the bunny-slicing benchmark node-averaged rotations
-  needed 64-76 iterations where the piece rotation needs 23. It is refactorised after
+  near-null space of ``Q A_f Qᵀ``; on the bunny-slicing benchmark node-averaged rotations
+  needed 64-76 iterations where the piece rotation needs 23. (The unwarped rest matrix
+  ``c_m M + c_k K`` rotated per piece from rest, factorised before, needed 10.0 iterations
+  per frame on the bunny benchmark where the warped one needs 8.3: the head bends at the
+  neck relative to the body, which one rotation per piece cannot follow.) It is refactorised after
   a change of the step size, when a cut separates a new piece (the remapped factorisation
   would still couple the pieces, which then rotate independently), or when a solve needed
   more than ``refactor_iterations`` iterations.
@@ -32,7 +37,7 @@ and per-node constraints (fixed, or normal-constrained ground contact):
   layers of neighbours, the constrained nodes plus ``CONSTRAINED_RINGS`` (1) layers, and
   the nodes whose constraint differs from the factorised one plus ``LOCAL_RINGS`` (3)
   layers. The two are combined as a symmetric multiplicative Schwarz preconditioner,
-  ``z₁ = A_tt⁻¹ r_t``, ``z₂ = z₁ + Q W A₀⁻¹ Wᵀ Qᵀ (r - A z₁)``, ``z = z₂ + A_tt⁻¹ (r - A z₂)_t``.
+  ``z₁ = A_tt⁻¹ r_t``, ``z₂ = z₁ + Q W A_f⁻¹ Wᵀ Qᵀ (r - A z₁)``, ``z = z₂ + A_tt⁻¹ (r - A z₂)_t``.
   (Keeping the old factorisation with only block-Jacobi on new nodes was measured
   to need 80-200 iterations instead of about 8-30; the local solve restores that.)
   A solve that has not converged after 200 iterations with a lagged factorisation is
@@ -70,6 +75,51 @@ frames 1 and 10 solved to 10⁻⁶ from the warm start):
 - CHOLMOD through ``cholespy`` (the only CHOLMOD wheel on PyPI; scikit-sparse has none):
   factorisation 4.1 s, solve 26 ms; hand-written numba triangular solves on SuperLU's
   factors (CSC or CSR, double or single precision): no faster than SuperLU's solve.
+- single precision without scaling stalled PCG (lumped masses spanning 5 decades after
+  slivers). Scaling does not cure every case: on the bunny meshed at 14,905 nodes, after 18
+  cuts a sliver made the diagonal span 5·10¹⁰ and the float32 factors solved with a relative
+  residual of 20-220 (PCG did not converge in 5,400 iterations, refactorised or not), so a
+  factorisation whose solve of a fixed random vector leaves more than ``SINGLE_RESIDUAL``
+  (10⁻³; 4-5·10⁻⁵ otherwise) is redone in double precision. Otherwise, after symmetric
+  Jacobi scaling (unit diagonal) it needs the same CG iterations
+  as double precision in every step of the 30-frame bunny run (24,138 nodes), factorises in
+  1.2-1.55 s instead of 1.85-2.4 s CPU (fill 25.8M; half the memory, which matters on the
+  benchmark's virtual machine, where first-touched memory costs up to 10 ms per MB) and
+  solves in 24-33 ms instead of 34 ms; the run's solve time per frame went 0.90 → 0.71 s
+  (load 1.5-1.6, one run each). The local (Schwarz) factorisations in single precision:
+  same iterations, 2.21 → 2.01 s factorising and 0.97 → 0.85 s solving in 29 frames (main
+  thread CPU): not worth an inexact local solve, they stay double;
+- SuperLU's ``relax`` (8-128) and ``panel_size`` with the nested-dissection order: same fill
+  (25.8M), solve 24-27 ms either way;
+- the warped matrix of the factorisation step rotated per piece from its positions, instead
+  of the rest matrix rotated from rest: 10.0 → 8.3 CG iterations per frame (30 frames);
+- a background refactorisation (:meth:`LaggedLU.wants_background`): SuperLU releases the GIL
+  (a Python loop in the main thread ran at 24% of its speed beside ``splu`` in a thread, at
+  31% beside a BLAS product, load 2.7: the second core was busy with other work). Started at
+  ``background_share`` 0.15 / 0.25 / 0.4 of ``touched_fraction``: 7.6 / 8.3 / 8.9 CG
+  iterations per frame with 12 / 8 / 6 factorisations in 30 steps (none waited for: two
+  steps of lead); 0.25 kept. Moving the foreground refactorisation of frame 1 (the auto
+  switch factorised the free-fall prediction; 13.8% of the nodes mismatched) to the
+  background as well, with doubled foreground limits, made frames 1-2 cost 1.30 + 1.53 s
+  (a local set of 14% of the nodes) instead of 1.64 + 0.48 s: not kept. What the thread
+  does holding the GIL holds up the main thread: scipy's SuperLU takes it for each
+  allocation, ``pymetis`` for the whole ordering (160 ms: the main thread's Python loop
+  ran at 11% of its speed), scipy's conversions often (in the thread beside a busy main
+  thread block→CSR took 0.38 s, 0.02 s alone, and ``A[p][:, p]`` 0.85 s, load 2.7):
+  the permuted, scaled matrix is built by a kernel that releases
+  the GIL (:meth:`unmesh.fem.factor.Factorization.from_blocks`), and the main thread's
+  kernels release it. Reusing the last METIS order for the background refactorisation
+  (new nodes placed after their parents through W) would spare the 160 ms, but after 20
+  cuts (1,786 new nodes) it had fill 36.2M instead of 25.9M and solved in 45 instead of
+  29 ms: not done. Predicting the first contact set from the nodes on the ground or taken
+  below it by their velocity (563 on the bunny, instead of the free fall's 988) avoids the
+  refactorisation of frame 1, but leaves 4.7% of the nodes mismatched (the contact rim
+  changes) until a background factorisation is installed: frames 1-3 took 2.72 s CPU
+  (load 3.4) instead of 1.84 s (an earlier run, load 2.8): not kept;
+- the numba kernels on both cores for the bunny (:data:`unmesh.fem.dynamics.SERIAL_NODES`
+  lowered below its node count), interleaved runs of 30 frames: wall 1.04 → 0.82 s per
+  frame at load 2.9, 1.44 → 1.72 s at load 3.5-3.7 (the other engineers' jobs on the two
+  cores); not adopted, as it depends on the load.
 
 Per frame of the bunny-slicing benchmark (``benchmarks/bench_fem_slicing.py --bunny``, 12
 frames; kernels on one thread as :data:`unmesh.fem.dynamics.SERIAL_NODES` sets them; the
@@ -77,6 +127,29 @@ machine shared, load average 2.8-3.1, the old and new code run one after the oth
 37 → 16 CG iterations, 3.81 → 2.36 s CPU and 5.51 → 3.35 s wall per frame (cutting frames
 4.08 → 2.59 s CPU); 3 LU factorisations either way (the setup step's, then a cut touching
 more than 10% of the nodes and a cut separating the head).
+
+The same benchmark at the thesis' node count (24,138 → 27,312 nodes, 30 frames), the code
+before and after the single-precision, warped and background factorisations and the
+kernels above, run one after the other on the shared machine (load 1.3-2.7): wall 1.37 →
+1.28 s per frame (cut 0.11 → 0.18, re-integration 0.21 → 0.23, solve 1.03 → 0.86 s), CPU
+1.31 → 1.25 s (main thread 0.97 s), 12 → 8 CG iterations, 3 → 8 factorisations (6 in the
+background, none waited for); at 14,905 nodes: wall 0.95 → 0.86 s, CPU 0.90 → 1.06 s (main
+thread 0.62 s), 10 → 8 iterations. A second pair at 24,138 nodes (load 1.0-2.9): wall
+1.40 → 1.52 s, CPU 1.37 → 1.12 s (main thread 0.87 s); the new code at 14,905 nodes again:
+wall 1.15 s, CPU 1.13 s (main thread 0.65 s; 14 factorisations, 12 in the background, some
+redone in double precision after slivers). The background thread costs the main thread when the
+machine is busy: with the other jobs on the two cores (load 1.7-3.2, interleaved runs of
+the 30 frames) the background refactorisation took 1.27 and 1.24 s per frame, refactorising
+in the foreground (``background=False``: 10.2 iterations, 3 factorisations) 1.19 and
+1.03 s, though the main thread's CPU was 0.99 and 0.95 s against 1.15 and 1.00 s (in the
+frames where a factorisation ran, cutting and re-integration took up to twice as long as in
+the old code's run: SuperLU's allocations take the GIL, and the thread competes for a core).
+Two more pairs at load 1.0-1.7: background 1.09 and 1.13 s (main thread 0.95 and 0.91 s),
+foreground 1.07 and 1.09 s (main thread 1.04 and 1.06 s). So the background refactorisation
+saves the main thread ~0.1 s per frame, which shows in the wall time only when the second
+core is free; on this shared machine it never was, and the wall times were equal within the
+noise (foreground faster in 4 of 5 pairs). It stays on (``background=True``), the goal being
+a quiet machine; ``background=False`` spends less CPU in all (1.01-1.16 against 1.17-1.26 s).
 
 The rounds of the contact active-set iteration (:mod:`unmesh.fem.dynamics`) are solved
 to a relative residual of 10⁻³ and the final active set is confirmed by a solve to
@@ -96,6 +169,8 @@ True
 
 from __future__ import annotations
 
+import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -103,10 +178,12 @@ import scipy.sparse as sp
 
 from unmesh.errors import InputError
 from unmesh.fem import _solve_kernels as SK
+from unmesh.fem.factor import Factorization, Job, _local_factor, block_csr, nested_dissection
 from unmesh.fem.krylov import PCG, pcg
 from unmesh.fem.rotations import polar_rotations
 
-__all__ = ["LOCAL_RINGS", "PCG", "SOLVERS", "LaggedLU", "direct_solve", "grow", "nested_dissection", "pcg"]
+__all__ = ["LOCAL_RINGS", "PCG", "SOLVERS", "LaggedLU", "block_csr", "direct_solve", "grow", "nested_dissection",
+           "pcg"]
 
 SOLVERS = ("auto", "lu-pcg", "cg", "direct")
 #: Layers of neighbours added, for the local solve, around nodes whose constraint differs from the factorised one.
@@ -115,36 +192,22 @@ LOCAL_RINGS = 3
 CONSTRAINED_RINGS = 1
 #: Layers of neighbours added around the nodes touched by cuts.
 TOUCHED_RINGS = 1
+#: A background refactorisation starts when the touched (or mismatched) nodes exceed this share of ``touched_fraction``.
+BACKGROUND_SHARE = 0.25
+#: ... or when a solve needed more than this many iterations.
+BACKGROUND_ITERATIONS = 15
+#: Steps after its start at which a background factorisation is installed.
+BACKGROUND_LEAD = 2
+#: A single-precision factorisation whose solve of a random right-hand side leaves a larger relative
+#: residual is redone in double precision (bunny benchmark: 4-5e-5 normally, 20-220 after slivers).
+SINGLE_RESIDUAL = 1e-3
 
 
-def nested_dissection(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
-    """METIS nested-dissection order (n,) of the nodes of a block pattern, or None without ``pymetis``.
+def grow(indptr: np.ndarray, indices: np.ndarray, mask: np.ndarray, rings: int, *, fast: bool = True) -> np.ndarray:
+    """``mask`` (n,) bool grown by ``rings`` layers of neighbours in the (symmetric) block pattern.
 
-    Example
-    -------
-    >>> import numpy as np
-    >>> perm = nested_dissection(np.array([0, 2, 4]), np.array([0, 1, 0, 1]))
-    >>> perm is None or sorted(perm.tolist()) == [0, 1]
-    True
-    """
-    try:
-        import pymetis
-    except ImportError:
-        return None
-    n = len(indptr) - 1
-    rows = np.repeat(np.arange(n), np.diff(indptr))
-    off = indices != rows
-    xadj = np.r_[0, np.cumsum(np.bincount(rows[off], minlength=n))].astype(np.int32)
-    adjncy = indices[off].astype(np.int32)
-    if hasattr(pymetis, "CSRAdjacency"):
-        perm, _ = pymetis.nested_dissection(adjacency=pymetis.CSRAdjacency(xadj, adjncy))
-    else:  # pymetis < 2025
-        perm, _ = pymetis.nested_dissection(xadj=xadj, adjncy=adjncy)
-    return np.asarray(perm, dtype=np.int64)
-
-
-def grow(indptr: np.ndarray, indices: np.ndarray, mask: np.ndarray, rings: int) -> np.ndarray:
-    """``mask`` (n,) bool grown by ``rings`` layers of neighbours in the block pattern.
+    ``fast``: the numba kernel, which visits only the marked rows (the preconditioner grows
+    masks of a few % of the nodes five times per setup); ``fast=False`` is the numpy reference.
 
     Example
     -------
@@ -152,6 +215,9 @@ def grow(indptr: np.ndarray, indices: np.ndarray, mask: np.ndarray, rings: int) 
     >>> grow(np.array([0, 2, 5, 7]), np.array([0, 1, 0, 1, 2, 1, 2]), np.array([True, False, False]), 1).tolist()
     [True, True, False]
     """
+    if fast:
+        return SK.grow_mask(np.asarray(indptr, np.int64), np.asarray(indices, np.int64), np.asarray(mask, bool),
+                            int(rings))
     out = np.asarray(mask, bool).copy()
     rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
     for _ in range(rings):
@@ -199,8 +265,74 @@ def direct_solve(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, b:
     return (x0.ravel() + P @ np.atleast_1d(y)).reshape(n, 3)
 
 
+@dataclass
+class _Pending:
+    """A factorisation running in the background, and the cuts since its matrix was taken."""
+
+    job: Job
+    due: int  # step at which it is installed (waiting for it if not done)
+    coeffs: tuple[float, float]
+    pieces: int | None
+    kind: np.ndarray  # (n,) constraints factorised, on the current nodes
+    normal: np.ndarray
+    ref: np.ndarray | None = None  # (n,3) positions its matrix was taken at, on the current nodes
+    weights: sp.csr_array | None = None  # current nodes -> its nodes (None: identity)
+    touched: np.ndarray | None = None  # nodes changed by cuts since its matrix was taken
+
+
+def _global_factor(indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, kind: np.ndarray,
+                   normal: np.ndarray, single: bool) -> Factorization:
+    """Factorisation of the filtered ``S A_f S + (I - S)`` in nested-dissection order (runs in a thread too)."""
+    if kind.any():
+        blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind, normal)
+    perm = nested_dissection(indptr, indices)
+
+    def factorise(single: bool) -> Factorization:
+        if perm is None:
+            return Factorization(block_csr(indptr, indices, blocks0), None, single=single)
+        return Factorization.from_blocks(indptr, indices, blocks0, perm, single=single)
+
+    try:
+        lu = factorise(single)
+        if single and _solve_residual(indptr, indices, blocks0, lu) > SINGLE_RESIDUAL:
+            lu = factorise(False)  # too ill-conditioned for single precision (module docstring)
+        return lu
+    except RuntimeError as exc:
+        raise InputError(f"the implicit system is singular ({exc}); check masses and materials") from None
+
+
+def _solve_residual(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, lu: Factorization) -> float:
+    """Relative residual ``|A y - r| / |r|`` of ``y = lu.solve(r)`` for a fixed pseudo-random r (deterministic)."""
+    n = len(indptr) - 1
+    r = np.random.default_rng(20070101).standard_normal((n, 3))
+    y = lu.solve(r.ravel()).reshape(n, 3)
+    # the serial row kernel: this may run in the background thread beside the main thread's parallel kernels
+    Ay = SK.bsr_matvec_rows(indptr, indices, blocks, y, np.arange(n))
+    return float(np.linalg.norm(Ay - r) / np.linalg.norm(r))
+
+
+def _remapped(W: sp.csr_array, touched: np.ndarray, weights: sp.csr_array | None, old_touched: np.ndarray | None,
+              kind: np.ndarray | None, ref: np.ndarray | None) -> tuple[Any, ...]:
+    """(weights, touched, kind, ref) of a factorisation carried across a cut with node weights W."""
+    if old_touched is None:
+        old_touched = np.zeros(W.shape[1], bool)
+    new_touched = np.asarray(touched, bool) | ((W @ old_touched.astype(np.float64)) != 0)
+    if kind is not None:
+        # constraints of the factorisation on the new nodes (touched ones are solved locally anyway)
+        kind = np.where(new_touched, 0, np.rint(W @ kind.astype(np.float64))).astype(np.int64)
+    if ref is not None:
+        ref = W @ ref
+    return (W if weights is None else sp.csr_array(W @ weights)), new_touched, kind, ref
+
+
 class LaggedLU:
     """The lagged, warped LU preconditioner of ``"lu-pcg"`` (see the module docstring).
+
+    ``single``: factorise the Jacobi-scaled matrix in single precision
+    (:class:`unmesh.fem.factor.Factorization`). ``background``: refactorise in a thread
+    before the factorisation is due (:meth:`wants_background`, :meth:`start_background`),
+    installed ``lead`` steps later; ``threaded=False`` computes it at once instead (same
+    results: the step it is installed at does not depend on the thread's timing).
 
     Example
     -------
@@ -209,33 +341,50 @@ class LaggedLU:
     """
 
     def __init__(self, refactor_iterations: int = 40, touched_fraction: float = 0.1, rings: int = LOCAL_RINGS,
-                 touched_rings: int = TOUCHED_RINGS, constrained_rings: int = CONSTRAINED_RINGS) -> None:
+                 touched_rings: int = TOUCHED_RINGS, constrained_rings: int = CONSTRAINED_RINGS, *,
+                 single: bool = True, background: bool = True, threaded: bool = True,
+                 background_share: float = BACKGROUND_SHARE, background_iterations: int = BACKGROUND_ITERATIONS,
+                 lead: int = BACKGROUND_LEAD) -> None:
         self.refactor_iterations = int(refactor_iterations)
         self.rings = int(rings)
         self.constrained_rings = int(constrained_rings)
         self.touched_rings = int(touched_rings)
         self.touched_fraction = float(touched_fraction)
-        self.lu: Any = None
+        self.single = bool(single)
+        self.background = bool(background)
+        self.threaded = bool(threaded)
+        self.background_share = float(background_share)
+        self.background_iterations = int(background_iterations)
+        self.lead = int(lead)
+        self.lu: Factorization | None = None
         self.coeffs: tuple[float, float] | None = None
-        self.factorizations = 0
+        self.factorizations = 0  # all factorisations made, in the foreground or the background
+        self.background_factorizations = 0
+        self.waited = 0.0  # seconds spent waiting for background factorisations
         self.last_iterations = 0
         self.weights: sp.csr_array | None = None  # current nodes -> factorised nodes (None: identity)
         self.touched: np.ndarray | None = None  # (n,) bool, nodes changed by cuts since the factorisation
         self.remaps = 0
         self.pieces: int | None = None  # connected pieces of the mesh at the factorisation
-        self.perm: np.ndarray | None = None  # DOF order of the factorisation (None: SuperLU's own)
         self.kind: np.ndarray | None = None  # (n,) constraints factorised, on the current nodes
+        self.ref: np.ndarray | None = None  # (n,3) positions the factorised matrix was taken at (None: rest)
+        self.pending: _Pending | None = None
         self._local_cache: tuple[Any, bytes, Any] | None = None  # (matrix, node set, local factor) of the cut region
         self.normal = np.array([0.0, 1.0, 0.0])
-        self.iperm: np.ndarray | None = None
         self.mismatch = 0.0  # share of the nodes solved locally because their constraint differs from the factorised one
 
+    @property
+    def perm(self) -> np.ndarray | None:
+        """DOF order of the factorisation (None: SuperLU's own)."""
+        return None if self.lu is None else self.lu.perm
+
     def invalidate(self) -> None:
-        """Drop the factorisation (e.g. after a change of material)."""
+        """Drop the factorisation and a pending one (e.g. after a change of material)."""
         self.lu = None
         self.weights = None
         self.touched = None
         self.kind = None
+        self.pending = None
 
     def needs_factor(self, coeffs: tuple[float, float], pieces: int | None = None) -> bool:
         """Whether to (re)factorise before the next solve.
@@ -259,8 +408,65 @@ class LaggedLU:
                 return True
         return self.lu is None or self.coeffs != coeffs or self.last_iterations > limit
 
+    def wants_background(self, coeffs: tuple[float, float], pieces: int | None = None) -> bool:
+        """Whether to start a background refactorisation (call when :meth:`needs_factor` is False).
+
+        When the cut-touched nodes or the nodes of mismatched constraints exceed
+        ``background_share`` of ``touched_fraction``, or the last solve needed more than
+        ``background_iterations`` iterations, and no refactorisation is pending.
+        """
+        if not self.background or self.pending is not None or self.lu is None or self.coeffs != coeffs:
+            return False
+        if pieces is not None and self.pieces is not None and pieces != self.pieces:
+            return False
+        share = self.background_share * self.touched_fraction
+        touched = 0.0 if self.touched is None else float(self.touched.mean())
+        return touched > share or self.mismatch > share or self.last_iterations > self.background_iterations
+
+    def start_background(self, indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray,
+                         coeffs: tuple[float, float], step: int, pieces: int | None = None,
+                         kind: np.ndarray | None = None, normal: np.ndarray | None = None,
+                         ref: np.ndarray | None = None) -> None:
+        """Start factorising A_f (as :meth:`factor`) in a thread; it is installed at step ``step + lead``.
+
+        The arrays must not be changed afterwards (the dynamics make new ones every step).
+        """
+        n = len(indptr) - 1
+        kind0 = np.zeros(n, np.int64) if kind is None else np.ascontiguousarray(kind, dtype=np.int64).copy()
+        nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.ascontiguousarray(normal, dtype=np.float64).copy()
+        job = Job(_global_factor, indptr, indices, blocks0, kind0, nrm, self.single, threaded=self.threaded)
+        self.pending = _Pending(job, step + self.lead, coeffs, pieces, kind0, nrm, ref)
+        self.factorizations += 1
+        self.background_factorizations += 1
+
+    def collect(self, step: int) -> bool:
+        """Install the pending factorisation if it is due at ``step`` (waits for it); whether it was."""
+        pend = self.pending
+        if pend is None or step < pend.due:
+            return False
+        t = time.perf_counter()
+        lu = pend.job.result()
+        self.waited += time.perf_counter() - t
+        self._install(lu, pend.coeffs, pend.pieces, pend.kind, pend.normal, pend.ref)
+        self.weights, self.touched = pend.weights, pend.touched
+        return True
+
+    def _install(self, lu: Factorization, coeffs: tuple[float, float], pieces: int | None, kind: np.ndarray,
+                 normal: np.ndarray, ref: np.ndarray | None) -> None:
+        self.lu = lu
+        self.ref = ref
+        self.coeffs = coeffs
+        self.pieces = pieces
+        self.kind = kind
+        self.normal = normal
+        self.mismatch = 0.0
+        self.last_iterations = 0
+        self.weights = None
+        self.touched = None
+        self.pending = None
+
     def remap(self, node_weights: sp.sparray, touched: np.ndarray) -> None:
-        """Keep the factorisation across a topology change (see the module docstring).
+        """Keep the factorisation (and a pending one) across a topology change (see the module docstring).
 
         Parameters
         ----------
@@ -270,57 +476,35 @@ class LaggedLU:
             Nodes of the new mesh whose neighbourhood changed (new, duplicated, or in a
             re-integrated element).
         """
+        W = sp.csr_array(node_weights)
+        pend = self.pending
+        if pend is not None:
+            pend.weights, pend.touched, pend.kind, pend.ref = _remapped(W, touched, pend.weights, pend.touched,
+                                                                        pend.kind, pend.ref)
         if self.lu is None:
             return
-        W = sp.csr_array(node_weights)
-        old_touched = self.touched if self.touched is not None else np.zeros(W.shape[1], bool)
-        hit = (W @ old_touched.astype(np.float64)) != 0
-        self.touched = np.asarray(touched, bool) | hit
-        if self.kind is not None:
-            # constraints of the factorisation on the new nodes (touched ones are solved locally anyway)
-            self.kind = np.where(self.touched, 0, np.rint(W @ self.kind.astype(np.float64))).astype(np.int64)
-        self.weights = W if self.weights is None else sp.csr_array(W @ self.weights)
+        self.weights, self.touched, self.kind, self.ref = _remapped(W, touched, self.weights, self.touched, self.kind,
+                                                                    self.ref)
         self.remaps += 1
 
     def factor(self, indptr: np.ndarray, indices: np.ndarray, blocks0: np.ndarray, coeffs: tuple[float, float],
-               pieces: int | None = None, kind: np.ndarray | None = None, normal: np.ndarray | None = None) -> None:
-        """Factorise the unwarped matrix A₀ (3×3 blocks) with SuperLU (``pieces``: see :meth:`needs_factor`).
+               pieces: int | None = None, kind: np.ndarray | None = None, normal: np.ndarray | None = None,
+               ref: np.ndarray | None = None) -> None:
+        """Factorise the matrix A_f (3×3 blocks) with SuperLU now (``pieces``: see :meth:`needs_factor`).
+
+        ``ref`` (n,3): the positions A_f was taken at (its warping), from which the
+        preconditioner rotates each piece; None: A_f is unwarped (the rest positions).
 
         With ``kind`` (n,) (1 fixed, 2 normal ``normal`` prescribed, 0 free) the filtered
-        matrix ``S A₀ S + (I - S)`` of these constraints is factorised (module docstring).
+        matrix ``S A_f S + (I - S)`` of these constraints is factorised (module docstring).
+        A pending background factorisation is dropped.
         """
-        from scipy.sparse.linalg import splu
-
         n = len(indptr) - 1
         kind0 = np.zeros(n, np.int64) if kind is None else np.ascontiguousarray(kind, dtype=np.int64)
         nrm = np.array([0.0, 1.0, 0.0]) if normal is None else np.ascontiguousarray(normal, dtype=np.float64)
-        if kind0.any():
-            blocks0 = SK.filter_blocks(indptr, indices, blocks0, kind0, nrm)
-        # double precision: single precision solves 1.5x faster but, with lumped masses spanning
-        # 5 decades (slivers after cuts), stalled PCG on the bunny-slicing benchmark
-        A0 = block_csr(indptr, indices, blocks0)
-        perm = nested_dissection(indptr, indices)
-        try:
-            if perm is None:
-                self.lu = splu(A0.tocsc(), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
-                self.perm = None
-            else:
-                dof = (3 * perm[:, None] + np.arange(3)).ravel()
-                self.lu = splu(sp.csc_array(A0[dof][:, dof]), permc_spec="NATURAL", options={"SymmetricMode": True})
-                self.perm = dof
-                self.iperm = np.empty_like(dof)
-                self.iperm[dof] = np.arange(len(dof))
-        except RuntimeError as exc:
-            raise InputError(f"the implicit system is singular ({exc}); check masses and materials") from None
-        self.coeffs = coeffs
-        self.pieces = pieces
-        self.kind = kind0
-        self.normal = nrm
+        self._install(_global_factor(indptr, indices, blocks0, kind0, nrm, self.single), coeffs, pieces, kind0, nrm,
+                      ref)
         self.factorizations += 1
-        self.mismatch = 0.0
-        self.last_iterations = 0
-        self.weights = None
-        self.touched = None
 
     def preconditioner(self, node_rot: np.ndarray, indptr: np.ndarray | None = None, indices: np.ndarray | None = None,
                        blocks: np.ndarray | None = None, kind: np.ndarray | None = None,
@@ -328,7 +512,7 @@ class LaggedLU:
         """The preconditioner ``r -> z`` for (n,3) residuals of the filtered system.
 
         Without a cut since the factorisation and without constrained nodes it is
-        ``Q A₀⁻¹ Qᵀ r`` (``node_rot`` (n,3,3): Q per node; the dynamics pass the rotation
+        ``Q A_f⁻¹ Qᵀ r`` (``node_rot`` (n,3,3): Q per node; the dynamics pass the rotation
         of each node's piece). Otherwise it is the symmetric
         multiplicative Schwarz combination (module docstring) of that with an exact
         solve on the local set: the nodes touched by cuts since the factorisation plus
@@ -339,7 +523,6 @@ class LaggedLU:
         """
         lu = self.lu
         assert lu is not None
-        perm, iperm = self.perm, self.iperm
         W = self.weights
         WT = sp.csr_array(W.T) if W is not None else None
 
@@ -347,10 +530,7 @@ class LaggedLU:
             rl = np.einsum("nji,nj->ni", node_rot, r)
             if WT is not None:
                 rl = WT @ rl
-            if perm is None:
-                y = lu.solve(rl.ravel()).reshape(-1, 3)
-            else:
-                y = lu.solve(rl.ravel()[perm])[iperm].reshape(-1, 3)
+            y = lu.solve(rl.ravel()).reshape(-1, 3)
             if W is not None:
                 y = W @ y
             return np.einsum("nij,nj->ni", node_rot, y)
@@ -420,77 +600,6 @@ class LaggedLU:
             return z
 
         return apply_schwarz
-
-
-class _PermutedLU:
-    """SuperLU of ``A[perm][:, perm]`` that solves with A."""
-
-    def __init__(self, A: sp.csr_array, perm: np.ndarray | None) -> None:
-        from scipy.sparse.linalg import splu
-
-        self.perm = perm
-        if perm is None:
-            self.lu = splu(sp.csc_array(A), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
-            return
-        self.iperm = np.empty_like(perm)
-        self.iperm[perm] = np.arange(len(perm))
-        self.lu = splu(sp.csc_array(A[perm][:, perm]), permc_spec="NATURAL", options={"SymmetricMode": True})
-
-    def solve(self, r: np.ndarray) -> np.ndarray:
-        if self.perm is None:
-            return self.lu.solve(r)
-        return self.lu.solve(r[self.perm])[self.iperm]
-
-
-#: Local sets of at least this many nodes are factorised in nested-dissection order.
-LOCAL_ND_NODES = 400
-
-
-def _local_factor(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray, kind: np.ndarray,
-                  normal: np.ndarray) -> tuple[np.ndarray, Any]:
-    """``(nodes, LU)`` of the filtered block ``S A_tt S + (I - S)`` on the sorted node set ``nodes``.
-
-    Large local sets (the cut region after a few cuts: thousands of nodes) are ordered by
-    nested dissection too: measured on the bunny-slicing benchmark, the local factorisations
-    in minimum-degree order cost about as much as the global ones.
-    """
-    sub_ptr, sub_idx, sub = _sub_block_array(indptr, indices, blocks, nodes)
-    kt = np.ascontiguousarray(kind[nodes], dtype=np.int64)
-    m = len(nodes)
-    if kt.any():  # the filter on the blocks (two sparse products cost a fifth of a local factorisation)
-        sub = SK.filter_blocks(sub_ptr, sub_idx, sub, kt, np.ascontiguousarray(normal, dtype=np.float64))
-    L = block_csr(sub_ptr, sub_idx, sub)
-    perm = nested_dissection(sub_ptr, sub_idx) if m >= LOCAL_ND_NODES else None
-    dof = None if perm is None else (3 * perm[:, None] + np.arange(3)).ravel()
-    return nodes, _PermutedLU(L, dof)
-
-
-def _sub_block_array(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray,
-                     nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Node-level CSR ``(indptr, indices)`` and blocks (nnz, 9) of the submatrix on the sorted node set ``nodes``."""
-    n = len(indptr) - 1
-    local = np.full(n, -1, np.int64)
-    local[nodes] = np.arange(len(nodes))
-    rows = np.repeat(np.arange(n), np.diff(indptr))
-    keep = (local[rows] >= 0) & (local[indices] >= 0)
-    lr, lc = local[rows[keep]], local[indices[keep]]
-    sub_ptr = np.r_[0, np.cumsum(np.bincount(lr, minlength=len(nodes)))].astype(np.int64)
-    return sub_ptr, lc, np.ascontiguousarray(blocks[keep])
-
-
-def _sub_blocks(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray) -> sp.csr_array:
-    """The (3m, 3m) CSR submatrix of a 3×3-block CSR matrix on the sorted node set ``nodes`` (m,).
-
-    Picks the blocks directly (no conversion of the whole matrix, which cost more than
-    the local factorisation on the bunny benchmark).
-    """
-    return block_csr(*_sub_block_array(indptr, indices, blocks, nodes))
-
-
-def block_csr(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray) -> sp.csr_array:
-    """The scalar (3n, 3n) CSR matrix of a node-level CSR pattern with 3×3 blocks (nnz, 9)."""
-    n3 = 3 * (len(indptr) - 1)
-    return sp.csr_array(sp.bsr_array((blocks.reshape(-1, 3, 3), indices, indptr), shape=(n3, n3)).tocsr())
 
 
 def node_rotations(rots: np.ndarray, node_offsets: np.ndarray, nodes: np.ndarray, weights: np.ndarray,
