@@ -223,13 +223,13 @@ def test_parallel_force_kernel_matches_reference(sphere, rng, monkeypatch):
     gives the reference forces and energies, as the single-threaded path does."""
     import numba
 
-    from unmesh.shells import forces
+    from unmesh.sim import threads as sim_threads
 
     x, topo = sphere
     state = random_state(x, topo, rng)
     y = x + rng.normal(scale=0.05, size=x.shape)
     f_ref, e_ref = elastic_forces_reference(y, topo, state, 25.0, 7.0)
-    monkeypatch.setattr(forces, "PARALLEL_MIN", 0)
+    monkeypatch.setattr(sim_threads, "PARALLEL_MIN", 0)
     threads = numba.get_num_threads()
     numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
     try:

@@ -127,13 +127,13 @@ def test_force_pass_is_the_same_on_one_and_on_two_threads(torn_strip, monkeypatc
     number of threads (the thread choice of ``threads_for`` follows the machine's load)."""
     import numba
 
-    from unmesh.shells import forces
+    from unmesh.sim import threads
 
     sim = torn_strip
     m = sim.material
-    monkeypatch.setattr(forces, "PARALLEL_MIN", 10**12)       # one thread
+    monkeypatch.setattr(threads, "PARALLEL_MIN", 10**12)       # one thread
     one = elastic_forces(sim.x, sim.topology, sim.fibers, m.ks, m.kb, m.arc_samples, sim._last.angles)
-    monkeypatch.setattr(forces, "PARALLEL_MIN", 0)
+    monkeypatch.setattr(threads, "PARALLEL_MIN", 0)
     threads = numba.get_num_threads()
     numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
     try:
@@ -143,23 +143,6 @@ def test_force_pass_is_the_same_on_one_and_on_two_threads(torn_strip, monkeypatc
             np.testing.assert_array_equal(two.stretch_energy, one.stretch_energy)
     finally:
         numba.set_num_threads(threads)
-
-
-def test_thread_tuner_keeps_the_faster_choice():
-    from unmesh.shells.forces import _Tuner
-
-    t = _Tuner()
-    for _ in range(2 * t.PROBE):
-        serial = t.choose_serial()
-        t.record(serial, 1.0 if serial else 3.0)
-    assert t.choose_serial() is True
-    for _ in range(t.PERIOD - 2 * t.PROBE):
-        assert t.choose_serial() is True
-        t.record(True, 1.0)
-    for _ in range(2 * t.PROBE):                                # the next probe round: load changed
-        serial = t.choose_serial()
-        t.record(serial, 5.0 if serial else 2.0)
-    assert t.choose_serial() is False
 
 
 def test_unvalidated_topology_build_equals_the_validated_one(torn_strip):

@@ -180,7 +180,7 @@ def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):
     """Fixed node and fiber ranges: the step does not depend on the number of threads."""
     import numba
 
-    from unmesh.shells import forces
+    from unmesh.sim import threads as sim_threads
 
     cloud, idx = sphere_with_nodes()
 
@@ -194,7 +194,7 @@ def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):
     runs = []
     threads = numba.get_num_threads()
     for count, minimum in ((1, 10**12), (min(2, numba.config.NUMBA_NUM_THREADS), 0)):
-        monkeypatch.setattr(forces, "PARALLEL_MIN", minimum)
+        monkeypatch.setattr(sim_threads, "PARALLEL_MIN", minimum)
         numba.set_num_threads(count)
         try:
             sim = make()

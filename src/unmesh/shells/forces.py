@@ -9,122 +9,21 @@ fracture (7.24) and the pressure force reuse without recomputing them.
 from __future__ import annotations
 
 import functools
-import math
-import time
 from dataclasses import dataclass
 
-import numba
 import numpy as np
-from numba.np.ufunc import parallel as _parallel
 
 from unmesh.shells import _kernels
 from unmesh.shells.energy import FiberState
 from unmesh.shells.fibers import ARC_SAMPLES
 from unmesh.shells.topology import ShellTopology
+from unmesh.sim.threads import threads_for
 
-__all__ = ["ForceResult", "arc_gram", "arc_weights", "elastic_forces", "node_terms", "threads_for"]
-
-#: Below this many work items the kernels always run on one thread (waking a second thread
-#: costs more than it saves). Above it, :class:`threads_for` times both ways and keeps the
-#: faster: on 2 idle cores two threads nearly halve a force pass of 7 600 fibers (1.9 -> 1.0 ms),
-#: while on 2 cores shared with other busy processes two threads can be several times slower
-#: (a balloon step of 10 166 fibers: 3.3 ms on one thread, 16 ms on two).
-PARALLEL_MIN = 4000
+__all__ = ["ForceResult", "arc_gram", "arc_weights", "elastic_forces", "node_terms"]
 
 #: Fixed number of node ranges of the force pass, each with its own force buffer: the
 #: summation order, and so the result bit for bit, does not depend on the number of threads.
 FORCE_CHUNKS = 8
-
-
-class _Tuner:
-    """Chooses one thread or all threads for a kernel by timing both now and then."""
-
-    PROBE = 3       # calls per mode in a probe round
-    PERIOD = 250    # calls from one probe round to the next
-
-    def __init__(self) -> None:
-        self.calls = 0
-        self.best = {True: math.inf, False: math.inf}
-        self.serial = False
-
-    def choose_serial(self) -> bool:
-        c = self.calls % self.PERIOD
-        return c % 2 == 0 if c < 2 * self.PROBE else self.serial
-
-    def record(self, serial: bool, seconds: float) -> None:
-        c = self.calls % self.PERIOD
-        if c < 2 * self.PROBE:
-            if c == 0:
-                self.best = {True: math.inf, False: math.inf}
-            self.best[serial] = min(self.best[serial], seconds)
-            if c == 2 * self.PROBE - 1:
-                self.serial = self.best[True] <= self.best[False]
-        self.calls += 1
-
-
-_TUNERS: dict[tuple[str, int], _Tuner] = {}
-
-
-def _num_threads() -> int:
-    """``numba.get_num_threads()``; once numba's threads run, without its start-up lock (a
-    multiprocessing lock: a few microseconds per call, three calls per time step)."""
-    get = getattr(_parallel, "_get_num_threads", None)
-    if getattr(_parallel, "_is_initialized", False) and get is not None:
-        return int(get())
-    return numba.get_num_threads()
-
-
-def _set_num_threads(n: int) -> None:
-    """``numba.set_num_threads(n)`` for an ``n`` already valid (1, or a value :func:`_num_threads` gave)."""
-    set_ = getattr(_parallel, "_set_num_threads", None)
-    if getattr(_parallel, "_is_initialized", False) and set_ is not None:
-        set_(int(n))
-        return
-    numba.set_num_threads(n)
-
-
-class threads_for:
-    """Run numba kernels on one thread or on all (``with threads_for(n, key): ...``).
-
-    Below ``minimum`` work items always on one thread; above it, the block is timed and the
-    faster choice kept, per ``key`` and size class (probed again every few hundred calls, so
-    the choice follows the machine's load). Kernels run this way must give the same result
-    on any number of threads (e.g. :data:`FORCE_CHUNKS`).
-
-    Parameters
-    ----------
-    items : int
-        Size of the work (fibers, surfels).
-    minimum : int
-        Smallest size that may run on all of numba's threads (default :data:`PARALLEL_MIN`).
-    key : str
-        Name of the kernel (each has its own timings).
-
-    Example
-    -------
-    >>> with threads_for(10):
-    ...     pass
-    """
-
-    def __init__(self, items: int, minimum: int | None = None, key: str = "forces") -> None:
-        self.previous = _num_threads()
-        self.serial = items < (PARALLEL_MIN if minimum is None else minimum)
-        self.tuner = None
-        if not self.serial and self.previous > 1:
-            self.tuner = _TUNERS.setdefault((key, int(items).bit_length()), _Tuner())
-            self.serial = self.tuner.choose_serial()
-
-    def __enter__(self) -> None:
-        if self.serial and self.previous != 1:
-            _set_num_threads(1)
-        self.start = time.perf_counter()
-
-    def __exit__(self, *exc: object) -> None:
-        elapsed = time.perf_counter() - self.start
-        if self.serial and self.previous != 1:
-            _set_num_threads(self.previous)
-        if self.tuner is not None and exc[0] is None:
-            self.tuner.record(self.serial, elapsed)
 
 
 @functools.lru_cache(maxsize=16)

@@ -17,12 +17,13 @@ import numpy as np
 
 from unmesh.shells import _kernels, _rebuild_kernels
 from unmesh.shells.fibers import degenerate as degenerate_fibers
-from unmesh.shells.forces import node_terms, threads_for
+from unmesh.shells.forces import node_terms
 from unmesh.shells.fracture import CrackSet, select_cracks
 from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
 from unmesh.shells.nodes import NodeCandidates
 from unmesh.shells.rebuild import rebuild_local
 from unmesh.shells.topology import ShellTopology
+from unmesh.sim.threads import threads_for
 
 __all__ = ["DEGENERATE_RATIO", "Tearing", "warm_up"]
 

@@ -1,0 +1,71 @@
+"""The thread tuner shared by shells and FEM (:mod:`unmesh.sim.threads`)."""
+
+from __future__ import annotations
+
+import numba
+import pytest
+
+from unmesh.sim import threads
+from unmesh.sim.threads import _Tuner, available_threads, serial_region, threads_for
+
+TWO = min(2, numba.config.NUMBA_NUM_THREADS)
+
+
+@pytest.fixture
+def restore_threads():
+    before = numba.get_num_threads()
+    yield
+    numba.set_num_threads(before)
+
+
+def test_tuner_keeps_the_faster_choice_and_probes_again_after_its_period():
+    t = _Tuner(period=20)
+    for _ in range(2 * t.PROBE):
+        serial = t.choose_serial()
+        t.record(serial, 1.0 if serial else 3.0)
+    assert t.choose_serial() is True
+    for _ in range(20 - 2 * t.PROBE):
+        assert t.choose_serial() is True
+        t.record(True, 1.0)
+    for _ in range(2 * t.PROBE):                                # the next probe round: load changed
+        serial = t.choose_serial()
+        t.record(serial, 5.0 if serial else 2.0)
+    assert t.choose_serial() is False
+
+
+@pytest.mark.skipif(TWO < 2, reason="needs two numba threads")
+def test_threads_for_inside_a_serial_region_may_use_the_outer_threads(restore_threads, monkeypatch):
+    monkeypatch.setattr(threads, "_TUNERS", {})
+    numba.set_num_threads(TWO)
+    seen = []
+    with serial_region():
+        assert numba.get_num_threads() == 1
+        assert available_threads() == TWO
+        for _ in range(2 * _Tuner.PROBE):                       # a probe round: both choices
+            with threads_for(10**6, key="test"):
+                seen.append(numba.get_num_threads())
+            assert numba.get_num_threads() == 1
+        with threads_for(10, key="test"):                       # below the minimum
+            assert numba.get_num_threads() == 1
+        with serial_region():                                   # nested: still the outermost count
+            assert available_threads() == TWO
+    assert sorted(set(seen)) == [1, TWO]
+    assert numba.get_num_threads() == TWO
+
+
+def test_a_users_single_thread_is_respected_inside_serial_regions(restore_threads, monkeypatch):
+    monkeypatch.setattr(threads, "_TUNERS", {})
+    numba.set_num_threads(1)
+    with serial_region():
+        assert available_threads() == 1
+        for _ in range(2 * _Tuner.PROBE):
+            with threads_for(10**6, key="test"):
+                assert numba.get_num_threads() == 1
+    assert numba.get_num_threads() == 1
+
+
+def test_a_disabled_serial_region_changes_nothing(restore_threads):
+    numba.set_num_threads(TWO)
+    with serial_region(False):
+        assert numba.get_num_threads() == TWO
+        assert available_threads() == TWO
