@@ -59,6 +59,8 @@ def main() -> None:
                     help="linear solver of the implicit step (default auto: CG, LU-preconditioned when slow)")
     ap.add_argument("--young", type=float, default=3e3, help="Young's modulus (default 3000, Appendix F.3, Fig. 9.10)")
     args = ap.parse_args()
+    import numba
+
     from unmesh.fem import tetrahedralize
     from unmesh.fem.dynamics import Dynamics, Ground
     from unmesh.fem.events import BladeEvent
@@ -120,6 +122,14 @@ def main() -> None:
           f"({getattr(lag, 'background_factorizations', 0)} in the background, {getattr(lag, 'waited', 0.0):.2f} s "
           f"waited for them), the factorisation kept across {lag.remaps} cuts; load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    try:
+        from unmesh.sim.threads import _TUNERS
+    except ImportError:  # before the shared thread tuner
+        _TUNERS = {}
+    chosen = [f"{key} ({2 ** (size - 1)}+ items): {'1 thread' if t.serial else 'all'} "
+              f"(probed {t.best[True] * 1e3:.1f} vs {t.best[False] * 1e3:.1f} ms, {t.calls} calls)"
+              for (key, size), t in sorted(_TUNERS.items()) if key.startswith("fem.")]
+    print(f"numba threads: {numba.get_num_threads()}; tuner's last choices: " + ("; ".join(chosen) or "none"))
     print("thesis: 6.08 s per frame (3.56 s without recomputing basis functions), 24079 -> 46132 nodes")
 
 

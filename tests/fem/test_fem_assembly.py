@@ -224,5 +224,5 @@ def test_block_pattern_kernel_matches_numpy_reference():
         off, nodes = mesh.element_nodes()
         fast = BlockPattern.build(off, nodes, mesh.n_nodes)
         ref = BlockPattern.build(off, nodes, mesh.n_nodes, fast=False)
-        for name in ("indptr", "indices", "block_map", "diag"):
+        for name in ("indptr", "indices", "block_map", "diag", "inc_offsets", "inc_elements", "inc_local"):
             np.testing.assert_array_equal(getattr(fast, name), getattr(ref, name), err_msg=name)

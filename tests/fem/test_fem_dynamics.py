@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -452,7 +453,7 @@ def test_lagged_lu_with_factorised_constraints_is_exact_for_them(rng, monkeypatc
     assert grow(p.indptr, p.indices, kind != 0, 1).sum() > (kind != 0).sum()
 
 
-def test_fused_warped_assembly_matches_rotated_blocks_scattered(rng):
+def test_fused_warped_assembly_and_its_row_gather_match_rotated_blocks_scattered(rng):
     sim = Dynamics(voronoi_foam(10, seed=7), 50.0, 0.3, 1.0)
     p = sim.pattern
     R = Rotation.random(sim.mesh.n_elements, random_state=3).as_matrix()
@@ -460,6 +461,15 @@ def test_fused_warped_assembly_matches_rotated_blocks_scattered(rng):
                             len(p.indices))
     got = FK.warped_global_blocks(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R, p.block_map,
                                   len(p.indices), 0.25)
+    threads = numba.get_num_threads()
+    try:
+        for count in sorted({1, min(2, numba.config.NUMBA_NUM_THREADS)}):
+            numba.set_num_threads(count)
+            rows = FK.warped_global_rows(sim.integ.node_offsets, sim.kstiff.offsets, sim.kstiff.data, R,
+                                         p.inc_offsets, p.inc_elements, p.inc_local, p.block_map, len(p.indices), 0.25)
+            np.testing.assert_array_equal(rows, got)  # the row gather: the scatter's sums in the same order
+    finally:
+        numba.set_num_threads(threads)
     np.testing.assert_allclose(got, 0.25 * ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
     SK.add_masses(got, p.diag, sim.masses, 2.0)
     np.testing.assert_allclose(got, SK.add_diagonal(ref, p.diag, 0.25, sim.masses, 2.0), rtol=1e-12,
@@ -580,3 +590,37 @@ def test_rotations_carried_across_a_cut_equal_a_fresh_horn_pass(twice):
     np.testing.assert_array_equal(carried, sim.rotations())
     sim.u = sim.u + 1e-3  # a new state: nothing carried over
     assert sim._cached_rotations() is None
+
+
+def test_steps_with_cuts_are_the_same_on_one_and_on_two_threads(monkeypatch):
+    """The per-element kernels (Horn, forces, assembly, integration, stiffness, pattern, matvec) give
+    the same results on any number of threads, so the tuner's choice does not change the simulation."""
+    from unmesh.fem import dynamics, krylov
+    from unmesh.fem.events import BladeEvent
+    from unmesh.fem.simulation import FemSimulation
+    from unmesh.sim import threads as sim_threads
+
+    for name in ("ELEMENT_PARALLEL_MIN", "CHANGED_PARALLEL_MIN", "SERIAL_NODES"):
+        monkeypatch.setattr(dynamics, name, 0)
+    monkeypatch.setattr(krylov, "MATVEC_PARALLEL_MIN", 0)
+    path = np.array([[[0.45, 1.2, -0.1], [0.45, 1.2, 1.1]], [[0.55, -0.2, -0.1], [0.55, -0.2, 1.1]]])
+
+    def run(count: int) -> list[np.ndarray]:
+        monkeypatch.setattr(sim_threads, "_TUNERS", {})  # probe from the start: both choices are taken
+        numba.set_num_threads(count)
+        dyn = Dynamics(hex_grid((5, 4, 3), size=(1.0, 1.0, 1.0), origin=(0, 0.02, 0)), 2e3, 0.3, 1.0,
+                       ground=Ground(), solver="lu-pcg")
+        sim = FemSimulation(dyn, 0.02, [BladeEvent(0.0, 0.16, path)])
+        for _ in range(10):
+            sim.step()
+        assert dyn.mesh.n_elements > 60  # the blade cut
+        return [dyn.u, dyn.v, dyn.mesh.points, dyn.elastic_forces()[0]]
+
+    threads = numba.get_num_threads()
+    try:
+        one = run(1)
+        two = run(min(2, numba.config.NUMBA_NUM_THREADS))
+    finally:
+        numba.set_num_threads(threads)
+    for a, b in zip(one, two, strict=True):
+        np.testing.assert_array_equal(a, b)

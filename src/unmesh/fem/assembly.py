@@ -22,6 +22,7 @@ import scipy.sparse as sp
 from unmesh._validate import as_array, as_indices, scalar
 from unmesh.errors import InputError
 from unmesh.fem import _fe_kernels as FK
+from unmesh.fem import _pattern_kernels as PK
 from unmesh.fem.integration import ElementIntegration, integrate_elements
 from unmesh.fem.mesh import PolyMesh
 
@@ -161,19 +162,23 @@ class BlockPattern:
     indices: np.ndarray
     block_map: np.ndarray
     diag: np.ndarray
+    inc_offsets: np.ndarray
+    inc_elements: np.ndarray
+    inc_local: np.ndarray
 
     @classmethod
     def build(cls, node_offsets: np.ndarray, nodes: np.ndarray, n_nodes: int, *, fast: bool = True) -> BlockPattern:
-        """Pattern of the element node lists (CSR).
+        """Pattern of the element node lists (CSR), and the node -> (element, local index) incidence.
 
-        ``fast`` builds it with a numba kernel (:func:`unmesh.fem._fe_kernels.block_pattern`,
-        no global sort: it is rebuilt after every cut); ``fast=False`` is the numpy reference.
+        ``fast`` builds it with numba kernels (:func:`unmesh.fem._pattern_kernels.block_pattern`,
+        no global sort, rows in parallel: it is rebuilt after every cut); ``fast=False`` is
+        the numpy reference. The incidence (``inc_offsets`` (n+1,), ``inc_elements``,
+        ``inc_local``: node i is local node ``inc_local[t]`` of element ``inc_elements[t]``,
+        elements ascending) drives the row-parallel warped assembly.
         """
         if fast and len(nodes):
-            indptr, indices, block_map, diag = FK.block_pattern(np.ascontiguousarray(node_offsets, dtype=np.int64),
-                                                                np.ascontiguousarray(nodes, dtype=np.int64),
-                                                                int(n_nodes))
-            return cls(int(n_nodes), indptr, indices, block_map, diag)
+            return cls(int(n_nodes), *PK.block_pattern(np.ascontiguousarray(node_offsets, dtype=np.int64),
+                                                       np.ascontiguousarray(nodes, dtype=np.int64), int(n_nodes)))
         n = np.diff(node_offsets)
         e = np.repeat(np.arange(len(n)), n * n)
         start = np.repeat(node_offsets[:-1], n * n)
@@ -187,7 +192,12 @@ class BlockPattern:
         indptr = np.searchsorted(r, np.arange(n_nodes + 1)).astype(np.int64)
         indices = (uniq % n_nodes).astype(np.int64)
         diag = np.searchsorted(uniq, np.arange(n_nodes, dtype=np.int64) * (n_nodes + 1))
-        return cls(int(n_nodes), indptr, indices, inv.astype(np.int64).ravel(), diag.astype(np.int64))
+        order = np.argsort(nodes, kind="stable")
+        inc_off = np.searchsorted(np.asarray(nodes)[order], np.arange(n_nodes + 1)).astype(np.int64)
+        inc_e = np.repeat(np.arange(len(n), dtype=np.int64), n)[order]
+        inc_a = (np.arange(len(nodes)) - np.repeat(node_offsets[:-1], n))[order].astype(np.int64)
+        return cls(int(n_nodes), indptr, indices, inv.astype(np.int64).ravel(), diag.astype(np.int64), inc_off, inc_e,
+                   inc_a)
 
     def assemble(self, blocks: np.ndarray) -> sp.bsr_array:
         """Global BSR matrix from element blocks (Σn², 9) in element order."""

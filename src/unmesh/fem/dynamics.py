@@ -33,9 +33,7 @@ True
 
 from __future__ import annotations
 
-import contextlib
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,6 +49,7 @@ from unmesh.fem.integration import ElementIntegration, integrate_elements, merge
 from unmesh.fem.mesh import PolyMesh
 from unmesh.fem.rotations import _horn_all, piece_rotations
 from unmesh.fem.solvers import PCG, SOLVERS, LaggedLU, direct_solve
+from unmesh.sim.threads import serial_region, threads_for
 
 __all__ = ["Dynamics", "Ground", "Load", "Prescribed", "kernel_threads"]
 
@@ -58,6 +57,15 @@ __all__ = ["Dynamics", "Ground", "Load", "Prescribed", "kernel_threads"]
 #: regions on small arrays cost more in synchronisation than they save, and on a
 #: shared (oversubscribed) machine they were measured up to 10x slower than serial.
 SERIAL_NODES = 30000
+#: Meshes with at least this many elements may run the heavy per-element kernels (Horn
+#: rotations, warped forces and assembly) on all threads: :class:`unmesh.sim.threads.threads_for`
+#: times one thread against all now and then and keeps the faster (the second core helps when
+#: it is free and hurts when other jobs keep it busy).
+ELEMENT_PARALLEL_MIN = 4096
+#: ... and the re-integration of at least this many changed elements (each costs ~0.25 ms).
+CHANGED_PARALLEL_MIN = 64
+#: Calls of a per-step kernel from one timing of both choices to the next.
+TUNER_PERIOD = 25
 #: ``solver="auto"``: block-Jacobi PCG iterations before switching to the factorised preconditioner.
 AUTO_CG_ITERATIONS = 150
 #: ``"lu-pcg"``: iterations with a lagged (or cut-remapped) factorisation before refactorising within the step.
@@ -68,24 +76,18 @@ CONTACT_TOL = 1e-3
 CONTACT_ROUNDS = 8
 
 
-@contextlib.contextmanager
-def kernel_threads(n_nodes: int) -> Iterator[None]:
+def kernel_threads(n_nodes: int) -> serial_region:
     """Use one numba thread for small problems inside the block.
+
+    The heavy per-element kernels run inside it under :class:`unmesh.sim.threads.threads_for`,
+    which may still use the threads in effect outside (one, if the user set one).
 
     Example
     -------
     >>> with kernel_threads(10):
     ...     pass
     """
-    import numba
-
-    before = numba.get_num_threads()
-    if n_nodes < SERIAL_NODES and before > 1:
-        numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)
+    return serial_region(n_nodes < SERIAL_NODES)
 
 
 @dataclass(frozen=True)
@@ -262,7 +264,8 @@ class Dynamics:
         n = self.mesh.n_nodes
         per = np.repeat(integ.volumes * self.density, np.diff(integ.node_offsets)) * integ.mu
         self.masses = np.bincount(integ.nodes, weights=per, minlength=n)
-        self.pattern = BlockPattern.build(integ.node_offsets, integ.nodes, n)
+        with threads_for(n, ELEMENT_PARALLEL_MIN, "fem.pattern", TUNER_PERIOD):
+            self.pattern = BlockPattern.build(integ.node_offsets, integ.nodes, n)
         from scipy.sparse.csgraph import connected_components
 
         graph = sp.csr_array((np.ones(len(self.pattern.indices)), self.pattern.indices, self.pattern.indptr), shape=(n, n))
@@ -281,13 +284,16 @@ class Dynamics:
         """Per-element rotations R_e (E,3,3) from Horn's method (identity without warping)."""
         if not self.warping:
             return np.broadcast_to(np.eye(3), (self.mesh.n_elements, 3, 3)).copy()
-        return _horn_all(self.mesh.points, self.positions(), self.integ.node_offsets, self.integ.nodes, self.integ.mu)
+        with threads_for(self.mesh.n_elements, ELEMENT_PARALLEL_MIN, "fem.horn", TUNER_PERIOD):
+            return _horn_all(self.mesh.points, self.positions(), self.integ.node_offsets, self.integ.nodes,
+                             self.integ.mu)
 
     def elastic_forces(self, rots: np.ndarray | None = None) -> tuple[np.ndarray, float]:
         """Warped elastic forces (n,3) and the elastic energy Σ_e ½ dᵀ K_e d."""
         R = self.rotations() if rots is None else rots
-        fe, en = FK.warped_forces(self.mesh.points, self.positions(), self.integ.node_offsets, self.integ.nodes,
-                                  self.kstiff.offsets, self.kstiff.data, R, self.mesh.n_nodes)
+        with threads_for(self.mesh.n_elements, ELEMENT_PARALLEL_MIN, "fem.forces", TUNER_PERIOD):
+            fe, en = FK.warped_forces(self.mesh.points, self.positions(), self.integ.node_offsets, self.integ.nodes,
+                                      self.kstiff.offsets, self.kstiff.data, R, self.mesh.n_nodes)
         f = np.zeros((self.mesh.n_nodes, 3))
         for k in range(3):
             f[:, k] = np.bincount(self.integ.nodes, weights=fe[:, k], minlength=self.mesh.n_nodes)
@@ -377,8 +383,16 @@ class Dynamics:
         R, f_el, _ = self._state_forces()
         cm = 1.0 + dt * self.alpha
         ck = dt * self.beta + dt * dt
-        A = FK.warped_global_blocks(self.integ.node_offsets, self.kstiff.offsets, self.kstiff.data, R,
-                                    self.pattern.block_map, len(self.pattern.indices), ck)
+        pat = self.pattern
+        integ, ks = self.integ, self.kstiff
+        with threads_for(self.mesh.n_elements, ELEMENT_PARALLEL_MIN, "fem.assembly", TUNER_PERIOD) as tf:
+            # one thread: the scatter over the elements; all: the row gather (same sums, same order)
+            if tf.serial:
+                A = FK.warped_global_blocks(integ.node_offsets, ks.offsets, ks.data, R, pat.block_map, len(pat.indices),
+                                            ck)
+            else:
+                A = FK.warped_global_rows(integ.node_offsets, ks.offsets, ks.data, R, pat.inc_offsets,
+                                          pat.inc_elements, pat.inc_local, pat.block_map, len(pat.indices), ck)
         SK.add_masses(A, self.pattern.diag, self.masses, cm)
         b = self.masses[:, None] * self.v + dt * (f_el + self.external_forces())
         fixed, vfix = self._prescribed(self.time)
@@ -580,8 +594,9 @@ class Dynamics:
         self.density = self.density[pend.parent]
         from_new = pend.kept < 0
         changed = np.flatnonzero(from_new)
-        new = integrate_elements(mesh, self.correction, elements=changed)
-        ks_new = element_stiffness(new, self.young[changed], self.poisson[changed])
+        with threads_for(len(changed), CHANGED_PARALLEL_MIN, "fem.integrate", TUNER_PERIOD):
+            new = integrate_elements(mesh, self.correction, elements=changed)
+            ks_new = element_stiffness(new, self.young[changed], self.poisson[changed])
         # element i comes from the old data (row kept[i]) or the re-integrated data (its rank in `changed`)
         src = np.where(from_new, np.cumsum(from_new) - 1, pend.kept)
         noff, nodes = mesh.element_nodes()

@@ -22,8 +22,13 @@ from typing import Any
 import numpy as np
 
 from unmesh.fem import _solve_kernels as SK
+from unmesh.sim.threads import threads_for
 
 __all__ = ["PCG", "pcg"]
+
+#: Systems of at least this many nodes may run the matrix-vector product on all threads
+#: (:class:`unmesh.sim.threads.threads_for` keeps the faster choice).
+MATVEC_PARALLEL_MIN = 4096
 
 
 def pcg(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, b: np.ndarray, x0: np.ndarray, kind: np.ndarray,
@@ -104,7 +109,8 @@ class PCG:
             self._direction()
         while it < maxiter:
             it += 1
-            q = SK.bsr_matvec(indptr, indices, blocks, self.d)
+            with threads_for(len(indptr) - 1, MATVEC_PARALLEL_MIN, "fem.matvec"):
+                q = SK.bsr_matvec(indptr, indices, blocks, self.d)
             SK.filter_inplace(q, self.kind, self.normal)
             dq = SK.dot(self.d, q)
             if dq <= 0.0:

@@ -149,7 +149,8 @@ class threads_for:
     faster choice kept, per ``key`` and size class (probed again every ``period`` calls, so
     the choice follows the machine's load). "All" is the count in effect outside any
     :class:`serial_region` (:func:`available_threads`). Kernels run this way must give the
-    same result on any number of threads.
+    same result on any number of threads. ``with threads_for(...) as tf`` gives the choice
+    (``tf.serial``), e.g. to run a serial kernel instead of a parallel one.
 
     Parameters
     ----------
@@ -182,10 +183,11 @@ class threads_for:
             self.serial = tuner.choose_serial()
         self.want = 1 if self.serial else self.threads
 
-    def __enter__(self) -> None:
+    def __enter__(self) -> threads_for:
         if self.want != self.previous:
             _set_num_threads(self.want)
         self.start = time.perf_counter()
+        return self
 
     def __exit__(self, *exc: object) -> None:
         elapsed = time.perf_counter() - self.start
