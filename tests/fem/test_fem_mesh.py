@@ -202,7 +202,7 @@ def test_surface_is_closed_and_outward():
     assert s.volume() == pytest.approx(1.0, abs=1e-9)
 
 
-def test_element_node_kernel_matches_the_numpy_reference():
+def test_element_node_triangle_and_bound_kernels_match_the_numpy_references():
     from unmesh.fem.cutting import PlaneCut, apply_cuts
 
     for mesh in (voronoi_foam(12, seed=3), hex_grid((3, 2, 2))):
@@ -212,6 +212,18 @@ def test_element_node_kernel_matches_the_numpy_reference():
             ref_off, ref_nodes = m._elem_nodes_reference()
             np.testing.assert_array_equal(off, ref_off)
             np.testing.assert_array_equal(nodes, ref_nodes)
+            toff, tris = m.element_triangles()
+            ref_toff, ref_tris = m._elem_tris_reference()
+            np.testing.assert_array_equal(toff, ref_toff)
+            np.testing.assert_array_equal(tris, ref_tris)
+            some = np.array([m.n_elements - 1, 0, 2])
+            soff, stris = m.triangles_of(some)
+            np.testing.assert_array_equal(np.diff(soff), np.diff(toff)[some])
+            np.testing.assert_array_equal(stris, np.concatenate([tris[toff[e]:toff[e + 1]] for e in some]))
+            lo, hi = m.element_bounds()
+            p = m.points[nodes]
+            np.testing.assert_array_equal(lo, np.minimum.reduceat(p, off[:-1], axis=0))
+            np.testing.assert_array_equal(hi, np.maximum.reduceat(p, off[:-1], axis=0))
 
 
 def test_node_face_and_repeated_node_kernels_match_numpy_references():

@@ -69,3 +69,33 @@ def test_a_disabled_serial_region_changes_nothing(restore_threads):
     with serial_region(False):
         assert numba.get_num_threads() == TWO
         assert available_threads() == TWO
+
+
+@pytest.mark.skipif(TWO != 2, reason="needs exactly two numba threads")
+def test_background_work_keeps_its_core(restore_threads, monkeypatch):
+    import threading
+
+    from unmesh.sim.threads import background_work
+
+    monkeypatch.setattr(threads, "_TUNERS", {})
+    numba.set_num_threads(2)
+    started, release = threading.Event(), threading.Event()
+
+    def work():
+        with background_work():
+            started.set()
+            release.wait(10)
+
+    t = threading.Thread(target=work)
+    t.start()
+    started.wait(10)
+    try:
+        for _ in range(2 * _Tuner.PROBE):
+            with threads_for(10**6, key="test") as tf:
+                assert tf.serial and numba.get_num_threads() == 1
+        assert not threads._TUNERS                              # no timings taken meanwhile
+    finally:
+        release.set()
+        t.join()
+    with threads_for(10**6, key="test") as tf:
+        assert tf.threads == 2

@@ -233,3 +233,56 @@ def repeated_face_node(face_offsets, face_nodes):
                 if face_nodes[a] == face_nodes[b]:
                     return f, face_nodes[a]
     return -1, -1
+
+
+@njit(cache=True, parallel=True)
+def element_triangles(elem_offsets, elem_faces, elem_signs, tri_offsets, tris, elements):
+    """Outward triangles of the listed elements: CSR ``(offsets (k+1,), tris (T,3))``, global node ids.
+
+    Element ``elements[i]`` gets the triangles of its faces in face order, reversed where
+    its face sign is -1. The numpy reference is :meth:`unmesh.fem.mesh.PolyMesh._elem_tris_reference`.
+    """
+    k = elements.shape[0]
+    counts = np.zeros(k, np.int64)
+    for i in prange(k):
+        e = elements[i]
+        c = 0
+        for j in range(elem_offsets[e], elem_offsets[e + 1]):
+            f = elem_faces[j]
+            c += tri_offsets[f + 1] - tri_offsets[f]
+        counts[i] = c
+    offsets = np.zeros(k + 1, np.int64)
+    for i in range(k):
+        offsets[i + 1] = offsets[i] + counts[i]
+    out = np.empty((offsets[k], 3), np.int64)
+    for i in prange(k):
+        e = elements[i]
+        p = offsets[i]
+        for j in range(elem_offsets[e], elem_offsets[e + 1]):
+            f = elem_faces[j]
+            flip = elem_signs[j] < 0
+            for t in range(tri_offsets[f], tri_offsets[f + 1]):
+                out[p, 0] = tris[t, 2] if flip else tris[t, 0]
+                out[p, 1] = tris[t, 1]
+                out[p, 2] = tris[t, 0] if flip else tris[t, 2]
+                p += 1
+    return offsets, out
+
+
+@njit(cache=True, parallel=True)
+def element_bounds(points, node_off, nodes):
+    """Bounding boxes ``(lo (E,3), hi (E,3))`` of the elements' nodes (numpy reference: ``minimum.reduceat``)."""
+    ne = node_off.shape[0] - 1
+    lo = np.empty((ne, 3))
+    hi = np.empty((ne, 3))
+    for e in prange(ne):
+        for d in range(3):
+            a = np.inf
+            b = -np.inf
+            for k in range(node_off[e], node_off[e + 1]):
+                v = points[nodes[k], d]
+                a = min(a, v)
+                b = max(b, v)
+            lo[e, d] = a
+            hi[e, d] = b
+    return lo, hi

@@ -109,10 +109,7 @@ class Cutter(PolygonCutter):
         self.mesh = mesh
         #: widest snapping band of any node (a pre-filter for candidate elements)
         self.max_band = self.snap * float(mesh.node_scales().max(initial=0.0))
-        off, nodes = mesh.element_nodes()
-        p = mesh.points[nodes]
-        self._elo = np.minimum.reduceat(p, off[:-1], axis=0) if len(off) > 1 else np.zeros((0, 3))
-        self._ehi = np.maximum.reduceat(p, off[:-1], axis=0) if len(off) > 1 else np.zeros((0, 3))
+        self._elo, self._ehi = mesh.element_bounds()
         self.touched = False
         #: nodes snapped onto a plane because a split would have left a degenerate half
         self.forced = 0

@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from unmesh.fem import _solve_kernels as SK
+from unmesh.sim.threads import background_work
 
 __all__ = ["Factorization", "Job", "block_csr", "nested_dissection"]
 
@@ -168,7 +169,7 @@ class Job:
         self._error: BaseException | None = None
         self._thread: threading.Thread | None = None
         if threaded:
-            self._thread = threading.Thread(target=self._run, args=(fn, args, kwargs), daemon=True,
+            self._thread = threading.Thread(target=self._run_background, args=(fn, args, kwargs), daemon=True,
                                             name="unmesh-factorization")
             self._thread.start()
         else:
@@ -179,6 +180,11 @@ class Job:
             self._value = fn(*args, **kwargs)
         except BaseException as exc:  # re-raised in the collecting thread
             self._error = exc
+
+    def _run_background(self, fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any]) -> None:
+        # the main thread's numba kernels leave this thread its core (unmesh.sim.threads)
+        with background_work():
+            self._run(fn, args, kwargs)
 
     def done(self) -> bool:
         """Whether the result is ready (never needed for correctness: :meth:`result` waits)."""

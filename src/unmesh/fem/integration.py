@@ -111,10 +111,11 @@ def _local_triangles(mesh: PolyMesh, elements: np.ndarray | None = None
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Node CSR and boundary triangles in local node numbers of ``elements`` (default all)."""
     noff, nodes = mesh.element_nodes()
-    toff, tris = mesh.element_triangles()
-    if elements is not None:
+    if elements is None:
+        toff, tris = mesh.element_triangles()
+    else:
         noff, nodes = gather_csr(noff, nodes, elements)
-        toff, tris = gather_csr(toff, tris, elements)
+        toff, tris = mesh.triangles_of(elements)
     ne = len(noff) - 1
     n1 = np.int64(mesh.n_nodes + 1)
     eid_n = np.repeat(np.arange(ne, dtype=np.int64), np.diff(noff))

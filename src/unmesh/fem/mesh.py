@@ -236,6 +236,25 @@ class PolyMesh:
 
     @cached_property
     def _elem_tris(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.triangles_of(np.arange(self.n_elements, dtype=np.int64))
+
+    def triangles_of(self, elements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """CSR ``(offsets (k+1,), tris (T,3))`` of the outward triangles of ``elements`` (k,) int64, global node ids.
+
+        A kernel over the listed elements only (the re-integration after a cut needs a few hundred).
+
+        Example
+        -------
+        >>> from unmesh.fem import hex_grid
+        >>> hex_grid((2, 1, 1)).triangles_of(np.array([1]))[0].tolist()
+        [0, 12]
+        """
+        toff, tris = self._triangles
+        return K.element_triangles(self.elem_offsets, self.elem_faces, self.elem_signs, toff, tris,
+                                   np.ascontiguousarray(elements, dtype=np.int64))
+
+    def _elem_tris_reference(self) -> tuple[np.ndarray, np.ndarray]:
+        """Numpy reference of :meth:`element_triangles`."""
         toff, tris = self._triangles
         ntri = np.diff(toff)[self.elem_faces]
         rows = np.repeat(np.arange(len(self.elem_faces)), ntri)
@@ -285,11 +304,12 @@ class PolyMesh:
 
     def diameters(self) -> np.ndarray:
         """Bounding-box diagonal of every element (E,)."""
-        off, nodes = self._elem_nodes
-        p = self.points[nodes]
-        hi = np.maximum.reduceat(p, off[:-1], axis=0)
-        lo = np.minimum.reduceat(p, off[:-1], axis=0)
+        lo, hi = self.element_bounds()
         return np.linalg.norm(hi - lo, axis=1)
+
+    def element_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding box ``(lo (E,3), hi (E,3))`` of every element's nodes."""
+        return K.element_bounds(self.points, *self._elem_nodes)
 
     def face_use(self) -> np.ndarray:
         """Number of elements using each face (F,): 1 on the boundary, 2 inside."""
@@ -425,6 +445,7 @@ class PolyMesh:
                             ("tolerance", self.tolerance), ("abs_tolerance", self.abs_tolerance),
                             ("node_scale", self.node_scale)):
             object.__setattr__(obj, name, value)
+        obj.__dict__["_triangles"] = self._triangles  # same points and faces (triangulated once per mesh)
         return obj
 
     def element_is_tet(self) -> np.ndarray:
