@@ -205,6 +205,28 @@ def test_lattice_pass_with_fluid_flat_and_isolated_particles():
     assert (s.occ[~solid] == -1).all()
 
 
+def test_lattice_pass_gives_the_same_bits_on_any_thread_count():
+    """The member forces of each block of particles go into the block's window, summed in block
+    order: one thread and all threads give identical results."""
+    import numba
+
+    rng = np.random.default_rng(17)
+    d = 0.1
+    x = _disturbed_lattice(3, d, rng, 0.1, 0.1)
+    s = LatticeState(x, 3, d, Material(elastic_stiffness=2e4, young=300.0, poisson=0.3), rng.uniform(0.5, 1.5, len(x)))
+    before = numba.get_num_threads()
+    results = []
+    try:
+        for threads in (1, numba.config.NUMBA_NUM_THREADS):
+            numba.set_num_threads(threads)
+            s.run()
+            results.append({k: v.copy() for k, v in s.out.items()})
+    finally:
+        numba.set_num_threads(before)
+    for key in results[0]:
+        assert np.array_equal(results[0][key], results[1][key]), key
+
+
 def test_printed_torque_correction_is_not_exact():
     """Eqs. (8.32)-(8.33) as printed leave a torque; the exact correction removes it (NOTES.md)."""
     rng = np.random.default_rng(5)

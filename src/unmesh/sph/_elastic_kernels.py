@@ -195,8 +195,8 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
     at = np.empty((3, cap8))
     qt = np.empty(cap8, np.int64)
     memb = np.empty(cap8 + 1)
-    bestd = np.empty(nq + 1)
-    bestt = np.empty(nq + 1, np.int64)
+    bestd = np.empty(nq)
+    bestt = np.empty(nq, np.int64)
     # per lane (particle of the group) and neighbour row: r (3), l (3), W·member, m_j, force (3)
     nb = np.empty((LANES, 11, cap8))
     # per lane: sums of (8.23) M (6) and B (9); A, M⁻¹, R, S, goal, strain matrices (9, row-major)
@@ -268,8 +268,7 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
             p21 = (tm[2, 0] * ainv[o, 0, 1] + tm[2, 1] * ainv[o, 1, 1] + tm[2, 2] * ainv[o, 2, 1]) / spacing
             p22 = (tm[2, 0] * ainv[o, 0, 2] + tm[2, 1] * ainv[o, 1, 2] + tm[2, 2] * ainv[o, 2, 2]) / spacing
             # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
-            for q in range(nq + 1):
-                bestd[q] = np.inf
+            for q in range(nq):
                 bestt[q] = -1
             # the neighbours' data in one pass (their loads overlap): offset, mass and id by row position
             for t in range(cnt):
@@ -323,7 +322,8 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                     rt[3, t] = lv[qs, 0]
                     rt[4, t] = lv[qs, 1]
                     rt[5, t] = lv[qs, 2]
-            # conflicts, branch-free (3D: slots by table look-up); non-candidates go to the spare entry nq
+            # conflicts (3D: slots by table look-up): the first candidate of a free slot takes it, a
+            # closer one replaces it (conflicts are rare: no initialised distances, a predictable branch)
             for t in range(cnt):
                 if dim == 3:
                     kk = int(at[1, t])
@@ -331,11 +331,11 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                     q = q if (kk >= 0) & (qt[t] != 0) else -1
                 else:
                     q = qt[t]
-                qq = q if q >= 0 else nq
-                d2 = at[0, t]
-                better = d2 < bestd[qq]
-                bestd[qq] = min(d2, bestd[qq])
-                bestt[qq] = t if better else bestt[qq]
+                if q >= 0:
+                    d2 = at[0, t]
+                    if bestt[q] < 0 or d2 < bestd[q]:
+                        bestd[q] = d2
+                        bestt[q] = t
             # 2. docking (section 8.2.5), per slot; the docked winner of a slot is a member
             for t in range(pad):
                 memb[t] = 0.0
