@@ -16,9 +16,9 @@ Measures, at 1 and 2 threads:
 
 Prints one table and the ratios the issue asks for (elastic/fluid, unmesh/SPlisHSPlasH).
 Timings are wall clock and CPU time of the stepping only (compilation and set-up excluded). The
-three unmesh cases are built first and then stepped in turn, in the order fluid, CCP, elastic,
-elastic, CCP, fluid with half of the timed steps each time (one untimed step before each turn):
-a load on the shared machine that drifts during the run weighs on every case alike, so the
+three unmesh cases are built first and then stepped in turns of ``--turn`` timed steps (one
+untimed step before each turn), in the order fluid, CCP, elastic, then elastic, CCP, fluid, and so
+on: a load on the shared machine that changes during the run weighs on every case alike, so the
 ratios compare the cases under the same conditions.
 
 Then validates the shipped 3D dam break (``examples/sph/dam_break.toml``, a = 0.25 m,
@@ -88,11 +88,12 @@ def build_case(spacing: float, case: str):
     return SPHSimulation(cfg, {mat.name: mat}, [obj], planes=box_planes([0, 0, 0], TANK, 3, open_top=True))
 
 
-def unmesh_rates(spacing: float, steps: int, threads: int, cases: tuple[str, ...]) -> dict[str, tuple]:
+def unmesh_rates(spacing: float, steps: int, threads: int, cases: tuple[str, ...], turn: int = 10) -> dict[str, tuple]:
     """Per case: (particles, particle-steps per wall second, per CPU second, mean neighbours).
 
-    The cases are stepped in turn in the order ``cases + reversed(cases)``, half of the ``steps``
-    timed steps per turn (after 3 warm-up steps each, and one untimed step before every turn).
+    After 3 warm-up steps each, the cases are stepped in turns of ``turn`` timed steps (one untimed
+    step before each turn), in the order ``cases``, then reversed, and so on until each case has
+    run ``steps`` timed steps.
     """
     import numba
 
@@ -102,10 +103,11 @@ def unmesh_rates(spacing: float, steps: int, threads: int, cases: tuple[str, ...
         for _ in range(3):  # compile and warm up
             sim.step()
     timed = {case: [0.0, 0.0, 0] for case in cases}
-    for turn, case in enumerate(cases + cases[::-1]):
+    order = [case for k in range(-(-steps // turn)) for case in (cases if k % 2 == 0 else cases[::-1])]
+    for case in order:
         sim = sims[case]
         sim.step()  # back in the caches after the other cases
-        n = steps // 2 if turn < len(cases) else steps - steps // 2
+        n = min(turn, steps - timed[case][2])
         t0 = time.perf_counter()
         c0 = time.process_time()
         for _ in range(n):
@@ -260,6 +262,7 @@ def splishsplash_rate(spacing: float, steps: int, threads: int) -> tuple[int, fl
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=60, help="timed steps per case")
+    parser.add_argument("--turn", type=int, default=10, help="timed steps per turn of a case (they alternate)")
     parser.add_argument("--spacing", type=float, default=0.01, help="particle spacing (0.01: about 61k particles)")
     parser.add_argument("--threads", default="1,2", help="comma-separated thread counts")
     parser.add_argument("--no-splishsplash", action="store_true")
@@ -272,7 +275,7 @@ def main() -> None:
     load0 = os.getloadavg()[0]
     rows = []
     for t in threads:
-        rates = unmesh_rates(args.spacing, args.steps, t, ("fluid", "fluid-ccp", "elastic"))
+        rates = unmesh_rates(args.spacing, args.steps, t, ("fluid", "fluid-ccp", "elastic"), args.turn)
         for case, res in rates.items():
             rows.append((names[case], t, *res))
         if not args.no_splishsplash:
@@ -280,7 +283,7 @@ def main() -> None:
             if res is not None:
                 rows.append((names["splish"], t, *res, float("nan")))
     nx, ny, nz = fluid_block(args.spacing)
-    print(f"\n3D dam break, {args.steps} timed steps per case, unmesh cases interleaved (load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, "
+    print(f"\n3D dam break, {args.steps} timed steps per case, unmesh cases in turns of {args.turn} (load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, "
           f"on {os.cpu_count()} CPUs)")
     print(f"fluid: {nx} x {ny} x {nz} particles on a cubic grid of spacing d = {args.spacing} m, h = 2d, in a "
           f"{TANK[0]} x {TANK[1]} x {TANK[2]} m tank; rho0 = {RHO0:g}, K = {STIFFNESS:g} Pa, exponent {EXPONENT:g}, "
