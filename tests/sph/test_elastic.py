@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from tests.sph.sph_helpers import LatticeState, lattice_block
 from unmesh.sph import _elastic_kernels as EK
+from unmesh.sph import _neighbour_kernels as NK
 from unmesh.sph.elastic import (
     ElasticParams,
     assign_slots,
@@ -342,7 +343,7 @@ def test_reverse_positions_match_numpy(blocks):
     x = x + rng.normal(0.0, 0.01, x.shape)
     nbr, nn = neighbour_table(x, 0.2, 3)
     rev = np.full(nbr.shape, -1, np.int32)
-    assert EK.reverse_positions(nbr, nn, blocks, rev) == 0
+    assert NK.reverse_positions(nbr, nn, blocks, rev) == 0
     for i in range(len(x)):
         for t in range(nn[i]):
             j = nbr[i, t]
@@ -352,7 +353,7 @@ def test_reverse_positions_match_numpy(blocks):
     nbr[0, :nn[0] - 1] = nbr[0, 1:nn[0]]
     nn[0] -= 1
     rev[:] = -1
-    assert EK.reverse_positions(nbr, nn, blocks, rev) == 1
+    assert NK.reverse_positions(nbr, nn, blocks, rev) == 1
     pos = np.flatnonzero(nbr[k, :nn[k]] == 0)[0]
     assert rev[k, pos] == -1
     used = np.arange(nbr.shape[1])[None, :] < nn[:, None]
