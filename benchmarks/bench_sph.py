@@ -15,7 +15,11 @@ Measures, at 1 and 2 threads:
   ``OMP_NUM_THREADS`` and ``LD_PRELOAD=libGLdispatch.so.0`` (its import needs it headless).
 
 Prints one table and the ratios the issue asks for (elastic/fluid, unmesh/SPlisHSPlasH).
-Timings are wall clock and CPU time of the stepping only (compilation and set-up excluded).
+Timings are wall clock and CPU time of the stepping only (compilation and set-up excluded). The
+three unmesh cases are built first and then stepped in turns of ``--turn`` timed steps (one
+untimed step before each turn), in the order fluid, CCP, elastic, then elastic, CCP, fluid, and so
+on: a load on the shared machine that changes during the run weighs on every case alike, so the
+ratios compare the cases under the same conditions.
 
 Then validates the shipped 3D dam break (``examples/sph/dam_break.toml``, a = 0.25 m,
 spacing a/20, no-slip tank walls) against Martin & Moyce (1952), n² = 2: the surge front Z = x/a at the
@@ -61,18 +65,12 @@ def fluid_block(spacing: float) -> tuple[int, int, int]:
     return round(cells / ny), ny, nz
 
 
-def unmesh_rate(spacing: float, steps: int, threads: int, case: str) -> tuple[int, float, float, float]:
-    """(particles, particle-steps per wall second, per CPU second, mean neighbours) of the unmesh step.
-
-    ``case``: ``"fluid"`` (cubic grid, the SPlisHSPlasH setup), ``"fluid-ccp"`` (the elastic block's
-    closest packing as a fluid) or ``"elastic"``.
-    """
-    import numba
-
+def build_case(spacing: float, case: str):
+    """The unmesh simulation of a case: ``"fluid"`` (cubic grid, the SPlisHSPlasH setup), ``"fluid-ccp"``
+    (the elastic block's closest packing as a fluid) or ``"elastic"``."""
     from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation, box_planes
     from unmesh.sph.sampling import closest_packing, cubic_grid
 
-    numba.set_num_threads(threads)
     lattice = "closest"
     if case == "fluid":
         nx, ny, nz = fluid_block(spacing)
@@ -87,16 +85,41 @@ def unmesh_rate(spacing: float, steps: int, threads: int, case: str) -> tuple[in
         mat = Material("water", density=RHO0, stiffness=STIFFNESS, gamma=EXPONENT, negative_pressure=0.0)
         obj = SPHObject("water", x, "water")
     cfg = SPHConfig(dim=3, spacing=spacing, dt=DT, gravity=(0, -9.81, 0), lattice=lattice)
-    sim = SPHSimulation(cfg, {mat.name: mat}, [obj], planes=box_planes([0, 0, 0], TANK, 3, open_top=True))
-    for _ in range(3):  # compile and warm up
-        sim.step()
-    t0 = time.perf_counter()
-    c0 = time.process_time()
-    for _ in range(steps):
-        sim.step()
-    wall = time.perf_counter() - t0
-    cpu = time.process_time() - c0
-    return len(x), len(x) * steps / wall, len(x) * steps / cpu, float(sim.nnbr.mean())
+    return SPHSimulation(cfg, {mat.name: mat}, [obj], planes=box_planes([0, 0, 0], TANK, 3, open_top=True))
+
+
+def unmesh_rates(spacing: float, steps: int, threads: int, cases: tuple[str, ...], turn: int = 10) -> dict[str, tuple]:
+    """Per case: (particles, particle-steps per wall second, per CPU second, mean neighbours).
+
+    After 3 warm-up steps each, the cases are stepped in turns of ``turn`` timed steps (one untimed
+    step before each turn), in the order ``cases``, then reversed, and so on until each case has
+    run ``steps`` timed steps.
+    """
+    import numba
+
+    numba.set_num_threads(threads)
+    sims = {case: build_case(spacing, case) for case in cases}
+    for sim in sims.values():
+        for _ in range(3):  # compile and warm up
+            sim.step()
+    timed = {case: [0.0, 0.0, 0] for case in cases}
+    order = [case for k in range(-(-steps // turn)) for case in (cases if k % 2 == 0 else cases[::-1])]
+    for case in order:
+        sim = sims[case]
+        sim.step()  # back in the caches after the other cases
+        n = min(turn, steps - timed[case][2])
+        t0 = time.perf_counter()
+        c0 = time.process_time()
+        for _ in range(n):
+            sim.step()
+        timed[case][0] += time.perf_counter() - t0
+        timed[case][1] += time.process_time() - c0
+        timed[case][2] += n
+    out = {}
+    for case, (wall, cpu, n) in timed.items():
+        count = len(sims[case].x)
+        out[case] = (count, count * n / wall, count * n / cpu, float(sims[case].nnbr.mean()))
+    return out
 
 
 #: Martin & Moyce (1952), n² = 2, a = 2.25 in: surge front Z = x/a at T = t·√(2g/a) (issue 4).
@@ -238,7 +261,8 @@ def splishsplash_rate(spacing: float, steps: int, threads: int) -> tuple[int, fl
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--steps", type=int, default=60, help="timed steps per run")
+    parser.add_argument("--steps", type=int, default=60, help="timed steps per case")
+    parser.add_argument("--turn", type=int, default=10, help="timed steps per turn of a case (they alternate)")
     parser.add_argument("--spacing", type=float, default=0.01, help="particle spacing (0.01: about 61k particles)")
     parser.add_argument("--threads", default="1,2", help="comma-separated thread counts")
     parser.add_argument("--no-splishsplash", action="store_true")
@@ -251,14 +275,15 @@ def main() -> None:
     load0 = os.getloadavg()[0]
     rows = []
     for t in threads:
-        for case in ("fluid", "fluid-ccp", "elastic"):
-            rows.append((names[case], t, *unmesh_rate(args.spacing, args.steps, t, case)))
+        rates = unmesh_rates(args.spacing, args.steps, t, ("fluid", "fluid-ccp", "elastic"), args.turn)
+        for case, res in rates.items():
+            rows.append((names[case], t, *res))
         if not args.no_splishsplash:
             res = splishsplash_rate(args.spacing, args.steps, t)
             if res is not None:
                 rows.append((names["splish"], t, *res, float("nan")))
     nx, ny, nz = fluid_block(args.spacing)
-    print(f"\n3D dam break, {args.steps} timed steps (load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, "
+    print(f"\n3D dam break, {args.steps} timed steps per case, unmesh cases in turns of {args.turn} (load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, "
           f"on {os.cpu_count()} CPUs)")
     print(f"fluid: {nx} x {ny} x {nz} particles on a cubic grid of spacing d = {args.spacing} m, h = 2d, in a "
           f"{TANK[0]} x {TANK[1]} x {TANK[2]} m tank; rho0 = {RHO0:g}, K = {STIFFNESS:g} Pa, exponent {EXPONENT:g}, "

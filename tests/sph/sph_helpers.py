@@ -7,6 +7,7 @@ import numpy as np
 from unmesh.kernels import poly6
 from unmesh.spatial import radius_neighbors
 from unmesh.sph import _elastic_kernels as EK
+from unmesh.sph import _slot_kernels as SK
 from unmesh.sph.elastic import ElasticParams, assign_slots, neighbourhood_forces
 from unmesh.sph.materials import Material, material_table
 from unmesh.sph.sampling import closest_packing, lattice_basis, lattice_frame, lattice_slots
@@ -27,10 +28,14 @@ def neighbour_table(x: np.ndarray, h: float, dim: int, cap: int = 96) -> tuple[n
 
 
 class LatticeState:
-    """Particles of one elastic object and the outputs of one call of ``lattice_update``."""
+    """Particles of one elastic object and the outputs of one call of ``lattice_update``.
+
+    ``solid`` (N,) bool: the solid particles (default all); the others are fluid (no neighbourhood of
+    their own, never members of one).
+    """
 
     def __init__(self, x: np.ndarray, dim: int, spacing: float, material: Material, masses: np.ndarray,
-                 a_prev: np.ndarray | None = None) -> None:
+                 a_prev: np.ndarray | None = None, solid: np.ndarray | None = None) -> None:
         self.x = np.ascontiguousarray(x)
         self.dim = dim
         self.d = spacing
@@ -40,11 +45,12 @@ class LatticeState:
         self.mat = material
         self.mats = material_table([material])
         self.vecs, self.coords, self.table = lattice_slots(dim, 2.0)
-        self.tmat = EK.d3_transform(lattice_basis(dim)) if dim == 3 else np.eye(3)
+        self.tmat = SK.d3_transform(lattice_basis(dim)) if dim == 3 else np.eye(3)
         frame = lattice_frame(dim)
         self.amat = np.repeat(frame[None], self.n, 0) if a_prev is None else np.ascontiguousarray(a_prev)
         self.ainv = np.ascontiguousarray(np.linalg.inv(self.amat))
         self.nbr, self.nn = neighbour_table(self.x, self.h, dim)
+        self.solid = np.ones(self.n, bool) if solid is None else np.asarray(solid, bool)
 
     def run(self) -> None:
         n, q = self.n, len(self.vecs)
@@ -56,7 +62,7 @@ class LatticeState:
             "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8), "fel": np.full((n, 3), np.nan),
         }
         o = self.out
-        EK.lattice_update(self.x, self.m, np.ones(n, np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
+        EK.lattice_update(self.x, self.m, self.solid.astype(np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
                           np.arange(n, dtype=np.int64), self.mats, self.nbr, self.nn, self.h, self.dim, self.d,
                           self.vecs, self.tmat, self.table, np.arange(n, dtype=np.int64), self.amat, self.ainv,
                           self.occ, self.docked, self.lam, 0, 0, 1e-4, 1, o["amat"], o["ainv"], self.occ, self.docked,
@@ -74,8 +80,9 @@ class LatticeState:
                             self.mat.density)
         w0 = float(poly6(0.0, self.h, self.dim))
         f = np.zeros((self.n, 3))
-        for i in range(self.n):
+        for i in np.flatnonzero(self.solid):
             js = self.nbr[i, :self.nn[i]].astype(np.int64)
+            js = js[self.solid[js]]
             r = self.x[js] - self.x[i]
             slot = assign_slots(r, self.ainv[i], self.coords, self.d, self.dim)
             keep = slot >= 0

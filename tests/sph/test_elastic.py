@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from tests.sph.sph_helpers import LatticeState, lattice_block
 from unmesh.sph import _elastic_kernels as EK
+from unmesh.sph import _neighbour_kernels as NK
 from unmesh.sph.elastic import (
     ElasticParams,
     assign_slots,
@@ -22,7 +23,7 @@ from unmesh.sph.elastic import (
     torque_correction,
 )
 from unmesh.sph.materials import Material
-from unmesh.sph.sampling import lattice_slots
+from unmesh.sph.sampling import lattice_basis, lattice_frame, lattice_slots
 
 
 def _rotation(dim: int, angles: np.ndarray) -> np.ndarray:
@@ -177,6 +178,56 @@ def test_lattice_state_read_through_the_sort_order():
         assert np.array_equal(a, b)
 
 
+def test_lattice_pass_with_fluid_flat_and_isolated_particles():
+    """Groups of the lattice pass that mix accepted, rejected and fluid particles: a disturbed block with
+    fluid particles among the solid ones, a flat sheet (its lattice offsets do not span the space:
+    M is singular), a pair and an isolated particle. Forces equal the numpy reference; rejected and
+    fluid particles keep their previous transformation and feel no force of their own."""
+    rng = np.random.default_rng(21)
+    d = 0.1
+    block = _disturbed_lattice(3, d, rng, 0.1, 0.08)
+    frame, basis = lattice_frame(3), lattice_basis(3)
+    ij = np.array([(i, j, 0) for i in range(-3, 4) for j in range(-3, 4)], float)
+    sheet = (ij @ basis.T) @ frame.T * d + [3.0, 0.0, 0.0]
+    lone = np.array([[0.0, 3.0, 0.0], [0.0, -3.0, 0.0], [0.9 * d, -3.0, 0.0]])
+    x = np.vstack([block, sheet, lone])
+    solid = np.ones(len(x), bool)
+    solid[rng.choice(len(block), len(block) // 7, replace=False)] = False
+    mat = Material(elastic_stiffness=2e4, young=300.0, poisson=0.3, goal_deformation=0.6)
+    s = LatticeState(x, 3, d, mat, rng.uniform(0.5, 1.5, len(x)), solid=solid)
+    f = s.forces()
+    ref = s.reference_forces()
+    assert np.abs(f - ref).max() <= 1e-10 * np.abs(ref).max()
+    valid = s.out["valid"].astype(bool)
+    rejected = np.arange(len(block), len(x))
+    assert valid[:len(block)][solid[:len(block)]].all() and not valid[rejected].any() and not valid[~solid].any()
+    assert np.array_equal(s.out["amat"][~valid], s.amat[~valid])
+    assert not s.out["fown"][~valid].any() and not f[rejected].any() and not f[~solid].any()
+    assert (s.occ[~solid] == -1).all()
+
+
+def test_lattice_pass_gives_the_same_bits_on_any_thread_count():
+    """The member forces of each block of particles go into the block's window, summed in block
+    order: one thread and all threads give identical results."""
+    import numba
+
+    rng = np.random.default_rng(17)
+    d = 0.1
+    x = _disturbed_lattice(3, d, rng, 0.1, 0.1)
+    s = LatticeState(x, 3, d, Material(elastic_stiffness=2e4, young=300.0, poisson=0.3), rng.uniform(0.5, 1.5, len(x)))
+    before = numba.get_num_threads()
+    results = []
+    try:
+        for threads in (1, numba.config.NUMBA_NUM_THREADS):
+            numba.set_num_threads(threads)
+            s.run()
+            results.append({k: v.copy() for k, v in s.out.items()})
+    finally:
+        numba.set_num_threads(before)
+    for key in results[0]:
+        assert np.array_equal(results[0][key], results[1][key]), key
+
+
 def test_printed_torque_correction_is_not_exact():
     """Eqs. (8.32)-(8.33) as printed leave a torque; the exact correction removes it (NOTES.md)."""
     rng = np.random.default_rng(5)
@@ -195,84 +246,6 @@ def test_printed_torque_correction_is_not_exact():
     assert np.linalg.norm(left_printed) > 1e-3 * np.linalg.norm(tau)
     assert np.abs(np.cross(xs, f + exact).sum(axis=0)).max() < 1e-12
     assert np.abs(exact.sum(axis=0)).max() < 1e-12
-
-
-@settings(max_examples=40, deadline=None)
-@given(dim=st.sampled_from([2, 3]), seed=st.integers(0, 10_000))
-def test_numba_svd_matches_numpy(dim, seed):
-    """svd_rot: A = U Σ Vᵀ with proper rotations; R and the goal matrix equal the numpy reference."""
-    rng = np.random.default_rng(seed)
-    a = np.eye(3) + 0.5 * rng.standard_normal((3, 3))
-    if dim == 2:
-        a[2, :] = a[:, 2] = 0.0
-        a[2, 2] = 1.0
-    u, s, v = np.empty((3, 3)), np.empty(3), np.empty((3, 3))
-    EK.svd_rot(a, dim, u, s, v, np.empty((4, 3, 3)))
-    assert np.allclose(u @ np.diag(s) @ v.T, a, atol=1e-10)
-    assert abs(np.linalg.det(u) - 1) < 1e-10 and abs(np.linalg.det(v) - 1) < 1e-10
-    ur, sr, vr = rotation_svd(a, dim)
-    assert np.allclose(u @ v.T, ur @ vr.T, atol=1e-9)
-    assert np.allclose(goal_matrix(u, s, v, 0.6, dim), goal_matrix(ur, sr, vr, 0.6, dim), atol=1e-9)
-
-
-@settings(max_examples=60, deadline=None)
-@given(seed=st.integers(0, 100_000), kind=st.sampled_from(["general", "near_rotation", "degenerate", "diagonal"]))
-def test_unrolled_jacobi_is_bit_identical(seed, kind):
-    """jacobi3 (registers) performs exactly the rotations of the shared jacobi_eigh: identical bits."""
-    from unmesh._linalg_kernels import jacobi_eigh
-
-    rng = np.random.default_rng(seed)
-    if kind == "general":
-        a = rng.standard_normal((3, 3))
-    elif kind == "near_rotation":  # AᵀA ≈ I: nearly degenerate eigenvalues, as in a rigid lattice
-        q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
-        a = q @ (np.eye(3) + 1e-6 * rng.standard_normal((3, 3)))
-    elif kind == "degenerate":
-        a = np.diag([1.0, 1.0, 2.0]) + np.diag([1e-9, 0.0], 1)
-    else:
-        a = np.diag(rng.uniform(0.5, 2.0, 3))
-    # AᵀA summed as svd_rot sums it (so the svd_rot check below sees the same input)
-    b = np.array([[(a[0, i] * a[0, j] + a[1, i] * a[1, j]) + a[2, i] * a[2, j] for j in range(3)] for i in range(3)])
-    ref = b.copy()
-    vec = np.empty((3, 3))
-    jacobi_eigh(ref, vec)
-    out = EK.jacobi3(*b.ravel())
-    assert np.array_equal(np.array(out[:3]), np.diag(ref))
-    assert np.array_equal(np.array(out[3:]).reshape(3, 3), vec)
-    # and svd_rot (3D) takes V from it exactly as sym_eig3 does
-    u, s, v = np.empty((3, 3)), np.empty(3), np.empty((3, 3))
-    EK.svd_rot(a, 3, u, s, v, np.empty((4, 3, 3)))
-    v_ref, val = np.empty((3, 3)), np.empty(3)
-    EK.sym_eig3(b, v_ref, val, np.empty((3, 3)))
-    assert np.array_equal(v, v_ref)
-
-
-@settings(max_examples=60, deadline=None)
-@given(seed=st.integers(0, 100_000), stretch=st.floats(0.0, 0.6))
-def test_polar_factors_match_the_svd(seed, stretch):
-    """The polar fast path of the lattice pass: R = U Vᵀ and S = V Σ Vᵀ of the SVD (8.24) whenever it
-    accepts A (det A > 0, every singular value strictly inside the clamps); otherwise it declines."""
-    rng = np.random.default_rng(seed)
-    q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
-    q *= np.sign(np.linalg.det(q))
-    a = q @ (np.eye(3) + stretch * rng.standard_normal((3, 3)))
-    rot, sym = np.empty((3, 3)), np.empty((3, 3))
-    ok = EK.polar_factors(a, 3, rot, sym, np.empty((3, 3)))
-    u, s, v = np.empty((3, 3)), np.empty(3), np.empty((3, 3))
-    EK.svd_rot(a, 3, u, s, v, np.empty((4, 3, 3)))
-    inside = np.linalg.det(a) > 0 and EK.SIG_LO < s.min() and s.max() < EK.SIG_HI
-    if ok:
-        assert inside
-        assert np.allclose(rot, u @ v.T, atol=1e-12) and np.allclose(rot @ rot.T, np.eye(3), atol=1e-14)
-        assert np.allclose(sym, v @ np.diag(s) @ v.T, atol=1e-12) and np.allclose(rot @ sym, a, atol=1e-12)
-    else:  # declined: A is inverted or a Gershgorin disc of S reaches a clamp
-        sm = v @ np.diag(s) @ v.T
-        rad = np.abs(sm).sum(axis=1) - np.abs(np.diag(sm))
-        assert (not inside or (np.diag(sm) - rad).min() < EK.SIG_LO * (1 + 1e-5)
-                or (np.diag(sm) + rad).max() > EK.SIG_HI * (1 - 1e-5))
-    assert not EK.polar_factors(np.diag([1.0, 1.0, -1.0]), 3, rot, sym, np.empty((3, 3)))
-    assert not EK.polar_factors(np.diag([3.0 * EK.SIG_HI, 1.0, 1.0]), 3, rot, sym, np.empty((3, 3)))
-    assert not EK.polar_factors(np.eye(3), 2, rot, sym, np.empty((3, 3)))
 
 
 def test_goal_matrix_preserves_volume():
@@ -370,7 +343,7 @@ def test_reverse_positions_match_numpy(blocks):
     x = x + rng.normal(0.0, 0.01, x.shape)
     nbr, nn = neighbour_table(x, 0.2, 3)
     rev = np.full(nbr.shape, -1, np.int32)
-    assert EK.reverse_positions(nbr, nn, blocks, rev) == 0
+    assert NK.reverse_positions(nbr, nn, blocks, rev) == 0
     for i in range(len(x)):
         for t in range(nn[i]):
             j = nbr[i, t]
@@ -380,7 +353,7 @@ def test_reverse_positions_match_numpy(blocks):
     nbr[0, :nn[0] - 1] = nbr[0, 1:nn[0]]
     nn[0] -= 1
     rev[:] = -1
-    assert EK.reverse_positions(nbr, nn, blocks, rev) == 1
+    assert NK.reverse_positions(nbr, nn, blocks, rev) == 1
     pos = np.flatnonzero(nbr[k, :nn[k]] == 0)[0]
     assert rev[k, pos] == -1
     used = np.arange(nbr.shape[1])[None, :] < nn[:, None]

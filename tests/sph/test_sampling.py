@@ -8,7 +8,7 @@ import pytest
 from unmesh.kernels import poly6, spiky_derivative
 from unmesh.shapes import Box, Sphere
 from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation
-from unmesh.sph import _elastic_kernels as EK
+from unmesh.sph import _slot_kernels as SK
 from unmesh.sph.sampling import (
     closest_packing,
     cubic_grid,
@@ -67,8 +67,8 @@ def test_nearest_point_fast_matches_brute_force(dim):
     if dim == 2:
         y[:, 2] = 0.0
     _vecs, coords, table = lattice_slots(dim, 2.0)
-    tmat = EK.d3_transform(lattice_basis(dim)) if dim == 3 else np.eye(3)
-    q, d2 = EK.nearest_slots(y, tmat, table, dim)
+    tmat = SK.d3_transform(lattice_basis(dim)) if dim == 3 else np.eye(3)
+    q, d2 = SK.nearest_slots(y, tmat, table, dim)
     # brute force over a big patch of lattice points
     rng_i = np.arange(-6, 7)
     if dim == 2:
@@ -88,8 +88,25 @@ def test_nearest_point_fast_matches_brute_force(dim):
     assert np.allclose(d2_np, ref_d2[:500], atol=1e-12)
     if dim == 3:  # the branch-free rounding of the lattice pass, from D3 coordinates z = T y
         z = y @ tmat.T
-        qd, d2d = zip(*(EK._nearest_d3(a, b, c, table) for a, b, c in z), strict=True)
+        qd, d2d = zip(*(SK._nearest_d3(a, b, c, table) for a, b, c in z), strict=True)
         assert np.array_equal(np.array(qd), q) and np.allclose(d2d, d2, rtol=1e-12, atol=1e-14)
+
+
+def test_d3_rounding_gives_the_lattice_offset_of_its_point():
+    """The lattice pass takes the lattice offset of the nearest point from the rounding's D3 coordinates
+    k (d T⁻¹ k, no table): it equals the slot's vector wherever the point is a slot."""
+    rng = np.random.default_rng(4)
+    vecs, _coords, table = lattice_slots(3, 2.0)
+    tmat = SK.d3_transform(lattice_basis(3))
+    tinv = np.linalg.inv(tmat)
+    size = table.shape[0]
+    y = np.vstack([vecs, vecs + 0.2 * rng.uniform(-1.0, 1.0, vecs.shape), rng.uniform(-2.6, 2.6, (4000, 3))])
+    q, _d2 = SK.nearest_slots(y, tmat, table, 3)
+    assert (q >= 0).sum() > len(vecs)
+    for yy, qq in zip(y, q, strict=True):
+        idx, _best, *k = SK._d3_round_k(*(tmat @ yy), float(size // 2), float(size))
+        if qq >= 0:
+            assert idx >= 0 and np.abs(tinv @ np.array(k) - vecs[qq]).max() < 1e-14
 
 
 def test_plane_spacings_and_box_margins():

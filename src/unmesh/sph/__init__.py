@@ -33,7 +33,8 @@ Modules
 :mod:`~unmesh.sph.scene`, :mod:`~unmesh.sph.cli`
     TOML scenes (``docs/sph_scene.md``) and ``unmesh sph SCENE.toml -o OUTDIR``.
 
-The numba kernels (``_kernels``, ``_elastic_kernels``, ``_phase_kernels``) work on
+The numba kernels (``_kernels``, ``_elastic_kernels`` with ``_polar_kernels`` and ``_slot_kernels``,
+``_phase_kernels``) work on
 particles sorted by grid cell and write only their own rows; each has a numpy
 reference that the tests compare against.
 

@@ -1,29 +1,27 @@
-"""Numba kernels of the elastic lattice forces (thesis section 8.2).
+"""Numba kernel of the lattice pass: elastic forces with an implicit rest state (thesis section 8.2).
 
 Numpy references: :mod:`unmesh.sph.elastic` (per-neighbourhood math) and
-:mod:`unmesh.sph.sampling` (nearest lattice point). Arrays are in the
-simulation's cell-sorted order; lattice slots are identified across steps by the
-*particle id* (``uid``) of their occupant, so re-sorting needs no remapping.
+:mod:`unmesh.sph.sampling` (nearest lattice point), which the tests compare against; the 3×3
+algebra is in :mod:`unmesh.sph._polar_kernels`, the nearest lattice point in
+:mod:`unmesh.sph._slot_kernels`. Arrays are in the simulation's cell-sorted order; lattice slots
+are identified across steps by the *particle id* (``uid``) of their occupant, so re-sorting needs no
+remapping.
 
-Pass ``lattice_update`` (one per solid particle ``i``, writes only row ``i``):
-assignment (8.21) with conflict resolution, docking (section 8.2.5), shape
-matching (8.23–8.24), goal matrix (8.29–8.30), strain stress (8.2.2), the forces
-the neighbourhood exerts on its members and the exact torque correction. It
-keeps the per-neighbourhood data (goal matrix, ``V P M⁻¹``, ``ω``, centroid
-offset) and writes the force on each member ``j`` into *j's* row, at the position
-of ``i`` in j's neighbour list (``fpair[j, rev[i, t]]``, :func:`reverse_positions`):
-every entry belongs to exactly one pair ``(i, j)``, so the parallel writes never
-collide, and the force pass sums i's own row — no search and no recomputation
-(measured: recomputing the forces from j's data in the force pass cost 3× more
-than writing and reading the (N, cap, 3) array).
+Pass :func:`lattice_update` (every solid particle ``i`` writes only its own rows): assignment
+(8.21) with conflict resolution, docking (section 8.2.5), shape matching (8.23–8.24), goal matrix
+(8.29–8.30), strain stress (8.2.2), the forces the neighbourhood exerts on its members and the
+exact torque correction. The forces on the members are added into an accumulator window per block
+of particles (race-free), summed per particle in block order afterwards (the same result whatever
+the thread count).
 
-Speed notes: one pass over the neighbours assigns slots (in 3D the map
-``T A⁻¹/d`` to D3 coordinates is formed once per particle, so each neighbour costs
-one 3×3 product and one rounding); one pass over the slots docks, records the
-members and accumulates the shape-matching sums in scalars; the members' offsets and
-weights are kept for the force pass over them; the 3×3 eigenproblem of the SVD runs
-in registers (:func:`jacobi3`, bit-identical to the shared
-:func:`unmesh._linalg_kernels.jacobi_eigh`).
+Speed notes: the neighbours of a particle are handled by row position (offset, lattice offset,
+weight, member flag in columns of small buffers) in loops that run to a multiple of 8 entries and
+vectorise: the D3 rounding of eq. (8.21) (in 3D ``T A⁻¹/d`` is formed once per particle, the lattice
+offset of the nearest point is ``d T⁻¹ k``), the shape-matching sums, the member forces and the
+torque correction. Non-members weigh 0. Only the slot conflicts, the docking and the additions into
+the window are scalar loops. Particles are processed in groups of :data:`LANES`: the 3×3 algebra of a
+group (``M⁻¹``, ``A``, its polar decomposition, the centroid and ``ω`` of the torque correction) runs
+as loops over the group, so the division chains of different particles overlap.
 """
 
 from __future__ import annotations
@@ -33,22 +31,17 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from unmesh._linalg_kernels import jacobi_eigh
 from unmesh.kernels._kernels import poly6_2d, poly6_3d
 from unmesh.sph import materials as M
+from unmesh.sph._kernels import PLAIN
+from unmesh.sph._polar_kernels import SIG_HI, SIG_LO, _inv3, polar_lanes, svd_rot, sym_adjugate
 from unmesh.sph._rng import STREAM_DOCK, uniform
-
-#: Flags of the helpers the fast-math lattice pass calls (numba passes a caller's ``fastmath``
-#: and ``error_model`` on to callees that do not set them): they compile the same whoever calls
-#: them first, e.g. the SVD stays bit-identical to the shared Jacobi solver.
-PLAIN = {"cache": True, "fastmath": False, "error_model": "python"}
+from unmesh.sph._slot_kernels import _d3_round_k, nearest_slot
 
 SOLID = 1
-#: Clamp of singular values when inverting A for the next assignment.
-SIG_LO = 0.2
-SIG_HI = 5.0
+#: Singular values are clamped to at least this when forming goal positions (inverted lattices).
 SIGMA_FLOOR = 0.05
-CHUNK = 64
+_EYE = np.eye(3)
 
 
 @njit(**PLAIN)
@@ -62,594 +55,6 @@ def _w(r2, h, dim):
 def _w_zero(h, dim):
     """``W(0)`` of poly6 (C.1/C.4)."""
     return _w(0.0, h, dim)
-
-
-# -- small dense linear algebra --------------------------------------------------------
-
-
-@njit(cache=True)
-def sym_eig3(a, vec, val, b):
-    """Eigen-decomposition of the symmetric 3×3 ``a`` by cyclic Jacobi (descending).
-
-    Writes eigenvectors (columns of ``vec``, ``det = +1``) and eigenvalues ``val``;
-    ``b`` (3, 3) is scratch.
-    """
-    for p in range(3):
-        for q in range(3):
-            b[p, q] = a[p, q]
-    jacobi_eigh(b, vec)
-    for k in range(3):
-        val[k] = b[k, k]
-    _sort_desc(vec, val)
-
-
-@njit(**PLAIN)
-def _sort_desc(vec, val):
-    """Sort eigenvalues descending (columns of ``vec`` along) and make ``det vec = +1``."""
-    for i in range(2):
-        best = i
-        for j in range(i + 1, 3):
-            if val[j] > val[best]:
-                best = j
-        if best != i:
-            tmp = val[i]
-            val[i] = val[best]
-            val[best] = tmp
-            for k in range(3):
-                tmp = vec[k, i]
-                vec[k, i] = vec[k, best]
-                vec[k, best] = tmp
-    det = (vec[0, 0] * (vec[1, 1] * vec[2, 2] - vec[1, 2] * vec[2, 1])
-           - vec[0, 1] * (vec[1, 0] * vec[2, 2] - vec[1, 2] * vec[2, 0])
-           + vec[0, 2] * (vec[1, 0] * vec[2, 1] - vec[1, 1] * vec[2, 0]))
-    if det < 0.0:
-        for k in range(3):
-            vec[k, 2] = -vec[k, 2]
-
-
-@njit(cache=True)
-def _orthonormal_to(u, col, ref):
-    """Unit vector orthogonal to column ``ref`` of ``u`` written into column ``col``."""
-    ax = 0
-    if abs(u[1, ref]) < abs(u[ax, ref]):
-        ax = 1
-    if abs(u[2, ref]) < abs(u[ax, ref]):
-        ax = 2
-    d = u[ax, ref]
-    n2 = 0.0
-    for k in range(3):
-        u[k, col] = (1.0 if k == ax else 0.0) - d * u[k, ref]
-        n2 += u[k, col] * u[k, col]
-    n = math.sqrt(n2)
-    for k in range(3):
-        u[k, col] /= n
-
-
-@njit(**PLAIN)
-def _rot2(c, s, a, b):
-    """Plane rotation of the pair ``(a, b)``: ``(c a − s b, s a + c b)``."""
-    return c * a - s * b, s * a + c * b
-
-
-@njit(**PLAIN)
-def _angle(bpp, bqq, apq):
-    """Cosine and sine of the Jacobi rotation that annihilates ``apq`` (as :func:`jacobi_eigh`)."""
-    theta = (bqq - bpp) / (2.0 * apq)
-    t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
-    if theta < 0.0:
-        t = -t
-    c = 1.0 / math.sqrt(t * t + 1.0)
-    return c, t * c
-
-
-@njit(cache=True)
-def jacobi3(b00, b01, b02, b10, b11, b12, b20, b21, b22):
-    """Cyclic Jacobi eigen-decomposition of a symmetric 3×3 matrix held in scalars.
-
-    The same rotations, in the same order and with the same floating-point
-    operations as :func:`unmesh._linalg_kernels.jacobi_eigh` (at most 30 sweeps, stop
-    when the off-diagonal mass is below ``1e-32`` of the diagonal's), unrolled so the
-    matrix stays in registers: the results are bit-identical.
-
-    Returns
-    -------
-    tuple of 12 floats
-        Eigenvalues ``l0, l1, l2`` (unsorted) and the eigenvector matrix ``V`` row by row
-        (column ``k`` is the eigenvector of ``l_k``).
-
-    Example
-    -------
-    >>> jacobi3(2.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 1.0)[:3]
-    (2.0, 3.0, 1.0)
-    """
-    v00 = 1.0
-    v01 = 0.0
-    v02 = 0.0
-    v10 = 0.0
-    v11 = 1.0
-    v12 = 0.0
-    v20 = 0.0
-    v21 = 0.0
-    v22 = 1.0
-    for _sweep in range(30):
-        diag = b00 * b00 + b11 * b11 + b22 * b22
-        off = b01 * b01 + b02 * b02 + b12 * b12
-        if off <= 1e-32 * diag or off == 0.0:
-            break
-        if b01 != 0.0:  # (p, q) = (0, 1)
-            c, s = _angle(b00, b11, b01)
-            b00, b01 = _rot2(c, s, b00, b01)
-            b10, b11 = _rot2(c, s, b10, b11)
-            b20, b21 = _rot2(c, s, b20, b21)
-            b00, b10 = _rot2(c, s, b00, b10)
-            b01, b11 = _rot2(c, s, b01, b11)
-            b02, b12 = _rot2(c, s, b02, b12)
-            v00, v01 = _rot2(c, s, v00, v01)
-            v10, v11 = _rot2(c, s, v10, v11)
-            v20, v21 = _rot2(c, s, v20, v21)
-        if b02 != 0.0:  # (0, 2)
-            c, s = _angle(b00, b22, b02)
-            b00, b02 = _rot2(c, s, b00, b02)
-            b10, b12 = _rot2(c, s, b10, b12)
-            b20, b22 = _rot2(c, s, b20, b22)
-            b00, b20 = _rot2(c, s, b00, b20)
-            b01, b21 = _rot2(c, s, b01, b21)
-            b02, b22 = _rot2(c, s, b02, b22)
-            v00, v02 = _rot2(c, s, v00, v02)
-            v10, v12 = _rot2(c, s, v10, v12)
-            v20, v22 = _rot2(c, s, v20, v22)
-        if b12 != 0.0:  # (1, 2)
-            c, s = _angle(b11, b22, b12)
-            b01, b02 = _rot2(c, s, b01, b02)
-            b11, b12 = _rot2(c, s, b11, b12)
-            b21, b22 = _rot2(c, s, b21, b22)
-            b10, b20 = _rot2(c, s, b10, b20)
-            b11, b21 = _rot2(c, s, b11, b21)
-            b12, b22 = _rot2(c, s, b12, b22)
-            v01, v02 = _rot2(c, s, v01, v02)
-            v11, v12 = _rot2(c, s, v11, v12)
-            v21, v22 = _rot2(c, s, v21, v22)
-    return b00, b11, b22, v00, v01, v02, v10, v11, v12, v20, v21, v22
-
-
-@njit(**PLAIN)
-def svd_rot(a, dim, u, s, v, work):
-    """``A = U diag(s) Vᵀ`` with ``det U = det V = +1`` (last ``s`` signed), eq. (8.24).
-
-    2D decomposes the upper 2×2 block (closed form via the polar angle); the z
-    row/column of ``U``, ``V`` is the identity and ``s[2] = 1``. 3D diagonalises
-    ``AᵀA`` by Jacobi rotations. ``work`` (4, 3, 3) is scratch.
-    """
-    if dim == 2:
-        theta = math.atan2(a[1, 0] - a[0, 1], a[0, 0] + a[1, 1])
-        c = math.cos(theta)
-        sn = math.sin(theta)
-        # symmetric S = R^T A
-        p = c * a[0, 0] + sn * a[1, 0]
-        q = c * a[0, 1] + sn * a[1, 1]
-        r = -sn * a[0, 1] + c * a[1, 1]
-        phi = 0.5 * math.atan2(2.0 * q, p - r)
-        cp = math.cos(phi)
-        sp = math.sin(phi)
-        mean = 0.5 * (p + r)
-        rad = math.sqrt(0.25 * (p - r) * (p - r) + q * q)
-        s[0] = mean + rad
-        s[1] = mean - rad
-        s[2] = 1.0
-        for i in range(3):
-            for j in range(3):
-                u[i, j] = 0.0
-                v[i, j] = 0.0
-        v[0, 0] = cp
-        v[1, 0] = sp
-        v[0, 1] = -sp
-        v[1, 1] = cp
-        v[2, 2] = 1.0
-        # U = R V
-        u[0, 0] = c * cp - sn * sp
-        u[1, 0] = sn * cp + c * sp
-        u[0, 1] = -c * sp - sn * cp
-        u[1, 1] = -sn * sp + c * cp
-        u[2, 2] = 1.0
-        return
-    ata = work[0]
-    for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for k in range(3):
-                acc += a[k, i] * a[k, j]
-            ata[i, j] = acc
-    lam = work[1, 0]
-    (lam[0], lam[1], lam[2], v[0, 0], v[0, 1], v[0, 2], v[1, 0], v[1, 1], v[1, 2], v[2, 0], v[2, 1],
-     v[2, 2]) = jacobi3(ata[0, 0], ata[0, 1], ata[0, 2], ata[1, 0], ata[1, 1], ata[1, 2], ata[2, 0], ata[2, 1],
-                        ata[2, 2])
-    _sort_desc(v, lam)
-    av = work[3]
-    for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for k in range(3):
-                acc += a[i, k] * v[k, j]
-            av[i, j] = acc
-    n0 = math.sqrt(av[0, 0] ** 2 + av[1, 0] ** 2 + av[2, 0] ** 2)
-    if n0 > 1e-300:
-        for k in range(3):
-            u[k, 0] = av[k, 0] / n0
-    else:
-        for k in range(3):
-            u[k, 0] = v[k, 0]
-    d = u[0, 0] * av[0, 1] + u[1, 0] * av[1, 1] + u[2, 0] * av[2, 1]
-    t0 = av[0, 1] - d * u[0, 0]
-    t1 = av[1, 1] - d * u[1, 0]
-    t2 = av[2, 1] - d * u[2, 0]
-    n1 = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-    if n1 > 1e-12 * max(n0, 1e-300):
-        u[0, 1] = t0 / n1
-        u[1, 1] = t1 / n1
-        u[2, 1] = t2 / n1
-    else:
-        _orthonormal_to(u, 1, 0)
-    u[0, 2] = u[1, 0] * u[2, 1] - u[2, 0] * u[1, 1]
-    u[1, 2] = u[2, 0] * u[0, 1] - u[0, 0] * u[2, 1]
-    u[2, 2] = u[0, 0] * u[1, 1] - u[1, 0] * u[0, 1]
-    for j in range(3):
-        s[j] = u[0, j] * av[0, j] + u[1, j] * av[1, j] + u[2, j] * av[2, j]
-
-
-@njit(**PLAIN)
-def _inv3(m, out):
-    """Inverse of a 3×3 matrix; returns the determinant (0 leaves ``out`` unchanged)."""
-    c00 = m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]
-    c01 = m[1, 2] * m[2, 0] - m[1, 0] * m[2, 2]
-    c02 = m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]
-    det = m[0, 0] * c00 + m[0, 1] * c01 + m[0, 2] * c02
-    if det == 0.0:
-        return 0.0
-    inv = 1.0 / det
-    out[0, 0] = c00 * inv
-    out[1, 0] = c01 * inv
-    out[2, 0] = c02 * inv
-    out[0, 1] = (m[0, 2] * m[2, 1] - m[0, 1] * m[2, 2]) * inv
-    out[1, 1] = (m[0, 0] * m[2, 2] - m[0, 2] * m[2, 0]) * inv
-    out[2, 1] = (m[0, 1] * m[2, 0] - m[0, 0] * m[2, 1]) * inv
-    out[0, 2] = (m[0, 1] * m[1, 2] - m[0, 2] * m[1, 1]) * inv
-    out[1, 2] = (m[0, 2] * m[1, 0] - m[0, 0] * m[1, 2]) * inv
-    out[2, 2] = (m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]) * inv
-    return det
-
-
-@njit(**PLAIN)
-def _det3(m):
-    """Determinant of a 3×3 matrix."""
-    return (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
-            + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
-
-
-# -- lattice look-up -------------------------------------------------------------------
-
-
-#: D3 basis (columns): the FCC lattice of eq. (8.20) is the checkerboard lattice
-#: D3 = {z in Z^3, sum even} up to a rotation and the scale sqrt(2) (all bases have 60 degree angles).
-_D3 = np.array([[1.0, 1.0, 0.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]])
-_SQ3 = math.sqrt(3.0)
-_EYE = np.eye(3)
-
-
-def d3_transform(bmat: np.ndarray) -> np.ndarray:
-    """Linear map from lattice-frame coordinates (units of d) to D3 coordinates: ``T = D3 B⁻¹``."""
-    return np.ascontiguousarray(_D3 @ np.linalg.inv(bmat))
-
-
-@njit(**PLAIN)
-def _round_away(v, r):
-    """Round ``v`` to the integer next to ``r = round(v)`` on the other side."""
-    return r + 1.0 if v > r else r - 1.0
-
-
-@njit(**PLAIN)
-def nearest_slot(y0, y1, y2, tmat, table, dim):
-    """Slot of the lattice point nearest to ``y`` (lattice frame, units of d) and the squared distance.
-
-    The minimisation of eq. (8.21) in closed form: 2D splits the hexagonal
-    lattice into two rectangular lattices and keeps the nearer rounding; 3D maps
-    ``y`` to D3 coordinates (``tmat``, :func:`d3_transform`) and applies the
-    Conway–Sloane rounding for D_n (round every coordinate; if the sum is odd,
-    re-round the coordinate with the largest error the other way). Returns slot -1
-    when the nearest point is the origin or outside the slot set (``table``).
-    """
-    if dim == 2:
-        a0 = math.floor(y0 + 0.5)
-        a1 = math.floor(y1 / _SQ3 + 0.5) * _SQ3
-        e0 = y0 - a0
-        e1 = y1 - a1
-        b0 = math.floor(y0 - 0.5 + 0.5) + 0.5
-        b1 = math.floor((y1 - 0.5 * _SQ3) / _SQ3 + 0.5) * _SQ3 + 0.5 * _SQ3
-        f0 = y0 - b0
-        f1 = y1 - b1
-        da = e0 * e0 + e1 * e1
-        db = f0 * f0 + f1 * f1
-        if db < da:
-            a0 = b0
-            a1 = b1
-            da = db
-        n1 = a1 / (0.5 * _SQ3)
-        n0 = a0 - 0.5 * n1
-        i0 = math.floor(n0 + 0.5)
-        i1 = math.floor(n1 + 0.5)
-        i2 = 0
-        best = da
-    else:
-        z0 = tmat[0, 0] * y0 + tmat[0, 1] * y1 + tmat[0, 2] * y2
-        z1 = tmat[1, 0] * y0 + tmat[1, 1] * y1 + tmat[1, 2] * y2
-        z2 = tmat[2, 0] * y0 + tmat[2, 1] * y1 + tmat[2, 2] * y2
-        r0 = math.floor(z0 + 0.5)
-        r1 = math.floor(z1 + 0.5)
-        r2 = math.floor(z2 + 0.5)
-        if (int(r0) + int(r1) + int(r2)) & 1:
-            d0 = abs(z0 - r0)
-            d1 = abs(z1 - r1)
-            d2 = abs(z2 - r2)
-            if d0 >= d1 and d0 >= d2:
-                r0 = _round_away(z0, r0)
-            elif d1 >= d2:
-                r1 = _round_away(z1, r1)
-            else:
-                r2 = _round_away(z2, r2)
-        best = 0.5 * ((z0 - r0) ** 2 + (z1 - r1) ** 2 + (z2 - r2) ** 2)
-        # back to lattice-basis integers: n = D3^-1 z = ½ (z0+z1−z2, z0−z1+z2, −z0+z1+z2), exact as the sum is even
-        k0 = int(r0)
-        k1 = int(r1)
-        k2 = int(r2)
-        i0 = (k0 + k1 - k2) >> 1
-        i1 = (k0 - k1 + k2) >> 1
-        i2 = (k1 + k2 - k0) >> 1
-    half = table.shape[0] // 2
-    i0 += half
-    i1 += half
-    i2 += half
-    if i0 < 0 or i1 < 0 or i2 < 0 or i0 >= table.shape[0] or i1 >= table.shape[0] or i2 >= table.shape[0]:
-        return -1, best
-    return table[i0, i1, i2], best
-
-
-@njit(cache=True, inline="always")
-def _d3_round(z0, z1, z2, half, size):
-    """:func:`nearest_slot` (3D) for a point given in D3 coordinates ``z = T y``, in floating point.
-
-    The Conway–Sloane rounding without branches and without integer conversions (so that the
-    loop over a neighbourhood vectorises): the coordinate with the largest rounding error (the
-    first of equal ones) moves one step the other way when the rounded sum is odd. Returns the
-    flat index into the slot table (``(i0 · size + i1) · size + i2``, as a float; -1 outside the
-    table of ``size³`` entries centred on ``half``) and the squared distance (units of d).
-    """
-    r0 = np.floor(z0 + 0.5)
-    r1 = np.floor(z1 + 0.5)
-    r2 = np.floor(z2 + 0.5)
-    s = r0 + r1 + r2
-    odd = s - 2.0 * np.floor(0.5 * s)  # 0 or 1, exactly
-    e0 = z0 - r0
-    e1 = z1 - r1
-    e2 = z2 - r2
-    d0 = abs(e0)
-    d1 = abs(e1)
-    d2 = abs(e2)
-    m0 = odd * ((d0 >= d1) & (d0 >= d2))
-    m1 = (odd - m0) * (d1 >= d2)
-    m2 = odd - m0 - m1
-    k0 = r0 + m0 * (2.0 * (e0 > 0.0) - 1.0)
-    k1 = r1 + m1 * (2.0 * (e1 > 0.0) - 1.0)
-    k2 = r2 + m2 * (2.0 * (e2 > 0.0) - 1.0)
-    e0 = z0 - k0
-    e1 = z1 - k1
-    e2 = z2 - k2
-    best = 0.5 * (e0 * e0 + e1 * e1 + e2 * e2)
-    # back to lattice-basis integers: n = D3^-1 k, exact as the sum is even
-    i0 = 0.5 * (k0 + k1 - k2) + half
-    i1 = 0.5 * (k0 - k1 + k2) + half
-    i2 = 0.5 * (k1 + k2 - k0) + half
-    inside = (i0 >= 0.0) & (i1 >= 0.0) & (i2 >= 0.0) & (i0 < size) & (i1 < size) & (i2 < size)
-    return ((i0 * size + i1) * size + i2 + 1.0) * inside - 1.0, best
-
-
-@njit(cache=True)
-def _nearest_d3(z0, z1, z2, table):
-    """Slot and squared distance of :func:`_d3_round` (the lattice pass's rounding), for tests."""
-    size = table.shape[0]
-    idx, best = _d3_round(z0, z1, z2, float(size // 2), float(size))
-    if idx < 0.0:
-        return -1, best
-    k = int(idx)
-    return table[k // (size * size), (k // size) % size, k % size], best
-
-
-@njit(cache=True)
-def nearest_slots(y, tmat, table, dim):
-    """Vectorised :func:`nearest_slot` for tests: ``y`` (K, 3) -> (slots (K,), d2 (K,))."""
-    n = y.shape[0]
-    q = np.empty(n, np.int64)
-    d2 = np.empty(n)
-    for k in range(n):
-        q[k], d2[k] = nearest_slot(y[k, 0], y[k, 1], y[k, 2], tmat, table, dim)
-    return q, d2
-
-
-# -- neighbour-list transpose ---------------------------------------------------------------
-
-
-@njit(**PLAIN)
-def _position(row, count, value):
-    """Index of ``value`` in the ascending ``row[:count]`` (-1 if absent); branch-free search."""
-    if count == 0:
-        return -1
-    base = 0
-    n = count
-    while n > 1:
-        half = n >> 1
-        probe = base + half
-        base = probe if row[probe] <= value else base
-        n -= half
-    return base if row[base] == value else -1
-
-
-@njit(**PLAIN)
-def _lower_bound(row, count, value):
-    """Number of entries of the ascending ``row[:count]`` that are below ``value``."""
-    lo = 0
-    hi = count
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if row[mid] < value:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True, parallel=True)
-def reverse_positions(nbr, nnbr, nblocks, rev):
-    """Position of ``i`` in the neighbour list of each of its neighbours.
-
-    ``rev[i, t] = u`` with ``nbr[j, u] == i`` for ``j = nbr[i, t]`` (-1 when ``i``
-    is missing from j's list, which a symmetric neighbour relation never gives).
-    Rows must be ascending (as the density pass and ``radius_neighbors`` produce
-    them). The rows are split into ``nblocks`` contiguous blocks processed in
-    parallel; within a block, the entries of row ``j`` that belong to the block's
-    rows come in ascending order, so one cursor per ``j`` (started by a binary
-    search) finds every position in O(1): O(N·k) in all.
-
-    Returns the number of missing entries.
-    """
-    n = nbr.shape[0]
-    cap = nbr.shape[1]
-    nb = max(1, min(nblocks, n))
-    missing = 0
-    for blk in prange(nb):
-        r0 = blk * n // nb
-        r1 = (blk + 1) * n // nb
-        lo = n
-        hi = -1
-        for i in range(r0, r1):
-            c = min(nnbr[i], cap)
-            if c > 0:
-                lo = min(lo, nbr[i, 0])
-                hi = max(hi, nbr[i, c - 1])
-        if hi < lo:
-            continue
-        cur = np.full(hi - lo + 1, -1, np.int64)
-        for i in range(r0, r1):
-            c = min(nnbr[i], cap)
-            for t in range(c):
-                j = nbr[i, t]
-                cj = min(nnbr[j], cap)
-                k = cur[j - lo]
-                if k < 0:
-                    k = _lower_bound(nbr[j], cj, r0)
-                if k < cj and nbr[j, k] == i:
-                    rev[i, t] = k
-                    cur[j - lo] = k + 1
-                else:
-                    u = _position(nbr[j], cj, i)
-                    rev[i, t] = u
-                    if u < 0:
-                        missing += 1
-                    else:
-                        cur[j - lo] = u + 1
-    return missing
-
-
-# -- polar decomposition -------------------------------------------------------------------
-
-
-@njit(**PLAIN)
-def polar_rotation(a, r):
-    """Rotation ``R`` of the polar decomposition ``A = R S`` (3D) by Newton's iteration.
-
-    ``R ← (R + R⁻ᵀ)/2`` from ``R = A`` converges quadratically to the orthogonal
-    polar factor (Higham 1986); it is a rotation when ``det A > 0``. Stops when a
-    step changes no entry by more than 1e-8 (the next iterate is then exact to
-    rounding, the error squares) or after 40 steps. Writes ``r`` (3, 3) and returns
-    True on convergence (False for ``det A ≤ 0`` or no convergence: use :func:`svd_rot`).
-
-    Example
-    -------
-    >>> r = np.empty((3, 3))
-    >>> polar_rotation(np.diag([2.0, 1.0, 0.5]), r), np.round(r, 12).tolist()[0]
-    (True, [1.0, 0.0, 0.0])
-    """
-    r00, r01, r02 = a[0, 0], a[0, 1], a[0, 2]
-    r10, r11, r12 = a[1, 0], a[1, 1], a[1, 2]
-    r20, r21, r22 = a[2, 0], a[2, 1], a[2, 2]
-    ok = False
-    for _it in range(40):
-        # cofactors: R⁻ᵀ = C / det R
-        c00 = r11 * r22 - r12 * r21
-        c01 = r12 * r20 - r10 * r22
-        c02 = r10 * r21 - r11 * r20
-        c10 = r02 * r21 - r01 * r22
-        c11 = r00 * r22 - r02 * r20
-        c12 = r01 * r20 - r00 * r21
-        c20 = r01 * r12 - r02 * r11
-        c21 = r02 * r10 - r00 * r12
-        c22 = r00 * r11 - r01 * r10
-        det = r00 * c00 + r01 * c01 + r02 * c02
-        if not det > 0.0:
-            break
-        hinv = 0.5 / det
-        n00 = 0.5 * r00 + hinv * c00
-        n01 = 0.5 * r01 + hinv * c01
-        n02 = 0.5 * r02 + hinv * c02
-        n10 = 0.5 * r10 + hinv * c10
-        n11 = 0.5 * r11 + hinv * c11
-        n12 = 0.5 * r12 + hinv * c12
-        n20 = 0.5 * r20 + hinv * c20
-        n21 = 0.5 * r21 + hinv * c21
-        n22 = 0.5 * r22 + hinv * c22
-        diff = max(abs(n00 - r00), abs(n01 - r01), abs(n02 - r02), abs(n10 - r10), abs(n11 - r11),
-                   abs(n12 - r12), abs(n20 - r20), abs(n21 - r21), abs(n22 - r22))
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = n00, n01, n02, n10, n11, n12, n20, n21, n22
-        if diff <= 1e-8:
-            ok = True
-            break
-    r[0, 0], r[0, 1], r[0, 2] = r00, r01, r02
-    r[1, 0], r[1, 1], r[1, 2] = r10, r11, r12
-    r[2, 0], r[2, 1], r[2, 2] = r20, r21, r22
-    return ok
-
-
-@njit(**PLAIN)
-def polar_factors(a, dim, rot, sym, work):
-    """``A = R S`` with the rotation ``R`` and symmetric ``S`` (3, 3) if no singular value is clamped.
-
-    The lattice pass needs only functions of ``S`` that reduce to matrix algebra when
-    every singular value lies inside the clamps (``SIG_LO < σ < SIG_HI``, which also
-    keeps the goal floor ``SIGMA_FLOOR`` inactive): ``U diag(f(σ)) Vᵀ = R f(S)`` for
-    ``f(σ) = sσ + (1 − s)`` and ``V diag(1/σ) Uᵀ = S⁻¹ Rᵀ``, ``Σσ = tr S``. Gershgorin's
-    discs of ``S`` bound its eigenvalues, so the check is rigorous. Returns False (use the
-    SVD, :func:`svd_rot`) in 2D, for ``det A ≤ 0``, when Newton's iteration does not
-    converge or when a disc reaches a clamp. ``work`` is unused scratch (3, 3).
-
-    Example
-    -------
-    >>> rot, sym = np.empty((3, 3)), np.empty((3, 3))
-    >>> polar_factors(np.diag([1.1, 0.9, 1.0]), 3, rot, sym, np.empty((3, 3))), np.round(np.diag(sym), 12).tolist()
-    (True, [1.1, 0.9, 1.0])
-    """
-    if dim != 3 or not polar_rotation(a, rot):
-        return False
-    for p in range(3):
-        for q in range(3):
-            work[p, q] = rot[0, p] * a[0, q] + rot[1, p] * a[1, q] + rot[2, p] * a[2, q]
-    for p in range(3):
-        for q in range(3):
-            sym[p, q] = 0.5 * (work[p, q] + work[q, p])
-    for p in range(3):
-        rad = 0.0
-        for q in range(3):
-            if q != p:
-                rad += abs(sym[p, q])
-        if not (sym[p, p] - rad > SIG_LO * (1.0 + 1e-6) and sym[p, p] + rad < SIG_HI * (1.0 - 1e-6)):
-            return False
-    return True
 
 
 # -- the update pass ---------------------------------------------------------------------
@@ -666,6 +71,9 @@ def _keep_previous(i, o, amat, ainv, amat_out, ainv_out):
 
 
 #: Blocks of the lattice pass. Each block of particles owns a window of member-force
+
+
+#: Blocks of the lattice pass. Each block of particles owns a window of member-force
 #: accumulators (the rows of its particles' neighbours), summed in block order: the result
 #: does not depend on the number of threads.
 LATTICE_BLOCKS = 16
@@ -674,10 +82,13 @@ SUM_ROWS = 4096
 #: Fast-math flags of the lattice pass (reassociation vectorises the sums over members;
 #: no ``nnan``/``ninf``).
 LATTICE_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
+#: Particles whose 3×3 algebra (shape matching, polar decomposition, goal matrix, torque correction) runs
+#: as one loop over lanes (vectorised, no latency chain per particle).
+LANES = 8
 
 
 @njit(cache=True, fastmath=LATTICE_FASTMATH, error_model="numpy")
-def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, lv,
+def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, lv, dti,
                    c6, w_self, tm, tmat, table, order, amat, ainv, occ, docked, lam, seed, step, dt, prime, onebody,
                    amat_out, ainv_out, occ_out, docked_out, gmat, fown, valid):
     """The particles ``r0 .. r1 - 1`` of :func:`lattice_update` (one block, serial); member forces are
@@ -690,410 +101,528 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         win[k, 0] = 0.0
         win[k, 1] = 0.0
         win[k, 2] = 0.0
-    # offsets r_ij of the neighbours, squared lattice distances, table indices, masses; ids
-    rt = np.empty((6, cap))
-    ut = np.empty(cap, np.int64)
+    cap8 = (cap + 7) // 8 * 8  # loops over neighbours run to a multiple of 8 (no scalar remainder)
+    far = 8.0 * h  # offset of the padding entries: beyond the support (weight 0) and ineligible
     tsize = table.shape[0]
     thalf = float(tsize // 2)
     tflat = table.reshape(tsize * tsize * tsize)
-    qt = np.empty(cap, np.int64)
-    bestd = np.empty(nq + 1)
-    bestj = np.empty(nq, np.int64)
-    bestt = np.empty(nq + 1, np.int64)
-    # the docked members of the current neighbourhood (slot order), as contiguous columns
-    mj = np.empty(nq, np.int64)
-    dflag = np.empty(nq, np.int64)
-    mb = np.empty((11, nq))  # r (3), lattice offset l (3), W, m_j, force (3)
+    # assignment scratch of one particle: squared lattice distance, table index, W; ids, slots, members
+    at = np.empty((3, cap8))
+    qt = np.empty(cap8, np.int64)
+    memb = np.empty(cap8 + 1)
+    bestd = np.empty(nq)
+    bestt = np.empty(nq, np.int64)
+    # per lane (particle of the group) and neighbour row: r (3), l (3), W·member, m_j, force (3)
+    nb = np.empty((LANES, 11, cap8))
+    # per lane: sums of (8.23) M (6) and B (9); A, M⁻¹, R, S, goal, strain matrices (9, row-major)
+    sums = np.empty((15, LANES))
+    la = np.empty((9, LANES))
+    lminv = np.empty((9, LANES))
+    lrot = np.empty((9, LANES))
+    lsym = np.empty((9, LANES))
+    lg = np.empty((9, LANES))
+    le = np.empty((9, LANES))
+    fast = np.empty(LANES)
+    act = np.empty(LANES)
+    ok = np.empty(LANES)
+    cand = np.empty(LANES)
+    lpad = np.empty(LANES, np.int64)
+    # torque correction per lane: force sum (3), torque (3), weighted centroid (3), weight, inertia (6)
+    tq = np.empty((16, LANES))
     a = np.empty((3, 3))
     u = np.empty((3, 3))
     v = np.empty((3, 3))
     sg = np.empty(3)
-    rot = np.empty((3, 3))
-    sym = np.empty((3, 3))
-    g = np.empty((3, 3))
-    b = np.empty((3, 3))
-    mm = np.empty((3, 3))
-    minv = np.empty((3, 3))
     work = np.empty((4, 3, 3))
     keep_goal = gmat.shape[0] > 0
     track = lam.shape[1] > 0
-    for i in range(r0, r1):
-        o = order[i]  # the particle's row in the state of the previous step
-        valid[i] = 0
-        cnt = min(nnbr[i], cap)
-        fown[i, 0] = 0.0
-        fown[i, 1] = 0.0
-        fown[i, 2] = 0.0
-        mt = matid[i]
-        ke = mats[mt, M.KE]
-        lmu = mats[mt, M.LMU]
-        llam = mats[mt, M.LLAM]
-        if phase[i] != SOLID or (ke <= 0.0 and lmu <= 0.0 and llam <= 0.0):
+    st00, st01, st02 = dti[0, 0], dti[0, 1], dti[0, 2]
+    st10, st11, st12 = dti[1, 0], dti[1, 1], dti[1, 2]
+    st20, st21, st22 = dti[2, 0], dti[2, 1], dti[2, 2]
+    for g0 in range(r0, r1, LANES):
+        nl = min(LANES, r1 - g0)
+        # -- per particle: assignment (8.21), docking, shape-matching sums (8.23) --
+        for k in range(LANES):
+            ok[k] = 0.0
+            cand[k] = 0.0
+            # an idle lane holds the identity (its algebra stays finite)
+            for e in range(15):
+                sums[e, k] = 0.0
+            sums[0, k] = sums[3, k] = sums[5, k] = 1.0
+            sums[6, k] = sums[10, k] = sums[14, k] = 1.0
+        for k in range(nl):
+            i = g0 + k
+            o = order[i]  # the particle's row in the state of the previous step
+            valid[i] = 0
+            cnt = min(nnbr[i], cap)
+            pad = (cnt + 7) // 8 * 8
+            lpad[k] = pad
+            fown[i, 0] = 0.0
+            fown[i, 1] = 0.0
+            fown[i, 2] = 0.0
+            mt = matid[i]
+            if phase[i] != SOLID or (mats[mt, M.KE] <= 0.0 and mats[mt, M.LMU] <= 0.0 and mats[mt, M.LLAM] <= 0.0):
+                for q in range(nq):
+                    occ_out[i, q] = -1
+                    docked_out[i, q] = 0
+                _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
+                continue
+            rt = nb[k]
+            xi0 = x[i, 0]
+            xi1 = x[i, 1]
+            xi2 = x[i, 2]
+            oi = obj[i]
+            # world offset -> lattice frame in units of d (A^(t-1)^-1 / d), in 3D straight on to D3 coordinates
+            p00 = (tm[0, 0] * ainv[o, 0, 0] + tm[0, 1] * ainv[o, 1, 0] + tm[0, 2] * ainv[o, 2, 0]) / spacing
+            p01 = (tm[0, 0] * ainv[o, 0, 1] + tm[0, 1] * ainv[o, 1, 1] + tm[0, 2] * ainv[o, 2, 1]) / spacing
+            p02 = (tm[0, 0] * ainv[o, 0, 2] + tm[0, 1] * ainv[o, 1, 2] + tm[0, 2] * ainv[o, 2, 2]) / spacing
+            p10 = (tm[1, 0] * ainv[o, 0, 0] + tm[1, 1] * ainv[o, 1, 0] + tm[1, 2] * ainv[o, 2, 0]) / spacing
+            p11 = (tm[1, 0] * ainv[o, 0, 1] + tm[1, 1] * ainv[o, 1, 1] + tm[1, 2] * ainv[o, 2, 1]) / spacing
+            p12 = (tm[1, 0] * ainv[o, 0, 2] + tm[1, 1] * ainv[o, 1, 2] + tm[1, 2] * ainv[o, 2, 2]) / spacing
+            p20 = (tm[2, 0] * ainv[o, 0, 0] + tm[2, 1] * ainv[o, 1, 0] + tm[2, 2] * ainv[o, 2, 0]) / spacing
+            p21 = (tm[2, 0] * ainv[o, 0, 1] + tm[2, 1] * ainv[o, 1, 1] + tm[2, 2] * ainv[o, 2, 1]) / spacing
+            p22 = (tm[2, 0] * ainv[o, 0, 2] + tm[2, 1] * ainv[o, 1, 2] + tm[2, 2] * ainv[o, 2, 2]) / spacing
+            # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
             for q in range(nq):
-                occ_out[i, q] = -1
-                docked_out[i, q] = 0
-            _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
-            continue
-        rho0 = mats[mt, M.RHO0]
-        xi0 = x[i, 0]
-        xi1 = x[i, 1]
-        xi2 = x[i, 2]
-        oi = obj[i]
-        # world offset -> lattice frame in units of d (A^(t-1)^-1 / d), in 3D straight on to D3 coordinates
-        p00 = (tm[0, 0] * ainv[o, 0, 0] + tm[0, 1] * ainv[o, 1, 0] + tm[0, 2] * ainv[o, 2, 0]) / spacing
-        p01 = (tm[0, 0] * ainv[o, 0, 1] + tm[0, 1] * ainv[o, 1, 1] + tm[0, 2] * ainv[o, 2, 1]) / spacing
-        p02 = (tm[0, 0] * ainv[o, 0, 2] + tm[0, 1] * ainv[o, 1, 2] + tm[0, 2] * ainv[o, 2, 2]) / spacing
-        p10 = (tm[1, 0] * ainv[o, 0, 0] + tm[1, 1] * ainv[o, 1, 0] + tm[1, 2] * ainv[o, 2, 0]) / spacing
-        p11 = (tm[1, 0] * ainv[o, 0, 1] + tm[1, 1] * ainv[o, 1, 1] + tm[1, 2] * ainv[o, 2, 1]) / spacing
-        p12 = (tm[1, 0] * ainv[o, 0, 2] + tm[1, 1] * ainv[o, 1, 2] + tm[1, 2] * ainv[o, 2, 2]) / spacing
-        p20 = (tm[2, 0] * ainv[o, 0, 0] + tm[2, 1] * ainv[o, 1, 0] + tm[2, 2] * ainv[o, 2, 0]) / spacing
-        p21 = (tm[2, 0] * ainv[o, 0, 1] + tm[2, 1] * ainv[o, 1, 1] + tm[2, 2] * ainv[o, 2, 1]) / spacing
-        p22 = (tm[2, 0] * ainv[o, 0, 2] + tm[2, 1] * ainv[o, 1, 2] + tm[2, 2] * ainv[o, 2, 2]) / spacing
-        # 1. assignment (8.21) with conflict resolution: the closest candidate keeps a slot
-        for q in range(nq + 1):
-            bestd[q] = np.inf
-            bestt[q] = -1
-        # the neighbours' data in one pass (their loads overlap): offset, mass and id by row position
-        for t in range(cnt):
-            j = nbr[i, t]
-            rt[0, t] = x[j, 0] - xi0
-            rt[1, t] = x[j, 1] - xi1
-            rt[2, t] = x[j, 2] - xi2
-            rt[5, t] = m[j]
-            ut[t] = uid[j]
-        if onebody:
-            for t in range(cnt):
-                qt[t] = 1
-        else:
+                bestt[q] = -1
+            # the neighbours' data in one pass (their loads overlap): offset, mass and id by row position
             for t in range(cnt):
                 j = nbr[i, t]
-                qt[t] = np.int64((phase[j] == SOLID) & (obj[j] == oi))
+                rt[0, t] = x[j, 0] - xi0
+                rt[1, t] = x[j, 1] - xi1
+                rt[2, t] = x[j, 2] - xi2
+                rt[7, t] = m[j]
+            if onebody:
+                for t in range(cnt):
+                    qt[t] = 1
+            else:
+                for t in range(cnt):
+                    j = nbr[i, t]
+                    qt[t] = np.int64((phase[j] == SOLID) & (obj[j] == oi))
+            for t in range(cnt, pad):
+                rt[0, t] = far
+                rt[1, t] = far
+                rt[2, t] = far
+                rt[7, t] = 0.0
+                qt[t] = 0
+            if dim == 3:
+                # vectorised rounding (flat table index as a float), weights and lattice offsets
+                for t in range(pad):
+                    y0 = rt[0, t]
+                    y1 = rt[1, t]
+                    y2 = rt[2, t]
+                    idx, d2, k0, k1, k2 = _d3_round_k(p00 * y0 + p01 * y1 + p02 * y2, p10 * y0 + p11 * y1 + p12 * y2,
+                                                      p20 * y0 + p21 * y1 + p22 * y2, thalf, tsize)
+                    at[1, t] = idx
+                    at[0, t] = d2
+                    hw = max(h2 - (y0 * y0 + y1 * y1 + y2 * y2), 0.0)
+                    at[2, t] = c6 * hw * hw * hw
+                    # the lattice offset of the nearest point (the slot's, for a slot): d T⁻¹ k
+                    rt[3, t] = st00 * k0 + st01 * k1 + st02 * k2
+                    rt[4, t] = st10 * k0 + st11 * k1 + st12 * k2
+                    rt[5, t] = st20 * k0 + st21 * k1 + st22 * k2
+            else:
+                for t in range(pad):
+                    y0 = rt[0, t]
+                    y1 = rt[1, t]
+                    y2 = rt[2, t]
+                    q, d2 = nearest_slot(p00 * y0 + p01 * y1 + p02 * y2, p10 * y0 + p11 * y1 + p12 * y2, 0.0,
+                                         tmat, table, dim)
+                    q = q if qt[t] != 0 else -1
+                    qt[t] = q
+                    at[0, t] = d2
+                    hw = max(h2 - (y0 * y0 + y1 * y1 + y2 * y2), 0.0)
+                    at[2, t] = c6 * hw * hw * hw
+                    qs = max(q, 0)  # any slot's offset for non-candidates: they weigh 0
+                    rt[3, t] = lv[qs, 0]
+                    rt[4, t] = lv[qs, 1]
+                    rt[5, t] = lv[qs, 2]
+            # conflicts (3D: slots by table look-up): the first candidate of a free slot takes it, a
+            # closer one replaces it (conflicts are rare: no initialised distances, a predictable branch)
+            for t in range(cnt):
+                if dim == 3:
+                    kk = int(at[1, t])
+                    q = tflat[max(kk, 0)]
+                    q = q if (kk >= 0) & (qt[t] != 0) else -1
+                else:
+                    q = qt[t]
+                if q >= 0:
+                    d2 = at[0, t]
+                    if bestt[q] < 0 or d2 < bestd[q]:
+                        bestd[q] = d2
+                        bestt[q] = t
+            # 2. docking (section 8.2.5), per slot; the docked winner of a slot is a member
+            for t in range(pad):
+                memb[t] = 0.0
+            lmax = mats[mt, M.DOCK_MAX]
+            frac = mats[mt, M.FRACTURE]
+            brittle = frac < np.inf
+            if not track and not brittle and (lmax == np.inf or prime):
+                # every assigned slot docks at once (infinite gain and rate, or the initial state)
+                for q in range(nq):
+                    t = bestt[q]
+                    has = t >= 0
+                    occ_out[i, q] = uid[nbr[i, max(t, 0)]] if has else -1
+                    docked_out[i, q] = has
+                for q in range(nq):
+                    t = bestt[q]
+                    memb[t if t >= 0 else cap8] = 1.0
+            else:
+                _dock(i, o, rt, nbr[i], uid, bestt, memb, occ, docked, lam, occ_out, docked_out, mats[mt], slot_vecs, uid[i],
+                      spacing, seed, step, dt, prime, track)
+            # 3. shape matching sums (8.23) over the members, by row position (the others weigh 0)
+            s00 = 0.0
+            s01 = 0.0
+            s02 = 0.0
+            s11 = 0.0
+            s12 = 0.0
+            s22 = 0.0
+            b00 = 0.0
+            b01 = 0.0
+            b02 = 0.0
+            b10 = 0.0
+            b11 = 0.0
+            b12 = 0.0
+            b20 = 0.0
+            b21 = 0.0
+            b22 = 0.0
+            count = 0.0
+            for t in range(pad):
+                y0 = rt[0, t]
+                y1 = rt[1, t]
+                y2 = rt[2, t]
+                w = at[2, t] * memb[t]
+                count += memb[t]
+                l0 = rt[3, t]
+                l1 = rt[4, t]
+                l2 = rt[5, t]
+                rt[6, t] = w
+                wl0 = w * l0
+                wl1 = w * l1
+                wl2 = w * l2
+                s00 += wl0 * l0
+                s01 += wl0 * l1
+                s02 += wl0 * l2
+                s11 += wl1 * l1
+                s12 += wl1 * l2
+                s22 += wl2 * l2
+                b00 += w * y0 * l0
+                b01 += w * y0 * l1
+                b02 += w * y0 * l2
+                b10 += w * y1 * l0
+                b11 += w * y1 * l1
+                b12 += w * y1 * l2
+                b20 += w * y2 * l0
+                b21 += w * y2 * l1
+                b22 += w * y2 * l2
+            if count < dim:
+                _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
+                continue
+            if dim == 2:
+                s02 = s12 = 0.0
+                b02 = b12 = b20 = b21 = 0.0
+                s22 = 1.0
+                b22 = 1.0
+            ok[k] = 1.0
+            cand[k] = 1.0
+            lane = (s00, s01, s02, s11, s12, s22, b00, b01, b02, b10, b11, b12, b20, b21, b22)
+            for e in range(15):
+                sums[e, k] = lane[e]
+        # -- per lane (vectorised): M⁻¹ and A = B M⁻¹ (8.23), rejected when M is near singular --
+        for k in range(LANES):
+            s00, s11, s22 = sums[0, k], sums[3, k], sums[5, k]
+            c00, c01, c02, c11, c12, c22, det = sym_adjugate(s00, sums[1, k], sums[2, k], s11, sums[4, k], s22)
+            tr = (s00 + s11 + (s22 if dim == 3 else 0.0)) / dim
+            trd = tr * tr * (tr if dim == 3 else 1.0)
+            ok[k] = 1.0 if (ok[k] > 0.0) & (det > 1e-6 * trd) else 0.0
+            inv = 1.0 / det if ok[k] > 0.0 else 0.0
+            m00 = c00 * inv
+            m01 = c01 * inv
+            m02 = c02 * inv
+            m11 = c11 * inv
+            m12 = c12 * inv
+            m22 = c22 * inv
+            lane = (m00, m01, m02, m01, m11, m12, m02, m12, m22)
+            for e in range(9):
+                lminv[e, k] = lane[e]
+            use = ok[k] > 0.0  # rejected and idle lanes decompose the identity
+            for p in range(3):
+                bp0 = sums[6 + 3 * p, k]
+                bp1 = sums[7 + 3 * p, k]
+                bp2 = sums[8 + 3 * p, k]
+                la[3 * p, k] = bp0 * m00 + bp1 * m01 + bp2 * m02 if use else (1.0 if p == 0 else 0.0)
+                la[3 * p + 1, k] = bp0 * m01 + bp1 * m11 + bp2 * m12 if use else (1.0 if p == 1 else 0.0)
+                la[3 * p + 2, k] = bp0 * m02 + bp1 * m12 + bp2 * m22 if use else (1.0 if p == 2 else 0.0)
+        # polar decomposition (8.24) of every lane at once (3D; the SVD where it does not apply)
         if dim == 3:
-            # vectorised rounding (flat table index as a float), then the table look-ups
-            for t in range(cnt):
-                r0 = rt[0, t]
-                r1 = rt[1, t]
-                r2 = rt[2, t]
-                idx, d2 = _d3_round(p00 * r0 + p01 * r1 + p02 * r2, p10 * r0 + p11 * r1 + p12 * r2,
-                                    p20 * r0 + p21 * r1 + p22 * r2, thalf, tsize)
-                rt[4, t] = idx
-                rt[3, t] = d2
-            for t in range(cnt):
-                k = int(rt[4, t])
-                q = tflat[max(k, 0)]
-                qt[t] = q if (k >= 0) & (qt[t] != 0) else -1
+            polar_lanes(la, lrot, lsym, fast, act)
         else:
-            for t in range(cnt):
-                r0 = rt[0, t]
-                r1 = rt[1, t]
-                q, d2 = nearest_slot(p00 * r0 + p01 * r1 + p02 * rt[2, t], p10 * r0 + p11 * r1 + p12 * rt[2, t], 0.0,
-                                     tmat, table, dim)
-                qt[t] = q if qt[t] != 0 else -1
-                rt[3, t] = d2
-        # branch-free: candidates outside the slot set go to the spare entry nq
-        for t in range(cnt):
-            q = qt[t]
-            qq = q if q >= 0 else nq
-            d2 = rt[3, t]
-            better = d2 < bestd[qq]
-            bestd[qq] = min(d2, bestd[qq])
-            bestt[qq] = t if better else bestt[qq]
-        for q in range(nq):
-            t = bestt[q]
-            bestj[q] = nbr[i, max(t, 0)] if t >= 0 else -1
-        # 2. docking (section 8.2.5), 3. shape matching sums (8.23) over the docked members
-        lmax = mats[mt, M.DOCK_MAX]
-        gain = mats[mt, M.DOCK_GAIN]
-        loss = mats[mt, M.DOCK_LOSS]
-        frac = mats[mt, M.FRACTURE]
-        s00 = 0.0
-        s01 = 0.0
-        s02 = 0.0
-        s11 = 0.0
-        s12 = 0.0
-        s22 = 0.0
-        b00 = 0.0
-        b01 = 0.0
-        b02 = 0.0
-        b10 = 0.0
-        b11 = 0.0
-        b12 = 0.0
-        b20 = 0.0
-        b21 = 0.0
-        b22 = 0.0
-        gain_fin = gain < np.inf
-        loss_fin = loss < np.inf
-        brittle = frac < np.inf
-        uid_i = uid[i]
-        for q in range(nq):
-            j = bestj[q]
-            has = j >= 0
-            newocc = ut[max(bestt[q], 0)] if has else -1
-            dk = docked[o, q] if newocc == occ[o, q] else 0  # a new occupant starts undocked
-            occ_out[i, q] = newocc
-            if track:
-                lq = lam[i, q]
-                lup = min(lq + gain * dt, lmax) if gain_fin else lmax
-                ldown = max(lq - loss * dt, 0.0) if loss_fin else 0.0
-                lnew = lup if has else ldown
-                if lnew != lq:  # a settled rate is not rewritten (no dirty cache lines)
-                    lam[i, q] = lnew
-            else:  # an infinite gain: the rate of an assigned slot is the maximum, whatever it was
-                lnew = lmax
-            if has and dk == 0:
-                if prime:
-                    dk = 1
-                elif lnew > 0.0:
-                    if lnew == np.inf or uniform(seed, step, uid_i, q, STREAM_DOCK) < 1.0 - math.exp(-lnew * dt):
-                        dk = 1
-            if brittle and has and dk == 1:
-                t = bestt[q]
-                rr = rt[0, t] * rt[0, t] + rt[1, t] * rt[1, t] + rt[2, t] * rt[2, t]
-                rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
-                if math.sqrt(rr) > (1.0 + frac) * rest:
-                    dk = 0
-                    if track:
-                        lam[i, q] = 0.0
-            docked_out[i, q] = dk
-            dflag[q] = has & (dk == 1)
-        # the docked members, in slot order (branch-free: every slot is written, only members advance)
-        count = 0
-        for q in range(nq):
-            t = max(bestt[q], 0)
-            j = max(bestj[q], 0)
-            r0 = rt[0, t]
-            r1 = rt[1, t]
-            r2 = rt[2, t]
-            hw = max(h2 - (r0 * r0 + r1 * r1 + r2 * r2), 0.0)
-            mj[count] = j
-            mb[0, count] = r0
-            mb[1, count] = r1
-            mb[2, count] = r2
-            mb[3, count] = lv[q, 0]
-            mb[4, count] = lv[q, 1]
-            mb[5, count] = lv[q, 2]
-            mb[6, count] = c6 * hw * hw * hw
-            mb[7, count] = rt[5, t]
-            count += dflag[q]
-        for k in range(count):
-            w = mb[6, k]
-            l0 = mb[3, k]
-            l1 = mb[4, k]
-            l2 = mb[5, k]
-            wl0 = w * l0
-            wl1 = w * l1
-            wl2 = w * l2
-            s00 += wl0 * l0
-            s01 += wl0 * l1
-            s02 += wl0 * l2
-            s11 += wl1 * l1
-            s12 += wl1 * l2
-            s22 += wl2 * l2
-            b00 += w * mb[0, k] * l0
-            b01 += w * mb[0, k] * l1
-            b02 += w * mb[0, k] * l2
-            b10 += w * mb[1, k] * l0
-            b11 += w * mb[1, k] * l1
-            b12 += w * mb[1, k] * l2
-            b20 += w * mb[2, k] * l0
-            b21 += w * mb[2, k] * l1
-            b22 += w * mb[2, k] * l2
-        if dim == 2:
-            s02 = s12 = 0.0
-            b02 = b12 = b20 = b21 = 0.0
-            s22 = 1.0
-            b22 = 1.0
-        mm[0, 0] = s00
-        mm[0, 1] = s01
-        mm[0, 2] = s02
-        mm[1, 0] = s01
-        mm[1, 1] = s11
-        mm[1, 2] = s12
-        mm[2, 0] = s02
-        mm[2, 1] = s12
-        mm[2, 2] = s22
-        if count < dim:
-            _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
-            continue
-        tr = (s00 + s11 + (s22 if dim == 3 else 0.0)) / dim
-        det = _inv3(mm, minv)
-        if not det > 1e-6 * tr ** dim:
-            _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
-            continue
-        for p in range(3):
-            bp0 = b00 if p == 0 else (b10 if p == 1 else b20)
-            bp1 = b01 if p == 0 else (b11 if p == 1 else b21)
-            bp2 = b02 if p == 0 else (b12 if p == 1 else b22)
-            for q in range(3):
-                a[p, q] = bp0 * minv[0, q] + bp1 * minv[1, q] + bp2 * minv[2, q]
-        valid[i] = 1
-        s = mats[mt, M.GOAL]
-        if polar_factors(a, dim, rot, sym, mm):
-            # every singular value inside the clamps: functions of S = Rᵀ A by matrix algebra
-            trs = sym[0, 0] + sym[1, 1] + sym[2, 2] - 3.0
+            for k in range(LANES):
+                fast[k] = 0.0
+        # goal matrix (8.29-8.30), stabilised inverse for the next assignment, strain stress (8.2.2)
+        for k in range(nl):
+            i = g0 + k
+            o = order[i]
+            mt = matid[i]
+            if ok[k] == 0.0:
+                if cand[k] > 0.0:  # M near singular: the previous transformation stays
+                    _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
+                continue
+            valid[i] = 1
             for p in range(3):
                 for q in range(3):
-                    mm[p, q] = s * sym[p, q] + ((1.0 - s) if p == q else 0.0)
-            norm = _det3(mm) ** (1.0 / 3.0)
-            for p in range(3):
-                for q in range(3):
-                    g[p, q] = (rot[p, 0] * mm[0, q] + rot[p, 1] * mm[1, q] + rot[p, 2] * mm[2, q]) / norm
-            _inv3(sym, mm)  # S⁻¹
-            for p in range(3):
-                for q in range(3):
-                    amat_out[i, p, q] = a[p, q]
-                    ainv_out[i, p, q] = mm[p, 0] * rot[q, 0] + mm[p, 1] * rot[q, 1] + mm[p, 2] * rot[q, 2]
-        else:
-            svd_rot(a, dim, u, sg, v, work)
-            is0 = min(max(sg[0], SIG_LO), SIG_HI)
-            is1 = min(max(sg[1], SIG_LO), SIG_HI)
-            is2 = min(max(sg[2], SIG_LO), SIG_HI)
-            for p in range(3):
-                for q in range(3):
-                    amat_out[i, p, q] = a[p, q]
-                    ainv_out[i, p, q] = v[p, 0] * u[q, 0] / is0 + v[p, 1] * u[q, 1] / is1 + v[p, 2] * u[q, 2] / is2
-            # 4. goal matrix (8.29-8.30)
-            dg0 = s * max(sg[0], SIGMA_FLOOR) + (1.0 - s)
-            dg1 = s * max(sg[1], SIGMA_FLOOR) + (1.0 - s)
-            if dim == 3:
-                dg2 = s * max(sg[2], SIGMA_FLOOR) + (1.0 - s)
-                norm = (dg0 * dg1 * dg2) ** (1.0 / 3.0)
-                dg2 /= norm
+                    a[p, q] = la[3 * p + q, k]
+            s = mats[mt, M.GOAL]
+            if fast[k] > 0.0:
+                # every singular value inside the clamps: functions of S = Rᵀ A by matrix algebra
+                y00, y01, y02 = lsym[0, k], lsym[1, k], lsym[2, k]
+                y11, y12, y22 = lsym[4, k], lsym[5, k], lsym[8, k]
+                trs = y00 + y11 + y22 - 3.0
+                f00 = s * y00 + (1.0 - s)
+                f11 = s * y11 + (1.0 - s)
+                f22 = s * y22 + (1.0 - s)
+                f01 = s * y01
+                f02 = s * y02
+                f12 = s * y12
+                fdet = (f00 * (f11 * f22 - f12 * f12) - f01 * (f01 * f22 - f12 * f02)
+                        + f02 * (f01 * f12 - f11 * f02))
+                norm = fdet ** (1.0 / 3.0)
+                for p in range(3):
+                    q0 = lrot[3 * p, k]
+                    q1 = lrot[3 * p + 1, k]
+                    q2 = lrot[3 * p + 2, k]
+                    lg[3 * p, k] = (q0 * f00 + q1 * f01 + q2 * f02) / norm
+                    lg[3 * p + 1, k] = (q0 * f01 + q1 * f11 + q2 * f12) / norm
+                    lg[3 * p + 2, k] = (q0 * f02 + q1 * f12 + q2 * f22) / norm
+                # S⁻¹ Rᵀ
+                d00, d01, d02, d11, d12, d22, ydet = sym_adjugate(y00, y01, y02, y11, y12, y22)
+                sinv = 1.0 / ydet
+                for p in range(3):
+                    e0 = (d00 if p == 0 else (d01 if p == 1 else d02)) * sinv
+                    e1 = (d01 if p == 0 else (d11 if p == 1 else d12)) * sinv
+                    e2 = (d02 if p == 0 else (d12 if p == 1 else d22)) * sinv
+                    for q in range(3):
+                        amat_out[i, p, q] = a[p, q]
+                        ainv_out[i, p, q] = e0 * lrot[3 * q, k] + e1 * lrot[3 * q + 1, k] + e2 * lrot[3 * q + 2, k]
             else:
-                dg2 = 1.0
-                norm = (dg0 * dg1) ** 0.5
-            dg0 /= norm
-            dg1 /= norm
-            trs = (sg[0] - 1.0) + (sg[1] - 1.0)
-            if dim == 3:
-                trs += sg[2] - 1.0
+                svd_rot(a, dim, u, sg, v, work)
+                is0 = min(max(sg[0], SIG_LO), SIG_HI)
+                is1 = min(max(sg[1], SIG_LO), SIG_HI)
+                is2 = min(max(sg[2], SIG_LO), SIG_HI)
+                for p in range(3):
+                    for q in range(3):
+                        amat_out[i, p, q] = a[p, q]
+                        ainv_out[i, p, q] = v[p, 0] * u[q, 0] / is0 + v[p, 1] * u[q, 1] / is1 + v[p, 2] * u[q, 2] / is2
+                dg0 = s * max(sg[0], SIGMA_FLOOR) + (1.0 - s)
+                dg1 = s * max(sg[1], SIGMA_FLOOR) + (1.0 - s)
+                if dim == 3:
+                    dg2 = s * max(sg[2], SIGMA_FLOOR) + (1.0 - s)
+                    norm = (dg0 * dg1 * dg2) ** (1.0 / 3.0)
+                    dg2 /= norm
+                else:
+                    dg2 = 1.0
+                    norm = (dg0 * dg1) ** 0.5
+                dg0 /= norm
+                dg1 /= norm
+                trs = (sg[0] - 1.0) + (sg[1] - 1.0)
+                if dim == 3:
+                    trs += sg[2] - 1.0
+                for p in range(3):
+                    for q in range(3):
+                        lg[3 * p + q, k] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
+                        lrot[3 * p + q, k] = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
+            if keep_goal:
+                for e in range(9):
+                    gmat[i, e // 3, e % 3] = lg[e, k]
+            # strain stress: E = V_i P M⁻¹, P = 2μ (A − R) + λ tr(Rᵀ A − I) R (2D: no z row and column)
+            lmu = mats[mt, M.LMU]
+            llam = mats[mt, M.LLAM]
+            vol = m[i] / mats[mt, M.RHO0]
             for p in range(3):
+                pp0 = 2.0 * lmu * (a[p, 0] - lrot[3 * p, k]) + llam * trs * lrot[3 * p, k]
+                pp1 = 2.0 * lmu * (a[p, 1] - lrot[3 * p + 1, k]) + llam * trs * lrot[3 * p + 1, k]
+                pp2 = 2.0 * lmu * (a[p, 2] - lrot[3 * p + 2, k]) + llam * trs * lrot[3 * p + 2, k]
+                if dim == 2:
+                    pp2 = 0.0
                 for q in range(3):
-                    g[p, q] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
-                    rot[p, q] = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
-        # 5. strain stress: b = V_i P M^-1, P = 2mu (A - R) + lam tr(R^T A - I) R
-        for p in range(3):
-            for q in range(3):
-                mm[p, q] = 2.0 * lmu * (a[p, q] - rot[p, q]) + llam * trs * rot[p, q]
-        if keep_goal:
-            for p in range(3):
-                for q in range(3):
-                    gmat[i, p, q] = g[p, q]
-        if dim == 2:
-            for p in range(3):
-                mm[2, p] = 0.0
-                mm[p, 2] = 0.0
-        vol = m[i] / rho0
-        for p in range(3):
-            for q in range(3):
-                b[p, q] = vol * (mm[p, 0] * minv[0, q] + mm[p, 1] * minv[1, q] + mm[p, 2] * minv[2, q])
-                if dim == 2 and (p == 2 or q == 2):
-                    b[p, q] = 0.0
-        # 6. member forces (8.31 + strain), torque about x_i, weights for the correction
-        g00, g01, g02 = g[0, 0], g[0, 1], g[0, 2]
-        g10, g11, g12 = g[1, 0], g[1, 1], g[1, 2]
-        g20, g21, g22 = g[2, 0], g[2, 1], g[2, 2]
-        e00, e01, e02 = b[0, 0], b[0, 1], b[0, 2]
-        e10, e11, e12 = b[1, 0], b[1, 1], b[1, 2]
-        e20, e21, e22 = b[2, 0], b[2, 1], b[2, 2]
-        chalf = 0.5 * ke * m[i] / rho0
-        fs0 = 0.0
-        fs1 = 0.0
-        fs2 = 0.0
-        t0 = 0.0
-        t1 = 0.0
-        t2 = 0.0
-        wi = m[i] * w_self
-        wsum = wi
-        c0 = 0.0
-        c1 = 0.0
-        c2 = 0.0
-        i00 = 0.0
-        i01 = 0.0
-        i02 = 0.0
-        i11 = 0.0
-        i12 = 0.0
-        i22 = 0.0
-        for k in range(count):
-            r0 = mb[0, k]
-            r1 = mb[1, k]
-            r2 = mb[2, k]
-            l0 = mb[3, k]
-            l1 = mb[4, k]
-            l2 = mb[5, k]
-            w = mb[6, k]
-            mk = mb[7, k]
-            cw = chalf * mk * w
-            f0 = cw * (g00 * l0 + g01 * l1 + g02 * l2 - r0) - w * (e00 * l0 + e01 * l1 + e02 * l2)
-            f1 = cw * (g10 * l0 + g11 * l1 + g12 * l2 - r1) - w * (e10 * l0 + e11 * l1 + e12 * l2)
-            f2 = cw * (g20 * l0 + g21 * l1 + g22 * l2 - r2) - w * (e20 * l0 + e21 * l1 + e22 * l2)
-            mb[8, k] = f0
-            mb[9, k] = f1
-            mb[10, k] = f2
-            fs0 += f0
-            fs1 += f1
-            fs2 += f2
-            t0 += r1 * f2 - r2 * f1
-            t1 += r2 * f0 - r0 * f2
-            t2 += r0 * f1 - r1 * f0
-            wk = mk * w
-            wsum += wk
-            c0 += wk * r0
-            c1 += wk * r1
-            c2 += wk * r2
-            i00 += wk * (r1 * r1 + r2 * r2)
-            i11 += wk * (r0 * r0 + r2 * r2)
-            i22 += wk * (r0 * r0 + r1 * r1)
-            i01 -= wk * r0 * r1
-            i02 -= wk * r0 * r2
-            i12 -= wk * r1 * r2
-        c0 /= wsum
-        c1 /= wsum
-        c2 /= wsum
-        # parallel-axis shift to the centroid
-        cc = c0 * c0 + c1 * c1 + c2 * c2
-        i00 -= wsum * (cc - c0 * c0)
-        i11 -= wsum * (cc - c1 * c1)
-        i22 -= wsum * (cc - c2 * c2)
-        i01 += wsum * c0 * c1
-        i02 += wsum * c0 * c2
-        i12 += wsum * c1 * c2
-        if dim == 2:
-            om0 = 0.0
-            om1 = 0.0
-            om2 = -t2 / i22 if i22 > 0.0 else 0.0
-        else:
-            mm[0, 0] = i00
-            mm[1, 1] = i11
-            mm[2, 2] = i22
-            mm[0, 1] = i01
-            mm[1, 0] = i01
-            mm[0, 2] = i02
-            mm[2, 0] = i02
-            mm[1, 2] = i12
-            mm[2, 1] = i12
-            if _inv3(mm, minv) != 0.0:
-                om0 = -(minv[0, 0] * t0 + minv[0, 1] * t1 + minv[0, 2] * t2)
-                om1 = -(minv[1, 0] * t0 + minv[1, 1] * t1 + minv[1, 2] * t2)
-                om2 = -(minv[2, 0] * t0 + minv[2, 1] * t1 + minv[2, 2] * t2)
-            else:
+                    le[3 * p + q, k] = vol * (pp0 * lminv[q, k] + pp1 * lminv[3 + q, k] + pp2 * lminv[6 + q, k])
+                    if dim == 2 and (p == 2 or q == 2):
+                        le[3 * p + q, k] = 0.0
+        # -- per particle: member forces (8.31 + strain), torque about x_i, weights for the correction --
+        for k in range(LANES):  # rejected and idle lanes: a unit weight and inertia (their algebra stays finite)
+            for e in range(16):
+                tq[e, k] = 0.0
+            tq[9, k] = tq[10, k] = tq[13, k] = tq[15, k] = 1.0
+        for k in range(nl):
+            if ok[k] == 0.0:
+                continue
+            i = g0 + k
+            mt = matid[i]
+            rt = nb[k]
+            g00, g01, g02 = lg[0, k], lg[1, k], lg[2, k]
+            g10, g11, g12 = lg[3, k], lg[4, k], lg[5, k]
+            g20, g21, g22 = lg[6, k], lg[7, k], lg[8, k]
+            e00, e01, e02 = le[0, k], le[1, k], le[2, k]
+            e10, e11, e12 = le[3, k], le[4, k], le[5, k]
+            e20, e21, e22 = le[6, k], le[7, k], le[8, k]
+            chalf = 0.5 * mats[mt, M.KE] * m[i] / mats[mt, M.RHO0]
+            fs0 = 0.0
+            fs1 = 0.0
+            fs2 = 0.0
+            t0 = 0.0
+            t1 = 0.0
+            t2 = 0.0
+            wi = m[i] * w_self
+            wsum = wi
+            c0 = 0.0
+            c1 = 0.0
+            c2 = 0.0
+            i00 = 0.0
+            i01 = 0.0
+            i02 = 0.0
+            i11 = 0.0
+            i12 = 0.0
+            i22 = 0.0
+            for t in range(lpad[k]):
+                y0 = rt[0, t]
+                y1 = rt[1, t]
+                y2 = rt[2, t]
+                l0 = rt[3, t]
+                l1 = rt[4, t]
+                l2 = rt[5, t]
+                w = rt[6, t]
+                mk = rt[7, t]
+                cw = chalf * mk * w
+                f0 = cw * (g00 * l0 + g01 * l1 + g02 * l2 - y0) - w * (e00 * l0 + e01 * l1 + e02 * l2)
+                f1 = cw * (g10 * l0 + g11 * l1 + g12 * l2 - y1) - w * (e10 * l0 + e11 * l1 + e12 * l2)
+                f2 = cw * (g20 * l0 + g21 * l1 + g22 * l2 - y2) - w * (e20 * l0 + e21 * l1 + e22 * l2)
+                rt[8, t] = f0
+                rt[9, t] = f1
+                rt[10, t] = f2
+                fs0 += f0
+                fs1 += f1
+                fs2 += f2
+                t0 += y1 * f2 - y2 * f1
+                t1 += y2 * f0 - y0 * f2
+                t2 += y0 * f1 - y1 * f0
+                wk = mk * w
+                wsum += wk
+                c0 += wk * y0
+                c1 += wk * y1
+                c2 += wk * y2
+                i00 += wk * (y1 * y1 + y2 * y2)
+                i11 += wk * (y0 * y0 + y2 * y2)
+                i22 += wk * (y0 * y0 + y1 * y1)
+                i01 -= wk * y0 * y1
+                i02 -= wk * y0 * y2
+                i12 -= wk * y1 * y2
+            lane = (fs0, fs1, fs2, t0, t1, t2, c0, c1, c2, wsum, i00, i01, i02, i11, i12, i22)
+            for e in range(16):
+                tq[e, k] = lane[e]
+        # -- per lane (vectorised): centroid, inertia about it, ω = −I⁻¹ τ --
+        for k in range(LANES):
+            wsum = tq[9, k]
+            c0 = tq[6, k] / wsum
+            c1 = tq[7, k] / wsum
+            c2 = tq[8, k] / wsum
+            cc = c0 * c0 + c1 * c1 + c2 * c2
+            i00 = tq[10, k] - wsum * (cc - c0 * c0)
+            i11 = tq[13, k] - wsum * (cc - c1 * c1)
+            i22 = tq[15, k] - wsum * (cc - c2 * c2)
+            i01 = tq[11, k] + wsum * c0 * c1
+            i02 = tq[12, k] + wsum * c0 * c2
+            i12 = tq[14, k] + wsum * c1 * c2
+            t0 = tq[3, k]
+            t1 = tq[4, k]
+            t2 = tq[5, k]
+            if dim == 2:
                 om0 = 0.0
                 om1 = 0.0
-                om2 = 0.0
-        # own share: -sum of member forces + correction at y = -c
-        fown[i, 0] = -fs0 + wi * (om1 * (-c2) - om2 * (-c1))
-        fown[i, 1] = -fs1 + wi * (om2 * (-c0) - om0 * (-c2))
-        fown[i, 2] = -fs2 + wi * (om0 * (-c1) - om1 * (-c0))
-        # the members' forces + torque correction at y = r - c, into the block's window
-        for k in range(count):
-            y0 = mb[0, k] - c0
-            y1 = mb[1, k] - c1
-            y2 = mb[2, k] - c2
-            wk = mb[7, k] * mb[6, k]
-            row = mj[k] - lo_b
-            win[row, 0] += mb[8, k] + wk * (om1 * y2 - om2 * y1)
-            win[row, 1] += mb[9, k] + wk * (om2 * y0 - om0 * y2)
-            win[row, 2] += mb[10, k] + wk * (om0 * y1 - om1 * y0)
+                om2 = -t2 / i22 if i22 > 0.0 else 0.0
+            else:
+                d00, d01, d02, d11, d12, d22, det = sym_adjugate(i00, i01, i02, i11, i12, i22)
+                inv = -1.0 / det if det != 0.0 else 0.0
+                om0 = (d00 * t0 + d01 * t1 + d02 * t2) * inv
+                om1 = (d01 * t0 + d11 * t1 + d12 * t2) * inv
+                om2 = (d02 * t0 + d12 * t1 + d22 * t2) * inv
+            lane = (om0, om1, om2, c0, c1, c2)  # ω over the torque, the centroid over its weighted sum
+            for e in range(6):
+                tq[3 + e, k] = lane[e]
+        # -- per particle: own share, members' forces + torque correction into the block's window --
+        for k in range(nl):
+            if ok[k] == 0.0:
+                continue
+            i = g0 + k
+            rt = nb[k]
+            om0 = tq[3, k]
+            om1 = tq[4, k]
+            om2 = tq[5, k]
+            c0 = tq[6, k]
+            c1 = tq[7, k]
+            c2 = tq[8, k]
+            wi = m[i] * w_self
+            fown[i, 0] = -tq[0, k] + wi * (om1 * (-c2) - om2 * (-c1))
+            fown[i, 1] = -tq[1, k] + wi * (om2 * (-c0) - om0 * (-c2))
+            fown[i, 2] = -tq[2, k] + wi * (om0 * (-c1) - om1 * (-c0))
+            for t in range(lpad[k]):
+                y0 = rt[0, t] - c0
+                y1 = rt[1, t] - c1
+                y2 = rt[2, t] - c2
+                wk = rt[7, t] * rt[6, t]
+                rt[8, t] += wk * (om1 * y2 - om2 * y1)
+                rt[9, t] += wk * (om2 * y0 - om0 * y2)
+                rt[10, t] += wk * (om0 * y1 - om1 * y0)
+            for t in range(min(nnbr[i], cap)):
+                row = nbr[i, t] - lo_b
+                win[row, 0] += rt[8, t]
+                win[row, 1] += rt[9, t]
+                win[row, 2] += rt[10, t]
+
+
+@njit(**PLAIN)
+def _dock(i, o, rt, row, uid, bestt, memb, occ, docked, lam, occ_out, docked_out, mat, slot_vecs, uid_i, spacing, seed,
+          step, dt, prime, track):
+    """Docking (section 8.2.5) of particle ``i``'s slots with finite rates or fracture: occupants, docking
+    flags and rates (row ``i``), members flagged in ``memb`` by row position."""
+    nq = slot_vecs.shape[0]
+    lmax = mat[M.DOCK_MAX]
+    gain = mat[M.DOCK_GAIN]
+    loss = mat[M.DOCK_LOSS]
+    frac = mat[M.FRACTURE]
+    gain_fin = gain < np.inf
+    loss_fin = loss < np.inf
+    brittle = frac < np.inf
+    for q in range(nq):
+        t = bestt[q]
+        has = t >= 0
+        newocc = uid[row[max(t, 0)]] if has else -1
+        dk = docked[o, q] if newocc == occ[o, q] else 0  # a new occupant starts undocked
+        occ_out[i, q] = newocc
+        if track:
+            lq = lam[i, q]
+            lup = min(lq + gain * dt, lmax) if gain_fin else lmax
+            ldown = max(lq - loss * dt, 0.0) if loss_fin else 0.0
+            lnew = lup if has else ldown
+            if lnew != lq:  # a settled rate is not rewritten (no dirty cache lines)
+                lam[i, q] = lnew
+        else:  # an infinite gain: the rate of an assigned slot is the maximum, whatever it was
+            lnew = lmax
+        if has and dk == 0:
+            if prime:
+                dk = 1
+            elif lnew > 0.0:
+                if lnew == np.inf or uniform(seed, step, uid_i, q, STREAM_DOCK) < 1.0 - math.exp(-lnew * dt):
+                    dk = 1
+        if brittle and has and dk == 1:
+            rr = rt[0, t] * rt[0, t] + rt[1, t] * rt[1, t] + rt[2, t] * rt[2, t]
+            rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
+            if math.sqrt(rr) > (1.0 + frac) * rest:
+                dk = 0
+                if track:
+                    lam[i, q] = 0.0
+        docked_out[i, q] = dk
+        if has and dk == 1:
+            memb[t] = 1.0
 
 
 @njit(cache=True, parallel=True)
@@ -1120,16 +649,18 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     direct + strain force and the exact torque correction ``w_j ω_i × (r_ij − c_i)``. The
     total elastic force on ``j`` is ``fown[j] + fel[j]``.
 
-    Per particle ``i`` (all in registers and small per-block buffers): one pass over the
-    neighbours assigns slots (8.21) with the branch-free D3 rounding (in 3D the map
-    ``T A⁻¹/d`` is formed once; the slot conflicts are resolved in a second, short pass); one
-    pass over the slots docks and keeps the members, one over the members sums
-    ``M = Σ w l lᵀ`` and ``B = Σ w r lᵀ`` (8.23, vectorised); ``A = B M⁻¹`` is
-    split by the polar decomposition (:func:`polar_factors`; the SVD :func:`svd_rot` when
-    a singular value is clamped, in 2D and for inverted lattices); the member forces and
-    torque-correction sums run over contiguous member buffers (vectorised). The forces on
-    the members are added into the block's accumulator window (race-free: one window per
-    block), then summed per particle.
+    Per particle ``i`` (small per-block buffers, columns by neighbour row): one vectorised loop
+    over the neighbours rounds them to the lattice (8.21; in 3D the map ``T A⁻¹/d`` is formed once,
+    :func:`unmesh.sph._slot_kernels._d3_round_k`) and gives their weights and the lattice offsets of
+    their points; a short scalar loop resolves the slot conflicts, one over the slots docks; the
+    members (docked winners) weigh ``W``, the other neighbours 0, in the vectorised sums ``M = Σ W l lᵀ``
+    and ``B = Σ W r lᵀ`` (8.23) and in the member forces. The 3×3 algebra runs per group of
+    :data:`LANES` particles: ``A = B M⁻¹``, its polar decomposition
+    (:func:`unmesh.sph._polar_kernels.polar_lanes`; the SVD where a singular value is clamped, in 2D
+    and for inverted lattices), the goal and strain matrices, and the ``ω`` of the torque
+    correction. The forces on the members are added into the block's accumulator window, then
+    summed per particle. The sums run in neighbour-row order (not slot order): results equal the
+    numpy reference to round-off.
     """
     n = x.shape[0]
     nq = slot_vecs.shape[0]
@@ -1144,6 +675,12 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
         for p in range(3):
             lv[q, p] = slot_vecs[q, p] * spacing
     tm = tmat if dim == 3 else _EYE
+    # D3 coordinates -> lattice offsets (length units): d T⁻¹ (3D)
+    dti = np.empty((3, 3))
+    _inv3(tm, dti)
+    for p in range(3):
+        for q in range(3):
+            dti[p, q] *= spacing
     # accumulator windows: block b adds member forces into rows lo[b]..hi[b]
     lo = np.empty(nblk, np.int64)
     hi = np.empty(nblk, np.int64)
@@ -1167,7 +704,7 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     onebody = others == 0
     for blk in prange(nblk):
         _lattice_block(blk * n // nblk, (blk + 1) * n // nblk, lo[blk], win[blk], x, m, phase, obj, matid, uid, mats,
-                       nbr, nnbr, h, dim, spacing, slot_vecs, lv, c6, w_self, tm, tmat, table, order, amat,
+                       nbr, nnbr, h, dim, spacing, slot_vecs, lv, dti, c6, w_self, tm, tmat, table, order, amat,
                        ainv, occ, docked, lam, seed, step, dt, prime, onebody, amat_out, ainv_out, occ_out, docked_out,
                        gmat, fown, valid)
     # the windows summed in block order (deterministic, whatever the thread count), in parallel over rows

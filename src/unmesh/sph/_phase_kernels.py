@@ -10,9 +10,9 @@ import math
 from numba import njit, prange
 
 from unmesh.sph import materials as M
-from unmesh.sph._elastic_kernels import nearest_slot
 from unmesh.sph._kernels import kernel_w
 from unmesh.sph._rng import STREAM_FREEZE, STREAM_MELT, uniform
+from unmesh.sph._slot_kernels import nearest_slot
 
 FLUID = 0
 SOLID = 1

@@ -281,11 +281,17 @@ def shape_matching(r: Any, l: Any, w: Any, dim: int) -> tuple[np.ndarray, np.nda
     ll = as_array(l, "l", (None, 3), length=len(rr))
     ww = as_array(w, "w", (None,), length=len(rr))
     n = 2 if dim == 2 else 3
-    m = np.eye(3)
+    m = _lattice_moment(ll, ww, n)
     b = np.eye(3)
-    m[:n, :n] = (ww[:, None, None] * ll[:, :n, None] * ll[:, None, :n]).sum(axis=0)
     b[:n, :n] = (ww[:, None, None] * rr[:, :n, None] * ll[:, None, :n]).sum(axis=0)
     return b @ np.linalg.inv(m), m
+
+
+def _lattice_moment(l: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
+    """``M = Σ W l lᵀ`` of eq. (8.23) over the first ``n`` coordinates (the rest of the 3×3 identity)."""
+    m = np.eye(3)
+    m[:n, :n] = (w[:, None, None] * l[:, :n, None] * l[:, None, :n]).sum(axis=0)
+    return m
 
 
 def displacement_gradient(r: Any, g: Any, w: Any, dim: int) -> np.ndarray:
@@ -423,10 +429,11 @@ def neighbourhood_forces(xi: Any, r: Any, l: Any, w: Any, w_self: float, mi: flo
     fj = np.zeros_like(rr)
     if len(rr) < n:
         return np.zeros(3), fj
-    a, m = shape_matching(rr, ll, ww, dim)
+    m = _lattice_moment(ll, ww, n)
     scale = np.trace(m[:n, :n]) / n
-    if not np.linalg.det(m[:n, :n]) > 1e-6 * scale**n:
+    if not np.linalg.det(m[:n, :n]) > 1e-6 * scale**n:  # e.g. a flat neighbourhood in 3D: no A exists
         return np.zeros(3), fj
+    a, m = shape_matching(rr, ll, ww, dim)
     u, sig, v = rotation_svd(a, dim)
     rot = u @ v.T
     if params.stiffness > 0.0:

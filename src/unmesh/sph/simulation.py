@@ -47,6 +47,7 @@ from unmesh.sim import Simulation
 from unmesh.sph import _elastic_kernels as EK
 from unmesh.sph import _kernels as K
 from unmesh.sph import _phase_kernels as PK
+from unmesh.sph import _slot_kernels as SK
 from unmesh.sph import materials as MT
 from unmesh.sph.boundary import BoundaryParticles, Plane, corner_pairs, corner_tables, wall_friction_tables, wall_tables
 from unmesh.sph.materials import Material, material_table
@@ -295,7 +296,7 @@ class SPHSimulation(Simulation):
         # lattice of the elastic model
         self.slot_vecs, self.slot_coords, self.slot_table = lattice_slots(self.dim, config.smoothing)
         self.bmat = lattice_basis(self.dim)
-        self.tmat = EK.d3_transform(self.bmat) if self.dim == 3 else np.eye(3)
+        self.tmat = SK.d3_transform(self.bmat) if self.dim == 3 else np.eye(3)
         self.frame = lattice_frame(self.dim)
         if config.gradient_correction:
             self.grad_scale = 1.0 / gradient_moment(self.dim, config.smoothing, config.lattice)
