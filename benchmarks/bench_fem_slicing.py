@@ -50,7 +50,7 @@ def closed_bunny(path: Path, resolution: int) -> object:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--resolution", type=int, default=24, help="blob surface resolution (default 24: ~24k nodes)")
+    ap.add_argument("--resolution", type=int, default=24, help="blob surface resolution (default 24: 11,132 nodes)")
     ap.add_argument("--frames", type=int, default=30, help="frames to simulate (default 30)")
     ap.add_argument("--bunny", type=Path, default=None, help="use this (Stanford bunny) OBJ instead of the blob")
     ap.add_argument("--bunny-resolution", type=int, default=76,
