@@ -9,7 +9,6 @@ from hypothesis import strategies as st
 
 from tests.sph.sph_helpers import LatticeState, lattice_block
 from unmesh.sph import _elastic_kernels as EK
-from unmesh.sph import _neighbour_kernels as NK
 from unmesh.sph.elastic import (
     ElasticParams,
     assign_slots,
@@ -331,33 +330,6 @@ def test_too_few_neighbours_give_no_forces():
     l = np.array([[0.1, 0.0, 0.0], [-0.1, 0.0, 0.0]])
     fi, fj = neighbourhood_forces(np.zeros(3), 1.1 * l, l, np.ones(2), 1.0, 1.0, np.ones(2), _params(3))
     assert not np.any(fi) and not np.any(fj)
-
-
-@pytest.mark.parametrize("blocks", [1, 3, 64])
-def test_reverse_positions_match_numpy(blocks):
-    """``rev[i, t]`` is the position of ``i`` in the list of ``nbr[i, t]`` (the transpose the force pass uses)."""
-    from tests.sph.sph_helpers import neighbour_table
-
-    rng = np.random.default_rng(3)
-    x = lattice_block(3, 0.1, 0.6)
-    x = x + rng.normal(0.0, 0.01, x.shape)
-    nbr, nn = neighbour_table(x, 0.2, 3)
-    rev = np.full(nbr.shape, -1, np.int32)
-    assert NK.reverse_positions(nbr, nn, blocks, rev) == 0
-    for i in range(len(x)):
-        for t in range(nn[i]):
-            j = nbr[i, t]
-            assert rev[i, t] == int(np.flatnonzero(nbr[j, :nn[j]] == i)[0])
-    # an asymmetric list (one entry dropped from row 0) is counted, the others still found
-    k = nbr[0, 0]
-    nbr[0, :nn[0] - 1] = nbr[0, 1:nn[0]]
-    nn[0] -= 1
-    rev[:] = -1
-    assert NK.reverse_positions(nbr, nn, blocks, rev) == 1
-    pos = np.flatnonzero(nbr[k, :nn[k]] == 0)[0]
-    assert rev[k, pos] == -1
-    used = np.arange(nbr.shape[1])[None, :] < nn[:, None]
-    assert np.count_nonzero(rev[used] < 0) == 1
 
 
 def test_permute_rows_matches_fancy_indexing():
