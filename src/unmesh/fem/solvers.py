@@ -104,7 +104,8 @@ frames 1 and 10 solved to 10⁻⁶ from the warm start):
   (a local set of 14% of the nodes) instead of 1.64 + 0.48 s: not kept. What the thread
   does holding the GIL holds up the main thread: scipy's SuperLU takes it for each
   allocation, ``pymetis`` for the whole ordering (160 ms: the main thread's Python loop
-  ran at 11% of its speed), scipy's conversions often (in the thread beside a busy main
+  ran at 11% of its speed; METIS is now called through ctypes, which releases it: 57%,
+  :func:`nested_dissection`), scipy's conversions often (in the thread beside a busy main
   thread block→CSR took 0.38 s, 0.02 s alone, and ``A[p][:, p]`` 0.85 s, load 2.7):
   the permuted, scaled matrix is built by a kernel that releases
   the GIL (:meth:`unmesh.fem.factor.Factorization.from_blocks`), and the main thread's
