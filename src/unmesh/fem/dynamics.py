@@ -501,6 +501,7 @@ class Dynamics:
         if lag.collect(self.steps):  # a background refactorisation due at this step
             info.extra["installed"] = True
         need = lag.needs_factor(coeffs, self.n_solid_pieces)
+        start: list[Any] = []  # the background refactorisation, started once the first preconditioner is made
         if need or lag.wants_background(coeffs, self.n_solid_pieces):
             # the step's warped matrix with the last step's contact set is factorised, and rotated per
             # piece from the positions it was taken at (module docstring of solvers)
@@ -510,8 +511,12 @@ class Dynamics:
                 lag.factor(pat.indptr, pat.indices, A, coeffs, self.n_solid_pieces, kind0, normal, ref)
                 info.extra["factorized"] = True
             else:
-                lag.start_background(pat.indptr, pat.indices, A, coeffs, self.steps, self.n_solid_pieces, kind0,
-                                     normal, ref)
+                # after the first local factorisation of the step: its METIS ordering (a few ms) would
+                # otherwise wait for the background thread's ordering of the whole mesh (~150 ms; METIS
+                # calls are serialised, unmesh.fem.factor.nested_dissection). The preconditioner made
+                # first does not depend on the pending factorisation
+                start.append((pat.indptr, pat.indices, A, coeffs, self.steps, self.n_solid_pieces, kind0, normal,
+                              ref))
         # one rotation per connected piece (not per node: a rotation varying from node to node
         # does not keep the translations in the near-null space, measured 3x the iterations)
         ref = self.mesh.points if lag.ref is None else lag.ref
@@ -524,6 +529,8 @@ class Dynamics:
             key = kind.tobytes()
             if key not in made:
                 made[key] = self.lagged.preconditioner(Q, pat.indptr, pat.indices, A, kind, normal)
+            if start:
+                lag.start_background(*start.pop())
             return made[key]
 
         return prec
