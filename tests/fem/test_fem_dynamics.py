@@ -624,3 +624,26 @@ def test_steps_with_cuts_are_the_same_on_one_and_on_two_threads(monkeypatch):
         numba.set_num_threads(threads)
     for a, b in zip(one, two, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_reserved_topology_buffers_change_nothing():
+    """The stiffness buffers reserved for cuts (touched before the first step) give the same steps."""
+    from unmesh.fem.events import BladeEvent
+    from unmesh.fem.simulation import FemSimulation
+
+    path = np.array([[[0.45, 1.2, -0.1], [0.45, 1.2, 1.1]], [[0.55, -0.2, -0.1], [0.55, -0.2, 1.1]]])
+
+    def run(reserve: bool) -> list[np.ndarray]:
+        dyn = Dynamics(hex_grid((5, 4, 3), size=(1.0, 1.0, 1.0), origin=(0, 0.02, 0)), 2e3, 0.3, 1.0,
+                       ground=Ground(), solver="lu-pcg")
+        if not reserve:
+            dyn.reserve_topology_buffers = lambda: None
+        sim = FemSimulation(dyn, 0.02, [BladeEvent(0.0, 0.16, path)])
+        assert (dyn._kspare is not None) == reserve
+        for _ in range(10):
+            sim.step()
+        assert dyn.mesh.n_elements > 60  # the blade cut
+        return [dyn.u, dyn.v, dyn.kstiff.data]
+
+    for a, b in zip(run(True), run(False), strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -213,3 +213,35 @@ def test_ill_conditioned_systems_fall_back_to_double_precision(rng):
         _, its, res = pcg(p.indptr, p.indices, A, rng.normal(size=(n, 3)), np.zeros((n, 3)), kind, normal,
                           lag.preconditioner(Q), 1e-8, 50)
         assert res <= 1e-8 and its <= 4
+
+
+def test_nested_dissection_through_ctypes_equals_pymetis():
+    """METIS_NodeND called through ctypes (GIL released) gives pymetis' order, bit for bit."""
+    pytest.importorskip("pymetis")
+    from unmesh.fem.factor import _metis_node_nd, nested_dissection
+
+    sim = Dynamics(voronoi_foam(12, seed=5), 2e3, 0.3, 1.0)
+    p = sim.pattern
+    fast = nested_dissection(p.indptr, p.indices)
+    ref = nested_dissection(p.indptr, p.indices, fast=False)
+    assert _metis_node_nd() is not None  # pymetis' build: 64-bit idx_t
+    np.testing.assert_array_equal(fast, ref)
+    assert sorted(fast.tolist()) == list(range(len(p.indptr) - 1))
+
+
+def test_local_orders_are_remembered(monkeypatch):
+    """A local set's pattern seen before gets its METIS order again without calling METIS."""
+    pytest.importorskip("pymetis")
+    import unmesh.fem.factor as FA
+
+    sim = Dynamics(voronoi_foam(12, seed=5), 2e3, 0.3, 1.0)
+    p = sim.pattern
+    monkeypatch.setattr(FA, "_LOCAL_ORDERS", type(FA._LOCAL_ORDERS)())
+    first = FA._local_order(p.indptr, p.indices)
+    np.testing.assert_array_equal(first, FA.nested_dissection(p.indptr, p.indices))
+
+    def fail(*args, **kwargs):
+        raise AssertionError("METIS called for a remembered pattern")
+
+    monkeypatch.setattr(FA, "nested_dissection", fail)
+    np.testing.assert_array_equal(FA._local_order(p.indptr, p.indices), first)

@@ -501,6 +501,7 @@ class Dynamics:
         if lag.collect(self.steps):  # a background refactorisation due at this step
             info.extra["installed"] = True
         need = lag.needs_factor(coeffs, self.n_solid_pieces)
+        start: list[Any] = []  # the background refactorisation, started once the first preconditioner is made
         if need or lag.wants_background(coeffs, self.n_solid_pieces):
             # the step's warped matrix with the last step's contact set is factorised, and rotated per
             # piece from the positions it was taken at (module docstring of solvers)
@@ -510,8 +511,12 @@ class Dynamics:
                 lag.factor(pat.indptr, pat.indices, A, coeffs, self.n_solid_pieces, kind0, normal, ref)
                 info.extra["factorized"] = True
             else:
-                lag.start_background(pat.indptr, pat.indices, A, coeffs, self.steps, self.n_solid_pieces, kind0,
-                                     normal, ref)
+                # after the first local factorisation of the step: its METIS ordering (a few ms) would
+                # otherwise wait for the background thread's ordering of the whole mesh (~150 ms; METIS
+                # calls are serialised, unmesh.fem.factor.nested_dissection). The preconditioner made
+                # first does not depend on the pending factorisation
+                start.append((pat.indptr, pat.indices, A, coeffs, self.steps, self.n_solid_pieces, kind0, normal,
+                              ref))
         # one rotation per connected piece (not per node: a rotation varying from node to node
         # does not keep the translations in the near-null space, measured 3x the iterations)
         ref = self.mesh.points if lag.ref is None else lag.ref
@@ -524,11 +529,38 @@ class Dynamics:
             key = kind.tobytes()
             if key not in made:
                 made[key] = self.lagged.preconditioner(Q, pat.indptr, pat.indices, A, kind, normal)
+            if start:
+                lag.start_background(*start.pop())
             return made[key]
 
         return prec
 
     # -- topology changes -------------------------------------------------------------------
+    def reserve_topology_buffers(self) -> None:
+        """Allocate (and touch) the buffers the stiffness data of the next topology changes go into.
+
+        The merged stiffness data of a topology change (~100 MB on the bunny-slicing benchmark)
+        is written into the buffer of the data two changes back (:meth:`_apply_pending`), 10 %
+        longer than needed; the first two changes found none (no spare, then the setup's data,
+        exactly as long as needed) and took fresh memory. On the benchmark's virtual machine
+        memory the process had not used before cost ~6 ms per MB at its first touch (0.5 and
+        0.7 s in the re-integration of the first two cutting frames). Called by a simulation
+        with scripted cuts (:class:`unmesh.fem.simulation.FemSimulation`) before its first step;
+        the data is unchanged, only moved.
+        """
+        ks = self.kstiff
+        size = len(ks.data)
+        cap = size + size // 10
+        base = _buffer(ks.data)
+        if base is None or len(base) < cap:
+            buf = np.empty(cap)
+            buf[:size] = ks.data
+            buf[size:] = 0.0
+            self.kstiff = ElementStiffness(ks.node_offsets, ks.nodes, ks.offsets, buf[:size])
+        if self._kspare is None or len(self._kspare) < cap:
+            self._kspare = np.empty(cap)
+            self._kspare.fill(0.0)
+
     def change_topology(self, mesh: PolyMesh, node_weights: sp.sparray, element_parent: np.ndarray,
                         changed: np.ndarray) -> None:
         """Switch to a new mesh after cutting; re-integration is deferred to the next :meth:`step`.

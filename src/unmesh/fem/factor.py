@@ -28,7 +28,9 @@ True
 
 from __future__ import annotations
 
+import ctypes
 import threading
+from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
@@ -41,8 +43,15 @@ from unmesh.sim.threads import background_work
 __all__ = ["Factorization", "Job", "block_csr", "nested_dissection"]
 
 
-def nested_dissection(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
+def nested_dissection(indptr: np.ndarray, indices: np.ndarray, *, fast: bool = True) -> np.ndarray | None:
     """METIS nested-dissection order (n,) of the nodes of a block pattern, or None without ``pymetis``.
+
+    ``fast``: METIS' ``METIS_NodeND`` of ``pymetis``' library called through ctypes, which
+    releases the GIL for the call (the same order as ``pymetis.nested_dissection``,
+    ``fast=False``, which holds the GIL throughout: 160-200 ms on the bunny benchmark,
+    in which a background refactorisation stopped the main thread). Calls are serialised
+    by a lock (the main thread orders local sets while the background thread may order
+    the whole mesh).
 
     Example
     -------
@@ -58,13 +67,53 @@ def nested_dissection(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | N
     n = len(indptr) - 1
     rows = np.repeat(np.arange(n), np.diff(indptr))
     off = indices != rows
-    xadj = np.r_[0, np.cumsum(np.bincount(rows[off], minlength=n))].astype(np.int32)
-    adjncy = indices[off].astype(np.int32)
+    xadj = np.r_[0, np.cumsum(np.bincount(rows[off], minlength=n))]
+    adjncy = indices[off]
+    node_nd = _metis_node_nd() if fast else None
+    if node_nd is not None:
+        P = ctypes.c_void_p
+        nv = np.array([n], np.int64)
+        xadj = np.ascontiguousarray(xadj, dtype=np.int64)
+        adjncy = np.ascontiguousarray(adjncy, dtype=np.int64)
+        perm, iperm = np.empty(n, np.int64), np.empty(n, np.int64)
+        with _METIS_LOCK:
+            status = node_nd(P(nv.ctypes.data), P(xadj.ctypes.data), P(adjncy.ctypes.data), None, None,
+                             P(perm.ctypes.data), P(iperm.ctypes.data))
+        if status == 1:  # METIS_OK
+            return perm
+    xadj, adjncy = xadj.astype(np.int32), adjncy.astype(np.int32)
     if hasattr(pymetis, "CSRAdjacency"):
         perm, _ = pymetis.nested_dissection(adjacency=pymetis.CSRAdjacency(xadj, adjncy))
     else:  # pymetis < 2025
         perm, _ = pymetis.nested_dissection(xadj=xadj, adjncy=adjncy)
     return np.asarray(perm, dtype=np.int64)
+
+
+_METIS_LOCK = threading.Lock()
+_NODE_ND: list[Any] = []  # [METIS_NodeND or None], once looked up
+
+
+def _metis_node_nd() -> Any:
+    """``METIS_NodeND`` of ``pymetis``' extension module through ctypes, or None.
+
+    Only with 64-bit ``idx_t`` (pymetis' build), told by ``METIS_SetDefaultOptions``: it sets
+    its ``METIS_NOPTIONS`` (40) options to -1, i.e. 40 int64 words, or 20 if ``idx_t`` is 32-bit.
+    """
+    if not _NODE_ND:
+        fn = None
+        try:
+            from pymetis import _internal
+
+            lib = ctypes.CDLL(_internal.__file__)
+            opts = np.zeros(80, np.int64)
+            lib.METIS_SetDefaultOptions(ctypes.c_void_p(opts.ctypes.data))
+            if np.all(opts[:40] == -1) and np.all(opts[40:] == 0):
+                fn = lib.METIS_NodeND
+                fn.restype = ctypes.c_int
+        except (ImportError, OSError, AttributeError):
+            fn = None
+        _NODE_ND.append(fn)
+    return _NODE_ND[0]
 
 
 class Factorization:
@@ -217,9 +266,35 @@ def _local_factor(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, n
     if kt.any():  # the filter on the blocks (two sparse products cost a fifth of a local factorisation)
         sub = SK.filter_blocks(sub_ptr, sub_idx, sub, kt, np.ascontiguousarray(normal, dtype=np.float64))
     L = block_csr(sub_ptr, sub_idx, sub)
-    perm = nested_dissection(sub_ptr, sub_idx) if m >= LOCAL_ND_NODES else None
+    perm = _local_order(sub_ptr, sub_idx) if m >= LOCAL_ND_NODES else None
     dof = None if perm is None else (3 * perm[:, None] + np.arange(3)).ravel()
     return nodes, Factorization(L, dof)
+
+
+#: Local orders kept by :func:`_local_order` (the last ones made).
+LOCAL_ORDERS = 8
+_LOCAL_ORDERS: OrderedDict[bytes, np.ndarray] = OrderedDict()
+
+
+def _local_order(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray | None:
+    """:func:`nested_dissection` of a local set's pattern, remembered for the next :data:`LOCAL_ORDERS` patterns.
+
+    The local sets of the contact region repeat from step to step (the same contact set on
+    the same mesh: the bunny benchmark's 1,313 nodes in frames 1-12); METIS is deterministic,
+    so a remembered order is the order it would make again, without waiting for the
+    background thread's ordering of the whole mesh (METIS calls are serialised).
+    """
+    key = np.asarray(indptr, np.int64).tobytes() + np.asarray(indices, np.int64).tobytes()
+    perm = _LOCAL_ORDERS.get(key)
+    if perm is not None:
+        _LOCAL_ORDERS.move_to_end(key)
+        return perm
+    perm = nested_dissection(indptr, indices)
+    if perm is not None:
+        _LOCAL_ORDERS[key] = perm
+        while len(_LOCAL_ORDERS) > LOCAL_ORDERS:
+            _LOCAL_ORDERS.popitem(last=False)
+    return perm
 
 
 def _sub_block_array(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray, nodes: np.ndarray, *,

@@ -81,6 +81,8 @@ class FemSimulation(Simulation):
         self._acc = {"solve_seconds": 0.0, "reintegration_seconds": 0.0, "cut_seconds": 0.0, "cg_iterations": 0,
                      "slivers_removed": 0, "cuts_missed": 0, "cuts_skipped": 0}
         self._size = float(np.ptp(dynamics.mesh.points, axis=0).max())
+        if self.events:
+            dynamics.reserve_topology_buffers()
 
     # -- stepping --------------------------------------------------------------------------
     def _cut(self, t0: float, t1: float) -> None:

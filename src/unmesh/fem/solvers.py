@@ -104,7 +104,8 @@ frames 1 and 10 solved to 10⁻⁶ from the warm start):
   (a local set of 14% of the nodes) instead of 1.64 + 0.48 s: not kept. What the thread
   does holding the GIL holds up the main thread: scipy's SuperLU takes it for each
   allocation, ``pymetis`` for the whole ordering (160 ms: the main thread's Python loop
-  ran at 11% of its speed), scipy's conversions often (in the thread beside a busy main
+  ran at 11% of its speed; METIS is now called through ctypes, which releases it: 57%,
+  :func:`nested_dissection`), scipy's conversions often (in the thread beside a busy main
   thread block→CSR took 0.38 s, 0.02 s alone, and ``A[p][:, p]`` 0.85 s, load 2.7):
   the permuted, scaled matrix is built by a kernel that releases
   the GIL (:meth:`unmesh.fem.factor.Factorization.from_blocks`), and the main thread's
@@ -150,6 +151,27 @@ saves the main thread ~0.1 s per frame, which shows in the wall time only when t
 core is free; on this shared machine it never was, and the wall times were equal within the
 noise (foreground faster in 4 of 5 pairs). It stays on (``background=True``), the goal being
 a quiet machine; ``background=False`` spends less CPU in all (1.01-1.16 against 1.17-1.26 s).
+Later, on the machine otherwise idle (load 0.6-1.7): the first two cuts took fresh memory for
+the stiffness data (~6 ms per MB at first touch on the benchmark's virtual machine; now
+reserved before the first step, :meth:`unmesh.fem.dynamics.Dynamics.reserve_topology_buffers`),
+and each background start stopped the main thread for 90-140 ms (pymetis held the GIL for
+the whole mesh's ordering; through ctypes, the step's first local ordering still queued
+behind it on the METIS lock): METIS is called through ctypes, the background job starts
+after the step's first local factorisation, and local orders are remembered
+(:func:`unmesh.fem.factor._local_order`). Main thread per frame over the 30 frames, two
+probe pairs: re-integration 114-119 → 73-77 ms, preconditioner set-up 72-76 → 50-52 ms;
+wall per frame in five interleaved pairs 0.75 / 0.76 / 0.73 / 0.80 / 0.85 → 0.73 / 0.73 /
+0.69 / 0.86 / 0.75 s (the machine's speed drifting by 25% within minutes: the same code ran
+at 0.98 s earlier); 8 iterations and 8 factorisations either way, the displacements after
+30 frames the same bit for bit. Tried without gain: METIS options (``nseps`` 3, ``ufactor``
+100, ``niter`` 20, ``ccorder``: fill 25.5-25.8M against 25.8M, no pivoting either way, L and
+U of equal size; solves within the noise), 1 or 2 BLAS threads for SuperLU's solve (28-40 ms
+either way), ``background_share`` 0.15 (12 factorisations, 7.6 iterations: 0.93 / 0.88
+against 0.93 / 0.86 s), ``background_iterations`` 10 (the same factorisations and
+iterations: a refactorisation was pending, just installed or started for the touched nodes
+anyway whenever it would have triggered), and
+glibc's ``mallopt`` keeping freed memory (no mmap, no trim) against the first-touch cost
+(no gain: the memory still grew, in the background thread's arena).
 
 The rounds of the contact active-set iteration (:mod:`unmesh.fem.dynamics`) are solved
 to a relative residual of 10⁻³ and the final active set is confirmed by a solve to
