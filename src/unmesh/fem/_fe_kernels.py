@@ -159,6 +159,17 @@ def scatter_blocks(block_map, blocks, nblocks):
     return out
 
 
+@njit(cache=True, inline="always")
+def _rotation_entries(R, scale):
+    """The entries of the rotation ``R`` (3, 3) and of ``scale·R``, row by row (18 floats)."""
+    r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
+    r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
+    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+    return (r00, r01, r02, r10, r11, r12, r20, r21, r22,
+            r00 * scale, r01 * scale, r02 * scale, r10 * scale, r11 * scale, r12 * scale,
+            r20 * scale, r21 * scale, r22 * scale)
+
+
 @njit(cache=True, nogil=True)
 def warped_global_blocks(node_off, k_off, ke, rots, block_map, nblocks, scale):
     """Global blocks (nblocks, 9) of the scaled warped stiffness ``scale · Σ_e R_e K_e R_eᵀ`` in one pass.
@@ -174,13 +185,8 @@ def warped_global_blocks(node_off, k_off, ke, rots, block_map, nblocks, scale):
     T = np.empty((3, 3))
     for e in range(ne):
         n = node_off[e + 1] - node_off[e]
-        R = rots[e]
-        r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
-        r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
-        r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
-        s00, s01, s02 = r00 * scale, r01 * scale, r02 * scale
-        s10, s11, s12 = r10 * scale, r11 * scale, r12 * scale
-        s20, s21, s22 = r20 * scale, r21 * scale, r22 * scale
+        (r00, r01, r02, r10, r11, r12, r20, r21, r22,
+         s00, s01, s02, s10, s11, s12, s20, s21, s22) = _rotation_entries(rots[e], scale)
         for ab in range(n * n):
             o = k_off[e] + ab * 9
             for j in range(3):
@@ -218,13 +224,8 @@ def warped_global_rows(node_off, k_off, ke, rots, inc_off, inc_e, inc_a, block_m
         for t in range(inc_off[i], inc_off[i + 1]):
             e = inc_e[t]
             m = node_off[e + 1] - node_off[e]
-            R = rots[e]
-            r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
-            r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
-            r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
-            s00, s01, s02 = r00 * scale, r01 * scale, r02 * scale
-            s10, s11, s12 = r10 * scale, r11 * scale, r12 * scale
-            s20, s21, s22 = r20 * scale, r21 * scale, r22 * scale
+            (r00, r01, r02, r10, r11, r12, r20, r21, r22,
+             s00, s01, s02, s10, s11, s12, s20, s21, s22) = _rotation_entries(rots[e], scale)
             o = k_off[e] + inc_a[t] * m * 9
             for _ in range(m):
                 b = block_map[o // 9]
