@@ -61,6 +61,7 @@ def main() -> None:
     args = ap.parse_args()
     import numba
 
+    import unmesh  # noqa: F401  (before numba starts its threads: unmesh's GOMP_SPINCOUNT default)
     from unmesh.fem import tetrahedralize
     from unmesh.fem.dynamics import Dynamics, Ground
     from unmesh.fem.events import BladeEvent

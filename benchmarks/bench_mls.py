@@ -214,6 +214,8 @@ def main() -> None:
     args = ap.parse_args()
     import numba
 
+    import unmesh  # noqa: F401  (before numba starts its threads: unmesh's GOMP_SPINCOUNT default)
+
     if args.threads:
         numba.set_num_threads(args.threads)
     print(f"numba threads {numba.get_num_threads()} ({numba.config.THREADING_LAYER} layer requested)")

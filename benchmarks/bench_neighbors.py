@@ -82,6 +82,8 @@ def main() -> None:
 
     import numba
 
+    import unmesh  # noqa: F401  (before numba starts its threads: unmesh's GOMP_SPINCOUNT default)
+
     if args.threads:
         numba.set_num_threads(args.threads)
     print(f"numba threads: {numba.get_num_threads()}")

@@ -57,6 +57,7 @@ def main() -> None:
 
     import numba
 
+    import unmesh  # noqa: F401  (before numba starts its threads: unmesh's GOMP_SPINCOUNT default)
     from unmesh.render import Camera, SplatRenderer, render, shade
     from unmesh.render._kernels import bin_boxes, tile_order
     from unmesh.render._splat_kernels import NPARAM, fill_tiles, gather_rows, splat_setup, splat_tiles

@@ -121,6 +121,8 @@ def main() -> None:
 
     import numba
 
+    import unmesh  # noqa: F401  (before numba starts its threads: unmesh's GOMP_SPINCOUNT default)
+
     if args.threads:
         numba.set_num_threads(args.threads)
     load = ", ".join(f"{v:.2f}" for v in os.getloadavg())

@@ -44,6 +44,9 @@ import textwrap
 import time
 from pathlib import Path
 
+#: The user's GOMP_SPINCOUNT before ``import unmesh`` sets its default (SPlisHSPlasH runs with the user's).
+USER_SPINCOUNT = os.environ.get("GOMP_SPINCOUNT")
+
 # The elastic block: width x height x depth (m), and the tank (both cases).
 COLUMN = (0.35, 0.7, 0.18)
 TANK = (1.4, 0.9, 0.18)
@@ -96,6 +99,8 @@ def unmesh_rates(spacing: float, steps: int, threads: int, cases: tuple[str, ...
     run ``steps`` timed steps.
     """
     import numba
+
+    import unmesh  # noqa: F401  (before numba starts its threads: unmesh's GOMP_SPINCOUNT default)
 
     numba.set_num_threads(threads)
     sims = {case: build_case(spacing, case) for case in cases}
@@ -244,6 +249,8 @@ def splishsplash_rate(spacing: float, steps: int, threads: int) -> tuple[int, fl
         path = d / "dam.json"
         path.write_text(json.dumps(scene))
         env = dict(os.environ, OMP_NUM_THREADS=str(threads))
+        if USER_SPINCOUNT is None:  # SPlisHSPlasH's OpenMP with its own default, not unmesh's
+            env.pop("GOMP_SPINCOUNT", None)
         gl = "/usr/lib/x86_64-linux-gnu/libGLdispatch.so.0"
         if Path(gl).exists():
             env["LD_PRELOAD"] = gl

@@ -99,3 +99,18 @@ def test_background_work_keeps_its_core(restore_threads, monkeypatch):
         t.join()
     with threads_for(10**6, key="test") as tf:
         assert tf.threads == 2
+
+
+def test_import_sets_a_short_openmp_spin_unless_the_user_set_one():
+    """``import unmesh`` bounds libgomp's spinning (a busy machine) but keeps the user's value."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import os, unmesh; print(os.environ['GOMP_SPINCOUNT'])"
+    env = {k: v for k, v in os.environ.items() if k != "GOMP_SPINCOUNT"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "30000"
+    out = subprocess.run([sys.executable, "-c", code], env={**env, "GOMP_SPINCOUNT": "7"}, capture_output=True,
+                         text=True, check=True)
+    assert out.stdout.strip() == "7"
