@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from unmesh.shells import _skinning_kernels as _sk
+from unmesh.shells.topology import csr_entries, csr_from_groups
 
 if TYPE_CHECKING:
     from unmesh.shells.skinning import _Passive
@@ -167,9 +168,7 @@ class Rebinding:
         nodes within ``2 (reach + radius)`` of one (the surfel-to-owner distance is within reach)."""
         _, near = self.tree.radius_neighbors(centers, 2.0 * (self._reach + radius))
         near = np.unique(near)
-        starts, counts = self._owned_offsets[near], np.diff(self._owned_offsets)[near]
-        pos = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-        return self._owned[pos]            # distinct surfels (each has one owner)
+        return self._owned[csr_entries(self._owned_offsets, near)[0]]      # distinct surfels (each has one owner)
 
     def _hides_bound(self, part: _Passive, rows: np.ndarray, blocked: Any) -> np.ndarray:
         """(R,) bool: ``blocked`` hides one of the bound nodes of point ``rows[r]`` of ``part``."""
@@ -194,14 +193,10 @@ class Rebinding:
         nbr, scale2 = self._cover_nbr, self._cover_scale2
         if len(rebound):
             if getattr(self, "_cover_rev", None) is None:     # who lists whom (the pairs never change)
-                from unmesh.shells.topology import csr_from_groups
-
                 off, order = csr_from_groups(nbr.reshape(-1), self.dense.n)
                 self._cover_rev = (off, order // nbr.shape[1])
             off, src = self._cover_rev
-            counts = off[rebound + 1] - off[rebound]
-            pos = np.repeat(off[rebound] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-            rows = np.unique(np.concatenate([rebound, src[pos]]))
+            rows = np.unique(np.concatenate([rebound, src[csr_entries(off, rebound)[0]]]))
             keep = _cover_pairs(self.dense.bind, nbr, rows) & (scale2[rows] > 0)
             scale2[rows] = np.where(keep, scale2[rows], 0.0)
         if new_discs is None:

@@ -28,6 +28,7 @@ from unmesh.shells.fracture import MIN_VISIBLE, CrackSet, FiberMaterial, fractur
 from unmesh.shells.fracture import rebuild_near as rebuild_near_reference
 from unmesh.shells.nodes import create_fibers, node_neighborhoods, umbrella_pairs
 from unmesh.shells.topology import UMBRELLA_SOFTENING, ShellTopology
+from unmesh.shells.topology import csr_entries as _entries
 
 __all__ = ["rebuild_local", "rebuild_near"]
 
@@ -71,13 +72,6 @@ def _measure(x: np.ndarray, fibers: np.ndarray, pairs: np.ndarray, pair_offsets:
     _kernels.fiber_measures(np.ascontiguousarray(x), f, np.ascontiguousarray(s[f[:, 1]]),
                             np.ascontiguousarray(soft[f[:, 1]]), arc_gram(samples), length, angle)
     return length, angle
-
-
-def _entries(offsets: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Positions of the entries of the listed CSR rows (in row order) and the row of each."""
-    counts = offsets[rows + 1] - offsets[rows]
-    pos = np.repeat(offsets[rows] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-    return pos.astype(np.int64), np.repeat(rows, counts)
 
 
 def _crossed(rest: np.ndarray, topology: ShellTopology, rows: np.ndarray, cracks: CrackSet, new: int) -> np.ndarray:

@@ -29,7 +29,7 @@ from unmesh.shells.material import ShellMaterial
 from unmesh.shells.nodes import DEFAULT_MIN_ANGLE, DEFAULT_NEIGHBORS, build_topology, select_nodes
 from unmesh.shells.skinning import DEFAULT_SKIN_NODES, SkinnedSurface
 from unmesh.shells.tearing import DEGENERATE_RATIO, Tearing, warm_up
-from unmesh.shells.topology import ShellTopology
+from unmesh.shells.topology import ShellTopology, csr_entries
 from unmesh.sim import Simulation
 from unmesh.surfels import SurfelCloud
 
@@ -265,12 +265,10 @@ class ShellSimulation(Tearing, Simulation):
         if nodes is None:
             nodes = np.arange(t.n_nodes)
         nodes = np.asarray(nodes, dtype=np.int64)
-        counts = t.neighbor_offsets[nodes + 1] - t.neighbor_offsets[nodes]
-        if counts.sum() == 0:
+        pos, rows = csr_entries(t.neighbor_offsets, nodes)
+        if not len(pos):
             return 0.0
-        rows = np.repeat(nodes, counts)
-        starts = np.repeat(t.neighbor_offsets[nodes] - np.cumsum(counts) + counts, counts)
-        nbr = t.neighbors[starts + np.arange(len(rows))]
+        nbr = t.neighbors[pos]
         return float(np.linalg.norm(self.rest[nbr] - self.rest[rows], axis=1).max())
 
     # -- dynamics -----------------------------------------------------------------

@@ -30,7 +30,7 @@ import numpy as np
 from unmesh._validate import as_array, as_indices
 from unmesh.errors import InputError
 
-__all__ = ["UMBRELLA_SOFTENING", "ShellTopology", "csr_from_groups"]
+__all__ = ["UMBRELLA_SOFTENING", "ShellTopology", "csr_entries", "csr_from_groups"]
 
 #: soft_i = UMBRELLA_SOFTENING * |s_i| at rest (regularisation of the tangent-angle axis).
 UMBRELLA_SOFTENING = 0.1
@@ -66,6 +66,19 @@ def csr_from_groups(groups: np.ndarray, count: int) -> tuple[np.ndarray, np.ndar
     order = np.empty(len(keys), dtype=np.int64)
     _kernels.group_order(keys, int(count), offsets, order)
     return offsets, order
+
+
+def csr_entries(offsets: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions of the entries of the listed CSR rows (in row order) and the row of each.
+
+    Example
+    -------
+    >>> csr_entries(np.array([0, 2, 3, 5]), np.array([2, 0]))
+    (array([3, 4, 0, 1]), array([2, 2, 0, 0]))
+    """
+    counts = offsets[rows + 1] - offsets[rows]
+    pos = np.repeat(offsets[rows] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+    return pos.astype(np.int64), np.repeat(rows, counts)
 
 
 def csr_from_groups_reference(groups: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
