@@ -84,6 +84,11 @@ class CrackSet:
         self.nodes = np.append(self.nodes, np.int64(node))
         self.times = np.append(self.times, float(time))
 
+    def take(self, index: np.ndarray | slice) -> CrackSet:
+        """The cracks ``index`` (indices or a slice) as a set of their own (e.g. the newest ones)."""
+        return CrackSet(self.centers[index], self.normals[index], self.radii[index], self.nodes[index],
+                        self.times[index])
+
     def blocked(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
         """(M,) bool: True where segment ``p[m]``-``q[m]`` (rest coordinates) crosses a crack disc."""
         out = np.zeros(len(p), dtype=np.bool_)

@@ -77,9 +77,7 @@ def _measure(x: np.ndarray, fibers: np.ndarray, pairs: np.ndarray, pair_offsets:
 def _crossed(rest: np.ndarray, topology: ShellTopology, rows: np.ndarray, cracks: CrackSet, new: int) -> np.ndarray:
     """(R,) bool: a segment from the node to one of its neighbours crosses one of the last ``new`` cracks."""
     pos, src = _entries(topology.neighbor_offsets, rows)
-    latest = CrackSet(cracks.centers[-new:], cracks.normals[-new:], cracks.radii[-new:], cracks.nodes[-new:],
-                      cracks.times[-new:])
-    hit = latest.blocked(rest[src], rest[topology.neighbors[pos]])
+    hit = cracks.take(slice(-new, None)).blocked(rest[src], rest[topology.neighbors[pos]])
     out = np.zeros(len(rows), dtype=bool)
     out[np.searchsorted(rows, src[hit])] = True
     return out

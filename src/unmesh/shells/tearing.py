@@ -18,8 +18,8 @@ import numpy as np
 from unmesh.shells import _kernels, _rebuild_kernels
 from unmesh.shells.fibers import degenerate as degenerate_fibers
 from unmesh.shells.forces import node_terms
-from unmesh.shells.fracture import CrackSet, select_cracks
 from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
+from unmesh.shells.fracture import select_cracks
 from unmesh.shells.nodes import NodeCandidates
 from unmesh.shells.rebuild import rebuild_local
 from unmesh.shells.topology import ShellTopology
@@ -202,8 +202,7 @@ class Tearing:
         self._pending_cracks = []
         if not len(new):
             return
-        latest = CrackSet(c.centers[new], c.normals[new], c.radii[new], c.nodes[new], c.times[new])
-        self.surface.rebind_near(c.centers[new], float(c.radii[new].max()), c.blocked, latest.blocked)
+        self.surface.rebind_near(c.centers[new], float(c.radii[new].max()), c.blocked, c.take(new).blocked)
         self.surface.add_discontinuities(c.centers[new], c.normals[new], c.radii[new], self.rest_normals[c.nodes[new]],
                                          c.blocked)
 
