@@ -130,9 +130,7 @@ class Factorization:
     [0.5, 0.25]
     """
 
-    def __init__(self, A: sp.sparray | None, perm: np.ndarray | None, *, single: bool = False) -> None:
-        if A is None:  # filled in by from_blocks
-            return
+    def __init__(self, A: sp.sparray, perm: np.ndarray | None, *, single: bool = False) -> None:
         A = sp.csr_array(A)
         self.scale: np.ndarray | None = None
         if single:
@@ -162,7 +160,7 @@ class Factorization:
         scipy's conversions and indexing took the GIL often enough to slow the main thread
         and themselves when run beside it (the background factorisation).
         """
-        self = cls(None, None)
+        self = cls.__new__(cls)  # the attributes of __init__, set below
         data = np.empty(9 * len(indices), np.float32 if single else np.float64)
         node_perm = np.ascontiguousarray(node_perm, dtype=np.int64)
         ptr, idx, scale = SK.permuted_scalar_csr(np.ascontiguousarray(indptr, dtype=np.int64),
