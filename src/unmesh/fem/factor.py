@@ -29,6 +29,7 @@ True
 from __future__ import annotations
 
 import ctypes
+import functools
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -90,30 +91,28 @@ def nested_dissection(indptr: np.ndarray, indices: np.ndarray, *, fast: bool = T
 
 
 _METIS_LOCK = threading.Lock()
-_NODE_ND: list[Any] = []  # [METIS_NodeND or None], once looked up
 
 
+@functools.cache
 def _metis_node_nd() -> Any:
-    """``METIS_NodeND`` of ``pymetis``' extension module through ctypes, or None.
+    """``METIS_NodeND`` of ``pymetis``' extension module through ctypes, or None (looked up once).
 
     Only with 64-bit ``idx_t`` (pymetis' build), told by ``METIS_SetDefaultOptions``: it sets
     its ``METIS_NOPTIONS`` (40) options to -1, i.e. 40 int64 words, or 20 if ``idx_t`` is 32-bit.
     """
-    if not _NODE_ND:
-        fn = None
-        try:
-            from pymetis import _internal
+    try:
+        from pymetis import _internal
 
-            lib = ctypes.CDLL(_internal.__file__)
-            opts = np.zeros(80, np.int64)
-            lib.METIS_SetDefaultOptions(ctypes.c_void_p(opts.ctypes.data))
-            if np.all(opts[:40] == -1) and np.all(opts[40:] == 0):
-                fn = lib.METIS_NodeND
-                fn.restype = ctypes.c_int
-        except (ImportError, OSError, AttributeError):
-            fn = None
-        _NODE_ND.append(fn)
-    return _NODE_ND[0]
+        lib = ctypes.CDLL(_internal.__file__)
+        opts = np.zeros(80, np.int64)
+        lib.METIS_SetDefaultOptions(ctypes.c_void_p(opts.ctypes.data))
+        if np.all(opts[:40] == -1) and np.all(opts[40:] == 0):
+            fn = lib.METIS_NodeND
+            fn.restype = ctypes.c_int
+            return fn
+    except (ImportError, OSError, AttributeError):
+        pass
+    return None
 
 
 class Factorization:
@@ -131,9 +130,7 @@ class Factorization:
     [0.5, 0.25]
     """
 
-    def __init__(self, A: sp.sparray | None, perm: np.ndarray | None, *, single: bool = False) -> None:
-        if A is None:  # filled in by from_blocks
-            return
+    def __init__(self, A: sp.sparray, perm: np.ndarray | None, *, single: bool = False) -> None:
         A = sp.csr_array(A)
         self.scale: np.ndarray | None = None
         if single:
@@ -163,7 +160,7 @@ class Factorization:
         scipy's conversions and indexing took the GIL often enough to slow the main thread
         and themselves when run beside it (the background factorisation).
         """
-        self = cls(None, None)
+        self = cls.__new__(cls)  # the attributes of __init__, set below
         data = np.empty(9 * len(indices), np.float32 if single else np.float64)
         node_perm = np.ascontiguousarray(node_perm, dtype=np.int64)
         ptr, idx, scale = SK.permuted_scalar_csr(np.ascontiguousarray(indptr, dtype=np.int64),
