@@ -71,9 +71,6 @@ def _keep_previous(i, o, amat, ainv, amat_out, ainv_out):
 
 
 #: Blocks of the lattice pass. Each block of particles owns a window of member-force
-
-
-#: Blocks of the lattice pass. Each block of particles owns a window of member-force
 #: accumulators (the rows of its particles' neighbours), summed in block order: the result
 #: does not depend on the number of threads.
 LATTICE_BLOCKS = 16
