@@ -71,9 +71,6 @@ def _keep_previous(i, o, amat, ainv, amat_out, ainv_out):
 
 
 #: Blocks of the lattice pass. Each block of particles owns a window of member-force
-
-
-#: Blocks of the lattice pass. Each block of particles owns a window of member-force
 #: accumulators (the rows of its particles' neighbours), summed in block order: the result
 #: does not depend on the number of threads.
 LATTICE_BLOCKS = 16
@@ -89,7 +86,7 @@ LANES = 8
 
 @njit(cache=True, fastmath=LATTICE_FASTMATH, error_model="numpy")
 def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, lv, dti,
-                   c6, w_self, tm, tmat, table, order, amat, ainv, occ, docked, lam, seed, step, dt, prime, onebody,
+                   c6, w_self, tm, table, order, amat, ainv, occ, docked, lam, seed, step, dt, prime, onebody,
                    amat_out, ainv_out, occ_out, docked_out, gmat, fown, valid):
     """The particles ``r0 .. r1 - 1`` of :func:`lattice_update` (one block, serial); member forces are
     added into ``win`` (W, 3), the accumulator rows ``lo_b, lo_b + 1, ...``. ``onebody``: every
@@ -227,7 +224,7 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                     y1 = rt[1, t]
                     y2 = rt[2, t]
                     q, d2 = nearest_slot(p00 * y0 + p01 * y1 + p02 * y2, p10 * y0 + p11 * y1 + p12 * y2, 0.0,
-                                         tmat, table, dim)
+                                         tm, table, dim)
                     q = q if qt[t] != 0 else -1
                     qt[t] = q
                     at[0, t] = d2
@@ -704,7 +701,7 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
     onebody = others == 0
     for blk in prange(nblk):
         _lattice_block(blk * n // nblk, (blk + 1) * n // nblk, lo[blk], win[blk], x, m, phase, obj, matid, uid, mats,
-                       nbr, nnbr, h, dim, spacing, slot_vecs, lv, dti, c6, w_self, tm, tmat, table, order, amat,
+                       nbr, nnbr, h, dim, spacing, slot_vecs, lv, dti, c6, w_self, tm, table, order, amat,
                        ainv, occ, docked, lam, seed, step, dt, prime, onebody, amat_out, ainv_out, occ_out, docked_out,
                        gmat, fown, valid)
     # the windows summed in block order (deterministic, whatever the thread count), in parallel over rows

@@ -282,9 +282,7 @@ def shape_matching(r: Any, l: Any, w: Any, dim: int) -> tuple[np.ndarray, np.nda
     ww = as_array(w, "w", (None,), length=len(rr))
     n = 2 if dim == 2 else 3
     m = _lattice_moment(ll, ww, n)
-    b = np.eye(3)
-    b[:n, :n] = (ww[:, None, None] * rr[:, :n, None] * ll[:, None, :n]).sum(axis=0)
-    return b @ np.linalg.inv(m), m
+    return _shape_matrix(rr, ll, ww, n, m), m
 
 
 def _lattice_moment(l: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
@@ -292,6 +290,13 @@ def _lattice_moment(l: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
     m = np.eye(3)
     m[:n, :n] = (w[:, None, None] * l[:, :n, None] * l[:, None, :n]).sum(axis=0)
     return m
+
+
+def _shape_matrix(r: np.ndarray, l: np.ndarray, w: np.ndarray, n: int, m: np.ndarray) -> np.ndarray:
+    """``A = (Σ W r lᵀ) M⁻¹`` of eq. (8.23) for the moment ``m`` (:func:`_lattice_moment`)."""
+    b = np.eye(3)
+    b[:n, :n] = (w[:, None, None] * r[:, :n, None] * l[:, None, :n]).sum(axis=0)
+    return b @ np.linalg.inv(m)
 
 
 def displacement_gradient(r: Any, g: Any, w: Any, dim: int) -> np.ndarray:
@@ -433,7 +438,7 @@ def neighbourhood_forces(xi: Any, r: Any, l: Any, w: Any, w_self: float, mi: flo
     scale = np.trace(m[:n, :n]) / n
     if not np.linalg.det(m[:n, :n]) > 1e-6 * scale**n:  # e.g. a flat neighbourhood in 3D: no A exists
         return np.zeros(3), fj
-    a, m = shape_matching(rr, ll, ww, dim)
+    a = _shape_matrix(rr, ll, ww, n, m)
     u, sig, v = rotation_svd(a, dim)
     rot = u @ v.T
     if params.stiffness > 0.0:
