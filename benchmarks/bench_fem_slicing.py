@@ -117,16 +117,14 @@ def main() -> None:
     if (~cutting).any():
         print(f"per frame without a cut: {a[~cutting, 0].mean():.2f} s")
     print(f"nodes {mesh.n_nodes} -> {int(a[-1, 5])}, elements {mesh.n_elements} -> {int(a[-1, 6])}, "
-          f"{getattr(dyn, 'n_solid_pieces', '?')} pieces at the end")
+          f"{dyn.n_solid_pieces} pieces at the end")
     lag = dyn.lagged
     print(f"solver {args.solver}: {lag.factorizations} LU factorisations in {args.frames} steps "
-          f"({getattr(lag, 'background_factorizations', 0)} in the background, {getattr(lag, 'waited', 0.0):.2f} s "
+          f"({lag.background_factorizations} in the background, {lag.waited:.2f} s "
           f"waited for them), the factorisation kept across {lag.remaps} cuts; load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    try:
-        from unmesh.sim.threads import _TUNERS
-    except ImportError:  # before the shared thread tuner
-        _TUNERS = {}
+    from unmesh.sim.threads import _TUNERS
+
     chosen = [f"{key} ({2 ** (size - 1)}+ items): {'1 thread' if t.serial else 'all'} "
               f"(probed {t.best[True] * 1e3:.1f} vs {t.best[False] * 1e3:.1f} ms, {t.calls} calls)"
               for (key, size), t in sorted(_TUNERS.items()) if key.startswith("fem.")]

@@ -218,9 +218,9 @@ class threads_for:
         self.serial = items < (PARALLEL_MIN if minimum is None else minimum)
         self.tuner = None
         if not self.serial and self.threads > 1:
-            tuner = _TUNERS.get((key, int(items).bit_length()))
+            tuner = _TUNERS.get(tkey := (key, int(items).bit_length()))
             if tuner is None:
-                tuner = _TUNERS[(key, int(items).bit_length())] = _Tuner(period)
+                tuner = _TUNERS[tkey] = _Tuner(period)
             self.tuner = tuner
             self.serial = tuner.choose_serial()
         self.serial = self.serial or self.threads == 1
