@@ -7,171 +7,41 @@ and per-node constraints (fixed, or normal-constrained ground contact):
   last velocity. No setup; fine for small or soft meshes, slow for stiff ones.
 - ``"auto"`` (default): ``"cg"``; if a solve does not converge in 150 iterations the
   system is too stiff for it and the dynamics switch to ``"lu-pcg"`` for good.
-- ``"lu-pcg"``: filtered PCG warm-started from the last velocity,
-  preconditioned by a *lagged, warped* sparse LU factorisation: the matrix ``A_f`` of
-  the step it is made in (warped stiffness, the rotations of that step), with the
-  constraints of the last step's contact set eliminated (``S A_f S + I - S``, S the
-  constraint projection; ground contact included, see below), is factorised (SuperLU in
-  METIS nested-dissection order of the node graph, :func:`nested_dissection`, 3×3 blocks
-  kept together; SuperLU's own minimum-degree order of A+Aᵀ when ``pymetis`` is missing;
-  single precision after symmetric Jacobi scaling, :class:`unmesh.fem.factor.Factorization`)
+- ``"lu-pcg"``: filtered PCG warm-started from the last velocity, preconditioned by a
+  *lagged, warped* sparse LU factorisation. The matrix ``A_f`` of the step it is made in
+  (warped stiffness, the rotations of that step), with the constraints of the last step's
+  contact set eliminated (``S A_f S + I - S``, S the constraint projection), is factorised
+  (SuperLU in METIS nested-dissection order of the node graph, :func:`nested_dissection`,
+  3×3 blocks kept together; SuperLU's own order when ``pymetis`` is missing; single
+  precision after symmetric Jacobi scaling, :class:`unmesh.fem.factor.Factorization`)
   and reused for later steps as ``Q A_f⁻¹ Qᵀ`` with Q the best-fit rotation of each
   connected piece from the positions ``A_f`` was taken at to the current ones
-  (:func:`unmesh.fem.rotations.piece_rotations`), so rigidly
-  rotated pieces are preconditioned exactly. One rotation per piece, not per node:
-  a node-to-node varying rotation maps the translations of the current configuration
-  (eigenvalue ~ mass, 1/4800 of the stiffness scale on the bunny benchmark) outside the
-  near-null space of ``Q A_f Qᵀ``; on the bunny-slicing benchmark node-averaged rotations
-  needed 64-76 iterations where the piece rotation needs 23. (The unwarped rest matrix
-  ``c_m M + c_k K`` rotated per piece from rest, factorised before, needed 10.0 iterations
-  per frame on the bunny benchmark where the warped one needs 8.3: the head bends at the
-  neck relative to the body, which one rotation per piece cannot follow.) It is refactorised after
-  a change of the step size, when a cut separates a new piece (the remapped factorisation
-  would still couple the pieces, which then rotate independently), or when a solve needed
-  more than ``refactor_iterations`` iterations.
-  A cut does not refactorise: the old factorisation is kept and mapped to the new
-  nodes through the cut's node weights W (new state = W old state), and a *local set*
-  gets an exact solve of its block ``A_tt`` of the current (filtered) matrix: the nodes
-  the cut touched (new nodes, duplicated nodes, nodes of re-integrated elements,
-  accumulated over the cuts since the last factorisation) plus ``TOUCHED_RINGS`` (1)
-  layers of neighbours, the constrained nodes plus ``CONSTRAINED_RINGS`` (1) layers, and
-  the nodes whose constraint differs from the factorised one plus ``LOCAL_RINGS`` (3)
-  layers. The two are combined as a symmetric multiplicative Schwarz preconditioner,
-  ``z₁ = A_tt⁻¹ r_t``, ``z₂ = z₁ + Q W A_f⁻¹ Wᵀ Qᵀ (r - A z₁)``, ``z = z₂ + A_tt⁻¹ (r - A z₂)_t``.
-  (Keeping the old factorisation with only block-Jacobi on new nodes was measured
-  to need 80-200 iterations instead of about 8-30; the local solve restores that.)
-  A solve that has not converged after 200 iterations with a lagged factorisation is
-  restarted with a fresh one (:data:`unmesh.fem.dynamics.LAGGED_ITERATIONS`).
-  It refactorises when the touched part exceeds ``touched_fraction`` (10%) of the
-  nodes or a solve needs more than 1.5 ``refactor_iterations``: on the bunny-slicing
-  benchmark the iterations grow to 25-35 per solve as the touched part reaches 10-14%
-  (measured with 20%: 1 LU instead of 2 in 12 frames, but 2.6-4.2 s instead of 1.2-2.8 s
-  per cutting frame). It also refactorises when the nodes whose constraint differs from the
-  factorised one, with their ``LOCAL_RINGS`` layers, exceed ``touched_fraction``: the
-  constraints factorised are the last step's contact set (the free-fall prediction when
-  there is none, which overestimates a first contact: 221 predicted, 64-131 in contact over
-  the first frames of the bunny benchmark), and each node factorised in the wrong state
-  widens the local set (the bunny benchmark solved 1137-2857 nodes locally for 85-690 of
-  them; factorised with the contact set, the local set is the ~90 contacts and one ring).
+  (:func:`unmesh.fem.rotations.piece_rotations`), so rigidly rotated pieces are
+  preconditioned exactly (one rotation per piece: a per-node rotation would map the
+  translations out of the near-null space of ``Q A_f Qᵀ``).
+
+  It is refactorised after a change of the step size, when a cut separates a new piece,
+  or when a solve needed more than ``refactor_iterations`` iterations; with cuts since the
+  last factorisation, also when the touched part exceeds ``touched_fraction`` (10%) of the
+  nodes or a solve needs more than 1.5 ``refactor_iterations``; and when the nodes whose
+  constraint differs from the factorised one, with their ``LOCAL_RINGS`` layers, exceed
+  ``touched_fraction``. A solve that has not converged after 200 iterations
+  with a lagged factorisation is restarted with a fresh one
+  (:data:`unmesh.fem.dynamics.LAGGED_ITERATIONS`). Refactorisations may run in a
+  background thread (:meth:`LaggedLU.wants_background`, ``background=True``).
+
+  A cut does not refactorise: the old factorisation is mapped to the new nodes through the
+  cut's node weights W (new state = W old state), and a *local set* gets an exact solve of
+  its block ``A_tt`` of the current (filtered) matrix: the nodes the cut touched (new,
+  duplicated, re-integrated) plus ``TOUCHED_RINGS`` (1) layers, the constrained nodes plus
+  ``CONSTRAINED_RINGS`` (1) layers, and the nodes whose constraint differs from the
+  factorised one plus ``LOCAL_RINGS`` (3) layers. The two are combined as a symmetric
+  multiplicative Schwarz preconditioner, ``z₁ = A_tt⁻¹ r_t``,
+  ``z₂ = z₁ + Q W A_f⁻¹ Wᵀ Qᵀ (r - A z₁)``, ``z = z₂ + A_tt⁻¹ (r - A z₂)_t``.
 - ``"direct"``: exact sparse LU of the constrained system in every step.
 
-Measured on the bunny-slicing benchmark (49k DOFs, one thread, loaded machine; systems of
-frames 1 and 10 solved to 10⁻⁶ from the warm start):
-
-- the contact constraints, not the warping, cost most iterations: 11 and 14 iterations
-  with the unconstrained factorisation and the contact nodes alone solved locally, 5 and 7
-  with 3 rings of neighbours in the local set, 2-3 and 5 with the contacts factorised
-  (still 2-3 and 5 with 1/8 of the contacts missing from the factorisation); the exact
-  current matrix needs 1;
-- METIS nested dissection: fill 14.0M (SuperLU's minimum degree: 16.1M), factorisation
-  1.1-1.3 s instead of 2.4-2.8 s; a solve costs 30-40 ms with either;
-- algebraic multigrid (``pyamg`` smoothed aggregation, rigid-body modes as near-null space,
-  on the filtered matrix): setup 1.6-3.7 s per matrix, 100-140 ms per V-cycle (three times
-  an LU solve), 6-165 iterations (137-165 after cuts with the default strength of
-  connection, 7-11 with θ = 0.02); slower than the lagged LU in every configuration tried;
-- incomplete LU (SuperLU ILUTP, drop 10⁻⁵..10⁻⁷): fill 8.2M-14.4M, no convergence in 300
-  iterations until it is nearly the full factor; a scalar (trace) factorisation: factor
-  0.12 s, but 21-59 iterations;
-- CHOLMOD through ``cholespy`` (the only CHOLMOD wheel on PyPI; scikit-sparse has none):
-  factorisation 4.1 s, solve 26 ms; hand-written numba triangular solves on SuperLU's
-  factors (CSC or CSR, double or single precision): no faster than SuperLU's solve.
-- single precision without scaling stalled PCG (lumped masses spanning 5 decades after
-  slivers). Scaling does not cure every case: on the bunny meshed at 14,905 nodes, after 18
-  cuts a sliver made the diagonal span 5·10¹⁰ and the float32 factors solved with a relative
-  residual of 20-220 (PCG did not converge in 5,400 iterations, refactorised or not), so a
-  factorisation whose solve of a fixed random vector leaves more than ``SINGLE_RESIDUAL``
-  (10⁻³; 4-5·10⁻⁵ otherwise) is redone in double precision. Otherwise, after symmetric
-  Jacobi scaling (unit diagonal) it needs the same CG iterations
-  as double precision in every step of the 30-frame bunny run (24,138 nodes), factorises in
-  1.2-1.55 s instead of 1.85-2.4 s CPU (fill 25.8M; half the memory, which matters on the
-  benchmark's virtual machine, where first-touched memory costs up to 10 ms per MB) and
-  solves in 24-33 ms instead of 34 ms; the run's solve time per frame went 0.90 → 0.71 s
-  (load 1.5-1.6, one run each). The local (Schwarz) factorisations in single precision:
-  same iterations, 2.21 → 2.01 s factorising and 0.97 → 0.85 s solving in 29 frames (main
-  thread CPU): not worth an inexact local solve, they stay double;
-- SuperLU's ``relax`` (8-128) and ``panel_size`` with the nested-dissection order: same fill
-  (25.8M), solve 24-27 ms either way;
-- the warped matrix of the factorisation step rotated per piece from its positions, instead
-  of the rest matrix rotated from rest: 10.0 → 8.3 CG iterations per frame (30 frames);
-- a background refactorisation (:meth:`LaggedLU.wants_background`): SuperLU releases the GIL
-  (a Python loop in the main thread ran at 24% of its speed beside ``splu`` in a thread, at
-  31% beside a BLAS product, load 2.7: the second core was busy with other work). Started at
-  ``background_share`` 0.15 / 0.25 / 0.4 of ``touched_fraction``: 7.6 / 8.3 / 8.9 CG
-  iterations per frame with 12 / 8 / 6 factorisations in 30 steps (none waited for: two
-  steps of lead); 0.25 kept. Moving the foreground refactorisation of frame 1 (the auto
-  switch factorised the free-fall prediction; 13.8% of the nodes mismatched) to the
-  background as well, with doubled foreground limits, made frames 1-2 cost 1.30 + 1.53 s
-  (a local set of 14% of the nodes) instead of 1.64 + 0.48 s: not kept. What the thread
-  does holding the GIL holds up the main thread: scipy's SuperLU takes it for each
-  allocation, ``pymetis`` for the whole ordering (160 ms: the main thread's Python loop
-  ran at 11% of its speed; METIS is now called through ctypes, which releases it: 57%,
-  :func:`nested_dissection`), scipy's conversions often (in the thread beside a busy main
-  thread block→CSR took 0.38 s, 0.02 s alone, and ``A[p][:, p]`` 0.85 s, load 2.7):
-  the permuted, scaled matrix is built by a kernel that releases
-  the GIL (:meth:`unmesh.fem.factor.Factorization.from_blocks`), and the main thread's
-  kernels release it. Reusing the last METIS order for the background refactorisation
-  (new nodes placed after their parents through W) would spare the 160 ms, but after 20
-  cuts (1,786 new nodes) it had fill 36.2M instead of 25.9M and solved in 45 instead of
-  29 ms: not done. Predicting the first contact set from the nodes on the ground or taken
-  below it by their velocity (563 on the bunny, instead of the free fall's 988) avoids the
-  refactorisation of frame 1, but leaves 4.7% of the nodes mismatched (the contact rim
-  changes) until a background factorisation is installed: frames 1-3 took 2.72 s CPU
-  (load 3.4) instead of 1.84 s (an earlier run, load 2.8): not kept;
-- the numba kernels on both cores for the bunny (:data:`unmesh.fem.dynamics.SERIAL_NODES`
-  lowered below its node count), interleaved runs of 30 frames: wall 1.04 → 0.82 s per
-  frame at load 2.9, 1.44 → 1.72 s at load 3.5-3.7 (the other engineers' jobs on the two
-  cores); not adopted, as it depends on the load.
-
-Per frame of the bunny-slicing benchmark (``benchmarks/bench_fem_slicing.py --bunny``, 12
-frames; kernels on one thread as :data:`unmesh.fem.dynamics.SERIAL_NODES` sets them; the
-machine shared, load average 2.8-3.1, the old and new code run one after the other):
-37 → 16 CG iterations, 3.81 → 2.36 s CPU and 5.51 → 3.35 s wall per frame (cutting frames
-4.08 → 2.59 s CPU); 3 LU factorisations either way (the setup step's, then a cut touching
-more than 10% of the nodes and a cut separating the head).
-
-The same benchmark at the thesis' node count (24,138 → 27,312 nodes, 30 frames), the code
-before and after the single-precision, warped and background factorisations and the
-kernels above, run one after the other on the shared machine (load 1.3-2.7): wall 1.37 →
-1.28 s per frame (cut 0.11 → 0.18, re-integration 0.21 → 0.23, solve 1.03 → 0.86 s), CPU
-1.31 → 1.25 s (main thread 0.97 s), 12 → 8 CG iterations, 3 → 8 factorisations (6 in the
-background, none waited for); at 14,905 nodes: wall 0.95 → 0.86 s, CPU 0.90 → 1.06 s (main
-thread 0.62 s), 10 → 8 iterations. A second pair at 24,138 nodes (load 1.0-2.9): wall
-1.40 → 1.52 s, CPU 1.37 → 1.12 s (main thread 0.87 s); the new code at 14,905 nodes again:
-wall 1.15 s, CPU 1.13 s (main thread 0.65 s; 14 factorisations, 12 in the background, some
-redone in double precision after slivers). The background thread costs the main thread when the
-machine is busy: with the other jobs on the two cores (load 1.7-3.2, interleaved runs of
-the 30 frames) the background refactorisation took 1.27 and 1.24 s per frame, refactorising
-in the foreground (``background=False``: 10.2 iterations, 3 factorisations) 1.19 and
-1.03 s, though the main thread's CPU was 0.99 and 0.95 s against 1.15 and 1.00 s (in the
-frames where a factorisation ran, cutting and re-integration took up to twice as long as in
-the old code's run: SuperLU's allocations take the GIL, and the thread competes for a core).
-Two more pairs at load 1.0-1.7: background 1.09 and 1.13 s (main thread 0.95 and 0.91 s),
-foreground 1.07 and 1.09 s (main thread 1.04 and 1.06 s). So the background refactorisation
-saves the main thread ~0.1 s per frame, which shows in the wall time only when the second
-core is free; on this shared machine it never was, and the wall times were equal within the
-noise (foreground faster in 4 of 5 pairs). It stays on (``background=True``), the goal being
-a quiet machine; ``background=False`` spends less CPU in all (1.01-1.16 against 1.17-1.26 s).
-Later, on the machine otherwise idle (load 0.6-1.7): the first two cuts took fresh memory for
-the stiffness data (~6 ms per MB at first touch on the benchmark's virtual machine; now
-reserved before the first step, :meth:`unmesh.fem.dynamics.Dynamics.reserve_topology_buffers`),
-and each background start stopped the main thread for 90-140 ms (pymetis held the GIL for
-the whole mesh's ordering; through ctypes, the step's first local ordering still queued
-behind it on the METIS lock): METIS is called through ctypes, the background job starts
-after the step's first local factorisation, and local orders are remembered
-(:func:`unmesh.fem.factor._local_order`). Main thread per frame over the 30 frames, two
-probe pairs: re-integration 114-119 → 73-77 ms, preconditioner set-up 72-76 → 50-52 ms;
-wall per frame in five interleaved pairs 0.75 / 0.76 / 0.73 / 0.80 / 0.85 → 0.73 / 0.73 /
-0.69 / 0.86 / 0.75 s (the machine's speed drifting by 25% within minutes: the same code ran
-at 0.98 s earlier); 8 iterations and 8 factorisations either way, the displacements after
-30 frames the same bit for bit. Tried without gain: METIS options (``nseps`` 3, ``ufactor``
-100, ``niter`` 20, ``ccorder``: fill 25.5-25.8M against 25.8M, no pivoting either way, L and
-U of equal size; solves within the noise), 1 or 2 BLAS threads for SuperLU's solve (28-40 ms
-either way), ``background_share`` 0.15 (12 factorisations, 7.6 iterations: 0.93 / 0.88
-against 0.93 / 0.86 s), ``background_iterations`` 10 (the same factorisations and
-iterations: a refactorisation was pending, just installed or started for the touched nodes
-anyway whenever it would have triggered), and
-glibc's ``mallopt`` keeping freed memory (no mmap, no trim) against the first-touch cost
-(no gain: the memory still grew, in the background thread's arena).
+The measurements behind these choices, and the alternatives tried and rejected (AMG,
+ILU, CHOLMOD, other orderings and thresholds), are in ``docs/performance.md``.
 
 The rounds of the contact active-set iteration (:mod:`unmesh.fem.dynamics`) are solved
 to a relative residual of 10⁻³ and the final active set is confirmed by a solve to
