@@ -97,11 +97,11 @@ def _docstring_nodes(tree: ast.Module) -> set[int]:
     return ids
 
 
-def imports_of(name: str) -> list[tuple[str, int]]:
-    """(imported module, line) for every import in module ``name`` that targets the package."""
-    tree = ast.parse(MODULES[name].read_text(), filename=str(MODULES[name]))
+def imports_of(name: str, source: str | None = None) -> list[tuple[str, int]]:
+    """(imported module, line) for every import in module ``name`` (its file, or ``source``) that targets the package."""
+    tree = ast.parse(MODULES[name].read_text() if source is None else source, filename=str(MODULES[name]))
     package = name if is_package(name) else name.rpartition(".")[0]
-    docstrings = _docstring_nodes(tree)
+    skip = _docstring_nodes(tree)   # docstrings and import_module arguments: not registry strings
     found: list[tuple[str, int]] = []
 
     def add(target: str | None, line: int) -> None:
@@ -128,13 +128,14 @@ def imports_of(name: str) -> list[tuple[str, int]]:
             if fname in ("import_module", "__import__") and node.args and isinstance(node.args[0], ast.Constant) \
                     and isinstance(node.args[0].value, str):
                 target = node.args[0].value
+                skip.add(id(node.args[0]))     # counted here, not again as a registry string
                 if target.startswith("."):
                     level = len(target) - len(target.lstrip("."))
                     base_parts = package.split(".")
                     base_parts = base_parts[: len(base_parts) - (level - 1)]
                     target = ".".join(base_parts + ([target.lstrip(".")] if target.lstrip(".") else []))
                 add(_known(target), node.lineno)
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:
             if node.value in MODULES and node.value.startswith("unmesh."):
                 add(node.value, node.lineno)
     return found
@@ -281,6 +282,25 @@ def test_checker_sees_lazy_relative_and_dynamic_imports():
     assert "unmesh.gallery.examples.render" in graph["unmesh.gallery"]  # EXAMPLE_MODULES string
     assert "unmesh.sim.cli" in graph["unmesh.gallery.registry"]  # lazy, inside ExampleContext.run_scene
     assert "unmesh.scenes" in graph["unmesh.gallery.registry"]   # `from unmesh import scenes`: the submodule
+
+
+def test_checker_resolves_relative_lazy_and_string_imports():
+    source = (
+        "from . import energy\n"                     # sibling submodule
+        "from .topology import ShellTopology\n"      # name from a sibling
+        "from .. import errors\n"                    # parent package's submodule
+        "from . import FiberState\n"                 # a name of the package __init__
+        "def f():\n"
+        "    import importlib\n"
+        "    from unmesh.render.camera import Camera\n"
+        "    importlib.import_module('unmesh.sph.cli')\n"
+        "    return ('unmesh.fem.cli', 'not unmesh.io')\n"
+    )
+    found = [target for target, _ in imports_of("unmesh.shells.forces", source)]
+    assert found == ["unmesh.shells.energy", "unmesh.shells.topology", "unmesh.errors", "unmesh.shells",
+                     "unmesh.render.camera", "unmesh.sph.cli", "unmesh.fem.cli"]
+    assert [t for t, _ in imports_of("unmesh.shells", "from . import forces\nfrom .forces import x\n")] == \
+        ["unmesh.shells.forces", "unmesh.shells.forces"]
 
 
 def test_checker_reports_upward_imports_and_cycles_by_name():
