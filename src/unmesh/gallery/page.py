@@ -9,7 +9,7 @@ import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from unmesh.gallery import Example, ExampleContext
+from unmesh.gallery.registry import Example, ExampleContext
 from unmesh.io.atomic import atomic_write_text
 
 __all__ = ["ExampleResult", "run_examples", "write_index"]

@@ -1,7 +1,12 @@
 """Membrane and bending energy of a fiber-sampled shell and its exact gradient (thesis 7.2).
 
 Plain numpy reference implementation; :mod:`unmesh.shells.forces` evaluates the same
-quantities with numba kernels, and the tests compare the two.
+quantities with numba kernels, and the tests compare the two. The reference
+(:func:`elastic_energy`, :func:`elastic_forces_reference`) never calls the fast path: it
+uses :mod:`unmesh.shells.fibers` only. :meth:`FiberState.at_rest` and
+:meth:`FiberState.measure` measure with the force kernels' arithmetic (tables from
+:mod:`unmesh.shells.arcs`), so a rest state has exactly zero force on the fast path too;
+this module does not import :mod:`unmesh.shells.forces`, which imports it.
 
 Definitions (per node ``i`` with fibers ``k``, ``m_i`` of them; fiber ``k`` centred at ``i``):
 
@@ -115,7 +120,7 @@ class FiberState:
         energy and force. Extra keyword arrays (e.g. ``stretch_scale``) override the uniform defaults.
         """
         from unmesh.shells import _kernels
-        from unmesh.shells.forces import arc_gram
+        from unmesh.shells.arcs import arc_gram
 
         x = as_points(rest, "rest", length=topology.n_nodes)
         f = topology.fibers
@@ -133,7 +138,7 @@ class FiberState:
         """Arc lengths and tangent angles (principal branch) of the fibers ``which`` (default all)
         at node positions ``x``, with the force kernels' arithmetic."""
         from unmesh.shells import _kernels
-        from unmesh.shells.forces import arc_gram
+        from unmesh.shells.arcs import arc_gram
 
         f = topology.fibers if which is None else np.ascontiguousarray(topology.fibers[which])
         s, normals = np.empty_like(x), np.empty_like(x)

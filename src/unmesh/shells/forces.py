@@ -8,12 +8,12 @@ fracture (7.24) and the pressure force reuse without recomputing them.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from unmesh.shells import _kernels
+from unmesh.shells.arcs import arc_gram, arc_weights  # re-exported: callers import them from here
 from unmesh.shells.energy import FiberState
 from unmesh.shells.fibers import ARC_SAMPLES
 from unmesh.shells.topology import ShellTopology
@@ -24,41 +24,6 @@ __all__ = ["ForceResult", "arc_gram", "arc_weights", "elastic_forces", "node_ter
 #: Fixed number of node ranges of the force pass, each with its own force buffer: the
 #: summation order, and so the result bit for bit, does not depend on the number of threads.
 FORCE_CHUNKS = 8
-
-
-@functools.lru_cache(maxsize=16)
-def arc_weights(samples: int) -> np.ndarray:
-    """Speed-sample weights (2n, 3) used by the kernels for ``samples`` = n per segment (B.4-B.6).
-
-    Example
-    -------
-    >>> arc_weights(1)
-    array([[-1.0625,  1.125 , -0.0625],
-           [ 0.0625, -1.125 ,  1.0625]])
-    """
-    from unmesh.shells.fibers import _samples
-
-    w = _kernels.sample_weights(_samples(samples))
-    w.setflags(write=False)
-    return w
-
-
-@functools.lru_cache(maxsize=16)
-def arc_gram(samples: int) -> np.ndarray:
-    """Gram-form speed table (2n, 6) of :func:`arc_weights` used by the kernels (B.4-B.6).
-
-    Columns ``alpha^2, 2 alpha gamma, gamma^2, alpha^2/n, alpha gamma/n, gamma^2/n``, where ``alpha``, ``gamma`` are the weights of ``x1``, ``x2`` (see
-    :mod:`unmesh.shells._fiber_kernels`).
-
-    Example
-    -------
-    >>> arc_gram(1)[:, :3]
-    array([[1.12890625, 0.1328125 , 0.00390625],
-           [0.00390625, 0.1328125 , 1.12890625]])
-    """
-    g = _kernels.gram_weights(arc_weights(samples))
-    g.setflags(write=False)
-    return g
 
 
 @dataclass(frozen=True, eq=False)

@@ -10,15 +10,12 @@ global one (``tests/shells/test_speed_paths.py``, ``tests/shells/test_fracture.p
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from unmesh.shells import _skinning_kernels as _sk
 from unmesh.shells.topology import csr_entries, csr_from_groups
-
-if TYPE_CHECKING:
-    from unmesh.shells.skinning import _Passive
 
 __all__ = ["Rebinding"]
 
@@ -41,6 +38,43 @@ def _cover_pairs_reference(bind: np.ndarray, nbr: np.ndarray, rows: np.ndarray, 
         eq = (mine[:, None, :, None] == theirs[:, :, None, :]) & (mine[:, None, :, None] >= 0)
         out[lo:lo + chunk] = eq.any(axis=(2, 3)) & (nbr[r] != r[:, None])
     return out
+
+
+class _Passive:
+    """Arrays of a set of bound passive points (dense surfels or discontinuity surfels), growable."""
+
+    FIELDS = ("points", "axes", "orient", "colors", "bind", "weights", "plane", "coords", "reach")
+
+    def __init__(self, k: int) -> None:
+        self.n = 0
+        self.points = np.zeros((0, 3))
+        self.axes = np.zeros((0, 2, 3))
+        self.orient = np.zeros(0)
+        self.colors = np.zeros((0, 3))
+        self.bind = np.zeros((0, k + 1), dtype=np.int64)
+        self.weights = np.zeros((0, k))
+        self.plane = np.zeros((0, 3))
+        self.coords = np.zeros((0, k, _sk.COORDS))
+        self.reach = np.zeros(0)     # distance to the farthest bound node
+
+    def append(self, **arrays: np.ndarray) -> None:
+        """Append rows (capacity doubles, so many small appends cost O(total))."""
+        add = len(arrays["points"])
+        need = self.n + add
+        cap = len(self.points)
+        if need > cap:
+            new_cap = max(need, 2 * cap, 16)
+            for name in self.FIELDS:
+                old = getattr(self, name)
+                grown = np.zeros((new_cap, *old.shape[1:]), dtype=old.dtype)
+                grown[:self.n] = old[:self.n]
+                setattr(self, name, grown)
+        for name in self.FIELDS:
+            getattr(self, name)[self.n:need] = arrays[name]
+        self.n = need
+
+    def view(self, name: str) -> np.ndarray:
+        return getattr(self, name)[:self.n]
 
 
 class Rebinding:

@@ -45,7 +45,7 @@ from unmesh._validate import as_points
 from unmesh.errors import InputError
 from unmesh.shells import _skinning_kernels as _sk
 from unmesh.shells.nodes import hide_blocked
-from unmesh.shells.rebinding import Rebinding, _cover_pairs, _cover_pairs_reference  # noqa: F401
+from unmesh.shells.rebinding import Rebinding, _cover_pairs, _cover_pairs_reference, _Passive  # noqa: F401
 from unmesh.sim.threads import threads_for
 from unmesh.surfels import SurfelCloud
 
@@ -266,43 +266,6 @@ def _trusted_cloud(positions: np.ndarray, normals: np.ndarray, radii: np.ndarray
     for name, value in zip(_CLOUD_FIELDS, (positions, normals, radii, None, colors, attributes), strict=True):
         object.__setattr__(cloud, name, value)
     return cloud
-
-
-class _Passive:
-    """Arrays of a set of bound passive points (dense surfels or discontinuity surfels), growable."""
-
-    FIELDS = ("points", "axes", "orient", "colors", "bind", "weights", "plane", "coords", "reach")
-
-    def __init__(self, k: int) -> None:
-        self.n = 0
-        self.points = np.zeros((0, 3))
-        self.axes = np.zeros((0, 2, 3))
-        self.orient = np.zeros(0)
-        self.colors = np.zeros((0, 3))
-        self.bind = np.zeros((0, k + 1), dtype=np.int64)
-        self.weights = np.zeros((0, k))
-        self.plane = np.zeros((0, 3))
-        self.coords = np.zeros((0, k, _sk.COORDS))
-        self.reach = np.zeros(0)     # distance to the farthest bound node
-
-    def append(self, **arrays: np.ndarray) -> None:
-        """Append rows (capacity doubles, so many small appends cost O(total))."""
-        add = len(arrays["points"])
-        need = self.n + add
-        cap = len(self.points)
-        if need > cap:
-            new_cap = max(need, 2 * cap, 16)
-            for name in self.FIELDS:
-                old = getattr(self, name)
-                grown = np.zeros((new_cap, *old.shape[1:]), dtype=old.dtype)
-                grown[:self.n] = old[:self.n]
-                setattr(self, name, grown)
-        for name in self.FIELDS:
-            getattr(self, name)[self.n:need] = arrays[name]
-        self.n = need
-
-    def view(self, name: str) -> np.ndarray:
-        return getattr(self, name)[:self.n]
 
 
 class SkinnedSurface(Rebinding):

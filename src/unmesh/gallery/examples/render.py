@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.gallery import ExampleContext, example
+from unmesh.gallery.registry import ExampleContext, example
 
 __all__ = ["checker_texture", "hole_fraction", "supersampled"]
 
