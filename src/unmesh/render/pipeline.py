@@ -27,6 +27,7 @@ Example
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -326,11 +327,9 @@ register_drawable("particles", Particles, _draw_particles, stage="opaque", order
 
 
 # -- render ---------------------------------------------------------------------------------------
-_KEYWORD_DEFAULTS: dict[str, Any] = {
-    "background": DEFAULT_BACKGROUND, "lights": None, "color_by": None, "colormap": "viridis", "color_range": None,
-    "legend": None, "splat": None, "particle_radius": None, "particle_style": "sphere", "particle_radii": None,
-    "mls": None, "supersample": 1, "progress": False, "method": "splat", "shading": "phong",
-}
+#: The keywords of :func:`render` that :meth:`RenderOptions.from_keywords` folds, with their defaults.
+_KEYWORD_DEFAULTS: dict[str, Any] = {name: p.default for name, p in
+                                     inspect.signature(RenderOptions.from_keywords).parameters.items()}
 
 
 def _is_default(value: Any, default: Any) -> bool:
