@@ -143,3 +143,41 @@ def test_nonuniform_scale_makes_elliptical_and_normals_stay_perpendicular():
     assert t.is_elliptical
     dots = np.einsum("nki,ni->nk", t.axes, t.normals)
     np.testing.assert_allclose(dots, 0, atol=1e-9)
+
+
+def test_surfel_kinds_from_the_discontinuity_attribute():
+    """Discontinuity surfels (thesis 4.3): 0 surface sample, 1 geometry, 2 texture discontinuity."""
+    from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCONTINUITY
+
+    plain = _cloud(4)
+    assert plain.surfel_kinds().tolist() == [SURFACE] * 4 and plain.surfel_kinds().dtype == np.int8
+    assert plain.visible() is plain and len(plain.discontinuity_surfels()) == 0
+    c = _cloud(6, attributes={"discontinuity": np.array([0, 1, 2, 0, 7, 0], dtype=np.uint8)})
+    assert c.surfel_kinds().tolist() == [0, GEOMETRY_DISCONTINUITY, TEXTURE_DISCONTINUITY, 0, GEOMETRY_DISCONTINUITY, 0]
+    vis = c.visible()
+    np.testing.assert_array_equal(vis.positions, c.positions[[0, 3, 5]])
+    assert vis.attributes["discontinuity"].tolist() == [0, 0, 0]
+    disc = c.discontinuity_surfels()
+    np.testing.assert_array_equal(disc.radii, c.radii[[1, 2, 4]])
+    assert disc.surfel_kinds().tolist() == [1, 2, 1]
+    # float flags (as written by PLY readers) and a cloud of surface samples only
+    f = _cloud(3, attributes={"discontinuity": np.zeros(3)})
+    assert f.visible() is f and f.surfel_kinds().tolist() == [0, 0, 0]
+    # computed, not stored: the attribute is the only record
+    assert set(c.attributes) == {"discontinuity"}
+
+
+def test_concatenate_attribute_policies():
+    a = _cloud(2, attributes={"t": np.ones(2), "s": np.zeros(2)})
+    b = _cloud(3, attributes={"t": np.full(3, 2.0)})
+    with pytest.raises(InputError, match="expected attributes"):
+        SurfelCloud.concatenate([a, b])
+    common = SurfelCloud.concatenate([a, b], attributes="common")
+    assert set(common.attributes) == {"t"} and common.attributes["t"].tolist() == [1, 1, 2, 2, 2]
+    none = SurfelCloud.concatenate([a, b], attributes="none")
+    assert none.attributes == {} and len(none) == 5
+    # the same construction as the default policy when names agree (bit for bit)
+    same = SurfelCloud.concatenate([a, a])
+    np.testing.assert_array_equal(SurfelCloud.concatenate([a, a], attributes="none").normals, same.normals)
+    with pytest.raises(InputError, match="attributes: expected 'same', 'common' or 'none'"):
+        SurfelCloud.concatenate([a], attributes="all")

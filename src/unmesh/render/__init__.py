@@ -22,10 +22,12 @@ Main API
     bounding box, ``Camera.fit(scene_points(objects), width, height)`` the objects themselves,
     ``.orbit(deg)``, ``.zoomed(k)``, ``.project(points)``, ``.rays()``.
 ``render(objects, camera, method="splat", shading="phong", **options) -> RenderResult``
-    Any mix of :class:`~unmesh.SurfelCloud`, :class:`~unmesh.TriangleMesh` and
-    :class:`~unmesh.Particles`; ``method="raycast"`` ray-casts the MLS surface of the surfels.
-    Options: ``background``, ``lights``, ``color_by``, ``colormap``, ``color_range``,
-    ``legend``, ``splat=SplatOptions(...)``, ``particle_radius``, ``particle_style``.
+    Any mix of :class:`~unmesh.SurfelCloud`, :class:`~unmesh.TriangleMesh`,
+    :class:`~unmesh.Particles` and registered drawable kinds; ``method="raycast"`` ray-casts the
+    MLS surface of the surfels. Options: ``background``, ``lights``, ``color_by``, ``colormap``,
+    ``color_range``, ``legend``, ``splat=SplatOptions(...)``, ``particle_radius``,
+    ``particle_style``, ``supersample``..., folded into one :class:`RenderOptions`
+    (or pass ``options=RenderOptions(...)``).
     ``RenderResult`` has ``.color`` (H,W,3), ``.depth`` (H,W), ``.normal`` (H,W,3),
     ``.coverage`` (H,W) bool, ``.weight`` (H,W), ``.albedo``, ``.save(path)``,
     ``.save_buffers(dir)``.
@@ -34,6 +36,11 @@ Main API
     ``.unsplat(cloud)`` (partial updates, 5.7), ``.gbuffer()``; with :func:`shade` for colours.
 ``Light(direction, color, intensity, space="camera")``, ``Shading(model, lights, ...)``,
 ``shade(gbuffer, camera, shading, background)``.
+``register_drawable(name, accepts, draw, stage="opaque", order=0)``
+    Adds a kind of drawable object (:mod:`unmesh.render.drawables`): ``draw(gbuffer, objects,
+    context)`` fills the G-buffer; ``collect(objects)`` sorts objects into a :class:`DrawList`
+    by kind (discontinuity surfels, 4.3, go to ``DrawList.clip`` and reach the splatter as
+    :class:`ClipSurfels`). ``Scene`` is a deprecated alias of ``DrawList``.
 
 Helpers (stable names, used by other capabilities)
 --------------------------------------------------
@@ -59,21 +66,39 @@ Example
 ((32, 32, 3), True, 3.0)
 """
 
+import warnings
+from typing import Any
+
 from unmesh.render.camera import Camera
 from unmesh.render.colormap import COLORMAPS, colormap, draw_legend, map_colors
+from unmesh.render.drawables import (
+    DrawableKind,
+    DrawContext,
+    drawable_kinds,
+    register_drawable,
+    unregister_drawable,
+)
 from unmesh.render.image import save_image, to_uint8, write_video
-from unmesh.render.pipeline import RenderResult, collect, render, scene_bounds, scene_points
+from unmesh.render.options import ColorOptions, ParticleOptions, RenderOptions
+from unmesh.render.pipeline import DrawList, collect, render, scene_bounds, scene_points
 from unmesh.render.sequence import find_frames, render_sequence, turntable, turntable_camera
-from unmesh.render.shading import DEFAULT_LIGHTS, GBuffer, Light, Shading, shade
-from unmesh.render.splat import ClipPlanes, SplatOptions, SplatRenderer
+from unmesh.render.shading import DEFAULT_LIGHTS, GBuffer, Light, RenderResult, Shading, shade
+from unmesh.render.splat import ClipPlanes, ClipSurfels, SplatOptions, SplatRenderer
 
 __all__ = [
     "COLORMAPS",
     "DEFAULT_LIGHTS",
     "Camera",
     "ClipPlanes",
+    "ClipSurfels",
+    "ColorOptions",
+    "DrawContext",
+    "DrawList",
+    "DrawableKind",
     "GBuffer",
     "Light",
+    "ParticleOptions",
+    "RenderOptions",
     "RenderResult",
     "Shading",
     "SplatOptions",
@@ -81,8 +106,10 @@ __all__ = [
     "collect",
     "colormap",
     "draw_legend",
+    "drawable_kinds",
     "find_frames",
     "map_colors",
+    "register_drawable",
     "render",
     "render_sequence",
     "save_image",
@@ -92,5 +119,14 @@ __all__ = [
     "to_uint8",
     "turntable",
     "turntable_camera",
+    "unregister_drawable",
     "write_video",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "Scene":
+        warnings.warn("unmesh.render.Scene is deprecated; use unmesh.render.DrawList (the draw list of one frame)",
+                      DeprecationWarning, stacklevel=2)
+        return DrawList
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

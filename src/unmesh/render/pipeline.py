@@ -1,9 +1,18 @@
-"""``render``: one call that draws any mix of surfel clouds, triangle meshes and particles.
+"""``render``: one call that draws any mix of surfel clouds, triangle meshes, particles and
+every other registered kind of drawable object (:mod:`unmesh.render.drawables`).
 
-Order of work: opaque geometry first (meshes by z-buffered rasterisation, particles as ray-cast
-spheres) into a G-buffer; then surfels, either EWA-splatted with the opaque depth as the initial
-visibility buffer (so meshes and particles occlude splats per fragment) or MLS ray-cast with a
-depth test; then deferred shading; then the colour-bar legend.
+Order of work: the objects are sorted into a :class:`DrawList` by kind (:func:`collect`); the
+``"opaque"`` kinds (meshes by z-buffered rasterisation, particles as ray-cast spheres) are drawn
+into a G-buffer; then the ``"splat"`` kinds: surfels, either EWA-splatted with the opaque depth as
+the initial visibility buffer (so meshes and particles occlude splats per fragment) or MLS
+ray-cast with a depth test; then deferred shading; then the colour-bar legend. Every option
+travels in one :class:`~unmesh.render.options.RenderOptions`.
+
+Discontinuity surfels (attribute ``discontinuity`` != 0, thesis 4.3, see
+:mod:`unmesh.surfels.cloud`) are not surface samples: :func:`collect` separates them from their
+clouds into :attr:`DrawList.clip`, and the splatter receives them as
+:class:`~unmesh.render.splat.ClipSurfels` beside :class:`~unmesh.render.splat.ClipPlanes`, the
+hook of chapter 4's clipped splatting. Until that is built they produce no colour.
 
 Example
 -------
@@ -18,10 +27,10 @@ Example
 
 from __future__ import annotations
 
-import os
-from collections.abc import Iterable, Mapping, Sequence
+import inspect
+import warnings
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -31,54 +40,88 @@ from unmesh.meshes import TriangleMesh
 from unmesh.particles import Particles
 from unmesh.render.camera import Camera
 from unmesh.render.colormap import attribute_values, draw_legend, map_colors, value_range
+from unmesh.render.drawables import DrawContext, draw_order, drawable_kind, drawable_kinds, register_drawable
+from unmesh.render.options import DEFAULT_BACKGROUND, METHODS, RenderOptions
 from unmesh.render.particles import draw_particles
 from unmesh.render.raster import draw_meshes
-from unmesh.render.shading import GBuffer, Light, Shading, as_shading, background_color, shade
-from unmesh.render.splat import SplatOptions, SplatRenderer, surfel_arrays
+from unmesh.render.shading import GBuffer, Light, RenderResult, Shading, shade
+from unmesh.render.splat import ClipSurfels, SplatOptions, SplatRenderer, surfel_arrays
 from unmesh.surfels import SurfelCloud
+from unmesh.surfels.cloud import DISCONTINUITY_ATTRIBUTE, SURFACE
 
-__all__ = ["METHODS", "RenderResult", "Scene", "collect", "render", "scene_bounds", "scene_points"]
+__all__ = ["METHODS", "DrawList", "RenderResult", "collect", "render", "scene_bounds", "scene_points"]
 
-#: Surfel rendering methods.
-METHODS = ("splat", "raycast")
 Renderable = SurfelCloud | TriangleMesh | Particles
 
 
 @dataclass
-class Scene:
-    """Objects of one frame sorted by kind (see :func:`collect`)."""
+class DrawList:
+    """The objects of one frame sorted by drawable kind (see :func:`collect`).
 
-    clouds: list[SurfelCloud] = field(default_factory=list)
-    meshes: list[TriangleMesh] = field(default_factory=list)
-    particles: list[Particles] = field(default_factory=list)
+    Attributes
+    ----------
+    groups : dict of str to list
+        Objects per kind name (:mod:`unmesh.render.drawables`), each list in the order given.
+        Surfel clouds hold their surface samples only (:meth:`SurfelCloud.visible`).
+    clip : list of SurfelCloud
+        The discontinuity surfels separated from the clouds (4.3): clip information for the
+        splatter (:meth:`clip_surfels`), never drawn.
+
+    Example
+    -------
+    >>> d = collect([SurfelCloud([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, radii=[1.0, 1.0],
+    ...                          attributes={"discontinuity": [0, 1]})])
+    >>> len(d.clouds[0]), len(d.clip[0]), len(d)
+    (1, 1, 1)
+    """
+
+    groups: dict[str, list[Any]] = field(default_factory=dict)
+    clip: list[SurfelCloud] = field(default_factory=list)
+
+    def of_kind(self, name: str) -> list[Any]:
+        """The (mutable) list of objects of kind ``name``."""
+        return self.groups.setdefault(name, [])
+
+    @property
+    def clouds(self) -> list[SurfelCloud]:
+        """Surfel clouds (kind ``"surfels"``)."""
+        return self.of_kind("surfels")
+
+    @property
+    def meshes(self) -> list[TriangleMesh]:
+        """Triangle meshes (kind ``"meshes"``)."""
+        return self.of_kind("meshes")
+
+    @property
+    def particles(self) -> list[Particles]:
+        """Particle sets (kind ``"particles"``)."""
+        return self.of_kind("particles")
 
     def __len__(self) -> int:
-        return len(self.clouds) + len(self.meshes) + len(self.particles)
+        return sum(len(v) for v in self.groups.values())
+
+    def _names(self) -> Iterator[str]:
+        known = [k.name for k in drawable_kinds()]
+        yield from (n for n in known if n in self.groups)
+        yield from (n for n in self.groups if n not in known)
 
     def all(self) -> list[Any]:
-        """Every object, clouds first."""
-        return [*self.clouds, *self.meshes, *self.particles]
+        """Every object, kind by kind in registration order (clouds, meshes, particles first)."""
+        return [obj for name in self._names() for obj in self.groups[name]]
+
+    def clip_surfels(self) -> ClipSurfels | None:
+        """The discontinuity surfels as :class:`ClipSurfels`, or None when there are none."""
+        clip = [c for c in self.clip if len(c)]
+        return ClipSurfels.from_clouds(clip) if clip else None
 
 
-def _surface_samples(cloud: SurfelCloud) -> SurfelCloud:
-    """``cloud`` without its discontinuity surfels (attribute ``discontinuity`` == 1).
+def collect(objects: Renderable | Iterable[Any] | None) -> DrawList:
+    """Sort a drawable object or a (nested) list of them into a :class:`DrawList`.
 
-    Thin-shell frames (thesis 7.4) carry pairs of such surfels along every crack; they mark the
-    crack edge for clipped splatting (section 4.3) and are not samples of the surface, so they are
-    not splatted.
-    """
-    flag = cloud.attributes.get("discontinuity")
-    if flag is None:
-        return cloud
-    keep = np.asarray(flag) == 0
-    return cloud if keep.all() else cloud.subset(keep)
-
-
-def collect(objects: Renderable | Iterable[Any] | None) -> Scene:
-    """Sort a renderable or a (nested) list of them into a :class:`Scene`.
-
-    Surfels flagged by a ``discontinuity`` attribute equal to 1 are left out (crack-edge markers
-    of the thin-shell simulation, not surface samples).
+    Each object goes to the first registered kind that accepts it
+    (:func:`~unmesh.render.drawables.register_drawable`); lists, tuples and draw lists are
+    flattened. The discontinuity surfels of surfel clouds (attribute ``discontinuity`` != 0,
+    4.3) go to :attr:`DrawList.clip` instead of being drawn.
 
     Example
     -------
@@ -86,27 +129,41 @@ def collect(objects: Renderable | Iterable[Any] | None) -> Scene:
     >>> len(s.clouds), len(s.particles)
     (1, 1)
     """
-    scene = Scene()
+    out = DrawList()
 
     def add(obj: Any, where: str) -> None:
-        if isinstance(obj, SurfelCloud):
-            scene.clouds.append(_surface_samples(obj))
-        elif isinstance(obj, TriangleMesh):
-            scene.meshes.append(obj)
-        elif isinstance(obj, Particles):
-            scene.particles.append(obj)
-        elif isinstance(obj, Scene):
+        if isinstance(obj, DrawList):
             for k, o in enumerate(obj.all()):
                 add(o, f"{where}[{k}]")
-        elif isinstance(obj, list | tuple):
+            out.clip.extend(obj.clip)
+            return
+        if isinstance(obj, list | tuple):
             for k, o in enumerate(obj):
                 add(o, f"{where}[{k}]")
+            return
+        kind = drawable_kind(obj)
+        if kind is not None:
+            if kind.clip is not None:
+                clip = kind.clip(obj)
+                if clip is not None:
+                    out.clip.append(clip)
+            out.of_kind(kind.name).append(kind.prepare(obj) if kind.prepare is not None else obj)
         else:
-            raise InputError(f"{where}: expected a SurfelCloud, TriangleMesh, Particles or a list of them, got {type(obj).__name__}")
+            names = ", ".join(k.name for k in drawable_kinds())
+            raise InputError(f"{where}: expected a SurfelCloud, TriangleMesh, Particles (or another registered "
+                             f"drawable kind: {names}) or a list of them, got {type(obj).__name__}")
 
     if objects is not None:
         add(objects, "objects")
-    return scene
+    return out
+
+
+def __getattr__(name: str) -> Any:
+    if name == "Scene":
+        warnings.warn("unmesh.render.pipeline.Scene is deprecated; use unmesh.render.DrawList", DeprecationWarning,
+                      stacklevel=2)
+        return DrawList
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def scene_bounds(objects: Any) -> np.ndarray:
@@ -118,10 +175,12 @@ def scene_bounds(objects: Any) -> np.ndarray:
     >>> scene_bounds(Particles([[0, 0, 0], [1, 2, 3]])).tolist()
     [[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]]
     """
-    scene = objects if isinstance(objects, Scene) else collect(objects)
+    scene = objects if isinstance(objects, DrawList) else collect(objects)
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for obj in scene.all():
+        if not callable(getattr(obj, "bounds", None)):  # a registered kind without bounds
+            continue
         b = np.asarray(obj.bounds(), dtype=np.float64)
         if not np.all(np.isfinite(b)):
             continue
@@ -143,7 +202,7 @@ def scene_points(objects: Any, max_points: int = 20000) -> np.ndarray:
     >>> scene_points(Particles([[0, 0, 0], [1, 1, 0]], radii=[0.5, 0.5])).max(axis=0).tolist()
     [1.5, 1.5, 0.0]
     """
-    scene = objects if isinstance(objects, Scene) else collect(objects)
+    scene = objects if isinstance(objects, DrawList) else collect(objects)
     items = [o for o in scene.all() if len(getattr(o, "positions", getattr(o, "vertices", ())))]
     if not items:
         return np.zeros((0, 3))
@@ -175,115 +234,110 @@ def scene_points(objects: Any, max_points: int = 20000) -> np.ndarray:
     return np.concatenate(out)
 
 
-@dataclass(frozen=True, eq=False)
-class RenderResult:
-    """A rendered image and its buffers, in the conventions of :mod:`unmesh.render.camera`.
-
-    Attributes
-    ----------
-    color : (H, W, 3) float64 in [0, 1]
-        Shaded image (legend included).
-    depth : (H, W) float64
-        Camera-space z; ``inf`` where nothing was hit.
-    normal : (H, W, 3) float64
-        World-space unit normals; zeros in the background.
-    coverage : (H, W) bool
-    weight : (H, W) float64
-        Accumulated splat weight (1 on meshes and particles, 0 in the background).
-    albedo : (H, W, 3) float64
-        Unshaded surface colour.
-    camera : Camera
-    color_range : tuple of float or None
-        The ``(lo, hi)`` range used by ``color_by``.
-    """
-
-    color: np.ndarray
-    depth: np.ndarray
-    normal: np.ndarray
-    coverage: np.ndarray
-    weight: np.ndarray
-    albedo: np.ndarray
-    camera: Camera
-    color_range: tuple[float, float] | None = None
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write :attr:`color` as an image file (atomic); returns the path.
-
-        Example
-        -------
-        >>> import tempfile, pathlib
-        >>> res = render([], Camera((0, 0, 1), (0, 0, 0), width=4, height=4))
-        >>> res.save(pathlib.Path(tempfile.mkdtemp()) / "empty.png").name
-        'empty.png'
-        """
-        from unmesh.render.image import save_image
-
-        return save_image(path, self.color)
-
-    def save_buffers(self, directory: str | os.PathLike[str]) -> dict[str, Path]:
-        """Write ``depth.npy`` (H,W float), ``normal.npy`` (H,W,3), ``coverage.npy`` (H,W bool)
-        and ``weight.npy`` (H,W float) into ``directory`` (created; each file atomic).
-
-        Example
-        -------
-        >>> import tempfile
-        >>> res = render([], Camera((0, 0, 1), (0, 0, 0), width=4, height=3))
-        >>> sorted(res.save_buffers(tempfile.mkdtemp()))
-        ['coverage', 'depth', 'normal', 'weight']
-        """
-        from unmesh.io.atomic import atomic_write
-
-        out = Path(directory)
-        out.mkdir(parents=True, exist_ok=True)
-        paths = {}
-        for name, arr in (("depth", self.depth), ("normal", self.normal), ("coverage", self.coverage),
-                          ("weight", self.weight)):
-            p = out / f"{name}.npy"
-            with atomic_write(p, "wb") as fh:
-                np.save(fh, arr)
-            paths[name] = p
-        return paths
-
-
-def _object_colors(scene: Scene, color_by: str | None, cmap: str, color_range: Sequence[float] | None
-                   ) -> tuple[dict[int, np.ndarray], tuple[float, float] | None]:
+def _object_colors(scene: DrawList, options: RenderOptions) -> tuple[dict[int, np.ndarray], tuple[float, float] | None]:
     """Colour overrides per object id for ``color_by`` and the range used."""
-    if color_by is None:
+    copt = options.color
+    if copt.by is None:
         return {}, None
     values: dict[int, np.ndarray] = {}
     errors = []
     for obj in scene.all():
         try:
-            values[id(obj)] = attribute_values(obj, color_by)
+            values[id(obj)] = attribute_values(obj, copt.by)
         except InputError as exc:
             errors.append(str(exc))
     if not values:
         if errors:
             raise InputError(errors[0])
         return {}, None
-    lo, hi = value_range(list(values.values()), color_range)
-    return {k: map_colors(v, lo, hi, cmap) for k, v in values.items()}, (lo, hi)
+    lo, hi = value_range(list(values.values()), copt.range)
+    return {k: map_colors(v, lo, hi, copt.colormap) for k, v in values.items()}, (lo, hi)
 
 
-def _downsample(hi: RenderResult, camera: Camera, k: int, legend: bool, cmap: str, label: str | None) -> RenderResult:
+def _with_legend(color: np.ndarray, options: RenderOptions, crange: tuple[float, float] | None) -> np.ndarray:
+    """``color`` with the colour bar of ``color_by`` when it is shown."""
+    copt = options.color
+    if copt.show_legend and crange is not None:
+        return draw_legend(color, crange[0], crange[1], copt.colormap, label=copt.by or "")
+    return color
+
+
+def _downsample(hi: RenderResult, camera: Camera, k: int, options: RenderOptions) -> RenderResult:
     """Average ``k x k`` blocks of a supersampled result (see ``render(supersample=k)``)."""
     h, w = camera.shape
 
     def blocks(a: np.ndarray) -> np.ndarray:
         return a.reshape(h, k, w, k, *a.shape[2:])
 
-    cov = blocks(hi.coverage)
-    coverage = cov.any(axis=(1, 3))
-    color = blocks(hi.color).mean(axis=(1, 3))
-    if legend and hi.color_range is not None:
-        color = draw_legend(color, hi.color_range[0], hi.color_range[1], cmap, label=label or "")
+    coverage = blocks(hi.coverage).any(axis=(1, 3))
+    color = _with_legend(blocks(hi.color).mean(axis=(1, 3)), options, hi.color_range)
     depth = blocks(np.where(hi.coverage, hi.depth, np.inf)).min(axis=(1, 3))
     nsum = blocks(hi.normal).sum(axis=(1, 3))
     length = np.linalg.norm(nsum, axis=-1, keepdims=True)
     normal = np.divide(nsum, length, out=np.zeros_like(nsum), where=length > 0)
-    return RenderResult(color=color, depth=depth, normal=normal, coverage=coverage,
-                        weight=blocks(hi.weight).mean(axis=(1, 3)), albedo=blocks(hi.albedo).mean(axis=(1, 3)),
-                        camera=camera, color_range=hi.color_range)
+    gbuf = GBuffer(albedo=blocks(hi.albedo).mean(axis=(1, 3)), normal=normal, depth=depth, coverage=coverage,
+                   weight=blocks(hi.weight).mean(axis=(1, 3)))
+    return RenderResult.from_gbuffer(gbuf, camera, color, hi.color_range)
+
+
+# -- the built-in drawable kinds ------------------------------------------------------------------
+def _draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], context: DrawContext) -> None:
+    draw_meshes(gbuffer, meshes, context.camera, [context.colors_for(m) for m in meshes])
+
+
+def _draw_particles(gbuffer: GBuffer, particles: Sequence[Particles], context: DrawContext) -> None:
+    popt = context.options.particles
+    radii = popt.radii or {}
+    draw_particles(gbuffer, particles, context.camera, [context.colors_for(p) for p in particles],
+                   radius=popt.radius, style=popt.style, filter_radius=max(context.options.splat.filter_radius, 0.71),
+                   radii=[radii.get(id(p)) for p in particles])
+
+
+def _draw_surfels(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], context: DrawContext) -> GBuffer | None:
+    """EWA splatting against the opaque G-buffer (3.2), or MLS ray casting (3.1.3)."""
+    clouds = [c for c in clouds if len(c)]
+    if not clouds:
+        return None
+    colors = None
+    if any(id(c) in context.colors for c in clouds):
+        colors = np.concatenate([context.colors.get(id(c), np.asarray(c.colors)) for c in clouds])
+    opts = context.options
+    if opts.method == "splat":
+        renderer = SplatRenderer(context.camera, opts.splat)
+        renderer.render(surfel_arrays(clouds, colors), opaque=gbuffer, clip_surfels=context.clip_surfels)
+        return renderer.gbuffer()
+    from unmesh.render.raycast import draw_mls
+
+    draw_mls(gbuffer, clouds, context.camera, colors=colors, mls_options=opts.mls, progress=opts.progress)
+    return None
+
+
+def _discontinuities(cloud: SurfelCloud) -> SurfelCloud | None:
+    """The discontinuity surfels of ``cloud`` (4.3), or None."""
+    if DISCONTINUITY_ATTRIBUTE not in cloud.attributes:
+        return None
+    clip = cloud.surfel_kinds() != SURFACE
+    return cloud.subset(clip) if clip.any() else None
+
+
+register_drawable("surfels", SurfelCloud, _draw_surfels, stage="splat", order=0, prepare=SurfelCloud.visible,
+                  clip=_discontinuities)
+register_drawable("meshes", TriangleMesh, _draw_meshes, stage="opaque", order=0)
+register_drawable("particles", Particles, _draw_particles, stage="opaque", order=10)
+
+
+# -- render ---------------------------------------------------------------------------------------
+#: The keywords of :func:`render` that :meth:`RenderOptions.from_keywords` folds, with their defaults.
+_KEYWORD_DEFAULTS: dict[str, Any] = {name: p.default for name, p in
+                                     inspect.signature(RenderOptions.from_keywords).parameters.items()}
+
+
+def _is_default(value: Any, default: Any) -> bool:
+    if value is default:
+        return True
+    if isinstance(default, str | bool | int | tuple) and type(value) is type(default):
+        return bool(value == default)
+    return False
 
 
 def render(
@@ -292,7 +346,8 @@ def render(
     method: str = "splat",
     shading: str | Shading = "phong",
     *,
-    background: Any = (1.0, 1.0, 1.0),
+    options: RenderOptions | None = None,
+    background: Any = DEFAULT_BACKGROUND,
     lights: Sequence[Light] | None = None,
     color_by: str | None = None,
     colormap: str = "viridis",
@@ -306,18 +361,24 @@ def render(
     supersample: int = 1,
     progress: bool = False,
 ) -> RenderResult:
-    """Render surfel clouds, triangle meshes and particles with one camera.
+    """Render surfel clouds, triangle meshes, particles (and registered kinds) with one camera.
+
+    The keywords are folded once into a :class:`~unmesh.render.options.RenderOptions`
+    (:meth:`~unmesh.render.options.RenderOptions.from_keywords`); or pass that object as
+    ``options`` (then leave the other keywords out).
 
     Parameters
     ----------
-    objects : SurfelCloud, TriangleMesh, Particles, or a (nested) list of them
-        An empty list renders the background.
+    objects : SurfelCloud, TriangleMesh, Particles, a registered drawable, or a (nested) list of them
+        An empty list renders the background. Discontinuity surfels (4.3) are not drawn.
     camera : Camera
     method : {"splat", "raycast"}
         Surfels by EWA splatting (3.2) or by ray casting their MLS surface (3.1.3).
     shading : {"phong", "none"} or Shading
         Deferred two-sided Blinn-Phong with ``lights`` (default: a key light from the upper left
         front plus ambient), or the unlit colour.
+    options : RenderOptions, optional
+        All options in one object (instead of the keywords).
     background : colour
         RGB triple, grey level or ``"#rrggbb"``.
     lights : sequence of Light, optional
@@ -360,50 +421,32 @@ def render(
     """
     if not isinstance(camera, Camera):
         raise InputError(f"camera: expected a Camera, got {type(camera).__name__}")
-    k = int(supersample)
-    if k != supersample or k < 1 or k > 16:
-        raise InputError(f"supersample: expected an integer in [1, 16], got {supersample!r}")
+    keywords = {"method": method, "shading": shading, "background": background, "lights": lights,
+                "color_by": color_by, "colormap": colormap, "color_range": color_range, "legend": legend,
+                "splat": splat, "particle_radius": particle_radius, "particle_style": particle_style,
+                "particle_radii": particle_radii, "mls": mls, "supersample": supersample, "progress": progress}
+    if options is None:
+        options = RenderOptions.from_keywords(**keywords)
+    else:
+        if not isinstance(options, RenderOptions):
+            raise InputError(f"options: expected RenderOptions, got {type(options).__name__}")
+        given = [k for k, v in keywords.items() if not _is_default(v, _KEYWORD_DEFAULTS[k])]
+        if given:
+            raise InputError(f"options: expected either a RenderOptions or keywords, got both (keywords: {', '.join(given)})")
+    k = options.supersample
     if k > 1:
-        hi = render(objects, camera.resized(camera.width * k, camera.height * k), method, shading,
-                    background=background, lights=lights, color_by=color_by, colormap=colormap,
-                    color_range=color_range, legend=False, splat=splat, particle_radius=particle_radius,
-                    particle_style=particle_style, particle_radii=particle_radii, mls=mls, progress=progress)
-        return _downsample(hi, camera, k, legend if legend is not None else color_by is not None, colormap, color_by)
-    if method not in METHODS:
-        raise InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    sh = as_shading(shading, lights)
-    bg = background_color(background)
+        hi = render(objects, camera.resized(camera.width * k, camera.height * k), options=options.single_sample())
+        return _downsample(hi, camera, k, options)
     scene = collect(objects)
-    overrides, crange = _object_colors(scene, color_by, colormap, color_range)
+    overrides, crange = _object_colors(scene, options)
     h, w = camera.shape
-    opts = splat if splat is not None else SplatOptions()
+    context = DrawContext(camera, options, overrides, scene.clip_surfels())
     gbuf = GBuffer.empty(h, w)
-    if scene.meshes:
-        draw_meshes(gbuf, scene.meshes, camera, [overrides.get(id(m)) for m in scene.meshes])
-    if scene.particles:
-        radii_map = particle_radii or {}
-        draw_particles(gbuf, scene.particles, camera, [overrides.get(id(p)) for p in scene.particles],
-                       radius=particle_radius, style=particle_style, filter_radius=max(opts.filter_radius, 0.71),
-                       radii=[radii_map.get(id(p)) for p in scene.particles])
-    clouds = [c for c in scene.clouds if len(c)]
-    if clouds:
-        colors = None
-        if any(id(c) in overrides for c in clouds):
-            colors = np.concatenate([overrides.get(id(c), np.asarray(c.colors)) for c in clouds])
-        if method == "splat":
-            renderer = SplatRenderer(camera, opts)
-            renderer.render(surfel_arrays(clouds, colors), opaque=gbuf)
-            gbuf = renderer.gbuffer()
-        else:
-            from unmesh.render.raycast import draw_mls
-
-            draw_mls(gbuf, clouds, camera, colors=colors, mls_options=mls, progress=progress)
-    color = shade(gbuf, camera, sh, bg)
-    show_legend = (color_by is not None) if legend is None else bool(legend)
-    if show_legend and crange is not None:
-        color = draw_legend(color, crange[0], crange[1], colormap, label=color_by or "")
-    normal = np.where(gbuf.coverage[..., None], gbuf.normal, 0.0)
-    depth = np.where(gbuf.coverage, gbuf.depth, np.inf)
-    return RenderResult(color=color, depth=depth, normal=normal, coverage=gbuf.coverage.copy(),
-                        weight=np.where(gbuf.coverage, gbuf.weight, 0.0), albedo=gbuf.albedo, camera=camera,
-                        color_range=crange)
+    for kind in draw_order():
+        items = scene.groups.get(kind.name)
+        if items:
+            drawn = kind.draw(gbuf, items, context)
+            if drawn is not None:
+                gbuf = drawn
+    color = _with_legend(shade(gbuf, camera, options.shading, options.background_rgb), options, crange)
+    return RenderResult.from_gbuffer(gbuf, camera, color, crange)

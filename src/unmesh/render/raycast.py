@@ -37,15 +37,6 @@ from unmesh.surfels import SurfelCloud
 __all__ = ["draw_mls"]
 
 
-def _combined(clouds: Sequence[SurfelCloud], colors: np.ndarray | None) -> SurfelCloud:
-    pos = np.concatenate([c.positions for c in clouds])
-    nrm = np.concatenate([c.normals for c in clouds])
-    col = np.concatenate([np.asarray(c.colors) for c in clouds]) if colors is None else colors
-    if any(c.is_elliptical for c in clouds):
-        return SurfelCloud(pos, nrm, axes=np.concatenate([c.tangent_axes() for c in clouds]), colors=col)
-    return SurfelCloud(pos, nrm, radii=np.concatenate([np.asarray(c.radii) for c in clouds]), colors=col)
-
-
 def draw_mls(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], camera: Camera, colors: np.ndarray | None = None,
              mls_options: Mapping[str, Any] | None = None, margin: int = 3, progress: bool = False) -> None:
     """Ray-cast the MLS surface of ``clouds`` into ``gbuffer`` (in place, z-buffered).
@@ -54,7 +45,8 @@ def draw_mls(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], camera: Camera, co
     ----------
     gbuffer : GBuffer
     clouds : sequence of SurfelCloud
-        Treated as one MLS surface.
+        Treated as one MLS surface (joined by :meth:`SurfelCloud.concatenate`; attributes are
+        not used).
     camera : Camera
     colors : (N, 3) array, optional
         Colour override for the concatenated surfels (e.g. an attribute through a colormap).
@@ -75,7 +67,10 @@ def draw_mls(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], camera: Camera, co
             raise InputError(f"clouds[{i}]: expected a SurfelCloud, got {type(c).__name__}")
     if not items:
         return
-    cloud = _combined(items, colors)
+    cloud = SurfelCloud.concatenate(items, attributes="none")
+    colors = cloud.colors if colors is None else np.ascontiguousarray(colors, dtype=np.float64)
+    if colors.shape != cloud.colors.shape:
+        raise InputError(f"colors: expected shape {cloud.colors.shape}, got {colors.shape}")
     opts = dict(mls_options or {})
     surf_keys = set(SURFACE_OPTIONS)
     surface = MLSSurface(cloud, **{k: v for k, v in opts.items() if k in surf_keys})
@@ -103,6 +98,6 @@ def draw_mls(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], camera: Camera, co
     pts = o + t[:, None] * d
     gbuffer.depth[rows, cols] = z
     gbuffer.normal[rows, cols] = nrm
-    gbuffer.albedo[rows, cols] = np.clip(interpolate(surface, pts, cloud.colors), 0.0, 1.0)
+    gbuffer.albedo[rows, cols] = np.clip(interpolate(surface, pts, colors), 0.0, 1.0)
     gbuffer.coverage[rows, cols] = True
     gbuffer.weight[rows, cols] = 1.0

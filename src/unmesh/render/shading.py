@@ -4,6 +4,8 @@ functions, and shading is performed in a second pass"; 5.7 deferred shading).
 Every renderer (splats, MLS ray casting, triangles, particles) fills the same G-buffer: albedo,
 world-space normal, depth and coverage. :func:`shade` turns it into colours with a two-sided
 Blinn-Phong model and directional lights, or passes the albedo through (``"none"``).
+:meth:`RenderResult.from_gbuffer` turns a G-buffer and its colours into the result every
+renderer returns.
 
 Example
 -------
@@ -14,8 +16,10 @@ Example
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,7 +29,7 @@ from unmesh.errors import InputError
 from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, shade_pixels
 from unmesh.render.camera import Camera
 
-__all__ = ["DEFAULT_LIGHTS", "GBuffer", "Light", "Shading", "as_shading", "background_color", "shade"]
+__all__ = ["DEFAULT_LIGHTS", "GBuffer", "Light", "RenderResult", "Shading", "as_shading", "background_color", "shade"]
 
 
 @dataclass(frozen=True)
@@ -201,6 +205,104 @@ class GBuffer:
     def copy(self) -> GBuffer:
         """A deep copy."""
         return GBuffer(self.albedo.copy(), self.normal.copy(), self.depth.copy(), self.coverage.copy(), self.weight.copy())
+
+
+@dataclass(frozen=True, eq=False)
+class RenderResult:
+    """A rendered image and its buffers, in the conventions of :mod:`unmesh.render.camera`.
+
+    Build it with :meth:`from_gbuffer` (the one constructor every renderer uses).
+
+    Attributes
+    ----------
+    color : (H, W, 3) float64 in [0, 1]
+        Shaded image (legend included).
+    depth : (H, W) float64
+        Camera-space z; ``inf`` where nothing was hit.
+    normal : (H, W, 3) float64
+        World-space unit normals; zeros in the background.
+    coverage : (H, W) bool
+    weight : (H, W) float64
+        Accumulated splat weight (1 on meshes and particles, 0 in the background).
+    albedo : (H, W, 3) float64
+        Unshaded surface colour.
+    camera : Camera
+    color_range : tuple of float or None
+        The ``(lo, hi)`` range used by ``color_by``.
+    """
+
+    color: np.ndarray
+    depth: np.ndarray
+    normal: np.ndarray
+    coverage: np.ndarray
+    weight: np.ndarray
+    albedo: np.ndarray
+    camera: Camera
+    color_range: tuple[float, float] | None = None
+
+    @classmethod
+    def from_gbuffer(cls, gbuffer: GBuffer, camera: Camera, color: np.ndarray,
+                     color_range: tuple[float, float] | None = None) -> RenderResult:
+        """The result of a G-buffer and its shaded ``color`` (H,W,3): background pixels (not
+        covered) get depth ``inf``, zero normal and zero weight; coverage is copied, the albedo
+        is shared.
+
+        Example
+        -------
+        >>> g = GBuffer.empty(2, 3)
+        >>> cam = Camera((0, 0, 1), (0, 0, 0), width=3, height=2)
+        >>> r = RenderResult.from_gbuffer(g, cam, shade(g, cam))
+        >>> r.color.shape, bool(np.isinf(r.depth).all())
+        ((2, 3, 3), True)
+        """
+        cov = gbuffer.coverage
+        return cls(color=color, depth=np.where(cov, gbuffer.depth, np.inf), normal=np.where(cov[..., None], gbuffer.normal, 0.0),
+                   coverage=cov.copy(), weight=np.where(cov, gbuffer.weight, 0.0), albedo=gbuffer.albedo, camera=camera,
+                   color_range=color_range)
+
+    def gbuffer(self) -> GBuffer:
+        """The buffers as a :class:`GBuffer` (arrays shared, not copied)."""
+        return GBuffer(self.albedo, self.normal, self.depth, self.coverage, self.weight)
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write :attr:`color` as an image file (atomic); returns the path.
+
+        Example
+        -------
+        >>> import tempfile, pathlib
+        >>> from unmesh.render import render
+        >>> res = render([], Camera((0, 0, 1), (0, 0, 0), width=4, height=4))
+        >>> res.save(pathlib.Path(tempfile.mkdtemp()) / "empty.png").name
+        'empty.png'
+        """
+        from unmesh.render.image import save_image
+
+        return save_image(path, self.color)
+
+    def save_buffers(self, directory: str | os.PathLike[str]) -> dict[str, Path]:
+        """Write ``depth.npy`` (H,W float), ``normal.npy`` (H,W,3), ``coverage.npy`` (H,W bool)
+        and ``weight.npy`` (H,W float) into ``directory`` (created; each file atomic).
+
+        Example
+        -------
+        >>> import tempfile
+        >>> from unmesh.render import render
+        >>> res = render([], Camera((0, 0, 1), (0, 0, 0), width=4, height=3))
+        >>> sorted(res.save_buffers(tempfile.mkdtemp()))
+        ['coverage', 'depth', 'normal', 'weight']
+        """
+        from unmesh.io.atomic import atomic_write
+
+        out = Path(directory)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = {}
+        for name, arr in (("depth", self.depth), ("normal", self.normal), ("coverage", self.coverage),
+                          ("weight", self.weight)):
+            p = out / f"{name}.npy"
+            with atomic_write(p, "wb") as fh:
+                np.save(fh, arr)
+            paths[name] = p
+        return paths
 
 
 def shade(gbuffer: GBuffer, camera: Camera, shading: str | Shading = "phong", background: Any = (1.0, 1.0, 1.0)) -> np.ndarray:

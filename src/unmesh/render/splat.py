@@ -16,6 +16,15 @@ of radius ``filter_radius`` pixels around the projected centre (Botsch et al. 20
 clipped Gaussian ``w = exp(-kappa rho^2)``, ``rho < 1``, is the reconstruction kernel. The depth
 tolerance of the extended depth test is ``eps_s = depth_tolerance * r_s`` per surfel (3.2.1).
 
+Clipping (chapter 4) comes in two forms that sit side by side: :class:`ClipPlanes`, per-surfel
+planes that the fragment kernel applies today (4.2.2), and :class:`ClipSurfels`, the
+discontinuity surfels of the drawn clouds (4.3, see :mod:`unmesh.surfels.cloud`), which the
+renderer separates from the surface samples and hands to the splatter. They are the hook of
+chapter 4's clipped splatting, which will derive the clip planes of each surfel from the
+discontinuity surfels it overlaps; until then they are kept by the renderer
+(:attr:`SplatRenderer.clip_surfels`) and produce no colour, as discontinuity surfels are
+invisible.
+
 Example
 -------
 >>> import numpy as np
@@ -41,10 +50,11 @@ from unmesh.errors import InputError
 from unmesh.render._kernels import SERIAL_BELOW, bin_boxes, box_visits, serial_if_small, tile_order
 from unmesh.render._splat_kernels import NPARAM, gather_rows, splat_resolve, splat_setup, splat_tiles
 from unmesh.render.camera import Camera
-from unmesh.render.shading import GBuffer
+from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.surfels import SurfelCloud
+from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCONTINUITY
 
-__all__ = ["ClipPlanes", "SplatOptions", "SplatRenderer", "SurfelArrays", "surfel_arrays"]
+__all__ = ["ClipPlanes", "ClipSurfels", "SplatOptions", "SplatRenderer", "SurfelArrays", "surfel_arrays"]
 
 
 @dataclass(frozen=True)
@@ -127,6 +137,76 @@ class ClipPlanes:
         return len(self.offsets) - 1
 
 
+@dataclass(frozen=True, eq=False)
+class ClipSurfels:
+    """Discontinuity surfels that clip the splats around them (chapter 4, 4.3).
+
+    Geometry discontinuity surfels (kind 1) clip their neighbours to a clean edge; texture
+    discontinuity surfels (kind 2) clip only their colour. Neither is drawn. This is the clip
+    information the renderer passes to :meth:`SplatRenderer.render` beside :class:`ClipPlanes`;
+    chapter 4's clipped splatting will turn it into per-surfel clip planes. Until that is built
+    the splatter keeps it (:attr:`SplatRenderer.clip_surfels`) without changing the image.
+
+    Parameters
+    ----------
+    positions, normals : array_like, shape (K, 3)
+    axes : array_like, shape (K, 2, 3)
+        Tangent axes (semi-axis lengths) of the clipping discs.
+    kind : array_like of int, shape (K,)
+        :data:`~unmesh.surfels.cloud.GEOMETRY_DISCONTINUITY` (1) or
+        :data:`~unmesh.surfels.cloud.TEXTURE_DISCONTINUITY` (2).
+
+    Example
+    -------
+    >>> c = SurfelCloud([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, radii=[1.0, 1.0], attributes={"discontinuity": [0, 2]})
+    >>> ClipSurfels.from_clouds([c]).kind.tolist()
+    [2]
+    """
+
+    positions: Any
+    normals: Any
+    axes: Any
+    kind: Any
+
+    def __post_init__(self) -> None:
+        pos = as_array(self.positions, "positions", (None, 3))
+        n = len(pos)
+        nrm = as_array(self.normals, "normals", (None, 3), length=n)
+        axes = as_array(self.axes, "axes", (None, 2, 3), length=n)
+        kind = np.ascontiguousarray(self.kind, dtype=np.int8)
+        if kind.shape != (n,):
+            raise InputError(f"kind: expected shape ({n},), got {kind.shape}")
+        bad = (kind != GEOMETRY_DISCONTINUITY) & (kind != TEXTURE_DISCONTINUITY)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(f"kind: expected {GEOMETRY_DISCONTINUITY} or {TEXTURE_DISCONTINUITY}, got {kind[i]} at index {i}")
+        object.__setattr__(self, "positions", pos)
+        object.__setattr__(self, "normals", nrm)
+        object.__setattr__(self, "axes", axes)
+        object.__setattr__(self, "kind", kind)
+
+    def __len__(self) -> int:
+        return int(self.positions.shape[0])
+
+    @classmethod
+    def from_clouds(cls, clouds: SurfelCloud | Sequence[SurfelCloud]) -> ClipSurfels:
+        """The discontinuity surfels of ``clouds`` (see :meth:`SurfelCloud.surfel_kinds`); their
+        surface samples are ignored."""
+        items = [clouds] if isinstance(clouds, SurfelCloud) else list(clouds)
+        for i, c in enumerate(items):
+            if not isinstance(c, SurfelCloud):
+                raise InputError(f"clouds[{i}]: expected a SurfelCloud, got {type(c).__name__}")
+        parts = []
+        for c in items:
+            kinds = c.surfel_kinds()
+            mask = kinds != SURFACE
+            if mask.any():
+                parts.append((c.positions[mask], c.normals[mask], c.tangent_axes()[mask], kinds[mask]))
+        if not parts:
+            return cls(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros(0, dtype=np.int8))
+        return cls(*(np.concatenate([p[k] for p in parts]) for k in range(4)))
+
+
 @dataclass(frozen=True)
 class SurfelArrays:
     """The arrays splatting reads.
@@ -199,6 +279,9 @@ class SplatRenderer:
         Unnormalised accumulation: weight, and colour, camera-space normal and depth times weight.
     count : (H, W) int32
         Number of accumulated fragments.
+    clip_surfels : ClipSurfels or None
+        The discontinuity surfels given to the last :meth:`render` (4.3); the hook of clipped
+        splatting (chapter 4), which does not change the image yet.
 
     Example
     -------
@@ -220,6 +303,7 @@ class SplatRenderer:
         if not isinstance(self.options, SplatOptions):
             raise InputError(f"options: expected SplatOptions, got {type(self.options).__name__}")
         self.param_dtype = np.float32 if self.options.precision == "single" else np.float64
+        self.clip_surfels: ClipSurfels | None = None
         self.clear()
 
     # -- buffers -------------------------------------------------------------------------
@@ -243,18 +327,26 @@ class SplatRenderer:
 
     # -- updates -------------------------------------------------------------------------
     def render(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, opaque: GBuffer | None = None,
-               clip: ClipPlanes | None = None) -> SplatRenderer:
+               clip: ClipPlanes | None = None, clip_surfels: ClipSurfels | None = None) -> SplatRenderer:
         """Full update: clear, visibility pass, accumulation pass over all ``clouds`` together.
 
         Parameters
         ----------
         clouds : SurfelCloud, list of SurfelCloud, or SurfelArrays
+            Splatted as given (:func:`unmesh.render.render` passes only the surface samples,
+            :meth:`SurfelCloud.visible`).
         opaque : GBuffer, optional
             Already rasterised opaque geometry; its depth initialises the visibility buffer.
         clip : ClipPlanes, optional
             Per-surfel clip planes (one entry per surfel of the concatenated clouds).
+        clip_surfels : ClipSurfels, optional
+            Discontinuity surfels of the view (4.3), kept in :attr:`clip_surfels` for clipped
+            splatting (chapter 4); they produce no colour.
         """
+        if clip_surfels is not None and not isinstance(clip_surfels, ClipSurfels):
+            raise InputError(f"clip_surfels: expected ClipSurfels, got {type(clip_surfels).__name__}")
         self.clear(opaque)
+        self.clip_surfels = clip_surfels
         self._run(clouds, clip, visibility=True, sign=1)
         return self
 
@@ -331,8 +423,8 @@ class SplatRenderer:
                           self.camera.rotation, g.albedo, g.normal, g.depth, g.coverage, g.weight)
         return g
 
-    def result(self, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0)) -> Any:
-        """The normalised, shaded image and buffers as a :class:`unmesh.render.RenderResult`.
+    def result(self, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0)) -> RenderResult:
+        """The normalised, shaded image and buffers as a :class:`~unmesh.render.shading.RenderResult`.
 
         Example
         -------
@@ -341,11 +433,6 @@ class SplatRenderer:
         >>> r.result(shading="none").color[4, 4].tolist()
         [1.0, 0.0, 0.0]
         """
-        from unmesh.render.pipeline import RenderResult
-        from unmesh.render.shading import shade
-
         g = self.gbuffer()
-        return RenderResult(color=shade(g, self.camera, shading, background), depth=np.where(g.coverage, g.depth, np.inf),
-                            normal=np.where(g.coverage[..., None], g.normal, 0.0), coverage=g.coverage,
-                            weight=np.where(g.coverage, g.weight, 0.0), albedo=g.albedo, camera=self.camera)
+        return RenderResult.from_gbuffer(g, self.camera, shade(g, self.camera, shading, background))
 

@@ -6,6 +6,25 @@ eq. 3.13). A :class:`SurfelCloud` holds N of them plus colours and any number of
 named per-surfel attributes (extra arrays whose first axis has length N). Arrays are
 converted once, here: positions/normals/colors (N,3) float64, radii (N,) float64,
 axes (N,2,3) float64, all C-contiguous.
+
+Discontinuity surfels (thesis 4.3)
+----------------------------------
+The optional per-surfel attribute ``discontinuity`` (:data:`DISCONTINUITY_ATTRIBUTE`) tells
+what a surfel is for:
+
+* ``0`` (:data:`SURFACE`) - an ordinary surface sample (also every surfel of a cloud without
+  the attribute);
+* ``1`` (:data:`GEOMETRY_DISCONTINUITY`) - a geometry discontinuity surfel: invisible, it clips
+  its neighbours to a clean edge (e.g. the pairs of opposite-facing surfels that the thin-shell
+  simulation puts along every crack, 7.4);
+* ``2`` (:data:`TEXTURE_DISCONTINUITY`) - a texture discontinuity surfel: invisible, it clips
+  only the colour of its neighbours (normals and depth blend across it, fig. 4.6).
+
+Any other non-zero value counts as a geometry discontinuity. Discontinuity surfels are not
+samples of the surface ("discontinuity surfels are not drawn", 4.4): :meth:`SurfelCloud.visible`
+gives the surface samples, :meth:`SurfelCloud.discontinuity_surfels` the clipping ones and
+:meth:`SurfelCloud.surfel_kinds` the kind of each surfel; all three are computed from the
+attribute, nothing else is stored.
 """
 
 from __future__ import annotations
@@ -21,7 +40,15 @@ import numpy as np
 from unmesh._validate import as_array, as_points, first_index
 from unmesh.errors import InputError
 
-__all__ = ["DEFAULT_COLOR", "RESERVED_NAMES", "SurfelCloud"]
+__all__ = [
+    "DEFAULT_COLOR",
+    "DISCONTINUITY_ATTRIBUTE",
+    "GEOMETRY_DISCONTINUITY",
+    "RESERVED_NAMES",
+    "SURFACE",
+    "TEXTURE_DISCONTINUITY",
+    "SurfelCloud",
+]
 
 DEFAULT_COLOR = (0.8, 0.8, 0.8)
 #: Names that per-surfel attributes may not use (they are fields or PLY properties).
@@ -29,6 +56,11 @@ RESERVED_NAMES = frozenset(
     {"positions", "normals", "radii", "axes", "colors", "x", "y", "z", "nx", "ny", "nz", "radius",
      "red", "green", "blue", "alpha"}
 )
+#: Name of the per-surfel attribute that marks discontinuity surfels (thesis 4.3).
+DISCONTINUITY_ATTRIBUTE = "discontinuity"
+#: Surfel kinds (values of :data:`DISCONTINUITY_ATTRIBUTE`): surface sample, geometry
+#: discontinuity (clips its neighbours, invisible), texture discontinuity (clips colour only).
+SURFACE, GEOMETRY_DISCONTINUITY, TEXTURE_DISCONTINUITY = 0, 1, 2
 
 
 def _unit_rows(vectors: np.ndarray, name: str) -> np.ndarray:
@@ -80,7 +112,9 @@ class SurfelCloud:
     colors : array_like, shape (N, 3), optional
         RGB in [0, 1] (uint8 input is divided by 255). Default light grey.
     attributes : mapping of str to array_like, optional
-        Extra per-surfel arrays, each with first axis of length N.
+        Extra per-surfel arrays, each with first axis of length N. ``discontinuity`` marks
+        discontinuity surfels (0 surface sample, 1 geometry discontinuity, 2 texture
+        discontinuity; see the module notes and :meth:`surfel_kinds`).
 
     Raises
     ------
@@ -190,6 +224,58 @@ class SurfelCloud:
         radii = np.asarray(self.radii)
         return np.ascontiguousarray(np.stack([t1, t2], axis=1) * radii[:, None, None])
 
+    def surfel_kinds(self) -> np.ndarray:
+        """The kind (N,) int8 of every surfel from the ``discontinuity`` attribute (thesis 4.3).
+
+        :data:`SURFACE` (0) where the attribute is 0 or absent, :data:`TEXTURE_DISCONTINUITY` (2)
+        where it is 2, :data:`GEOMETRY_DISCONTINUITY` (1) at every other non-zero value.
+
+        Example
+        -------
+        >>> c = SurfelCloud(np.zeros((3, 3)), np.tile([0, 0, 1.0], (3, 1)), radii=[1, 1, 1],
+        ...                 attributes={"discontinuity": [0, 1, 2]})
+        >>> c.surfel_kinds().tolist()
+        [0, 1, 2]
+        """
+        flag = self.attributes.get(DISCONTINUITY_ATTRIBUTE)
+        if flag is None:
+            return np.zeros(len(self), dtype=np.int8)
+        flag = np.asarray(flag).reshape(len(self), -1)[:, 0]
+        kinds = np.full(len(self), GEOMETRY_DISCONTINUITY, dtype=np.int8)
+        kinds[flag == 0] = SURFACE
+        kinds[flag == TEXTURE_DISCONTINUITY] = TEXTURE_DISCONTINUITY
+        return kinds
+
+    def visible(self) -> SurfelCloud:
+        """The surface samples: the cloud without its discontinuity surfels (4.3, which are not drawn).
+
+        Returns the cloud itself (not a copy) when it has no discontinuity surfels.
+
+        Example
+        -------
+        >>> c = SurfelCloud(np.zeros((3, 3)), np.tile([0, 0, 1.0], (3, 1)), radii=[1, 2, 3],
+        ...                 attributes={"discontinuity": [0, 1, 0]})
+        >>> c.visible().radii, c.subset([0]).visible().radii
+        (array([1., 3.]), array([1.]))
+        """
+        flag = self.attributes.get(DISCONTINUITY_ATTRIBUTE)
+        if flag is None:
+            return self
+        keep = np.asarray(flag) == 0
+        return self if keep.all() else self.subset(keep)
+
+    def discontinuity_surfels(self) -> SurfelCloud:
+        """The discontinuity surfels (geometry and texture, 4.3), with all attributes; empty when none.
+
+        Example
+        -------
+        >>> c = SurfelCloud(np.zeros((3, 3)), np.tile([0, 0, 1.0], (3, 1)), radii=[1, 2, 3],
+        ...                 attributes={"discontinuity": [0, 1, 2]})
+        >>> c.discontinuity_surfels().surfel_kinds().tolist()
+        [1, 2]
+        """
+        return self.subset(self.surfel_kinds() != SURFACE)
+
     def bounds(self) -> np.ndarray:
         """Axis-aligned bounds (2, 3) of the centres: ``[min, max]``; empty gives ``[inf, -inf]``."""
         if len(self) == 0:
@@ -268,18 +354,39 @@ class SurfelCloud:
         return SurfelCloud(pos, nrm, axes=axes, colors=self.colors, attributes=self.attributes)
 
     @classmethod
-    def concatenate(cls, clouds: Iterable[SurfelCloud]) -> SurfelCloud:
-        """Join clouds; they must carry the same attribute names.
+    def concatenate(cls, clouds: Iterable[SurfelCloud], attributes: str = "same") -> SurfelCloud:
+        """Join clouds.
 
         Mixing circular and elliptical clouds gives an elliptical cloud.
+
+        Parameters
+        ----------
+        clouds : iterable of SurfelCloud
+        attributes : {"same", "common", "none"}
+            ``"same"``: every cloud must carry the same attribute names (default);
+            ``"common"``: keep the attributes all clouds carry; ``"none"``: drop them.
+
+        Example
+        -------
+        >>> a = SurfelCloud([[0, 0, 0]], [[0, 0, 1]], radii=[1.0], attributes={"t": [1.0]})
+        >>> b = SurfelCloud([[1, 0, 0]], [[0, 0, 1]], radii=[2.0])
+        >>> c = SurfelCloud.concatenate([a, b], attributes="none")
+        >>> len(c), c.attributes
+        (2, {})
         """
         items = list(clouds)
         if not items:
             raise InputError("clouds: expected at least one SurfelCloud, got none")
+        if attributes not in ("same", "common", "none"):
+            raise InputError(f"attributes: expected 'same', 'common' or 'none', got {attributes!r}")
         names = set(items[0].attributes)
         for i, c in enumerate(items):
-            if set(c.attributes) != names:
+            if attributes == "common":
+                names &= set(c.attributes)
+            elif attributes == "same" and set(c.attributes) != names:
                 raise InputError(f"clouds[{i}]: expected attributes {sorted(names)}, got {sorted(c.attributes)}")
+        if attributes == "none":
+            names = set()
         attrs = {k: np.concatenate([c.attributes[k] for c in items]) for k in names}
         pos = np.concatenate([c.positions for c in items])
         nrm = np.concatenate([c.normals for c in items])
