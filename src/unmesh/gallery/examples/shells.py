@@ -1,7 +1,7 @@
 """Gallery examples of point-sampled thin shells (thesis chapter 7).
 
 Each example runs a shipped scene (``examples/shells/*.toml``), renders the dense surfel
-frames (discontinuity surfels are left out of the image) with one fixed camera into a video
+frames (discontinuity surfels only clip, section 4.3) with one fixed camera into a video
 and a strip of stills, and reports figures read from ``summary.json``. ``ctx.quick`` runs
 them coarser and shorter.
 """
@@ -35,8 +35,8 @@ def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path |
                   fps: float = 25.0) -> tuple[list[np.ndarray], Path | None]:
     """Render selected frames (stills) and optionally every frame (video) with one camera.
 
-    Discontinuity surfels (attribute ``discontinuity == 1``) only clip edges (section 4.3)
-    and are not drawn.
+    The frames keep their discontinuity surfels (``SurfelCloud.surfel_kinds``): the renderer
+    passes them to the splatter as clip information (section 4.3) and draws no colour for them.
     """
     from unmesh import io
     from unmesh.render import Camera, render, write_video
@@ -46,13 +46,11 @@ def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path |
 
     def load(i: int) -> Any:
         if i not in clouds:
-            c = io.load(files[i])
-            keep = c.attributes.get("discontinuity", np.zeros(len(c))) == 0
             clouds.clear()
-            clouds[i] = c.subset(keep)
+            clouds[i] = io.load(files[i])
         return clouds[i]
 
-    pts = np.concatenate([load(i).positions[::7] for i in np.linspace(0, len(files) - 1, 6).astype(int)])
+    pts = np.concatenate([load(i).visible().positions[::7] for i in np.linspace(0, len(files) - 1, 6).astype(int)])
     cam = Camera.fit(pts, size, size, direction=direction)
     stills = [render(load(min(i, len(files) - 1)), cam).color for i in frames]
     written = None
