@@ -37,6 +37,7 @@ __all__ = [
     "EXTRA",
     "connect",
     "dashboard_address",
+    "imap_ordered",
     "limit_numba_threads",
     "ordered_map",
     "require_dask",
@@ -188,7 +189,6 @@ def connect(workers: int | None = None, scheduler: str | None = None, *, numba_t
                 dashboard_address=dashboard if dashboard is not None else None))
             client = stack.enter_context(distributed.Client(cluster))
             where = f"local cluster of {n} worker process{'es' if n != 1 else ''}"
-        client.unmesh_numba_threads = threads  # type: ignore[attr-defined]
         if progress_output is not None:
             link = dashboard_address(client)
             print(f"dask: {where}, numba threads per worker {threads}; dashboard: "
@@ -200,37 +200,47 @@ def submit_all(client: Any, fn: Callable[..., Any], calls: Sequence[tuple[str, t
                retries: int = 1) -> dict[Any, str]:
     """Submit ``fn(*args)`` for each ``(name, args)``; returns ``{future: name}``.
 
-    Task keys are ``"<fn>-<name>"`` (readable in the dashboard); ``retries`` reruns a failing
+    Task keys are ``"<fn>-<name>-<token>"`` (readable in the dashboard); ``retries`` reruns a failing
     call that many times before its future holds the error.
     """
+    import uuid
+
     futures: dict[Any, str] = {}
     base = getattr(fn, "__name__", "task").strip("_")
+    token = uuid.uuid4().hex[:8]  # one submission's keys never meet an earlier one's results
     for name, args in calls:
-        fut = client.submit(fn, *args, key=f"{base}-{name}", retries=int(retries), pure=False)
+        fut = client.submit(fn, *args, key=f"{base}-{name}-{token}", retries=int(retries), pure=False)
         futures[fut] = name
     return futures
 
 
-def ordered_map(client: Any, fn: Callable[..., Any], args: Sequence[tuple[Any, ...]], *, retries: int = 1,
-                progress: bool = True, desc: str = "tasks") -> list[Any]:
-    """``[fn(*a) for a in args]`` on the cluster, in order, with a progress bar over completions.
+def imap_ordered(client: Any, fn: Callable[..., Any], args: Sequence[tuple[Any, ...]], *, retries: int = 1,
+                 progress: bool = True, desc: str = "tasks") -> Iterator[Any]:
+    """Yield ``fn(*a)`` for each ``a`` of ``args`` in order, computed on the cluster (all submitted at once).
 
-    A call that still fails after ``retries`` reruns raises its error here (the other calls are
-    cancelled). Ctrl-C cancels every call before re-raising.
+    Results wait on the workers until their turn, so a long sequence (video frames) streams
+    through the client. A call that still fails after ``retries`` reruns raises its error
+    here; the remaining calls are then cancelled, as on Ctrl-C or when the consumer stops early.
     """
     from tqdm.auto import tqdm
 
-    distributed = require_dask()
     width = len(str(max(len(args) - 1, 0)))
-    futures = submit_all(client, fn, [(f"{k:0{width}d}", a) for k, a in enumerate(args)], retries=retries)
-    order = {name: k for k, name in enumerate(futures.values())}
-    results: list[Any] = [None] * len(args)
+    futures = list(submit_all(client, fn, [(f"{k:0{width}d}", a) for k, a in enumerate(args)], retries=retries))
     try:
-        with tqdm(total=len(args), desc=desc, unit="task", disable=not progress) as bar:
-            for fut in distributed.as_completed(list(futures)):
-                results[order[futures[fut]]] = fut.result()
+        with tqdm(total=len(futures), desc=desc, unit="task", disable=not progress) as bar:
+            for k, fut in enumerate(futures):
+                value = fut.result()
+                futures[k] = None  # release the result on the cluster
+                fut.release()
                 bar.update(1)
-    except BaseException:
-        client.cancel(list(futures), force=True)
-        raise
-    return results
+                yield value
+    finally:
+        rest = [f for f in futures if f is not None]
+        if rest:
+            client.cancel(rest, force=True)
+
+
+def ordered_map(client: Any, fn: Callable[..., Any], args: Sequence[tuple[Any, ...]], *, retries: int = 1,
+                progress: bool = True, desc: str = "tasks") -> list[Any]:
+    """``[fn(*a) for a in args]`` on the cluster, in order (see :func:`imap_ordered`)."""
+    return list(imap_ordered(client, fn, args, retries=retries, progress=progress, desc=desc))

@@ -12,7 +12,7 @@ Example
 -------
 >>> from unmesh.batch import task_id
 >>> task_id({"simulation.spacing": 0.02})
-'spacing=0.02-6e2a6d1d'
+'spacing=0.02-470b6b5a'
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ with both, every run is combined with every point of ``[sweep]``. For scene comm
 (``sample``, ``render``, ``convert``: ``inputs = ["scans/*.ply"]``) they are the command's
 options without the dashes (``spacing = [0.01, 0.005]`` runs ``--spacing 0.01`` ...).
 
-Task ids look like ``viscosity=0.01_spacing=0.02-1f0c9a3e``: the last part of each key with
+Task ids look like ``viscosity=0.01_spacing=0.02-30bd46ed``: the last part of each key with
 its value (the input file's stem first), then 8 hex digits of a hash of the task's full
 parameters and input. An id depends on its own task only (not on the other tasks or the
 order of the keys), so it survives editing the sweep and ``--resume`` finds the tasks again.
@@ -24,7 +24,7 @@ order of the keys), so it survives editing the sweep and ``--resume`` finds the 
 Example
 -------
 >>> task_id({"materials.water.viscosity": 0.01, "simulation.spacing": 0.02})
-'viscosity=0.01_spacing=0.02-bd6d3fb4'
+'viscosity=0.01_spacing=0.02-30bd46ed'
 """
 
 from __future__ import annotations
@@ -158,7 +158,7 @@ def task_id(parameters: Mapping[str, Any], input: str | None = None, name: str |
     Example
     -------
     >>> task_id({"spacing": 0.01}, input="scans/bunny.ply")
-    'bunny_spacing=0.01-bfd6ce3a'
+    'bunny_spacing=0.01-916150cf'
     """
     canon = json.dumps({"input": input, "parameters": _canonical(dict(parameters)), "name": name},
                        sort_keys=True, separators=(",", ":"), allow_nan=False)
