@@ -138,7 +138,7 @@ def dashboard_address(client: Any) -> str | None:
 
 @contextlib.contextmanager
 def connect(workers: int | None = None, scheduler: str | None = None, *, numba_threads: int | None = None,
-            dashboard: str | None = ":8787", progress_output: Any = sys.stderr) -> Iterator[Any]:
+            dashboard: str | None = ":8787", progress_output: Any = "stderr") -> Iterator[Any]:
     """A Dask client: a new local cluster (default) or an existing scheduler; closed on exit.
 
     Parameters
@@ -151,8 +151,8 @@ def connect(workers: int | None = None, scheduler: str | None = None, *, numba_t
         Numba threads per worker (default: ``cores // workers`` locally, 1 on an existing cluster).
     dashboard : str or None
         Dashboard address of a local cluster (``None``: no dashboard).
-    progress_output : file or None
-        Where the cluster and dashboard addresses are printed (``None``: silent).
+    progress_output : file, "stderr" or None
+        Where the cluster and dashboard addresses are printed (default ``sys.stderr``; ``None``: silent).
 
     Raises
     ------
@@ -189,6 +189,8 @@ def connect(workers: int | None = None, scheduler: str | None = None, *, numba_t
                 dashboard_address=dashboard if dashboard is not None else None))
             client = stack.enter_context(distributed.Client(cluster))
             where = f"local cluster of {n} worker process{'es' if n != 1 else ''}"
+        if isinstance(progress_output, str):
+            progress_output = sys.stderr
         if progress_output is not None:
             link = dashboard_address(client)
             print(f"dask: {where}, numba threads per worker {threads}; dashboard: "

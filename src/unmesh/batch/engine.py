@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -54,7 +53,7 @@ def _check_outdir(outdir: Path, sweep: Sweep, previous: dict[str, Any] | None, r
 def run_batch(sweep: Sweep | str | os.PathLike[str], outdir: str | os.PathLike[str], *, workers: int | None = None,
               scheduler: str | None = None, resume: bool = False, progress: bool = True, client: Any = None,
               retries: int = 1, numba_threads: int | None = None, poll_seconds: float = 0.5,
-              log: Any = sys.stderr) -> dict[str, Any]:
+              log: Any = "stderr") -> dict[str, Any]:
     """Run every task of a sweep on Dask distributed; returns the final manifest (``batch.json``).
 
     Parameters
@@ -79,8 +78,8 @@ def run_batch(sweep: Sweep | str | os.PathLike[str], outdir: str | os.PathLike[s
         Numba threads per task (default: as :func:`unmesh.distributed.connect` chooses).
     poll_seconds : float
         How often the running tasks' workers are read from the scheduler.
-    log : file or None
-        Where the cluster and dashboard addresses are printed.
+    log : file, "stderr" or None
+        Where the cluster and dashboard addresses are printed (default ``sys.stderr``; ``None``: silent).
 
     Raises
     ------

@@ -17,7 +17,7 @@ with both, every run is combined with every point of ``[sweep]``. For scene comm
 options without the dashes (``spacing = [0.01, 0.005]`` runs ``--spacing 0.01`` ...).
 
 Task ids look like ``viscosity=0.01_spacing=0.02-30bd46ed``: the last part of each key with
-its value (the input file's stem first), then 8 hex digits of a hash of the task's full
+its value, keys in alphabetical order of their full names (the input file's stem first), then 8 hex digits of a hash of the task's full
 parameters and input. An id depends on its own task only (not on the other tasks or the
 order of the keys), so it survives editing the sweep and ``--resume`` finds the tasks again.
 
@@ -169,7 +169,7 @@ def task_id(parameters: Mapping[str, Any], input: str | None = None, name: str |
     if name is not None:
         parts.append(_SAFE.sub("-", name))
     else:
-        for key, value in parameters.items():
+        for key, value in sorted(parameters.items(), key=lambda kv: str(kv[0])):
             short = re.sub(r"\[\d+\]$", "", str(key).split(".")[-1])
             parts.append(f"{_SAFE.sub('-', short)}={_SAFE.sub('-', _value_text(value))}")
     readable = "_".join(p for p in parts if p)[:_READABLE_MAX].strip("_-.") or "run"
