@@ -1,11 +1,11 @@
-"""A 2-worker local Dask cluster shared by the batch tests of a module."""
+"""A 2-worker local Dask cluster shared by the batch tests (of one test process)."""
 
 from __future__ import annotations
 
 import pytest
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def client():
     pytest.importorskip("distributed")
     from unmesh.distributed import connect

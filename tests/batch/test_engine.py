@@ -51,6 +51,7 @@ def test_sample_sweep_on_two_workers_equals_serial_runs(tmp_path, capsys):
     assert len(rows) == 5 and "surfels" in rows[0]
 
 
+@pytest.mark.slow
 def test_sph_sweep_equals_serial_runs(tmp_path, client):
     from unmesh.scenes import __file__ as scenes_init
     from unmesh.sim.cli import run_scene
