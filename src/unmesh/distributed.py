@@ -184,6 +184,11 @@ def connect(workers: int | None = None, scheduler: str | None = None, *, numba_t
             threads = max(1, cores // n) if numba_threads is None else int(numba_threads)
             env = {"NUMBA_NUM_THREADS": str(threads), "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                    "OPENBLAS_NUM_THREADS": "1"}
+            import dask
+
+            # one task per worker thread at a time (the rest wait on the scheduler): long tasks
+            # balance over workers, and a task the scheduler shows on a worker is running there
+            stack.enter_context(dask.config.set({"distributed.scheduler.worker-saturation": 1.0}))
             cluster = stack.enter_context(distributed.LocalCluster(
                 n_workers=n, threads_per_worker=1, processes=True, env=env, silence_logs=logging.ERROR,
                 dashboard_address=dashboard if dashboard is not None else None))

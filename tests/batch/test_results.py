@@ -124,3 +124,21 @@ def test_frames_rendered_on_two_workers_equal_serial_render(tmp_path, client):
     gif_a = render_sequence(sim, tmp_path / "a.gif", width=48, height=32, progress=False)
     gif_b = render_sequence_parallel(sim, tmp_path / "b.gif", client=client, width=48, height=32, progress=False)
     assert gif_a.read_bytes() == gif_b.read_bytes()
+
+
+def test_render_command_line_with_a_scheduler(tmp_path, client, capsys):
+    from unmesh import Particles, io
+    from unmesh.cli import main
+
+    sim = tmp_path / "sim"
+    for k in range(3):
+        io.save(sim / "frames" / f"frame_{k:05d}.ply", Particles([[0.1 * k, 0, 0], [0, 0.2, 0], [0.3, 0.1, 0]]))
+    args = ["render", os.fspath(sim), "--size", "40x30", "--no-progress"]
+    assert main([*args, "-o", os.fspath(tmp_path / "serial")]) == 0
+    assert main([*args, "-o", os.fspath(tmp_path / "par"), "--scheduler", client.scheduler.address]) == 0
+    for k in range(3):
+        name = f"frame_{k:05d}.png"
+        assert filecmp.cmp(tmp_path / "serial" / name, tmp_path / "par" / name, shallow=False)
+    assert main(["render", os.fspath(sim / "frames" / "frame_00000.ply"), "-o", os.fspath(tmp_path / "a.png"),
+                 "--workers", "2"]) == 1
+    assert "--workers/--scheduler: only for frame sequences" in capsys.readouterr().err

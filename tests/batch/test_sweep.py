@@ -112,7 +112,7 @@ keys = st.from_regex(r"[a-z_]{1,8}(\.[a-z_]{1,8}){0,2}", fullmatch=True)
 param_sets = st.dictionaries(keys, values, max_size=4)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(param_sets, st.randoms())
 def test_ids_are_stable_and_safe(params, rnd):
     items = list(params.items())
@@ -124,7 +124,7 @@ def test_ids_are_stable_and_safe(params, rnd):
     assert not tid.startswith((".", "-"))
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(st.lists(param_sets, min_size=2, max_size=6, unique_by=lambda d: repr(sorted(d.items(), key=str))))
 def test_ids_of_different_tasks_differ(sets):
     canon = {repr(sorted(((k, repr(v)) for k, v in d.items()))) for d in sets}

@@ -73,10 +73,22 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.output is None:
         raise InputError("-o: expected the output directory, e.g. -o out")
+    import signal
+    import threading
+
     from unmesh.batch.engine import run_batch
 
-    manifest = run_batch(sweep, args.output, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-                         progress=not args.no_progress)
+    def terminated(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt  # SIGTERM (a batch job's end, `kill`) stops like Ctrl-C: tasks cancelled, batch.json kept
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, terminated) if main_thread else None
+    try:
+        manifest = run_batch(sweep, args.output, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+                             progress=not args.no_progress)
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
     tasks = manifest["tasks"]
     done = sum(t["status"] == "done" for t in tasks)
     failed = [t for t in tasks if t["status"] == "failed"]

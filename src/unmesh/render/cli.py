@@ -151,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"input: no such file or directory: {p}")
     is_sequence = (len(inputs) == 1 and inputs[0].is_dir()) or (ext in VIDEO_EXTENSIONS and args.turntable is None) \
         or (ext == "" and args.turntable is None)
+    if (args.workers is not None or args.scheduler is not None) and not is_sequence:
+        raise InputError("--workers/--scheduler: only for frame sequences (a simulation directory to .mp4, .gif "
+                         "or a folder)")
     if is_sequence:
         if args.buffers:
             raise InputError("--buffers: only for still images, not for frame sequences")
