@@ -127,6 +127,10 @@ def __getattr__(name: str) -> Any:
 
 def dashboard_address(client: Any) -> str | None:
     """The Dask dashboard's address of ``client``'s scheduler, or ``None`` when it has none (no bokeh)."""
+    import importlib.util
+
+    if importlib.util.find_spec("bokeh") is None:  # the scheduler keeps the port but serves no dashboard
+        return None
     try:
         info = client.scheduler_info()
     except Exception:  # a dashboard is a convenience: never fail a run over it
