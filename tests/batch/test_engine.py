@@ -156,6 +156,13 @@ def test_missing_dask_names_the_extra(tmp_path, monkeypatch, counting):
         run_batch(f, tmp_path / "out", progress=False, log=None)
 
 
+def test_local_workers_do_not_oversubscribe_the_cores(client):
+    threads = client.run(lambda: __import__("numba").config.NUMBA_NUM_THREADS)
+    assert len(threads) == 2
+    assert set(threads.values()) == {max(1, (os.cpu_count() or 1) // 2)}
+    assert {w["nthreads"] for w in client.scheduler_info(n_workers=-1)["workers"].values()} == {1}
+
+
 def test_workers_and_scheduler_exclude_each_other():
     from unmesh.distributed import connect
 

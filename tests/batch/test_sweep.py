@@ -85,6 +85,7 @@ def test_inputs_glob_relative_to_the_sweep_file(tmp_path):
     ('command = "sample"\ninputs = "nothing/*.ply"\n', "matches no file"),
     ('command = "render"\ninputs = "nofile.ply"\n', "no such file 'nofile.ply'"),
     ('command = "sample"\nscene = "base.toml"\n', "give 'inputs' instead"),
+    ('command = "sph"\nscene = "base.toml"\noptions = ["--resume"]\n', "runs its scene in-process"),
 ])
 def test_bad_sweep_files_name_the_key(tmp_path, text, message):
     f = _write(tmp_path, text)

@@ -133,7 +133,8 @@ def run_batch(sweep: Sweep | str | os.PathLike[str], outdir: str | os.PathLike[s
                 if changed:
                     write_manifest(out, manifest)
         except BaseException:
-            client.cancel(list(waiting), force=True)
+            if client is not None and waiting:
+                client.cancel(list(waiting), force=True)
             for fut in waiting:
                 rec = records[futures[fut]]
                 rec.update(status="pending", error="cancelled (interrupted)", worker=None)

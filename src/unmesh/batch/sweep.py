@@ -295,6 +295,9 @@ def load_sweep(path: str | os.PathLike[str], commands: Mapping[str, Any] | None 
     if not isinstance(options, list) or not all(isinstance(o, str) for o in options):
         raise SceneError(f"{where}: 'options': expected a list of strings such as [\"--size\", \"400x300\"], "
                          f"got {options!r}")
+    if options and cmd.builder is not None:
+        raise SceneError(f"{where}: 'options': command '{name}' runs its scene in-process; give its settings as "
+                         "[sweep] or [[runs]] keys (the keys of --set) and 'duration'")
     output = data.get("output")
     if output is not None and (not isinstance(output, str) or not output or "/" in output or "\\" in output):
         raise SceneError(f"{where}: 'output': expected a file name such as \"{{stem}}.ply\", got {output!r}")
