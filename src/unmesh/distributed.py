@@ -28,6 +28,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -154,7 +155,7 @@ def connect(workers: int | None = None, scheduler: str | None = None, *, numba_t
     numba_threads : int, optional
         Numba threads per worker (default: ``cores // workers`` locally, 1 on an existing cluster).
     dashboard : str or None
-        Dashboard address of a local cluster (``None``: no dashboard).
+        Dashboard address of a local cluster (``None``: any free port).
     progress_output : file, "stderr" or None
         Where the cluster and dashboard addresses are printed (default ``sys.stderr``; ``None``: silent).
 
@@ -193,9 +194,12 @@ def connect(workers: int | None = None, scheduler: str | None = None, *, numba_t
             # one task per worker thread at a time (the rest wait on the scheduler): long tasks
             # balance over workers, and a task the scheduler shows on a worker is running there
             stack.enter_context(dask.config.set({"distributed.scheduler.worker-saturation": 1.0}))
-            cluster = stack.enter_context(distributed.LocalCluster(
-                n_workers=n, threads_per_worker=1, processes=True, env=env, silence_logs=logging.ERROR,
-                dashboard_address=dashboard if dashboard is not None else None))
+            with warnings.catch_warnings():
+                # a busy dashboard port moves to a free one; the address printed below is the real one
+                warnings.filterwarnings("ignore", message=r"Port \d+ is already in use")
+                cluster = stack.enter_context(distributed.LocalCluster(
+                    n_workers=n, threads_per_worker=1, processes=True, env=env, silence_logs=logging.ERROR,
+                    dashboard_address=dashboard if dashboard is not None else ":0"))
             client = stack.enter_context(distributed.Client(cluster))
             where = f"local cluster of {n} worker process{'es' if n != 1 else ''}"
         if isinstance(progress_output, str):
