@@ -30,6 +30,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "unmesh.sph.cli",
     "unmesh.shells.cli",
     "unmesh.fem.cli",
+    "unmesh.batch.cli",
     "unmesh.gallery.cli",
 )
 

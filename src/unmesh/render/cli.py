@@ -53,6 +53,11 @@ def register(sub: Any) -> None:
     p.add_argument("--particle-radius", type=float, metavar="R", help="drawing radius of particles")
     p.add_argument("--particle-style", choices=("sphere", "disc"), default="sphere", help="particle glyphs")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="render a simulation's frames in parallel on a local Dask cluster of N processes")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="render a simulation's frames on an existing Dask cluster (tcp://host:8786)")
     p.set_defaults(func=run)
 
 
@@ -146,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"input: no such file or directory: {p}")
     is_sequence = (len(inputs) == 1 and inputs[0].is_dir()) or (ext in VIDEO_EXTENSIONS and args.turntable is None) \
         or (ext == "" and args.turntable is None)
+    if (args.workers is not None or args.scheduler is not None) and not is_sequence:
+        raise InputError("--workers/--scheduler: only for frame sequences (a simulation directory to .mp4, .gif "
+                         "or a folder)")
     if is_sequence:
         if args.buffers:
             raise InputError("--buffers: only for still images, not for frame sequences")
@@ -164,8 +172,15 @@ def run(args: argparse.Namespace) -> int:
         color_by = options.pop("color_by")
         crange = options.pop("color_range")
         pr = options.pop("particle_radius")
-        path = render_sequence(source, out, camera=camera, fps=args.fps, progress=progress, width=size[0],
-                               height=size[1], color_by=color_by, color_range=crange, particle_radius=pr, **options)
+        sequence = render_sequence
+        if args.workers is not None or args.scheduler is not None:
+            from functools import partial
+
+            from unmesh.render.parallel import render_sequence_parallel
+
+            sequence = partial(render_sequence_parallel, workers=args.workers, scheduler=args.scheduler)
+        path = sequence(source, out, camera=camera, fps=args.fps, progress=progress, width=size[0],
+                        height=size[1], color_by=color_by, color_range=crange, particle_radius=pr, **options)
         print(f"wrote {path}")
         return 0
     objects = [io.load(p) for p in inputs]
