@@ -1,13 +1,20 @@
 """Frame sequences and turntables: simulation output directories to MP4/GIF.
 
-Simulation output layout (``unmesh.sim``): ``OUTDIR/frames/<series>_NNNNN.ply`` (or the frame
-files directly in the directory, as FEM's ``surface_NNNNN.ply``) plus optional static geometry
-``OUTDIR/boundary.{ply,obj,off}``; giving ``OUTDIR/frames`` or ``OUTDIR/surfaces`` (SPH fluid
-surfaces) also picks up ``OUTDIR/boundary.*``.
-Files are grouped by their trailing frame number, so several series written for the same frame
-(e.g. ``fluid_00012.ply`` and ``solid_00012.ply``) are drawn together; unnumbered files are
-static and drawn in every frame. Each file is loaded with :func:`unmesh.io.load` (surfel clouds,
-particles or triangle meshes by content).
+Simulation output (``unmesh.sim``): ``OUTDIR/frames.json`` lists every file the run wrote,
+frame by frame (``{"frames": [{"frame", "time", "files"}], "static": [...], "fps"}``, paths
+relative to OUTDIR). For such a folder the frames are exactly the manifest's: each frame draws
+its renderable files under ``OUTDIR/frames/`` (``unmesh render OUTDIR``) or under another
+listed folder given instead (``unmesh render OUTDIR/surfaces`` for SPH fluid surfaces), plus
+the manifest's renderable static files (``boundary.ply``) in every frame; other files in the
+folder are ignored and nothing is guessed from names. The manifest's ``fps`` is the default
+frame rate of the video.
+
+A directory without ``frames.json`` (frame files written by other tools) is read by name:
+its ``frames/`` sub-folder if there is one, else its own files, grouped by their trailing
+frame number, so several series written for the same frame (e.g. ``fluid_00012.ply`` and
+``solid_00012.ply``) are drawn together; unnumbered files are static and drawn in every
+frame, as are ``boundary.{ply,obj,off}`` next to ``frames/``. Each file is loaded with
+:func:`unmesh.io.load` (surfel clouds, particles or triangle meshes by content).
 
 One fixed camera frames the union of the bounds of a sample of frames (first, last and up to
 :data:`BOUNDS_SAMPLES` in between, so a splash mid-run stays in view) and of the static
@@ -29,6 +36,7 @@ Example
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from collections.abc import Iterable, Iterator, Sequence
@@ -42,7 +50,8 @@ from unmesh.particles import Particles
 from unmesh.render.camera import Camera
 from unmesh.render.pipeline import collect, render, scene_bounds, scene_points
 
-__all__ = ["BOUNDS_SAMPLES", "FRAME_EXTENSIONS", "find_frames", "render_sequence", "turntable", "turntable_camera"]
+__all__ = ["BOUNDS_SAMPLES", "FRAME_EXTENSIONS", "MANIFEST", "find_frames", "render_sequence", "sequence_fps", "turntable",
+           "turntable_camera"]
 
 #: Renderable frame file extensions.
 FRAME_EXTENSIONS = (".ply", ".obj", ".off")
@@ -50,10 +59,82 @@ FRAME_EXTENSIONS = (".ply", ".obj", ".off")
 BOUNDS_SAMPLES = 16
 _NUMBERED = re.compile(r"^(?P<series>.*?)(?P<num>\d+)$")
 STATIC_COLOR = (0.72, 0.72, 0.72)
+#: The manifest a simulation run writes into its output folder (see :mod:`unmesh.sim.runner`).
+MANIFEST = "frames.json"
 
 
 def _renderable(p: Path) -> bool:
     return p.is_file() and p.suffix.lower() in FRAME_EXTENSIONS and not p.name.startswith(".")
+
+
+def _manifest_of(root: Path) -> tuple[Path, str, dict[str, Any]] | None:
+    """(run folder, series folder, manifest) when ``root`` is a run folder or a folder listed in one."""
+    for home, series in ((root, "frames"), (root.parent, root.name)):
+        path = home / MANIFEST
+        if not path.is_file():
+            continue
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise InputError(f"frames: {path} is not readable JSON ({exc})") from None
+        if not isinstance(data, dict) or not isinstance(data.get("frames"), list):
+            raise InputError(f"frames: {path}: expected an object with a \"frames\" list")
+        if home == root.parent:
+            listed = {str(f).split("/", 1)[0] for e in data["frames"] if isinstance(e, dict)
+                      for f in e.get("files", []) if "/" in str(f)}
+            if series not in listed:
+                continue
+        return home, series, data
+    return None
+
+
+def _member(home: Path, rel: Any, path: Path) -> Path:
+    if not isinstance(rel, str) or not rel or rel.startswith("/") or ".." in rel.split("/"):
+        raise InputError(f"frames: {path}: expected file paths relative to {home}, got {rel!r}")
+    return home / rel
+
+
+def _from_manifest(home: Path, series: str, data: dict[str, Any]) -> tuple[list[list[Path]], list[Path]]:
+    path = home / MANIFEST
+    entries = [e for e in data["frames"] if isinstance(e, dict)]
+    entries.sort(key=lambda e: e.get("frame", 0))
+    groups: list[list[Path]] = []
+    for e in entries:
+        files = [_member(home, f, path) for f in e.get("files", [])]
+        picked = [p for p in files if p.parent == home / series and p.suffix.lower() in FRAME_EXTENSIONS]
+        missing = [p for p in picked if not p.is_file()]
+        if missing:
+            raise InputError(f"frames: {path} lists {missing[0].relative_to(home).as_posix()} (frame "
+                             f"{e.get('frame')}) but it does not exist")
+        if picked:
+            groups.append(sorted(picked))
+    static = [p for p in (_member(home, f, path) for f in data.get("static", []))
+              if p.suffix.lower() in FRAME_EXTENSIONS and p.is_file()]
+    if not groups:
+        raise InputError(f"frames: {path} lists no renderable frame files ({', '.join(FRAME_EXTENSIONS)}) "
+                         f"under {series}/")
+    return groups, sorted(static)
+
+
+def sequence_fps(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> float | None:
+    """The frame rate recorded in the simulation manifest of ``source`` (a run folder), else None.
+
+    Example
+    -------
+    >>> import tempfile
+    >>> sequence_fps(tempfile.mkdtemp()) is None
+    True
+    """
+    if not isinstance(source, str | os.PathLike):
+        return None
+    root = Path(source)
+    if not root.is_dir():
+        return None
+    found = _manifest_of(root)
+    if found is None:
+        return None
+    fps = found[2].get("fps")
+    return float(fps) if isinstance(fps, int | float) and not isinstance(fps, bool) and fps > 0 else None
 
 
 def find_frames(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> tuple[list[list[Path]], list[Path]]:
@@ -62,7 +143,8 @@ def find_frames(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]
     Parameters
     ----------
     source : path or sequence of paths
-        A simulation output directory (with ``frames/``), a directory of frame files, or an
+        A simulation output directory (read through its ``frames.json``; or one of its
+        folders listed there, such as ``OUTDIR/surfaces``), a directory of frame files, or an
         explicit list of files (each file one frame, ordered by trailing number then name).
 
     Returns
@@ -75,12 +157,15 @@ def find_frames(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]
     Raises
     ------
     unmesh.errors.InputError
-        When no frame files are found.
+        When no frame files are found, or a manifest lists a missing file.
     """
     if isinstance(source, str | os.PathLike):
         root = Path(source)
         if not root.exists():
             raise InputError(f"frames: {root} does not exist")
+        found = _manifest_of(root) if root.is_dir() else None
+        if found is not None:
+            return _from_manifest(*found)
         if root.is_file():
             files = [root]
             static: list[Path] = []
@@ -220,7 +305,7 @@ def render_sequence(
     frames: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     out_path: str | os.PathLike[str],
     camera: Camera | None = None,
-    fps: float = 30.0,
+    fps: float | None = None,
     progress: bool = True,
     width: int = 640,
     height: int = 480,
@@ -241,7 +326,8 @@ def render_sequence(
         ``.mp4``/``.gif`` (atomic), or a directory (``frame_NNNNN.png`` files).
     camera : Camera, optional
         Default: :meth:`Camera.framing` of the union of the bounds of sampled frames.
-    fps : float
+    fps : float, optional
+        Video frame rate; default the simulation's (``fps`` in ``frames.json``), else 30.
     progress : bool
         tqdm progress bar over frames.
     width, height : int
@@ -276,6 +362,8 @@ def render_sequence(
     from unmesh.render.particles import estimate_radius
 
     groups, static_paths = find_frames(frames)
+    if fps is None:
+        fps = sequence_fps(frames) or 30.0
     static = collect(_frame_objects(static_paths))
     sampled = {i: collect(_frame_objects(groups[i])) for i in _sample_indices(len(groups))}
     lo = np.full(3, np.inf)
