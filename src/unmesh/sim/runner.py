@@ -577,8 +577,8 @@ def run(sim: Simulation, outdir: str | os.PathLike[str], settings: RunSettings, 
                     raise _Unstable(f"initial state: {reason}")
                 r.summary["frames"].append(r.record(0.0))
                 r.add_frame(sim.write_frame(out, 0))
+                r.write_manifest()  # first: files on disk are recorded as soon as possible
                 r.write_checkpoint()
-                r.write_manifest()
                 r.write_summary()
             while r.frame < last:
                 target = (r.frame + 1) / settings.fps
@@ -597,10 +597,10 @@ def run(sim: Simulation, outdir: str | os.PathLike[str], settings: RunSettings, 
                 r.frame += 1
                 rec = r.record(spent / n if n else 0.0)
                 r.add_frame(sim.write_frame(out, r.frame))
+                r.write_manifest()
                 r.summary["frames"].append(rec)
                 if r.frame % settings.checkpoint_every == 0 or r.frame == last:
                     r.write_checkpoint()
-                r.write_manifest()
                 r.write_summary()
                 bar.update(1)
                 bar.set_postfix_str(f"t={sim.time:.3g}s {n / spent if spent > 0 else 0:.0f} steps/s")
