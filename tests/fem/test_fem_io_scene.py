@@ -76,7 +76,7 @@ points = [[-1, 0.6, -1], [2, 0.6, -1], [2, 0.6, 2], [-1, 0.6, 2]]
 """
 
 
-def test_cli_writes_the_contract_files(tmp_path):
+def test_cli_writes_the_contract_files(tmp_path, capsys):
     from unmesh.cli import main
 
     scene = tmp_path / "s.toml"
@@ -94,19 +94,31 @@ def test_cli_writes_the_contract_files(tmp_path):
         assert f["volume"] == pytest.approx(1.0, abs=1e-9)
     assert summary["frames"][-1]["nodes"] > 27
     for k in range(5):
-        assert (out / f"mesh_{k:05d}.vtu").is_file() and (out / f"surface_{k:05d}.ply").is_file()
+        assert (out / "frames" / f"mesh_{k:05d}.vtu").is_file() and (out / "frames" / f"surface_{k:05d}.ply").is_file()
+    # the manifest lists every per-frame file; mesh.pvd (a static file) lists the vtu files relative to itself
+    manifest = json.loads((out / "frames.json").read_text())
+    assert manifest["static"] == ["mesh.pvd"]
+    assert [e["files"] for e in manifest["frames"]] == \
+        [[f"frames/mesh_{k:05d}.vtu", f"frames/surface_{k:05d}.ply"] for k in range(5)]
     pvd = (out / "mesh.pvd").read_text()
-    assert pvd.count("<DataSet") == 5
-    mesh, _ = read_vtu(out / "mesh_00004.vtu", check=False)
+    assert pvd.count("<DataSet") == 5 and 'file="frames/mesh_00004.vtu"' in pvd
+    assert not list(out.glob("*.vtu")) and not list(out.glob("surface_*.ply"))
+    mesh, _ = read_vtu(out / "frames" / "mesh_00004.vtu", check=False)
     assert mesh.n_nodes == summary["frames"][-1]["nodes"]
     from unmesh import io
 
-    surf = io.load_mesh(out / "surface_00004.ply")
+    surf = io.load_mesh(out / "frames" / "surface_00004.ply")
     assert len(surf.boundary_edges()) == 0
+    # a fresh run into the used folder is refused without --force
+    assert main(["fem", str(scene), "-o", str(out), "--no-progress"]) == 1
+    assert "--force" in capsys.readouterr().err
     # --duration and --resume continue from the checkpoint
     assert main(["fem", str(scene), "-o", str(out), "--no-progress", "--duration", "0.3", "--resume"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["frames"]) == 7 and summary["frames"][-1]["time"] == pytest.approx(0.3)
+    pvd = (out / "mesh.pvd").read_text()
+    assert pvd.count("<DataSet") == 7 and 'file="frames/mesh_00006.vtu"' in pvd
+    assert len(json.loads((out / "frames.json").read_text())["frames"]) == 7
 
 
 @pytest.mark.parametrize(("patch", "message"), [
@@ -143,7 +155,7 @@ def test_nan_stops_the_run_with_the_last_good_frame(tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["status"] == "unstable"
     assert summary["frames"][-1]["frame"] == 1
-    assert (tmp_path / "mesh_00001.vtu").is_file() and not (tmp_path / "mesh_00002.vtu").exists()
+    assert (tmp_path / "frames" / "mesh_00001.vtu").is_file() and not (tmp_path / "frames" / "mesh_00002.vtu").exists()
 
 
 SCENES = Path(__file__).resolve().parents[2] / "src" / "unmesh" / "scenes" / "fem"

@@ -95,3 +95,109 @@ def test_turntable_frames_and_video(tmp_path):
     assert p.exists()
     with pytest.raises(InputError):
         turntable(cloud, 0)
+
+
+def sim_run(path, frames=3, fps=5.0):
+    """A run folder written by the shared runner: OUTDIR/frames.json lists the frames and boundary.ply."""
+    from unmesh.sim import RunSettings, Simulation, run
+
+    class Mover(Simulation):
+        name = "mover"
+
+        def __init__(self):
+            self.time = 0.0
+
+        def step(self):
+            self.time += 0.5 / fps
+            return 0.5 / fps
+
+        def check(self):
+            return None
+
+        def write_frame(self, outdir, frame):
+            pts = np.array([[self.time, 0.0, 0.0], [self.time, 0.2, 0.0], [self.time + 0.1, 0.1, 0.0]])
+            io.save(outdir / "frames" / f"body_{frame:05d}.ply", Particles(pts))
+            io.save(outdir / "surfaces" / f"body_{frame:05d}.ply",
+                    TriangleMesh(pts, [[0, 1, 2]]))
+            return [f"frames/body_{frame:05d}.ply", f"surfaces/body_{frame:05d}.ply"]
+
+        def write_static(self, outdir):
+            io.save(outdir / "boundary.ply", Particles([[0.0, -0.1, 0.0], [1.0, -0.1, 0.0]]))
+            return ["boundary.ply"]
+
+        def frame_record(self):
+            return {}
+
+        def state_dict(self):
+            return {"time": self.time}
+
+        def load_state_dict(self, state):
+            self.time = float(state["time"])
+
+    run(Mover(), path, RunSettings(duration=(frames - 1) / fps, fps=fps), progress=False)
+    return path
+
+
+def test_run_folders_are_read_through_their_manifest(tmp_path):
+    out = sim_run(tmp_path / "out")
+    # stray files another tool (or an older run) left are not frames
+    io.save(out / "frames" / "frame_00000.ply", Particles([[9.0, 9, 9]]))
+    io.save(out / "frames" / "body_00099.ply", Particles([[9.0, 9, 9]]))
+    io.save(out / "surface_00001.ply", Particles([[9.0, 9, 9]]))
+    io.save(out / "boundary_old.ply", Particles([[9.0, 9, 9]]))
+    frames, static = find_frames(out)
+    assert [[p.relative_to(out).as_posix() for p in g] for g in frames] == \
+        [[f"frames/body_{k:05d}.ply"] for k in range(3)]
+    assert [p.name for p in static] == ["boundary.ply"]
+    assert find_frames(out / "frames") == (frames, static)
+    # another listed folder picks that series
+    frames, static = find_frames(out / "surfaces")
+    assert [[p.relative_to(out).as_posix() for p in g] for g in frames] == \
+        [[f"surfaces/body_{k:05d}.ply"] for k in range(3)]
+    assert [p.name for p in static] == ["boundary.ply"]
+    # a listed file that is gone is an error, not a silently shorter video
+    (out / "frames" / "body_00001.ply").unlink()
+    with pytest.raises(InputError, match=r"frames\.json lists frames/body_00001\.ply"):
+        find_frames(out)
+
+
+def test_videos_default_to_the_simulations_frame_rate(tmp_path):
+    from PIL import Image
+
+    from unmesh.render.sequence import sequence_fps
+
+    out = sim_run(tmp_path / "out", frames=3, fps=5.0)
+    assert sequence_fps(out) == 5.0 and sequence_fps(out / "surfaces") == 5.0
+    assert sequence_fps(tmp_path) is None
+    gif = render_sequence(out, tmp_path / "a.gif", width=24, height=16, progress=False)
+    im = Image.open(gif)
+    assert im.n_frames == 3 and im.info["duration"] == 200  # ms per frame at 5 fps
+    gif = render_sequence(out, tmp_path / "b.gif", fps=20, width=24, height=16, progress=False)
+    assert Image.open(gif).info["duration"] == 50
+
+
+def test_render_command_on_a_run_folder_uses_its_fps_and_says_when_a_size_is_rounded(tmp_path, capsys):
+    import imageio.v3 as iio
+
+    from unmesh.cli import main
+
+    out = sim_run(tmp_path / "out", frames=3, fps=5.0)
+    (out / "frames" / "frame_00007.ply").write_text("not a frame of this run")
+    assert main(["render", str(out), "-o", str(tmp_path / "v.mp4"), "--size", "33x24", "--no-progress"]) == 0
+    captured = capsys.readouterr()
+    assert "at 5 fps (the simulation's frame rate)" in captured.out
+    assert "33x24 is padded to 34x24" in captured.err
+    meta = iio.immeta(tmp_path / "v.mp4", plugin="pyav") if _has_pyav() else iio.immeta(tmp_path / "v.mp4")
+    assert float(meta["fps"]) == pytest.approx(5.0)
+    assert main(["render", str(out), "-o", str(tmp_path / "w.mp4"), "--size", "32x24", "--fps", "12",
+                 "--no-progress"]) == 0
+    captured = capsys.readouterr()
+    assert "padded" not in captured.err and "simulation's frame rate" not in captured.out
+
+
+def _has_pyav():
+    try:
+        import av  # noqa: F401
+    except ImportError:
+        return False
+    return True

@@ -66,6 +66,10 @@ def test_cli_writes_the_documented_outputs(tmp_path):
     for prop in ("x", "y", "z", "nx", "ny", "nz", "radius", "red", "green", "blue", "discontinuity"):
         assert f" {prop}\n" in header
     assert (out / "fibers" / "frame_00002.npz").exists()
+    manifest = json.loads((out / "frames.json").read_text())
+    assert manifest["static"] == [] and manifest["fps"] == 25
+    assert [e["files"] for e in manifest["frames"]] == [
+        [f"frames/frame_{k:05d}.ply", f"nodes/frame_{k:05d}.ply", f"fibers/frame_{k:05d}.npz"] for k in range(3)]
     # the sheet sags under gravity
     assert cloud.positions[:, 1].min() < 1.0
 

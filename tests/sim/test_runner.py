@@ -45,8 +45,7 @@ class Oscillator(Simulation):
 
     def write_frame(self, outdir: Path, frame: int):
         atomic_write_text(outdir / "frames" / f"frame_{frame:05d}.txt", " ".join(map(repr, self.x)))
-
-    frame_patterns = ("frames/frame_*.txt",)
+        return [f"frames/frame_{frame:05d}.txt"]
 
     def frame_record(self):
         return {"energy": 0.5 * float(self.v @ self.v + self.omega**2 * self.x @ self.x), "x": self.x}
@@ -132,9 +131,9 @@ def test_nonfinite_diagnostics_are_unstable(tmp_path):
         run(Bad(), tmp_path, RunSettings(duration=1.0, fps=10), progress=False)
 
 
-def test_fresh_run_removes_stale_frames(tmp_path):
+def test_forced_fresh_run_removes_the_previous_runs_frames(tmp_path):
     run(Oscillator(), tmp_path, RunSettings(duration=1.0, fps=10), progress=False)
-    run(Oscillator(), tmp_path, RunSettings(duration=0.3, fps=10), progress=False)
+    run(Oscillator(), tmp_path, RunSettings(duration=0.3, fps=10), progress=False, force=True)
     assert len(list((tmp_path / "frames").glob("*.txt"))) == 4
 
 

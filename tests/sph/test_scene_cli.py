@@ -93,6 +93,15 @@ def test_cli_writes_frames_summary_and_resumes(tmp_path):
     b = PlyData.read(str(ref / "frames" / "frame_00004.ply"))["vertex"].data
     assert all(np.array_equal(a[k], b[k]) for k in ("x", "y", "vx", "density"))
     assert len(json.loads((out / "summary.json").read_text())["frames"]) == 5
+    manifest = json.loads((out / "frames.json").read_text())
+    assert [e["files"] for e in manifest["frames"]] == [[f"frames/frame_{k:05d}.ply"] for k in range(5)]
+    assert manifest["fps"] == json.loads((ref / "frames.json").read_text())["fps"]
+    # a fresh run into the used folder is refused unless --force
+    (out / "notes.txt").write_text("mine")
+    assert main(["sph", str(scene), "-o", str(out), "--duration", "0.05", "--no-progress"]) == 1
+    assert main(["sph", str(scene), "-o", str(out), "--duration", "0.05", "--no-progress", "--force"]) == 0
+    assert (out / "notes.txt").read_text() == "mine"
+    assert sorted(p.name for p in (out / "frames").iterdir()) == [f"frame_{k:05d}.ply" for k in range(3)]
 
 
 def test_boundary_particles_written_once(tmp_path):
@@ -106,6 +115,7 @@ shape = { type = "sphere", radius = 0.1, center = [0.75, 0.3, 0] }
     run(sim, tmp_path / "o", settings.replace(duration=0.025), progress=False)
     b = PlyData.read(str(tmp_path / "o" / "boundary.ply"))["vertex"].data
     assert len(b) == len(sim.boundary) > 10 and "volume" in b.dtype.names
+    assert json.loads((tmp_path / "o" / "frames.json").read_text())["static"] == ["boundary.ply"]
 
 
 def test_time_step_too_large_stops_with_last_good_frame(tmp_path):
@@ -241,6 +251,13 @@ def test_cli_writes_surface_meshes_per_frame(tmp_path):
         assert np.all(fluid.vertices.min(axis=0) < water.min(axis=0))
         assert np.all(fluid.vertices.max(axis=0) > water.max(axis=0))
         assert np.allclose(jelly.vertices.mean(axis=0), solid.mean(axis=0), atol=0.02)
+    # the manifest lists exactly the files written, frame by frame
+    manifest = json.loads((out / "frames.json").read_text())
+    for k, e in enumerate(manifest["frames"]):
+        assert e["files"][:2] == [f"frames/frame_{k:05d}.ply", f"surfaces/fluid_{k:05d}.ply"]
+        assert f"surfaces/jelly_{k:05d}.ply" in e["files"]
+    listed = {f for e in manifest["frames"] for f in e["files"]}
+    assert listed == {p.relative_to(out).as_posix() for d in ("frames", "surfaces") for p in (out / d).iterdir()}
     # without [output] no surfaces are written
     plain = tmp_path / "plain.toml"
     plain.write_text(SURFACE_SCENE.split("[output]")[0])

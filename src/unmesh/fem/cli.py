@@ -2,10 +2,10 @@
 
 Usage::
 
-    unmesh fem SCENE.toml -o OUTDIR [--duration SECONDS] [--resume] [--set KEY=VALUE] [--no-progress]
+    unmesh fem SCENE.toml -o OUTDIR [--duration SECONDS] [--resume | --force] [--set KEY=VALUE] [--no-progress]
 
-Writes ``OUTDIR/mesh_NNNNN.vtu`` + ``OUTDIR/mesh.pvd`` (ParaView), ``OUTDIR/surface_NNNNN.ply``
-(renderer) and ``OUTDIR/summary.json``.
+Writes ``OUTDIR/frames/mesh_NNNNN.vtu`` + ``OUTDIR/mesh.pvd`` (ParaView), ``OUTDIR/frames/surface_NNNNN.ply``
+(renderer), ``OUTDIR/frames.json`` (the manifest of written files) and ``OUTDIR/summary.json``.
 """
 
 from __future__ import annotations
@@ -41,7 +41,8 @@ def register(sub: Any) -> None:
 
     p = sub.add_parser("fem", help="linear FEM on convex polyhedra with cutting (chapter 9)",
                        description="Run a finite element scene: polyhedral meshes with mean value shape functions, "
-                                   "stiffness warping, implicit Euler, scripted cuts. Writes mesh_NNNNN.vtu + mesh.pvd "
-                                   "(ParaView), surface_NNNNN.ply and summary.json into OUTDIR.")
+                                   "stiffness warping, implicit Euler, scripted cuts. Writes frames/mesh_NNNNN.vtu + "
+                                   "mesh.pvd (ParaView), frames/surface_NNNNN.ply, frames.json and summary.json "
+                                   "into OUTDIR (docs/fem_scene.md).")
     add_run_arguments(p)
     p.set_defaults(func=_run)

@@ -1,9 +1,9 @@
 """The FEM simulation for :func:`unmesh.sim.run`: dynamics, scripted cuts, frame files.
 
-Per frame ``k`` it writes ``mesh_NNNNN.vtu`` (polyhedron cells, deformed points,
-point data ``displacement`` and ``velocity``), rewrites ``mesh.pvd`` (the series)
-and writes ``surface_NNNNN.ply`` (the boundary triangles, deformed, for the
-renderer). ``summary.json`` gets ``nodes_initial``, ``elements_initial`` and per
+Per frame ``k`` it writes ``frames/mesh_NNNNN.vtu`` (polyhedron cells, deformed points,
+point data ``displacement`` and ``velocity``), rewrites ``mesh.pvd`` (the series, in OUTDIR)
+and writes ``frames/surface_NNNNN.ply`` (the boundary triangles, deformed, for the
+renderer); the runner records them in ``frames.json``. ``summary.json`` gets ``nodes_initial``, ``elements_initial`` and per
 frame ``nodes``, ``elements``, ``volume`` (rest volume), ``kinetic_energy``,
 ``elastic_energy``, ``solve_seconds`` and ``reintegration_seconds`` (summed over
 the steps of the frame), ``cg_iterations`` and ``contacts``.
@@ -143,15 +143,28 @@ class FemSimulation(Simulation):
         return None
 
     # -- output ----------------------------------------------------------------------------
-    def write_frame(self, outdir: Path, frame: int) -> None:
+    def write_static(self, outdir: Path) -> list[str]:
+        """``OUTDIR/mesh.pvd``, the ParaView series (empty until frame 0; :meth:`write_frame` extends it)."""
+        write_pvd(Path(outdir) / "mesh.pvd", [f for f, _ in self.frames], [t for _, t in self.frames])
+        return ["mesh.pvd"]
+
+    def write_frame(self, outdir: Path, frame: int) -> list[str]:
+        """``frames/mesh_NNNNN.vtu`` and ``frames/surface_NNNNN.ply``; rewrites ``mesh.pvd``.
+
+        Returns the two frame files (relative to ``outdir``); ``mesh.pvd`` is a static file
+        of the manifest (rewritten here, listing ``frames/mesh_*.vtu`` relative to itself).
+        """
         from unmesh import io
 
+        out = Path(outdir)
         d = self.dyn
-        name = f"mesh_{frame:05d}.vtu"
-        write_vtu(outdir / name, d.mesh, d.u, point_data={"velocity": d.v})
-        io.save(outdir / f"surface_{frame:05d}.ply", d.mesh.surface(d.u))
+        name = f"frames/mesh_{frame:05d}.vtu"
+        surface = f"frames/surface_{frame:05d}.ply"
+        write_vtu(out / name, d.mesh, d.u, point_data={"velocity": d.v})
+        io.save(out / surface, d.mesh.surface(d.u))
         self.frames = [f for f in self.frames if f[0] != name] + [(name, float(self.time))]
-        write_pvd(outdir / "mesh.pvd", [f for f, _ in self.frames], [t for _, t in self.frames])
+        write_pvd(out / "mesh.pvd", [f for f, _ in self.frames], [t for _, t in self.frames])
+        return [name, surface]
 
     def frame_record(self) -> dict[str, Any]:
         d = self.dyn

@@ -104,8 +104,9 @@ class ExampleContext:
 
         name = Path(scene).name
         out = self.path(name)
+        # the example reruns into its own folder: force replaces the files of its previous run only
         run_scene(scenes.path(f"{scene}.toml"), out, build, overrides=overrides or None, duration=duration,
-                  progress=self.progress)
+                  progress=self.progress, force=True)
         summary = json.loads((out / "summary.json").read_text())
         self.file(out / "summary.json", f"{name}: summary.json")
         return out, summary

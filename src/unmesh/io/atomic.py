@@ -1,7 +1,8 @@
 """Atomic file output: write to a temporary file in the target directory, then rename.
 
 A crash or an exception while writing leaves the previous file (or nothing), never
-a half-written one.
+a half-written one. Files get the modes a plain ``open()`` would give them
+(``0o666 & ~umask``), not the ``0o600`` of :func:`tempfile.mkstemp`.
 
 Example
 -------
@@ -23,7 +24,33 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_path", "atomic_write", "atomic_write_bytes", "atomic_write_json", "atomic_write_text"]
+__all__ = ["atomic_path", "atomic_write", "atomic_write_bytes", "atomic_write_json", "atomic_write_text", "file_mode"]
+
+
+def _umask() -> int:
+    # /proc/self/status has the umask without changing it (os.umask() must set it to read it,
+    # which races with other threads creating files)
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def file_mode() -> int:
+    """Permission bits of a newly created regular file: ``0o666 & ~umask``.
+
+    Example
+    -------
+    >>> file_mode() & 0o600
+    384
+    """
+    return 0o666 & ~_umask()
 
 
 @contextlib.contextmanager
@@ -37,8 +64,11 @@ def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iter
     target.parent.mkdir(parents=True, exist_ok=True)
     ext = suffix if suffix is not None else "".join(target.suffixes[-1:])
     fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".tmp{ext}", dir=target.parent)
-    os.close(fd)
     tmp_path = Path(tmp)
+    try:
+        os.fchmod(fd, file_mode())
+    finally:
+        os.close(fd)
     try:
         yield tmp_path
         os.replace(tmp_path, target)

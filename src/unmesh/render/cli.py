@@ -12,6 +12,11 @@ A default camera frames the bounding box of the input (from the front-right-abov
 is viewed head-on). ``--buffers DIR`` writes ``depth.npy`` (H,W float, camera z, inf = background),
 ``normal.npy`` (H,W,3 world normals, zeros in background), ``coverage.npy`` (H,W bool) and
 ``weight.npy`` (H,W accumulated splat weight).
+
+A simulation output directory is read through its ``frames.json`` (the files the run wrote;
+nothing is guessed from names, other files are ignored); its video plays at the simulation's
+frame rate unless ``--fps`` is given. MP4 needs even image sizes: an odd ``--size`` is padded
+by one pixel, and the command says so.
 """
 
 from __future__ import annotations
@@ -49,7 +54,9 @@ def register(sub: Any) -> None:
                    help="anti-aliasing: K x K samples per pixel (default 1; buffers are then block averages)")
     p.add_argument("--buffers", metavar="DIR", help="also write depth/normal/coverage/weight .npy files (stills)")
     p.add_argument("--turntable", type=int, metavar="N", help="render an orbit of N frames to OUT.mp4/.gif")
-    p.add_argument("--fps", type=float, default=30.0, help="frames per second of videos (default 30)")
+    p.add_argument("--fps", type=float, metavar="FPS",
+                   help="frames per second of videos (default: the simulation's frame rate for a simulation "
+                        "output directory, else 30)")
     p.add_argument("--particle-radius", type=float, metavar="R", help="drawing radius of particles")
     p.add_argument("--particle-style", choices=("sphere", "disc"), default="sphere", help="particle glyphs")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
@@ -121,6 +128,16 @@ def _camera(args: argparse.Namespace, objects: Any, size: tuple[int, int]) -> An
                   ortho=args.ortho)
 
 
+def _note_rounding(ext: str, size: tuple[int, int]) -> None:
+    """Say when an MP4's odd size will be padded to an even one (yuv420p needs even sizes)."""
+    import sys
+
+    w, h = size
+    if ext == ".mp4" and (w % 2 or h % 2):
+        print(f"note: MP4 needs an even width and height: {w}x{h} is padded to {w + w % 2}x{h + h % 2} "
+              "(give an even --size to avoid it)", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     from unmesh import io
     from unmesh.errors import InputError
@@ -172,6 +189,16 @@ def run(args: argparse.Namespace) -> int:
         color_by = options.pop("color_by")
         crange = options.pop("color_range")
         pr = options.pop("particle_radius")
+        fps = args.fps
+        note = ""
+        if fps is None and ext in VIDEO_EXTENSIONS:
+            from unmesh.render.sequence import sequence_fps
+
+            sim_fps = sequence_fps(source)
+            fps = sim_fps or 30.0
+            note = f" at {fps:g} fps" + (" (the simulation's frame rate)" if sim_fps else "")
+        if ext in VIDEO_EXTENSIONS:
+            _note_rounding(ext, size)
         sequence = render_sequence
         if args.workers is not None or args.scheduler is not None:
             from functools import partial
@@ -179,9 +206,9 @@ def run(args: argparse.Namespace) -> int:
             from unmesh.render.parallel import render_sequence_parallel
 
             sequence = partial(render_sequence_parallel, workers=args.workers, scheduler=args.scheduler)
-        path = sequence(source, out, camera=camera, fps=args.fps, progress=progress, width=size[0],
+        path = sequence(source, out, camera=camera, fps=fps, progress=progress, width=size[0],
                         height=size[1], color_by=color_by, color_range=crange, particle_radius=pr, **options)
-        print(f"wrote {path}")
+        print(f"wrote {path}{note}")
         return 0
     objects = [io.load(p) for p in inputs]
     camera = _camera(args, objects, size)
@@ -194,7 +221,9 @@ def run(args: argparse.Namespace) -> int:
             from unmesh.render import turntable_camera
 
             camera = turntable_camera(objects, size[0], size[1], fov=args.fov or 40.0)
-        path = turntable(objects, args.turntable, out, camera=camera, fps=args.fps, progress=progress, **options)
+        _note_rounding(ext, size)
+        path = turntable(objects, args.turntable, out, camera=camera, fps=args.fps or 30.0, progress=progress,
+                         **options)
         print(f"wrote {path}")
         return 0
     if ext not in IMAGE_EXTENSIONS:

@@ -1,13 +1,20 @@
 """Frame sequences and turntables: simulation output directories to MP4/GIF.
 
-Simulation output layout (``unmesh.sim``): ``OUTDIR/frames/<series>_NNNNN.ply`` (or the frame
-files directly in the directory, as FEM's ``surface_NNNNN.ply``) plus optional static geometry
-``OUTDIR/boundary.{ply,obj,off}``; giving ``OUTDIR/frames`` or ``OUTDIR/surfaces`` (SPH fluid
-surfaces) also picks up ``OUTDIR/boundary.*``.
-Files are grouped by their trailing frame number, so several series written for the same frame
-(e.g. ``fluid_00012.ply`` and ``solid_00012.ply``) are drawn together; unnumbered files are
-static and drawn in every frame. Each file is loaded with :func:`unmesh.io.load` (surfel clouds,
-particles or triangle meshes by content).
+Simulation output (``unmesh.sim``): ``OUTDIR/frames.json`` lists every file the run wrote,
+frame by frame (``{"frames": [{"frame", "time", "files"}], "static": [...], "fps"}``, paths
+relative to OUTDIR). For such a folder the frames are exactly the manifest's: each frame draws
+its renderable files under ``OUTDIR/frames/`` (``unmesh render OUTDIR``) or under another
+listed folder given instead (``unmesh render OUTDIR/surfaces`` for SPH fluid surfaces), plus
+the manifest's renderable static files (``boundary.ply``) in every frame; other files in the
+folder are ignored and nothing is guessed from names. The manifest's ``fps`` is the default
+frame rate of the video.
+
+A directory without ``frames.json`` (frame files written by other tools) is read by name:
+its ``frames/`` sub-folder if there is one, else its own files, grouped by their trailing
+frame number, so several series written for the same frame (e.g. ``fluid_00012.ply`` and
+``solid_00012.ply``) are drawn together; unnumbered files are static and drawn in every
+frame, as are ``boundary.{ply,obj,off}`` next to ``frames/``. Each file is loaded with
+:func:`unmesh.io.load` (surfel clouds, particles or triangle meshes by content).
 
 One fixed camera frames the union of the bounds of a sample of frames (first, last and up to
 :data:`BOUNDS_SAMPLES` in between, so a splash mid-run stays in view) and of the static
@@ -29,9 +36,11 @@ Example
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +51,20 @@ from unmesh.particles import Particles
 from unmesh.render.camera import Camera
 from unmesh.render.pipeline import collect, render, scene_bounds, scene_points
 
-__all__ = ["BOUNDS_SAMPLES", "FRAME_EXTENSIONS", "find_frames", "render_sequence", "turntable", "turntable_camera"]
+__all__ = [
+    "BOUNDS_SAMPLES",
+    "FRAME_EXTENSIONS",
+    "MANIFEST",
+    "SequencePlan",
+    "find_frames",
+    "render_frame",
+    "render_sequence",
+    "sequence_fps",
+    "sequence_plan",
+    "turntable",
+    "turntable_camera",
+    "write_frames",
+]
 
 #: Renderable frame file extensions.
 FRAME_EXTENSIONS = (".ply", ".obj", ".off")
@@ -50,10 +72,82 @@ FRAME_EXTENSIONS = (".ply", ".obj", ".off")
 BOUNDS_SAMPLES = 16
 _NUMBERED = re.compile(r"^(?P<series>.*?)(?P<num>\d+)$")
 STATIC_COLOR = (0.72, 0.72, 0.72)
+#: The manifest a simulation run writes into its output folder (see :mod:`unmesh.sim.runner`).
+MANIFEST = "frames.json"
 
 
 def _renderable(p: Path) -> bool:
     return p.is_file() and p.suffix.lower() in FRAME_EXTENSIONS and not p.name.startswith(".")
+
+
+def _manifest_of(root: Path) -> tuple[Path, str, dict[str, Any]] | None:
+    """(run folder, series folder, manifest) when ``root`` is a run folder or a folder listed in one."""
+    for home, series in ((root, "frames"), (root.parent, root.name)):
+        path = home / MANIFEST
+        if not path.is_file():
+            continue
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise InputError(f"frames: {path} is not readable JSON ({exc})") from None
+        if not isinstance(data, dict) or not isinstance(data.get("frames"), list):
+            raise InputError(f"frames: {path}: expected an object with a \"frames\" list")
+        if home == root.parent:
+            listed = {str(f).split("/", 1)[0] for e in data["frames"] if isinstance(e, dict)
+                      for f in e.get("files", []) if "/" in str(f)}
+            if series not in listed:
+                continue
+        return home, series, data
+    return None
+
+
+def _member(home: Path, rel: Any, path: Path) -> Path:
+    if not isinstance(rel, str) or not rel or rel.startswith("/") or ".." in rel.split("/"):
+        raise InputError(f"frames: {path}: expected file paths relative to {home}, got {rel!r}")
+    return home / rel
+
+
+def _from_manifest(home: Path, series: str, data: dict[str, Any]) -> tuple[list[list[Path]], list[Path]]:
+    path = home / MANIFEST
+    entries = [e for e in data["frames"] if isinstance(e, dict)]
+    entries.sort(key=lambda e: e.get("frame", 0))
+    groups: list[list[Path]] = []
+    for e in entries:
+        files = [_member(home, f, path) for f in e.get("files", [])]
+        picked = [p for p in files if p.parent == home / series and p.suffix.lower() in FRAME_EXTENSIONS]
+        missing = [p for p in picked if not p.is_file()]
+        if missing:
+            raise InputError(f"frames: {path} lists {missing[0].relative_to(home).as_posix()} (frame "
+                             f"{e.get('frame')}) but it does not exist")
+        if picked:
+            groups.append(sorted(picked))
+    static = [p for p in (_member(home, f, path) for f in data.get("static", []))
+              if p.suffix.lower() in FRAME_EXTENSIONS and p.is_file()]
+    if not groups:
+        raise InputError(f"frames: {path} lists no renderable frame files ({', '.join(FRAME_EXTENSIONS)}) "
+                         f"under {series}/")
+    return groups, sorted(static)
+
+
+def sequence_fps(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> float | None:
+    """The frame rate recorded in the simulation manifest of ``source`` (a run folder), else None.
+
+    Example
+    -------
+    >>> import tempfile
+    >>> sequence_fps(tempfile.mkdtemp()) is None
+    True
+    """
+    if not isinstance(source, str | os.PathLike):
+        return None
+    root = Path(source)
+    if not root.is_dir():
+        return None
+    found = _manifest_of(root)
+    if found is None:
+        return None
+    fps = found[2].get("fps")
+    return float(fps) if isinstance(fps, int | float) and not isinstance(fps, bool) and fps > 0 else None
 
 
 def find_frames(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> tuple[list[list[Path]], list[Path]]:
@@ -62,7 +156,8 @@ def find_frames(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]
     Parameters
     ----------
     source : path or sequence of paths
-        A simulation output directory (with ``frames/``), a directory of frame files, or an
+        A simulation output directory (read through its ``frames.json``; or one of its
+        folders listed there, such as ``OUTDIR/surfaces``), a directory of frame files, or an
         explicit list of files (each file one frame, ordered by trailing number then name).
 
     Returns
@@ -75,12 +170,15 @@ def find_frames(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]
     Raises
     ------
     unmesh.errors.InputError
-        When no frame files are found.
+        When no frame files are found, or a manifest lists a missing file.
     """
     if isinstance(source, str | os.PathLike):
         root = Path(source)
         if not root.exists():
             raise InputError(f"frames: {root} does not exist")
+        found = _manifest_of(root) if root.is_dir() else None
+        if found is not None:
+            return _from_manifest(*found)
         if root.is_file():
             files = [root]
             static: list[Path] = []
@@ -220,7 +318,7 @@ def render_sequence(
     frames: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     out_path: str | os.PathLike[str],
     camera: Camera | None = None,
-    fps: float = 30.0,
+    fps: float | None = None,
     progress: bool = True,
     width: int = 640,
     height: int = 480,
@@ -241,7 +339,8 @@ def render_sequence(
         ``.mp4``/``.gif`` (atomic), or a directory (``frame_NNNNN.png`` files).
     camera : Camera, optional
         Default: :meth:`Camera.framing` of the union of the bounds of sampled frames.
-    fps : float
+    fps : float, optional
+        Video frame rate; default the simulation's (``fps`` in ``frames.json``), else 30.
     progress : bool
         tqdm progress bar over frames.
     width, height : int
@@ -271,8 +370,61 @@ def render_sequence(
     """
     from tqdm.auto import tqdm
 
+    if fps is None:
+        fps = sequence_fps(frames) or 30.0
+    plan = sequence_plan(frames, camera, width, height, color_by, color_range, particle_radius, cutaway,
+                         **render_options)
+    images = (render_frame(plan, i) for i in tqdm(range(len(plan.groups)), desc="render", unit="frame",
+                                                  disable=not progress))
+    return write_frames(images, out_path, fps)
+
+
+def write_frames(images: Iterable[np.ndarray], out_path: str | os.PathLike[str], fps: float) -> Path:
+    """Write rendered frames, in order, as a video (``.mp4``/``.gif``, atomic) or a directory of PNGs."""
+    from unmesh.render.image import save_image, write_video
+
+    out = check_output(out_path)
+    if out.suffix:
+        return write_video(images, out, fps=fps)
+    out.mkdir(parents=True, exist_ok=True)
+    for k, img in enumerate(images):
+        save_image(out / f"frame_{k:05d}.png", img)
+    return out
+
+
+def check_output(out_path: str | os.PathLike[str]) -> Path:
+    """The output path of a frame sequence: a video file or a directory (no other suffix)."""
+    from unmesh.render.image import VIDEO_EXTENSIONS
+
+    out = Path(out_path)
+    if out.suffix and out.suffix.lower() not in VIDEO_EXTENSIONS:
+        raise InputError(f"output: expected .mp4, .gif or a directory for a frame sequence, got {out.name!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class SequencePlan:
+    """What every frame of a sequence shares (see :func:`sequence_plan`)."""
+
+    groups: tuple[tuple[Path, ...], ...]
+    static_objects: tuple[Any, ...]
+    camera: Camera
+    color_by: str | None
+    color_range: tuple[float, float] | None
+    particle_radius: float | None
+    render_options: dict[str, Any] = field(default_factory=dict)
+
+
+def sequence_plan(frames: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], camera: Camera | None = None,
+                  width: int = 640, height: int = 480, color_by: str | None = None,
+                  color_range: Sequence[float] | None = None, particle_radius: float | None = None,
+                  cutaway: bool = True, **render_options: Any) -> SequencePlan:
+    """The camera, colour range, particle radius and static geometry of a frame sequence.
+
+    Parameters are those of :func:`render_sequence` (the same defaults
+    and the same choices, so a frame of the plan is the frame ``render_sequence`` draws).
+    """
     from unmesh.render.colormap import attribute_values, value_range
-    from unmesh.render.image import VIDEO_EXTENSIONS, save_image, write_video
     from unmesh.render.particles import estimate_radius
 
     groups, static_paths = find_frames(frames)
@@ -287,7 +439,7 @@ def render_sequence(
     dyn_bounds = np.stack([lo, hi])
     if camera is None:
         pts = np.concatenate([scene_points(sc, 4000) for sc in [*sampled.values(), static]])
-        margin = 1.35 if color_by is not None and render_options.get("legend", True) else 1.08  # colour bar room
+        margin = 1.35 if color_by is not None and render_options.get("legend", True) else 1.08
         cam = Camera.fit(pts, width, height, margin=margin) if len(pts) else \
             Camera.framing(np.stack([lo, hi]), width, height, margin=margin)
     else:
@@ -308,7 +460,6 @@ def render_sequence(
         missing = [p for p in first.particles if p.radii is None]
         if missing:
             particle_radius = estimate_radius(np.concatenate([p.positions for p in missing]))
-    # static particles: grey, cut away in front of the moving content
     static_particles: list[Particles] = []
     for p in static.particles:
         keep = np.ones(len(p), dtype=bool)
@@ -320,20 +471,17 @@ def render_sequence(
         sub = p.subset(keep)
         col = np.tile(STATIC_COLOR, (len(sub), 1))
         static_particles.append(sub.replace(attributes={**sub.attributes, "colors": col}))
-    static_objects = [*static.clouds, *static.meshes, *static_particles]
+    static_objects = (*static.clouds, *static.meshes, *static_particles)
+    crange = None if color_range is None else (float(color_range[0]), float(color_range[1]))
+    return SequencePlan(tuple(tuple(g) for g in groups), static_objects, cam, color_by, crange,
+                        particle_radius, dict(render_options))
 
-    def images() -> Iterator[np.ndarray]:
-        for i in tqdm(range(len(groups)), desc="render", unit="frame", disable=not progress):
-            sc = sampled.get(i) or collect(_frame_objects(groups[i]))
-            yield render([*static_objects, *sc.all()], cam, color_by=color_by, color_range=color_range,
-                         particle_radius=particle_radius, **render_options).color
 
-    out = Path(out_path)
-    if out.suffix.lower() in VIDEO_EXTENSIONS:
-        return write_video(images(), out, fps=fps)
-    if out.suffix:
-        raise InputError(f"output: expected .mp4, .gif or a directory for a frame sequence, got {out.name!r}")
-    out.mkdir(parents=True, exist_ok=True)
-    for k, img in enumerate(images()):
-        save_image(out / f"frame_{k:05d}.png", img)
-    return out
+def render_frame(plan: SequencePlan, i: int) -> np.ndarray:
+    """Frame ``i`` of a plan: (H, W, 3) float colours, as :func:`render_sequence` draws it."""
+    if not 0 <= int(i) < len(plan.groups):
+        raise InputError(f"i: expected a frame index in [0, {len(plan.groups)}), got {i}")
+    # the frame's own objects go to render() as loaded, so its discontinuity surfels reach the
+    # splatter as clip information
+    return render([*plan.static_objects, *_frame_objects(plan.groups[int(i)])], plan.camera, color_by=plan.color_by,
+                  color_range=plan.color_range, particle_radius=plan.particle_radius, **plan.render_options).color

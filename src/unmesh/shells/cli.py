@@ -13,7 +13,8 @@ _DESCRIPTION = """\
 Simulate a point-sampled thin shell (elastic, plastic, fracturing) described by a TOML
 scene file. Writes OUTDIR/frames/frame_NNNNN.ply (the dense surfel cloud, renderable with
 'unmesh render OUTDIR/frames'), OUTDIR/nodes/frame_NNNNN.ply (simulation nodes with
-velocities), OUTDIR/fibers/frame_NNNNN.npz and OUTDIR/summary.json (energies, momentum,
+velocities), OUTDIR/fibers/frame_NNNNN.npz, OUTDIR/frames.json (the manifest of written
+files) and OUTDIR/summary.json (energies, momentum,
 fiber and crack counts, pieces, time per frame split into forces, fracture and surface).
 Example scenes: examples/shells/*.toml."""
 

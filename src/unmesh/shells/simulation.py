@@ -481,8 +481,11 @@ class ShellSimulation(Tearing, Simulation):
                 "dt": self.dt, "ks": m.ks, "kb": m.kb, "damping": m.damping, "mass": float(self.mass.sum())}
 
     # -- output ---------------------------------------------------------------------
-    def write_frame(self, outdir: Path, frame: int) -> None:
-        """``frames/``: dense surfels; ``nodes/``: nodes with velocities; ``fibers/``: fiber data."""
+    def write_frame(self, outdir: Path, frame: int) -> list[str]:
+        """``frames/``: dense surfels; ``nodes/``: nodes with velocities; ``fibers/``: fiber data.
+
+        Returns the three files written (relative to ``outdir``).
+        """
         from unmesh import io
         from unmesh.io.atomic import atomic_path
         from unmesh.particles import Particles
@@ -501,6 +504,7 @@ class ShellSimulation(Tearing, Simulation):
                      rest_length=self.fibers.rest_length(), rest_angle=self.fibers.rest_angle(),
                      crack_centers=self.cracks.centers, crack_normals=self.cracks.normals,
                      crack_radii=self.cracks.radii)
+        return [f"frames/{name}.ply", f"nodes/{name}.ply", f"fibers/{name}.npz"]
 
     # -- checkpoints ----------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:

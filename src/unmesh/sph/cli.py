@@ -1,8 +1,8 @@
-"""``unmesh sph SCENE.toml -o OUTDIR [--duration SECONDS] [--resume]``.
+"""``unmesh sph SCENE.toml -o OUTDIR [--duration SECONDS] [--resume | --force]``.
 
 Runs a visco-elastic SPH scene (thesis chapter 8; format in ``docs/sph_scene.md``)
-and writes ``OUTDIR/frames/frame_NNNNN.ply``, ``OUTDIR/boundary.ply``,
-``OUTDIR/summary.json`` and ``OUTDIR/checkpoint.npz``.
+and writes ``OUTDIR/frames/frame_NNNNN.ply``, ``OUTDIR/boundary.ply``, ``OUTDIR/frames.json``
+(the manifest of written files), ``OUTDIR/summary.json`` and ``OUTDIR/checkpoint.npz``.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ def register(sub: Any) -> None:
         "sph", help="run a visco-elastic SPH scene (fluids, elastic solids, melting, freezing, fracture)",
         description="Weakly compressible SPH with connectivity-free elasticity (thesis chapter 8). Writes "
                     "frames/frame_NNNNN.ply (x y z vx vy vz density pressure temperature phase object), "
-                    "boundary.ply, summary.json and checkpoint.npz into OUTDIR. Scene format: docs/sph_scene.md.")
+                    "boundary.ply, frames.json, summary.json and checkpoint.npz into OUTDIR. Scene format: "
+                    "docs/sph_scene.md.")
     add_run_arguments(p)
     p.set_defaults(func=_run)

@@ -748,24 +748,33 @@ class SPHSimulation(Simulation):
             "dt": float(self.dt_last),
         }
 
-    def write_static(self, outdir: Path) -> None:
-        """``OUTDIR/boundary.ply``: the boundary particles (with their volumes)."""
+    def write_static(self, outdir: Path) -> list[str]:
+        """``OUTDIR/boundary.ply``: the boundary particles (with their volumes); returns the files written."""
         from unmesh import io
         from unmesh.particles import Particles
 
-        if len(self.boundary):
-            io.save(Path(outdir) / "boundary.ply", Particles(self.boundary.positions, attributes={"volume": self.boundary.volumes}))
+        if not len(self.boundary):
+            return []
+        io.save(Path(outdir) / "boundary.ply", Particles(self.boundary.positions, attributes={"volume": self.boundary.volumes}))
+        return ["boundary.ply"]
 
-    def write_frame(self, outdir: Path, frame: int) -> None:
-        """``frames/frame_NNNNN.ply`` (and surfaces when enabled)."""
+    def write_frame(self, outdir: Path, frame: int) -> list[str]:
+        """``frames/frame_NNNNN.ply`` (and ``surfaces/*_NNNNN.ply`` when enabled); returns the files written."""
         from unmesh import io
 
         out = Path(outdir)
-        io.save(out / "frames" / f"frame_{frame:05d}.ply", self.particles().to_particles())
+        name = f"frame_{frame:05d}"
+        io.save(out / "frames" / f"{name}.ply", self.particles().to_particles())
+        files = [f"frames/{name}.ply"]
         if self.surfaces != "none" or any(o.surface is not None for o in self.objects):
             from unmesh.sph.surface import write_surfaces
 
             write_surfaces(self, out / "surfaces", frame)
+            # the names write_surfaces uses: fluid_NNNNN.ply, <skin name>_NNNNN.ply
+            if self.surfaces != "none":
+                files.append(f"surfaces/fluid_{frame:05d}.ply")
+            files.extend(f"surfaces/{skin}_{frame:05d}.ply" for skin in self.skins())
+        return files
 
     def state_dict(self) -> dict[str, Any]:
         """Every array and counter needed to continue the run exactly."""

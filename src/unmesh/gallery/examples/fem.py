@@ -69,7 +69,7 @@ def _render_run(ctx: ExampleContext, out: Path, summary: dict[str, Any], eye: An
                           vertex_colors=np.full((4, 3), 0.82))
 
     def frame(k: int) -> np.ndarray:
-        mesh, pdata = read_vtu(out / f"mesh_{k:05d}.vtu", check=False)
+        mesh, pdata = read_vtu(out / "frames" / f"mesh_{k:05d}.vtu", check=False)
         return render([ground, element_colored_surface(mesh, pdata["displacement"])], cam).color
 
     write_video((frame(k) for k in range(n)), out / "movie.mp4", fps=min(30.0, n / max(summary["frames"][-1]["time"],
