@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from unmesh.errors import InputError
-from unmesh.fem import hex_grid, solve_static, stiffness_matrix, voronoi_foam
+from unmesh.fem import cut_by_plane, hex_grid, solve_static, stiffness_matrix, voronoi_foam
 from unmesh.fem.assembly import element_stiffness
 from unmesh.fem.hexcells import REFERENCE_CORNERS, hex_cells, incompatible_stiffness, trilinear_gradients
 from unmesh.fem.integration import IntegrationRule, cone_rule, integrate_elements
@@ -89,12 +89,30 @@ def test_patch_test_passes_under_every_rule(rule):
     rng = np.random.default_rng(5)
     A = rng.normal(size=(3, 3)) * 1e-2
     b = rng.normal(size=3) * 1e-2
-    meshes = [_projective_hex_grid()] + ([voronoi_foam(20, seed=3)] if rule.startswith("subtet") else [])
+    cut = cut_by_plane(hex_grid((3, 2, 2)), [0.5, 0.5, 0.5], [1.0, 0.3, 0.2])  # hexahedra and cut cells mixed
+    cut3 = hex_grid((4, 3, 3))
+    for _ in range(3):  # some pieces are hexahedra with a non-planar face: they keep the mean value cell
+        cut3 = cut_by_plane(cut3, rng.random(3), rng.normal(size=3))
+    meshes = [_projective_hex_grid(), cut, cut3] + ([voronoi_foam(20, seed=3)] if rule.startswith("subtet") else [])
     for mesh in meshes:
         exact = mesh.points @ A.T + b
         bnd = np.unique(mesh.boundary_triangles())
         u = solve_static(mesh, E, NU, bnd, np.zeros_like(exact), displacements=exact, rule=rule)
         assert np.abs(u - exact).max() < 1e-10 * np.abs(exact).max()
+
+
+def test_trilinear_rule_keeps_the_thesis_volumes_and_masses_and_the_other_cells():
+    m = cut_by_plane(hex_grid((3, 2, 2)), [0.5, 0.5, 0.5], [1.0, 0.3, 0.2])
+    a, b = integrate_elements(m), integrate_elements(m, rule="trilinear")
+    is_hex = hex_cells(m)[0]
+    assert 0 < is_hex.sum() < m.n_elements
+    np.testing.assert_allclose(b.volumes, a.volumes, rtol=1e-13)
+    np.testing.assert_allclose(b.mu, a.mu, rtol=1e-13, atol=1e-15)
+    other = np.flatnonzero(~is_hex)
+    np.testing.assert_array_equal(b.take(other).grads, a.take(other).grads)
+    assert np.all(np.diff(b.sample_offsets)[is_hex] == 8)
+    sub = integrate_elements(m, rule="trilinear", elements=[5, 0, 2])
+    np.testing.assert_array_equal(sub.grads, b.take(np.array([5, 0, 2])).grads)
 
 
 def test_hex_cells_detects_hexahedra_and_orders_their_corners():
@@ -106,6 +124,12 @@ def test_hex_cells_detects_hexahedra_and_orders_their_corners():
     _, det = trilinear_gradients(x)
     assert det.min() > 0
     assert not hex_cells(voronoi_foam(8, seed=1))[0].any()
+    rng = np.random.default_rng(5)
+    rng.normal(size=12)
+    cut3 = hex_grid((4, 3, 3))
+    for _ in range(3):
+        cut3 = cut_by_plane(cut3, rng.random(3), rng.normal(size=3))
+    assert hex_cells(cut3)[0].sum() == 15  # one 8-node, six-quadrilateral piece has a non-planar face
 
 
 def test_trilinear_gradients_reproduce_linear_fields():

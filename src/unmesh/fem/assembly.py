@@ -150,13 +150,17 @@ def element_stiffness(mesh: PolyMesh | ElementIntegration, young: Any, poisson: 
     if rule.kind == "incompatible":
         if not isinstance(mesh, PolyMesh):
             raise InputError("rule: the 'incompatible' stiffness needs the mesh, got an ElementIntegration")
-        from unmesh.fem.hexcells import hex_cells, incompatible_stiffness
+        from unmesh.fem.hexcells import hex_cells, incompatible_stiffness, trilinear_gradients
 
         is_hex, corners = hex_cells(mesh)
         h = np.flatnonzero(is_hex)
         if len(h):
             loc = integ.nodes[integ.node_offsets[h][:, None] + corners]
-            kb = incompatible_stiffness(mesh.points[loc], lam[h], mu[h])        # corner order
+            x = mesh.points[loc]
+            # the integration's trilinear gradients carry the interface correction: pass it on
+            g0 = integ.grads[(integ.grad_offsets[h][:, None] + np.arange(8)).ravel()].reshape(len(h), 8, 3)
+            shift = g0[np.arange(len(h))[:, None], corners] - trilinear_gradients(x)[0][:, 0]
+            kb = incompatible_stiffness(x, lam[h], mu[h], shift)                # corner order
             local = np.empty_like(kb)
             r = np.arange(len(h))[:, None, None]
             local[r, corners[:, :, None], corners[:, None, :]] = kb

@@ -50,7 +50,8 @@ def hex_cells(mesh: PolyMesh) -> tuple[np.ndarray, np.ndarray]:
     Returns
     -------
     is_hex : (E,) bool
-        8 nodes, 6 four-node faces, every node on exactly three edges of the element.
+        8 nodes, 6 planar four-node faces (within 1e-9 of the cell diagonal), every node on
+        exactly three edges of the element.
     corners : (H, 8) int64
         For the hexahedra in element order: the *local* node index (into the element's
         sorted node list, :meth:`PolyMesh.element_nodes`) of each reference corner, with a
@@ -88,6 +89,14 @@ def hex_cells(mesh: PolyMesh) -> tuple[np.ndarray, np.ndarray]:
     adj[rows, a.ravel(), b.ravel()] = True
     adj[rows, b.ravel(), a.ravel()] = True
     ok = np.all(adj.sum(axis=2) == 3, axis=1) & ~adj[:, np.arange(8), np.arange(8)].any(axis=1)
+    # planar faces (Newell normal; within 1e-9 of the cell's diagonal): else the bilinear face
+    # of the trilinear map is not the polyhedron's face
+    qp = mesh.points[quad]                                                 # (H, 6, 4, 3)
+    nrm = np.cross(qp, np.roll(qp, -1, axis=2)).sum(axis=2)
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-300)
+    off = np.einsum("hfkj,hfj->hfk", qp - qp.mean(axis=2, keepdims=True), nrm)
+    diag = np.linalg.norm(np.ptp(mesh.points[enodes], axis=1), axis=1)
+    ok &= np.abs(off).max(axis=(1, 2)) <= 1e-9 * diag
     # corner 0 = local node 0; its three neighbours are corners 1, 2, 4; the common neighbours
     # of two of them (other than node 0) are corners 3, 5, 6; the node left is corner 7
     H = len(cand)
@@ -163,7 +172,8 @@ def _lame_blocks(ga: np.ndarray, gb: np.ndarray, w: np.ndarray, lam: np.ndarray,
             + mu[:, None, None, None, None] * dot[..., None, None] * np.eye(3))
 
 
-def incompatible_stiffness(x: np.ndarray, lam: np.ndarray, mu: np.ndarray) -> np.ndarray:
+def incompatible_stiffness(x: np.ndarray, lam: np.ndarray, mu: np.ndarray,
+                           shift: np.ndarray | None = None) -> np.ndarray:
     """Condensed stiffness of Wilson–Taylor incompatible-mode hexahedra: blocks (H, 8, 8, 3, 3).
 
     Parameters
@@ -172,6 +182,9 @@ def incompatible_stiffness(x: np.ndarray, lam: np.ndarray, mu: np.ndarray) -> np
         Corner positions in the order of :data:`REFERENCE_CORNERS`.
     lam, mu : (H,) float64
         Lamé parameters.
+    shift : (H, 8, 3) float64, optional
+        Constant added to the trilinear gradients at every Gauss point (the interface
+        consistency correction of :func:`unmesh.fem.integration.integrate_elements`).
 
     Returns
     -------
@@ -187,6 +200,8 @@ def incompatible_stiffness(x: np.ndarray, lam: np.ndarray, mu: np.ndarray) -> np
     """
     H = len(x)
     gu, det = trilinear_gradients(x)
+    if shift is not None:
+        gu = gu + shift[:, None]
     J0 = np.einsum("hak,aj->hkj", x, REFERENCE_CORNERS) / 8.0
     det0 = np.linalg.det(J0)
     inv0 = np.linalg.inv(J0)                                               # ∂ξ_j/∂x_k at the centre

@@ -311,16 +311,12 @@ def concat(parts: list[ElementIntegration], order: np.ndarray) -> ElementIntegra
     return full.take(order)
 
 
-def _integrate_subtet(mesh: PolyMesh, noff: np.ndarray, nodes: np.ndarray, toff: np.ndarray, tris: np.ndarray,
-                      correction: bool, order: int) -> tuple[np.ndarray, ...]:
-    """The ``subtet`` rule: Gauss points in the centroid cones of the boundary triangles (numpy + MVC kernel)."""
-    from unmesh.fem._mvc_kernels import mvc_elements
-
+def _cone_data(mesh: PolyMesh, noff: np.ndarray, nodes: np.ndarray, toff: np.ndarray, tris: np.ndarray
+               ) -> tuple[np.ndarray, ...]:
+    """Centroids, triangle corners and normals, cone volumes, V, μ (9.17) and ∮ φ_i n dA per local node."""
     ne = len(noff) - 1
     n = np.diff(noff)
-    m = np.diff(toff)
-    eid_n = np.repeat(np.arange(ne), n)
-    eid_t = np.repeat(np.arange(ne), m)
+    eid_t = np.repeat(np.arange(ne), np.diff(toff))
     pts = mesh.points[nodes]
     c = np.add.reduceat(pts, noff[:-1], axis=0) / n[:, None] if ne else np.zeros((0, 3))
     corner = pts[noff[eid_t][:, None] + tris]                     # (Σm, 3, 3)
@@ -332,6 +328,20 @@ def _integrate_subtet(mesh: PolyMesh, noff: np.ndarray, nodes: np.ndarray, toff:
     exact = np.zeros((len(nodes), 3))
     for r in range(3):
         np.add.at(exact, local[:, r], cr / 6.0)
+    return c, corner, cr, tv, vols, mu, exact
+
+
+def _integrate_subtet(mesh: PolyMesh, noff: np.ndarray, nodes: np.ndarray, toff: np.ndarray, tris: np.ndarray,
+                      correction: bool, order: int) -> tuple[np.ndarray, ...]:
+    """The ``subtet`` rule: Gauss points in the centroid cones of the boundary triangles (numpy + MVC kernel)."""
+    from unmesh.fem._mvc_kernels import mvc_elements
+
+    ne = len(noff) - 1
+    n = np.diff(noff)
+    m = np.diff(toff)
+    eid_n = np.repeat(np.arange(ne), n)
+    eid_t = np.repeat(np.arange(ne), m)
+    c, corner, cr, tv, vols, mu, exact = _cone_data(mesh, noff, nodes, toff, tris)
     tet = (n == 4) & (m == 4)
     lam, cw = cone_rule(order)
     k = len(cw)
@@ -374,38 +384,100 @@ def _integrate_subtet(mesh: PolyMesh, noff: np.ndarray, nodes: np.ndarray, toff:
     return vols, mu, weights, samples, grads, soff, goff
 
 
+def _interface_fix(mesh: PolyMesh, is_hex: np.ndarray, hexes: np.ndarray, noff8: np.ndarray, nodes8: np.ndarray,
+                   vols: np.ndarray) -> np.ndarray | None:
+    """Consistency correction of hexahedra on faces shared with non-hexahedral cells: (k, 8, 3) or None.
+
+    A linear field's nodal forces are ``σ·∫∇N_i = σ·∮ N_i n``; across a face both cells must
+    use the same trace. On faces to other hexahedra the bilinear one (nothing to do); on
+    faces to mean value cells the piecewise-linear one of the face's triangles. The
+    difference ``∫_f (φ_i - N_i) n dA`` over those faces, divided by V, is added to every
+    sample's ∇N_i (it keeps Σ_i x_i ∇N_iᵀ = I), so the patch test passes on mixed meshes.
+    """
+    fe = mesh.face_elements()
+    pos = np.full(mesh.n_elements, -1, np.int64)
+    pos[hexes] = np.arange(len(hexes))
+    # (hex position, face) pairs with a non-hexahedral neighbour across the face
+    eid = np.repeat(np.arange(mesh.n_elements), np.diff(mesh.elem_offsets))
+    mine = pos[eid] >= 0
+    f_all = mesh.elem_faces[mine]
+    hpos = pos[eid[mine]]
+    nb = np.where(fe[f_all, 0] == eid[mine], fe[f_all, 1], fe[f_all, 0])
+    mixed = (nb >= 0) & ~is_hex[np.maximum(nb, 0)]
+    if not mixed.any():
+        return None
+    f, hp = f_all[mixed], hpos[mixed]
+    c = mesh.points[nodes8.reshape(-1, 8)[hp]].mean(axis=1)                 # cell centroids
+    quad = mesh.face_nodes[mesh.face_offsets[f][:, None] + np.arange(4)]     # (P, 4) cyclic
+    q = mesh.points[quad]
+    out = np.zeros((len(hexes), 8, 3))
+
+    def add(nodes_glob: np.ndarray, pairs: np.ndarray, vec: np.ndarray) -> None:
+        rows = nodes8.reshape(-1, 8)[pairs]
+        li = (rows < nodes_glob[:, None]).sum(axis=1)
+        np.add.at(out, (pairs, li), vec)
+
+    sign = np.sign(np.einsum("pj,pj->p", np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), q.mean(axis=1) - c))
+    # bilinear trace: ∫ N_k n dA by 2×2 Gauss on the face (exact for planar quadrilaterals)
+    g = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+    sk = np.array([-1.0, 1.0, 1.0, -1.0])
+    tk = np.array([-1.0, -1.0, 1.0, 1.0])
+    for s in g:
+        for t in g:
+            N = (1 + sk * s) * (1 + tk * t) / 4
+            dXs = np.einsum("k,pkj->pj", sk * (1 + tk * t) / 4, q)
+            dXt = np.einsum("k,pkj->pj", tk * (1 + sk * s) / 4, q)
+            nA = np.cross(dXs, dXt) * sign[:, None]
+            for kk in range(4):
+                add(quad[:, kk], hp, -N[kk] * nA)
+    # piecewise-linear trace on the face's triangles: A_T n_T / 3 per corner
+    toff, tris = mesh.triangles()
+    nt = toff[f + 1] - toff[f]
+    tp = np.repeat(np.arange(len(f)), nt)
+    tr = tris[np.repeat(toff[f], nt) + (np.arange(nt.sum()) - np.repeat(np.cumsum(nt) - nt, nt))]
+    p = mesh.points[tr]
+    cr = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * sign[tp][:, None] / 6.0
+    for r in range(3):
+        add(tr[:, r], hp[tp], cr)
+    return out / vols[:, None, None]
+
+
 def _integrate_trilinear(mesh: PolyMesh, correction: bool, elements: np.ndarray | None) -> ElementIntegration:
-    """Thesis rule on all elements, then the hexahedra's samples replaced by the 2×2×2 trilinear ones."""
+    """Hexahedra: 2×2×2 trilinear samples (V and μ of 9.17 as in the thesis); other cells: the thesis rule."""
     from unmesh.fem.hexcells import GAUSS_2, REFERENCE_CORNERS, hex_cells, trilinear_gradients
 
-    base = integrate_elements(mesh, correction, elements)
     is_hex, corners = hex_cells(mesh)
     sel = np.arange(mesh.n_elements) if elements is None else np.asarray(elements, dtype=np.int64)
-    slot = np.full(mesh.n_elements, -1, np.int64)
-    slot[is_hex] = np.arange(int(is_hex.sum()))
     h = np.flatnonzero(is_hex[sel])                      # positions in the integration that are hexahedra
     if not len(h):
-        return base
+        return integrate_elements(mesh, correction, elements)
+    slot = np.full(mesh.n_elements, -1, np.int64)
+    slot[is_hex] = np.arange(int(is_hex.sum()))
     cor = corners[slot[sel[h]]]                          # (k, 8) local node per reference corner
-    enodes = base.nodes[base.node_offsets[h][:, None] + cor]
-    x = mesh.points[enodes]
+    noff8, nodes8, toff8, tris8 = _local_triangles(mesh, sel[h])
+    vols, mu = _cone_data(mesh, noff8, nodes8, toff8, tris8)[4:6]
+    k = len(h)
+    x = mesh.points[nodes8[noff8[:-1, None] + cor]]
     g, det = trilinear_gradients(x)                      # (k, 8q, 8 corners, 3)
     grads = np.empty_like(g)
-    grads[np.arange(len(h))[:, None, None], np.arange(8)[None, :, None], cor[:, None, :]] = g  # local order
+    grads[np.arange(k)[:, None, None], np.arange(8)[None, :, None], cor[:, None, :]] = g  # local order
     ref = np.einsum("qa,hak->hqk", 0.125 * np.prod(1 + GAUSS_2[:, None, :] * REFERENCE_CORNERS[None], axis=2), x)
-    k = len(h)
-    noff8 = np.arange(0, 8 * k + 1, 8, dtype=np.int64)
     soff8 = np.arange(0, 8 * k + 1, 8, dtype=np.int64)
     goff8 = np.arange(0, 64 * k + 1, 64, dtype=np.int64)
-    _, mu = gather_csr(base.node_offsets, base.mu, h)
-    hexes = ElementIntegration(noff8, base.nodes[(base.node_offsets[h][:, None] + np.arange(8)).ravel()],
-                               base.volumes[h], mu, soff8, det.ravel(), ref.reshape(-1, 3), goff8,
-                               grads.reshape(-1, 3), base.corrected)
+    grads = grads.reshape(k, 8, 8, 3)
+    if correction:
+        fix = _interface_fix(mesh, is_hex, sel[h], noff8, nodes8, vols)
+        if fix is not None:
+            grads += fix[:, None, :, :]
+    hexes = ElementIntegration(noff8, nodes8, vols, mu, soff8, det.ravel(), ref.reshape(-1, 3), goff8,
+                               grads.reshape(-1, 3), bool(correction))
     rest = np.flatnonzero(~is_hex[sel])
+    if not len(rest):
+        return hexes
     order = np.empty(len(sel), np.int64)
     order[rest] = np.arange(len(rest))
     order[h] = len(rest) + np.arange(k)
-    return concat([base.take(rest), hexes], order)
+    return concat([integrate_elements(mesh, correction, sel[rest]), hexes], order)
 
 
 def integrate_elements(mesh: PolyMesh, correction: bool = True, elements: np.ndarray | None = None,
