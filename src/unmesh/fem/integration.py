@@ -15,6 +15,13 @@ boundary triangle). Adding ``(exact_i - Σ_q w_q ∇φ_i(p_q)) / V`` to every sa
 gradient makes the quadrature exact for ∇φ_i and keeps Σ_i x_i ∇φ_iᵀ = I at every
 sample, so constant strains are represented exactly and the patch test passes.
 
+Other rules (beyond the thesis; :class:`IntegrationRule`, study in
+docs/fem_cantilever_study.md): ``subtet`` integrates the same mean value basis with Gauss
+points in the centroid cones of the boundary triangles (converging to the exact integral);
+``trilinear`` and ``incompatible`` give hexahedral cells the trilinear brick (the latter with
+Wilson–Taylor incompatible modes, :mod:`unmesh.fem.hexcells`), which removes most of the
+bending over-stiffness of mean value cubes (a basis effect, not a quadrature one).
+
 Example
 -------
 >>> from unmesh.fem import voronoi_foam
