@@ -23,7 +23,7 @@ from unmesh._validate import as_array, as_indices, scalar
 from unmesh.errors import InputError
 from unmesh.fem import _fe_kernels as FK
 from unmesh.fem import _pattern_kernels as PK
-from unmesh.fem.integration import ElementIntegration, integrate_elements
+from unmesh.fem.integration import ElementIntegration, IntegrationRule, integrate_elements
 from unmesh.fem.mesh import PolyMesh
 
 __all__ = [
@@ -113,7 +113,7 @@ class ElementStiffness:
 
 
 def element_stiffness(mesh: PolyMesh | ElementIntegration, young: Any, poisson: Any,
-                      correction: bool = True) -> ElementStiffness:
+                      correction: bool = True, rule: IntegrationRule | str | None = None) -> ElementStiffness:
     """Element stiffness matrices (9.19 with the volume factor).
 
     Parameters
@@ -124,6 +124,9 @@ def element_stiffness(mesh: PolyMesh | ElementIntegration, young: Any, poisson: 
         Young's modulus Y and Poisson ratio ν per element.
     correction : bool
         Consistency correction of the sampled gradients (when integrating here).
+    rule : IntegrationRule or str, optional
+        Quadrature when integrating here (default the thesis rule (9.19); see
+        :class:`unmesh.fem.integration.IntegrationRule`).
 
     Returns
     -------
@@ -136,13 +139,32 @@ def element_stiffness(mesh: PolyMesh | ElementIntegration, young: Any, poisson: 
     >>> ks.matrix(0).shape
     (24, 24)
     """
-    integ = integrate_elements(mesh, correction) if isinstance(mesh, PolyMesh) else mesh
+    rule = IntegrationRule.parse(rule)
+    integ = integrate_elements(mesh, correction, rule=rule) if isinstance(mesh, PolyMesh) else mesh
     ne = integ.n_elements
     lam, mu = lame_parameters(_per_element(young, ne, "young"), _per_element(poisson, ne, "poisson"))
     n = np.diff(integ.node_offsets)
     koff = np.r_[0, np.cumsum(9 * n * n)].astype(np.int64)
     data = FK.element_stiffness(integ.node_offsets, integ.sample_offsets, integ.grad_offsets, integ.weights,
                                 integ.grads, lam, mu, koff)
+    if rule.kind == "incompatible":
+        if not isinstance(mesh, PolyMesh):
+            raise InputError("rule: the 'incompatible' stiffness needs the mesh, got an ElementIntegration")
+        from unmesh.fem.hexcells import hex_cells, incompatible_stiffness, trilinear_gradients
+
+        is_hex, corners = hex_cells(mesh)
+        h = np.flatnonzero(is_hex)
+        if len(h):
+            loc = integ.nodes[integ.node_offsets[h][:, None] + corners]
+            x = mesh.points[loc]
+            # the integration's trilinear gradients carry the interface correction: pass it on
+            g0 = integ.grads[(integ.grad_offsets[h][:, None] + np.arange(8)).ravel()].reshape(len(h), 8, 3)
+            shift = g0[np.arange(len(h))[:, None], corners] - trilinear_gradients(x)[0][:, 0]
+            kb = incompatible_stiffness(x, lam[h], mu[h], shift)                # corner order
+            local = np.empty_like(kb)
+            r = np.arange(len(h))[:, None, None]
+            local[r, corners[:, :, None], corners[:, None, :]] = kb
+            data[(koff[h][:, None] + np.arange(576)).ravel()] = local.reshape(-1)
     return ElementStiffness(integ.node_offsets, integ.nodes, koff, data)
 
 
@@ -206,7 +228,8 @@ class BlockPattern:
         return sp.bsr_array((data.reshape(-1, 3, 3), self.indices, self.indptr), shape=(n3, n3))
 
 
-def stiffness_matrix(mesh: PolyMesh, young: Any, poisson: Any, correction: bool = True) -> sp.csr_array:
+def stiffness_matrix(mesh: PolyMesh, young: Any, poisson: Any, correction: bool = True,
+                     rule: IntegrationRule | str | None = None) -> sp.csr_array:
     """Global stiffness matrix K (9.16) of a polyhedral mesh.
 
     Parameters
@@ -216,6 +239,8 @@ def stiffness_matrix(mesh: PolyMesh, young: Any, poisson: Any, correction: bool 
         Young's modulus Y and Poisson ratio ν.
     correction : bool
         Consistency correction of the quadrature (default True).
+    rule : IntegrationRule or str, optional
+        Quadrature (default the thesis rule (9.19); ``"subtet"``, ``"subtet:ORDER"``).
 
     Returns
     -------
@@ -229,7 +254,7 @@ def stiffness_matrix(mesh: PolyMesh, young: Any, poisson: Any, correction: bool 
     >>> import numpy as np; bool(abs(K @ np.tile([1.0, 0, 0], 27)).max() < 1e-9)
     True
     """
-    ks = element_stiffness(mesh, young, poisson, correction)
+    ks = element_stiffness(mesh, young, poisson, correction, rule)
     pattern = BlockPattern.build(ks.node_offsets, ks.nodes, mesh.n_nodes)
     return pattern.assemble(ks.data).tocsr()
 
@@ -296,7 +321,8 @@ def check_supported(mesh: PolyMesh, fixed: np.ndarray) -> None:
 
 
 def solve_static(mesh: PolyMesh, young: Any, poisson: Any, fixed: Any, forces: Any, *,
-                 displacements: Any | None = None, correction: bool = True) -> np.ndarray:
+                 displacements: Any | None = None, correction: bool = True,
+                 rule: IntegrationRule | str | None = None) -> np.ndarray:
     """Static displacements: solve ``K u = f`` with fixed (prescribed) nodes.
 
     Parameters
@@ -311,6 +337,9 @@ def solve_static(mesh: PolyMesh, young: Any, poisson: Any, fixed: Any, forces: A
         Prescribed displacements (only the rows of ``fixed`` are used).
     correction : bool
         Consistency correction of the quadrature (default True).
+    rule : IntegrationRule or str, optional
+        Quadrature (default the thesis rule (9.19); ``"subtet"``, ``"subtet:ORDER"``; see
+        docs/fem_cantilever_study.md).
 
     Returns
     -------
@@ -338,7 +367,7 @@ def solve_static(mesh: PolyMesh, young: Any, poisson: Any, fixed: Any, forces: A
     f = as_array(forces, "forces", (n, 3))
     u = np.zeros((n, 3)) if displacements is None else as_array(displacements, "displacements", (n, 3)).copy()
     check_supported(mesh, fix)
-    K = stiffness_matrix(mesh, young, poisson, correction)
+    K = stiffness_matrix(mesh, young, poisson, correction, rule)
     mask = np.ones(n, bool)
     mask[fix] = False
     used = np.zeros(n, bool)

@@ -15,6 +15,13 @@ boundary triangle). Adding ``(exact_i - Σ_q w_q ∇φ_i(p_q)) / V`` to every sa
 gradient makes the quadrature exact for ∇φ_i and keeps Σ_i x_i ∇φ_iᵀ = I at every
 sample, so constant strains are represented exactly and the patch test passes.
 
+Other rules (beyond the thesis; :class:`IntegrationRule`, study in
+docs/fem_cantilever_study.md): ``subtet`` integrates the same mean value basis with Gauss
+points in the centroid cones of the boundary triangles (converging to the exact integral);
+``trilinear`` and ``incompatible`` give hexahedral cells the trilinear brick (the latter with
+Wilson–Taylor incompatible modes, :mod:`unmesh.fem.hexcells`), which removes most of the
+bending over-stiffness of mean value cubes (a basis effect, not a quadrature one).
+
 Example
 -------
 >>> from unmesh.fem import voronoi_foam
@@ -29,10 +36,118 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh.errors import InputError
 from unmesh.fem import _fe_kernels as FK
 from unmesh.fem.mesh import PolyMesh
 
-__all__ = ["ElementIntegration", "gather_csr", "integrate_elements", "merge_csr"]
+__all__ = ["ElementIntegration", "IntegrationRule", "gather_csr", "integrate_elements", "merge_csr"]
+
+RULES = ("thesis", "subtet", "trilinear", "incompatible")
+
+
+@dataclass(frozen=True)
+class IntegrationRule:
+    """Which quadrature (and, for hexahedral cells, which element) the non-tetrahedral elements get.
+
+    Attributes
+    ----------
+    kind : str
+        ``"thesis"`` (default): mean value basis, the vertex and face samples of (9.19),
+        ``n + m`` samples.
+        ``"subtet"``: mean value basis; the element is split into the cones from its vertex
+        centroid to its boundary triangles and each cone gets a Gauss (Stroud conical
+        product) rule with ``order³`` points, exact for polynomials of degree
+        ``2·order - 1`` on the cone. Converges to the exactly integrated mean value
+        stiffness (see docs/fem_cantilever_study.md).
+        ``"trilinear"``: hexahedral cells (:func:`unmesh.fem.hexcells.hex_cells`) get the
+        trilinear basis at 2×2×2 Gauss points (no consistency correction: it passes the
+        patch test by itself); other cells the thesis rule.
+        ``"incompatible"``: a stiffness option, not a quadrature: hexahedral cells get the
+        condensed Wilson–Taylor incompatible-mode stiffness
+        (:func:`unmesh.fem.hexcells.incompatible_stiffness`), other cells the thesis rule.
+        Accepted by :func:`~unmesh.fem.assembly.element_stiffness`,
+        :func:`~unmesh.fem.assembly.stiffness_matrix` and
+        :func:`~unmesh.fem.assembly.solve_static` given a mesh; :func:`integrate_elements`
+        gives the ``trilinear`` samples for it (the compatible part).
+    order : int
+        Gauss points per direction of the ``subtet`` rule (1–8; ignored by the others).
+
+    Tetrahedra always get their exact one-point rule (their basis is linear). The volumes
+    and volume fractions μ (9.17, lumped masses 9.21) are the thesis ones under every rule.
+
+    Example
+    -------
+    >>> IntegrationRule("subtet", 2).points_per_cone
+    8
+    """
+
+    kind: str = "thesis"
+    order: int = 2
+
+    def __post_init__(self) -> None:
+        if self.kind not in RULES:
+            raise InputError(f"integration: expected one of {', '.join(RULES)}, got {self.kind!r}")
+        if isinstance(self.order, bool) or not isinstance(self.order, int | np.integer) or not 1 <= self.order <= 8:
+            raise InputError(f"integration order: expected an integer in [1, 8], got {self.order!r}")
+
+    @property
+    def points_per_cone(self) -> int:
+        """Samples per boundary-triangle cone of the ``subtet`` rule (``order³``)."""
+        return int(self.order) ** 3
+
+    @classmethod
+    def parse(cls, value: IntegrationRule | str | None) -> IntegrationRule:
+        """A rule from a rule, ``None`` (thesis) or a string ``"thesis"``, ``"subtet"``, ``"subtet:3"``.
+
+        Example
+        -------
+        >>> IntegrationRule.parse("subtet:3")
+        IntegrationRule(kind='subtet', order=3)
+        """
+        if value is None:
+            return cls()
+        if isinstance(value, IntegrationRule):
+            return value
+        if not isinstance(value, str):
+            raise InputError(f"integration: expected an IntegrationRule or a string, got {type(value).__name__}")
+        kind, _, order = value.partition(":")
+        if not order:
+            return cls(kind)
+        try:
+            return cls(kind, int(order))
+        except ValueError:
+            raise InputError(f"integration: expected 'kind' or 'kind:order' with an integer order, got {value!r}") \
+                from None
+
+
+def cone_rule(order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Stroud conical-product Gauss rule on the unit tetrahedron: barycentric points (k, 4), weights (k,).
+
+    ``k = order³``; the weights sum to 1 (fractions of the tetrahedron's volume) and the rule
+    integrates polynomials of degree ``2·order - 1`` exactly. The first barycentric coordinate
+    belongs to the apex.
+
+    Example
+    -------
+    >>> lam, w = cone_rule(2)
+    >>> lam.shape, round(float(w.sum()), 12)
+    ((8, 4), 1.0)
+    """
+    from scipy.special import roots_jacobi
+
+    def jacobi01(alpha: int) -> tuple[np.ndarray, np.ndarray]:
+        x, w = roots_jacobi(order, alpha, 0)
+        return (x + 1) / 2, w / 2 ** (alpha + 1)
+
+    a, wa = jacobi01(2)
+    b, wb = jacobi01(1)
+    c, wc = jacobi01(0)
+    A, B, Cc = (g.ravel() for g in np.meshgrid(a, b, c, indexing="ij"))
+    W = (wa[:, None, None] * wb[None, :, None] * wc[None, None, :]).ravel() * 6.0
+    x = A
+    y = (1 - A) * B
+    z = (1 - A) * (1 - B) * Cc
+    return np.c_[1 - x - y - z, x, y, z], W
 
 
 def gather_csr(offsets: np.ndarray, data: np.ndarray, idx: np.ndarray, *,
@@ -203,7 +318,177 @@ def concat(parts: list[ElementIntegration], order: np.ndarray) -> ElementIntegra
     return full.take(order)
 
 
-def integrate_elements(mesh: PolyMesh, correction: bool = True, elements: np.ndarray | None = None) -> ElementIntegration:
+def _cone_data(mesh: PolyMesh, noff: np.ndarray, nodes: np.ndarray, toff: np.ndarray, tris: np.ndarray
+               ) -> tuple[np.ndarray, ...]:
+    """Centroids, triangle corners and normals, cone volumes, V, μ (9.17) and ∮ φ_i n dA per local node."""
+    ne = len(noff) - 1
+    n = np.diff(noff)
+    eid_t = np.repeat(np.arange(ne), np.diff(toff))
+    pts = mesh.points[nodes]
+    c = np.add.reduceat(pts, noff[:-1], axis=0) / n[:, None] if ne else np.zeros((0, 3))
+    corner = pts[noff[eid_t][:, None] + tris]                     # (Σm, 3, 3)
+    cr = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    tv = np.einsum("ij,ij->i", corner[:, 0] - c[eid_t], cr) / 6.0  # cone volumes (9.17)-(9.18)
+    vols = np.bincount(eid_t, weights=tv, minlength=ne)
+    local = noff[eid_t][:, None] + tris
+    mu = np.bincount(local.ravel(), weights=np.repeat(tv / (3.0 * vols[eid_t]), 3), minlength=len(nodes))
+    exact = np.zeros((len(nodes), 3))
+    for r in range(3):
+        np.add.at(exact, local[:, r], cr / 6.0)
+    return c, corner, cr, tv, vols, mu, exact
+
+
+def _integrate_subtet(mesh: PolyMesh, noff: np.ndarray, nodes: np.ndarray, toff: np.ndarray, tris: np.ndarray,
+                      correction: bool, order: int) -> tuple[np.ndarray, ...]:
+    """The ``subtet`` rule: Gauss points in the centroid cones of the boundary triangles (numpy + MVC kernel)."""
+    from unmesh.fem._mvc_kernels import mvc_elements
+
+    ne = len(noff) - 1
+    n = np.diff(noff)
+    m = np.diff(toff)
+    eid_n = np.repeat(np.arange(ne), n)
+    eid_t = np.repeat(np.arange(ne), m)
+    c, corner, cr, tv, vols, mu, exact = _cone_data(mesh, noff, nodes, toff, tris)
+    tet = (n == 4) & (m == 4)
+    lam, cw = cone_rule(order)
+    k = len(cw)
+    counts = np.where(tet, 1, m * k)
+    soff = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    # samples: tetrahedra their centroid, other elements k points per cone, cone by cone
+    is_cone_t = ~tet[eid_t]
+    samples = np.empty((int(soff[-1]), 3))
+    weights = np.empty(int(soff[-1]))
+    samples[soff[:-1][tet]] = c[tet]
+    weights[soff[:-1][tet]] = vols[tet]
+    ct = np.flatnonzero(is_cone_t)
+    first_t = toff[eid_t[ct]]
+    pos = soff[eid_t[ct]][:, None] + (ct - first_t)[:, None] * k + np.arange(k)
+    cone_pts = lam[None, :, 0, None] * c[eid_t[ct]][:, None, :] + np.einsum("qr,trj->tqj", lam[:, 1:], corner[ct])
+    samples[pos.ravel()] = cone_pts.reshape(-1, 3)
+    weights[pos.ravel()] = (tv[ct][:, None] * cw[None, :]).ravel()
+    _, grads, goff = mvc_elements(mesh.points, noff, nodes, toff, tris, soff, samples)
+    # tetrahedra: exact constant gradients (the MVC of a tetrahedron is barycentric; use the closed form)
+    te = np.flatnonzero(tet)
+    if len(te):
+        tt = np.flatnonzero(tet[eid_t])
+        opp = 6 - tris[tt].sum(axis=1)
+        grads[goff[eid_t[tt]] + opp] = -cr[tt] / (6.0 * vols[eid_t[tt]])[:, None]
+    if correction and len(ct):
+        ce = np.flatnonzero(~tet)
+        q = counts[ce]
+        # Σ_q w_q ∇φ_i(p_q) per local node i of the corrected elements
+        acc = np.zeros((len(nodes), 3))
+        row_e = np.repeat(ce, q * n[ce])
+        start = np.repeat(goff[ce], q * n[ce])
+        rel = np.arange(len(row_e)) - np.repeat(np.r_[0, np.cumsum(q * n[ce])][:-1], q * n[ce])
+        i_loc = rel % n[row_e]
+        s_loc = rel // n[row_e]
+        rows = start + rel
+        node_row = noff[row_e] + i_loc
+        np.add.at(acc, node_row, weights[soff[row_e] + s_loc][:, None] * grads[rows])
+        fix = (exact - acc) / vols[eid_n][:, None]
+        grads[rows] += fix[node_row]
+    return vols, mu, weights, samples, grads, soff, goff
+
+
+def _interface_fix(mesh: PolyMesh, is_hex: np.ndarray, hexes: np.ndarray, noff8: np.ndarray, nodes8: np.ndarray,
+                   vols: np.ndarray) -> np.ndarray | None:
+    """Consistency correction of hexahedra on faces shared with non-hexahedral cells: (k, 8, 3) or None.
+
+    A linear field's nodal forces are ``σ·∫∇N_i = σ·∮ N_i n``; across a face both cells must
+    use the same trace. On faces to other hexahedra the bilinear one (nothing to do); on
+    faces to mean value cells the piecewise-linear one of the face's triangles. The
+    difference ``∫_f (φ_i - N_i) n dA`` over those faces, divided by V, is added to every
+    sample's ∇N_i (it keeps Σ_i x_i ∇N_iᵀ = I), so the patch test passes on mixed meshes.
+    """
+    fe = mesh.face_elements()
+    pos = np.full(mesh.n_elements, -1, np.int64)
+    pos[hexes] = np.arange(len(hexes))
+    # (hex position, face) pairs with a non-hexahedral neighbour across the face
+    eid = np.repeat(np.arange(mesh.n_elements), np.diff(mesh.elem_offsets))
+    mine = pos[eid] >= 0
+    f_all = mesh.elem_faces[mine]
+    hpos = pos[eid[mine]]
+    nb = np.where(fe[f_all, 0] == eid[mine], fe[f_all, 1], fe[f_all, 0])
+    mixed = (nb >= 0) & ~is_hex[np.maximum(nb, 0)]
+    if not mixed.any():
+        return None
+    f, hp = f_all[mixed], hpos[mixed]
+    c = mesh.points[nodes8.reshape(-1, 8)[hp]].mean(axis=1)                 # cell centroids
+    quad = mesh.face_nodes[mesh.face_offsets[f][:, None] + np.arange(4)]     # (P, 4) cyclic
+    q = mesh.points[quad]
+    out = np.zeros((len(hexes), 8, 3))
+
+    def add(nodes_glob: np.ndarray, pairs: np.ndarray, vec: np.ndarray) -> None:
+        rows = nodes8.reshape(-1, 8)[pairs]
+        li = (rows < nodes_glob[:, None]).sum(axis=1)
+        np.add.at(out, (pairs, li), vec)
+
+    sign = np.sign(np.einsum("pj,pj->p", np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), q.mean(axis=1) - c))
+    # bilinear trace: ∫ N_k n dA by 2×2 Gauss on the face (exact for planar quadrilaterals)
+    g = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+    sk = np.array([-1.0, 1.0, 1.0, -1.0])
+    tk = np.array([-1.0, -1.0, 1.0, 1.0])
+    for s in g:
+        for t in g:
+            N = (1 + sk * s) * (1 + tk * t) / 4
+            dXs = np.einsum("k,pkj->pj", sk * (1 + tk * t) / 4, q)
+            dXt = np.einsum("k,pkj->pj", tk * (1 + sk * s) / 4, q)
+            nA = np.cross(dXs, dXt) * sign[:, None]
+            for kk in range(4):
+                add(quad[:, kk], hp, -N[kk] * nA)
+    # piecewise-linear trace on the face's triangles: A_T n_T / 3 per corner
+    toff, tris = mesh.triangles()
+    nt = toff[f + 1] - toff[f]
+    tp = np.repeat(np.arange(len(f)), nt)
+    tr = tris[np.repeat(toff[f], nt) + (np.arange(nt.sum()) - np.repeat(np.cumsum(nt) - nt, nt))]
+    p = mesh.points[tr]
+    cr = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) * sign[tp][:, None] / 6.0
+    for r in range(3):
+        add(tr[:, r], hp[tp], cr)
+    return out / vols[:, None, None]
+
+
+def _integrate_trilinear(mesh: PolyMesh, correction: bool, elements: np.ndarray | None) -> ElementIntegration:
+    """Hexahedra: 2×2×2 trilinear samples (V and μ of 9.17 as in the thesis); other cells: the thesis rule."""
+    from unmesh.fem.hexcells import GAUSS_2, REFERENCE_CORNERS, hex_cells, trilinear_gradients
+
+    is_hex, corners = hex_cells(mesh)
+    sel = np.arange(mesh.n_elements) if elements is None else np.asarray(elements, dtype=np.int64)
+    h = np.flatnonzero(is_hex[sel])                      # positions in the integration that are hexahedra
+    if not len(h):
+        return integrate_elements(mesh, correction, elements)
+    slot = np.full(mesh.n_elements, -1, np.int64)
+    slot[is_hex] = np.arange(int(is_hex.sum()))
+    cor = corners[slot[sel[h]]]                          # (k, 8) local node per reference corner
+    noff8, nodes8, toff8, tris8 = _local_triangles(mesh, sel[h])
+    vols, mu = _cone_data(mesh, noff8, nodes8, toff8, tris8)[4:6]
+    k = len(h)
+    x = mesh.points[nodes8[noff8[:-1, None] + cor]]
+    g, det = trilinear_gradients(x)                      # (k, 8q, 8 corners, 3)
+    grads = np.empty_like(g)
+    grads[np.arange(k)[:, None, None], np.arange(8)[None, :, None], cor[:, None, :]] = g  # local order
+    ref = np.einsum("qa,hak->hqk", 0.125 * np.prod(1 + GAUSS_2[:, None, :] * REFERENCE_CORNERS[None], axis=2), x)
+    soff8 = np.arange(0, 8 * k + 1, 8, dtype=np.int64)
+    goff8 = np.arange(0, 64 * k + 1, 64, dtype=np.int64)
+    grads = grads.reshape(k, 8, 8, 3)
+    if correction:
+        fix = _interface_fix(mesh, is_hex, sel[h], noff8, nodes8, vols)
+        if fix is not None:
+            grads += fix[:, None, :, :]
+    hexes = ElementIntegration(noff8, nodes8, vols, mu, soff8, det.ravel(), ref.reshape(-1, 3), goff8,
+                               grads.reshape(-1, 3), bool(correction))
+    rest = np.flatnonzero(~is_hex[sel])
+    if not len(rest):
+        return hexes
+    order = np.empty(len(sel), np.int64)
+    order[rest] = np.arange(len(rest))
+    order[h] = len(rest) + np.arange(k)
+    return concat([integrate_elements(mesh, correction, sel[rest]), hexes], order)
+
+
+def integrate_elements(mesh: PolyMesh, correction: bool = True, elements: np.ndarray | None = None,
+                       rule: IntegrationRule | str | None = None) -> ElementIntegration:
     """Samples, weights and shape-function gradients of the elements (9.17–9.19).
 
     Parameters
@@ -214,6 +499,9 @@ def integrate_elements(mesh: PolyMesh, correction: bool = True, elements: np.nda
         Apply the consistency correction (default True; see the module docstring).
     elements : (k,) int array, optional
         Integrate only these elements (in this order).
+    rule : IntegrationRule or str, optional
+        The quadrature (default the thesis rule (9.19); ``"subtet"`` or ``"subtet:ORDER"``
+        the Gauss rule on the centroid cones, see :class:`IntegrationRule`).
 
     Returns
     -------
@@ -225,9 +513,18 @@ def integrate_elements(mesh: PolyMesh, correction: bool = True, elements: np.nda
     >>> integ = integrate_elements(hex_grid((1, 1, 1)))
     >>> integ.sample_offsets.tolist()  # 8 vertex + 12 triangle samples
     [0, 20]
+    >>> integrate_elements(hex_grid((1, 1, 1)), rule="subtet:2").sample_offsets.tolist()  # 12 cones x 2³
+    [0, 96]
     """
+    rule = IntegrationRule.parse(rule)
+    if rule.kind in ("trilinear", "incompatible"):
+        return _integrate_trilinear(mesh, correction, elements)
     idx = None if elements is None else np.asarray(elements, dtype=np.int64)
     noff, nodes, toff, tris = _local_triangles(mesh, idx)
+    if rule.kind == "subtet":
+        vols, mu, w, s, g, soff, goff = _integrate_subtet(mesh, noff, nodes, toff, tris, bool(correction),
+                                                          int(rule.order))
+        return ElementIntegration(noff, nodes, vols, mu, soff, w, s, goff, g, bool(correction))
     counts = FK.sample_counts(noff, toff)
     soff = np.r_[0, np.cumsum(counts)].astype(np.int64)
     goff = np.r_[0, np.cumsum(counts * np.diff(noff))].astype(np.int64)
