@@ -36,7 +36,7 @@ from unmesh.fem.assembly import (
 from unmesh.fem.builders import convex_polyhedron, hex_grid, polymesh_from_faces, tet_mesh, tetrahedralize, voronoi_foam
 from unmesh.fem.cutting import PlaneCut, PolygonCut, apply_cuts, cut_by_plane, cut_by_polygon, split_element
 from unmesh.fem.dynamics import Dynamics, Ground, Load, Prescribed
-from unmesh.fem.integration import ElementIntegration, integrate_elements
+from unmesh.fem.integration import ElementIntegration, IntegrationRule, integrate_elements
 from unmesh.fem.mesh import PolyMesh
 from unmesh.fem.mvc import mean_value_coordinates
 from unmesh.fem.rotations import horn_rotations
@@ -45,6 +45,7 @@ from unmesh.fem.slivers import find_slivers, remove_slivers
 __all__ = [
     "Dynamics",
     "ElementIntegration",
+    "IntegrationRule",
     "Ground",
     "Load",
     "PlaneCut",
