@@ -763,9 +763,32 @@ class SPHSimulation(Simulation):
         out = Path(outdir)
         io.save(out / "frames" / f"frame_{frame:05d}.ply", self.particles().to_particles())
         if self.surfaces != "none" or any(o.surface is not None for o in self.objects):
-            from unmesh.sph.surface import write_surfaces
+            self.write_surfaces(out / "surfaces", frame)
 
-            write_surfaces(self, out / "surfaces", frame)
+    def write_surfaces(self, outdir: Path, frame: int) -> None:
+        """Write ``fluid_NNNNN.ply`` (marching cubes) and ``<object>_NNNNN.ply`` (skinned meshes).
+
+        Called by :meth:`write_frame` when the scene asks for surfaces (``[output] surface`` /
+        ``skin``), e.g. ``sim.write_surfaces(outdir / "surfaces", 3)``; the meshes come from
+        :func:`unmesh.sph.surface.fluid_surface` and :meth:`unmesh.sph.surface.Skin.deform`.
+        """
+        from unmesh import io
+        from unmesh.sph.surface import fluid_surface
+
+        outdir = Path(outdir)
+        state = self.particles()
+        if self.surfaces != "none":
+            sel = state.phases == FLUID if self.surfaces == "fluid" else np.ones(len(state), bool)
+            rho0 = float(np.average(self.mats[:, 0]))
+            mesh = fluid_surface(state.positions[sel], state.masses[sel], rho0, self.h,
+                                 step=self.surface_resolution * self.spacing)
+            io.save(outdir / f"fluid_{frame:05d}.ply", mesh)
+        skins = self.skins()
+        if skins:
+            amat = self.lattice_transforms()
+            active = (state.phases == SOLID).astype(np.float64)
+            for name, skin in skins.items():
+                io.save(outdir / f"{name}_{frame:05d}.ply", skin.deform(state.positions, amat, active))
 
     def state_dict(self) -> dict[str, Any]:
         """Every array and counter needed to continue the run exactly."""

@@ -24,9 +24,10 @@ True
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -34,9 +35,6 @@ from numba import njit
 from unmesh._validate import as_array, as_points, positive_scalar
 from unmesh.kernels._kernels import poly6_3d
 from unmesh.meshes import TriangleMesh
-
-if TYPE_CHECKING:
-    from unmesh.sph.simulation import SPHSimulation
 
 __all__ = ["Skin", "density_grid", "fluid_surface", "write_surfaces"]
 
@@ -214,26 +212,12 @@ class Skin:
         return TriangleMesh(verts[keep], remap[faces])
 
 
-def write_surfaces(sim: SPHSimulation, outdir: Path, frame: int) -> None:
-    """Write ``fluid_NNNNN.ply`` (marching cubes) and ``<object>_NNNNN.ply`` (skinned meshes).
+def write_surfaces(sim: Any, outdir: Path, frame: int) -> None:
+    """Deprecated: use :meth:`unmesh.sph.SPHSimulation.write_surfaces` (``sim.write_surfaces(outdir, frame)``).
 
-    Called by :meth:`unmesh.sph.SPHSimulation.write_frame` when the scene asks for surfaces
-    (``[output] surface`` / ``skin``), e.g. ``write_surfaces(sim, outdir / "surfaces", 3)``.
+    Kept so that old imports keep working; this module no longer knows the simulation
+    (``sph.simulation`` imports ``sph.surface``, never the other way round).
     """
-    from unmesh import io
-    from unmesh.sph.state import FLUID, SOLID
-
-    outdir = Path(outdir)
-    state = sim.particles()
-    if sim.surfaces != "none":
-        sel = state.phases == FLUID if sim.surfaces == "fluid" else np.ones(len(state), bool)
-        rho0 = float(np.average(sim.mats[:, 0]))
-        mesh = fluid_surface(state.positions[sel], state.masses[sel], rho0, sim.h,
-                             step=sim.surface_resolution * sim.spacing)
-        io.save(outdir / f"fluid_{frame:05d}.ply", mesh)
-    skins = sim.skins()
-    if skins:
-        amat = sim.lattice_transforms()
-        active = (state.phases == SOLID).astype(np.float64)
-        for name, skin in skins.items():
-            io.save(outdir / f"{name}_{frame:05d}.ply", skin.deform(state.positions, amat, active))
+    warnings.warn("unmesh.sph.surface.write_surfaces(sim, outdir, frame) is deprecated; "
+                  "use sim.write_surfaces(outdir, frame)", DeprecationWarning, stacklevel=2)
+    sim.write_surfaces(outdir, frame)
