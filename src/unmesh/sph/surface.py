@@ -1,8 +1,9 @@
 """Surfaces of SPH results (thesis section 8.2.7).
 
 Fluids
-    Marching cubes (scikit-image) of the SPH density field
-    ``ρ(x) = Σ_j m_j W(x − x_j)`` (poly6, eq. 8.4) at half the rest density.
+    Marching cubes (:func:`unmesh.meshes.marching_cubes`) of the SPH density field
+    ``ρ(x) = Σ_j m_j W(x − x_j)`` (poly6, eq. 8.4) sampled on a grid, at half the rest
+    density; vertices are at the level of the grid's trilinear interpolant (float64).
 Solids
     A surface mesh (or surfel cloud) skinned to the particles (eq. 8.38): each
     vertex ``s`` stores its rest offsets ``s⁰_i = s − x⁰_i`` to the nearby particles
@@ -34,7 +35,7 @@ from numba import njit
 
 from unmesh._validate import as_array, as_points, positive_scalar
 from unmesh.kernels._kernels import poly6_3d
-from unmesh.meshes import TriangleMesh
+from unmesh.meshes import TriangleMesh, marching_cubes
 
 __all__ = ["Skin", "density_grid", "fluid_surface", "write_surfaces"]
 
@@ -104,7 +105,7 @@ def fluid_surface(positions: Any, masses: Any, rest_density: float, h: float, st
     Returns
     -------
     TriangleMesh
-        Empty (no faces) when there are no particles.
+        Empty (no faces) when there are no particles or the density nowhere exceeds the level.
 
     Example
     -------
@@ -116,19 +117,10 @@ def fluid_surface(positions: Any, masses: Any, rest_density: float, h: float, st
     x = as_points(positions)
     if len(x) == 0:
         return TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
-    from skimage import measure
-
     st = h / 4.0 if step is None else positive_scalar(step, "step")
     grid, lower = density_grid(x, masses, h, st)
-    if grid.max() <= level * rest_density:
-        return TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
-    grid = np.pad(grid, 1)
-    verts, faces, _normals, _ = measure.marching_cubes(grid, level * rest_density, spacing=(st, st, st),
-                                                       gradient_direction="ascent")
-    verts = verts + lower - st
-    # ascent gradient: faces wind so that normals point to increasing density; flip to outward
-    faces = faces[:, ::-1]
-    return TriangleMesh(verts, np.ascontiguousarray(faces, dtype=np.int64))
+    # zero padding closes the surface where the grid ends (the density is 0 there)
+    return marching_cubes(np.pad(grid, 1), lower - st, st, level * rest_density, inside="above")
 
 
 @dataclass(frozen=True, eq=False)
