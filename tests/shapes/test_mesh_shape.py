@@ -28,8 +28,6 @@ def test_closest_points_match_brute_force(rng):
 
 
 def test_winding_numbers_match_exact_sum(rng):
-    from unmesh.shapes._kernels import bvh_winding
-
     mesh = Blob().mesh(0.08)
     shape = MeshShape(mesh)
     lo, hi = mesh.bounds()
@@ -41,9 +39,7 @@ def test_winding_numbers_match_exact_sum(rng):
     assert np.abs(w - w_ref).max() < 0.025
     np.testing.assert_array_equal(w > 0.5, w_ref > 0.5)
     # ... converging to the exact sum as the acceptance ratio beta grows.
-    order, _, _, left, right, start, count, avec, ctr, rad = shape._bvh
-    errs = [np.abs(bvh_winding(x, mesh.vertices, mesh.faces, order, left, right, start, count, avec, ctr, rad,
-                               beta) - w_ref).max() for beta in (2.0, 4.0, 8.0, 1e9)]
+    errs = [np.abs(shape.bvh.winding_number(x, beta) - w_ref).max() for beta in (2.0, 4.0, 8.0, 1e9)]
     assert errs[1] < errs[0] / 2 and errs[2] < errs[1] / 2 and errs[3] < 1e-12
 
 

@@ -312,7 +312,9 @@ def voronoi_foam(n_cells: int = 30, size: Any = (1.0, 1.0, 1.0), origin: Any = (
     >>> m.n_elements, round(m.volume(), 9)
     (20, 1.0)
     """
-    from scipy.spatial import HalfspaceIntersection, cKDTree
+    from scipy.spatial import HalfspaceIntersection
+
+    from unmesh.spatial import KDTree
 
     sz = _triple(size, "size")
     org = as_array(origin, "origin", (3,))
@@ -342,8 +344,7 @@ def voronoi_foam(n_cells: int = 30, size: Any = (1.0, 1.0, 1.0), origin: Any = (
         verts.append(hs.intersections)
         planes.append((A, b, np.r_[-np.ones(6, np.int64), others]))
     allv = np.concatenate(verts)
-    tree = cKDTree(allv)
-    pairs = tree.query_pairs(1e-9 * scale, output_type="ndarray")
+    pairs = KDTree(allv).radius_pairs(1e-9 * scale)  # near-duplicate corners, i < j sorted
     parent = np.arange(len(allv))
     for a, b in sorted(map(tuple, pairs)):  # union-find on near-duplicates
         ra, rb = a, b

@@ -212,75 +212,28 @@ def _grid_values(func: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], lo
     return values
 
 
-def _edge_roots(func: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], p0: np.ndarray, p1: np.ndarray,
-                f0: np.ndarray, f1: np.ndarray, tol: float, iterations: int = 60) -> np.ndarray:
-    """Zero of ``func`` on each segment p0 -> p1 (N,3) with ``f0 * f1 <= 0`` (Illinois regula falsi)."""
-    ta = np.zeros(len(p0))
-    tb = np.ones(len(p0))
-    fa = f0.astype(np.float64).copy()
-    fb = f1.astype(np.float64).copy()
-    t = np.where(fa == fb, 0.5, fa / np.where(fa == fb, 1.0, fa - fb))
-    active = np.flatnonzero((fa != 0) & (fb != 0))
-    t[fa == 0] = 0.0
-    t[(fb == 0) & (fa != 0)] = 1.0
-    side = np.zeros(len(p0), np.int64)
-    for _ in range(iterations):
-        if not len(active):
-            break
-        ta_, tb_, fa_, fb_ = ta[active], tb[active], fa[active], fb[active]
-        tt = (ta_ * fb_ - tb_ * fa_) / (fb_ - fa_)
-        tt = np.clip(tt, np.minimum(ta_, tb_), np.maximum(ta_, tb_))
-        ft = func(p0[active] + tt[:, None] * (p1[active] - p0[active]))[0]
-        t[active] = tt
-        same_a = np.sign(ft) == np.sign(fa_)
-        # replace the endpoint on the same side; halve the other value if it is kept twice (Illinois)
-        ta[active] = np.where(same_a, tt, ta_)
-        fa[active] = np.where(same_a, ft, np.where(side[active] == -1, 0.5 * fa_, fa_))
-        tb[active] = np.where(same_a, tb_, tt)
-        fb[active] = np.where(same_a, np.where(side[active] == 1, 0.5 * fb_, fb_), ft)
-        side[active] = np.where(same_a, 1, -1)
-        done = (np.abs(ft) <= tol) | (np.abs(tb[active] - ta[active]) <= 1e-15)
-        active = active[~done]
-    return p0 + t[:, None] * (p1 - p0)
-
-
 def marching_mesh(func: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], lo: np.ndarray, hi: np.ndarray,
                   spacing: float, lipschitz: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Marching cubes of ``func(x) -> (values, unit normals)`` over the box [lo, hi].
 
-    The box is padded by two cells. Each vertex of scikit-image's marching cubes
-    lies on a grid edge whose end values have opposite signs; it is moved along
-    that edge to the exact zero of ``func`` (regula falsi), so vertices are on the
-    surface to round-off while every triangle stays in its cube (no folds). Faces
-    are oriented outward (positive volume). ``lipschitz=True`` (|grad f| <= 1)
-    evaluates ``func`` only near the surface.
+    The box is padded by two cells and sampled (``lipschitz=True``, i.e. |grad f| <= 1,
+    evaluates ``func`` only near the surface); the surface is
+    :func:`unmesh.meshes.marching_cubes` with ``func`` refining the vertices: each lies
+    on a grid edge whose end values have opposite signs and is moved along that edge
+    to the exact zero of ``func`` (regula falsi), so vertices are on the surface to
+    round-off while every triangle stays in its cube (no folds). Faces are oriented
+    outward (positive volume).
     """
-    from skimage.measure import marching_cubes
+    from unmesh.meshes.marching import marching_cubes
 
     lo = np.asarray(lo, dtype=np.float64) - 2 * spacing
     hi = np.asarray(hi, dtype=np.float64) + 2 * spacing
     counts = np.maximum(np.ceil((hi - lo) / spacing).astype(np.int64) + 1, 3)
     values = _grid_values(func, lo, spacing, counts, lipschitz)
-    verts, faces, _, _ = marching_cubes(values, level=0.0, allow_degenerate=False)
-    faces = faces.astype(np.int64)
-    base = np.floor(verts)
-    frac = verts - base
-    axis = np.argmax(frac, axis=1)
-    on_edge = frac[np.arange(len(verts)), axis] > 0
-    i0 = np.minimum(base.astype(np.int64), counts - 1)
-    i1 = i0.copy()
-    i1[np.arange(len(verts)), axis] += on_edge
-    i1 = np.minimum(i1, counts - 1)
-    f0 = values[i0[:, 0], i0[:, 1], i0[:, 2]]
-    f1 = values[i1[:, 0], i1[:, 1], i1[:, 2]]
-    p0 = lo + spacing * i0
-    p1 = lo + spacing * i1
-    bracket = on_edge & (f0 * f1 <= 0)
-    out = lo + spacing * verts
-    if bracket.any():
-        out[bracket] = _edge_roots(func, p0[bracket], p1[bracket], f0[bracket], f1[bracket], 1e-14 * spacing)
+    mesh = marching_cubes(values, lo, spacing, 0.0, inside="below", function=lambda x: func(x)[0])
+    out, faces = mesh.vertices, mesh.faces
     v0, v1, v2 = out[faces[:, 0]], out[faces[:, 1]], out[faces[:, 2]]
     vol = np.einsum("ij,ij->i", v0, np.cross(v1, v2)).sum()
-    if vol < 0:
+    if vol < 0:  # never for a closed surface (marching_cubes orients outward); kept as a guard
         faces = faces[:, ::-1].copy()
     return np.ascontiguousarray(out), np.ascontiguousarray(faces)

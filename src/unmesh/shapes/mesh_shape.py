@@ -4,9 +4,9 @@ Inside/outside uses the generalized winding number (Jacobson, Kavan, Sorkine-Hor
 2013): ``w(x) = sum_t Omega_t(x) / 4 pi`` over the triangles' signed solid angles;
 ``x`` is inside where ``w > 1/2``. Unlike ray parity or pseudo-normals this degrades
 gracefully on meshes with holes (the Stanford bunny's base) and stray triangles.
-It is evaluated with a triangle BVH: exact solid angles for nearby triangles, the
-first-order dipole expansion of Barill et al. (2018) for clusters farther than
-``3x`` their radius (winding numbers accurate to about 0.01-0.02, which only
+It is evaluated with :class:`unmesh.spatial.TriangleBVH`: exact solid angles for nearby
+triangles, the first-order dipole expansion of Barill et al. (2018) for clusters farther
+than ``3x`` their radius (winding numbers accurate to about 0.01-0.02, which only
 matters where the exact value is near 1/2, i.e. right at holes). The signed distance is the exact distance to the closest
 point on the triangles (found with the same BVH), signed by the winding number.
 """
@@ -21,16 +21,14 @@ import numpy as np
 from unmesh._validate import as_array, as_points
 from unmesh.errors import InputError
 from unmesh.shapes.base import Shape
+from unmesh.spatial.bvh import WINDING_BETA, TriangleBVH, closest_point_reference, winding_reference
 
 if TYPE_CHECKING:
     from unmesh.meshes import TriangleMesh
     from unmesh.surfels import SurfelCloud
 
-__all__ = ["MeshShape", "closest_point_reference", "winding_reference"]
-
-#: Far-field acceptance ratio of the winding-number expansion (Barill et al. use 2); with 3 the
-#: first-order far field is accurate to about 0.01-0.02 (measured on spheres, the blob and the bunny).
-WINDING_BETA = 3.0
+# closest_point_reference, winding_reference and WINDING_BETA moved to unmesh.spatial.bvh (re-exported).
+__all__ = ["WINDING_BETA", "MeshShape", "closest_point_reference", "winding_reference"]
 
 
 class MeshShape(Shape):
@@ -84,10 +82,9 @@ class MeshShape(Shape):
         return f"MeshShape({self.mesh_data!r})"
 
     @functools.cached_property
-    def _bvh(self) -> tuple[np.ndarray, ...]:
-        from unmesh.shapes._kernels import LEAF_SIZE, bvh_build
-
-        return bvh_build(self.mesh_data.vertices, self.mesh_data.faces, LEAF_SIZE)
+    def bvh(self) -> TriangleBVH:
+        """The triangle tree of the mesh (:class:`unmesh.spatial.TriangleBVH`), built on first use."""
+        return TriangleBVH(self.mesh_data.vertices, self.mesh_data.faces)
 
     # -- queries -----------------------------------------------------------------------
     def closest_points(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -103,7 +100,7 @@ class MeshShape(Shape):
         distances : (N,) float64
         points : (N, 3) float64
         faces : (N,) int64
-            Index of the triangle holding each closest point (lowest index on ties).
+            Index of the triangle holding each closest point (one of them on exact ties).
 
         Example
         -------
@@ -113,11 +110,8 @@ class MeshShape(Shape):
         >>> float(d[0]), np.round(p[0], 12).tolist()
         (1.0, [0.2, 0.2, 0.0])
         """
-        from unmesh.shapes._kernels import bvh_closest
-
-        pts = as_points(x, "x")
-        order, lo, hi, left, right, start, count = self._bvh[:7]
-        return bvh_closest(pts, self.mesh_data.vertices, self.mesh_data.faces, order, lo, hi, left, right, start, count)
+        dist, face, pts, _ = self.bvh.closest(as_points(x, "x"))
+        return dist, pts, face
 
     def winding_number(self, x: Any) -> np.ndarray:
         """Generalized winding numbers (N,) at points ``x``: 1 inside, 0 outside a closed mesh.
@@ -129,12 +123,7 @@ class MeshShape(Shape):
         >>> [round(float(w), 1) + 0.0 for w in m.winding_number([[0, 0, 0], [5, 0, 0]])]
         [1.0, 0.0]
         """
-        from unmesh.shapes._kernels import bvh_winding
-
-        pts = as_points(x, "x")
-        order, _, _, left, right, start, count, avec, ctr, rad = self._bvh
-        return bvh_winding(pts, self.mesh_data.vertices, self.mesh_data.faces, order, left, right, start, count,
-                           avec, ctr, rad, WINDING_BETA)
+        return self.bvh.winding_number(as_points(x, "x"), WINDING_BETA)
 
     def implicit(self, x: Any) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance (N,) (negative inside by winding number) and unit gradients (N,3).
@@ -210,48 +199,3 @@ class MeshShape(Shape):
     def transformed(self, matrix: Any) -> MeshShape:
         """The mesh moved by any invertible 4x4 affine (or 3x3 linear) map."""
         return MeshShape(self.mesh_data.transformed(matrix))
-
-
-def closest_point_reference(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Brute-force numpy closest points: distances (Q,) and points (Q,3).
-
-    For every query and triangle the candidates are the orthogonal projection onto
-    the triangle's plane (if its barycentric coordinates are all >= 0) and the
-    clamped projections onto the three edges; the nearest candidate wins.
-    """
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    p = points[:, None, :]
-    cands = []
-    for e0, e1 in ((a, b), (b, c), (c, a)):
-        e = e1 - e0
-        ee = np.einsum("fi,fi->f", e, e)
-        t = np.clip(np.einsum("qfi,fi->qf", p - e0, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
-        cands.append(e0 + t[..., None] * e)
-    n = np.cross(b - a, c - a)
-    nn = np.einsum("fi,fi->f", n, n)
-    ok = nn > 0
-    proj = p - (np.einsum("qfi,fi->qf", p - a, n) / np.where(ok, nn, 1.0))[..., None] * n
-    w0 = np.einsum("qfi,fi->qf", np.cross(b - proj, c - proj), n)
-    w1 = np.einsum("qfi,fi->qf", np.cross(c - proj, a - proj), n)
-    w2 = np.einsum("qfi,fi->qf", np.cross(a - proj, b - proj), n)
-    inside = (w0 >= 0) & (w1 >= 0) & (w2 >= 0) & ok
-    proj = np.where(inside[..., None], proj, cands[0])
-    cands.append(proj)
-    stack = np.stack(cands)  # (4, Q, F, 3)
-    d = np.linalg.norm(stack - p[None], axis=3)  # (4, Q, F)
-    flat = d.reshape(4, len(points), -1).transpose(1, 0, 2).reshape(len(points), -1)
-    best = np.argmin(flat, axis=1)
-    k, f = np.divmod(best, len(faces))
-    return flat[np.arange(len(points)), best], stack[k, np.arange(len(points)), f]
-
-
-def winding_reference(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Exact generalized winding numbers (Q,) by summing every triangle's solid angle (numpy)."""
-    x = vertices[faces[:, 0]][None] - points[:, None]
-    y = vertices[faces[:, 1]][None] - points[:, None]
-    z = vertices[faces[:, 2]][None] - points[:, None]
-    lx, ly, lz = (np.linalg.norm(v, axis=2) for v in (x, y, z))
-    det = np.einsum("qfi,qfi->qf", x, np.cross(y, z))
-    den = lx * ly * lz + np.einsum("qfi,qfi->qf", x, y) * lz + np.einsum("qfi,qfi->qf", y, z) * lx \
-        + np.einsum("qfi,qfi->qf", z, x) * ly
-    return (2.0 * np.arctan2(det, den)).sum(axis=1) / (4.0 * np.pi)

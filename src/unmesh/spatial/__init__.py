@@ -1,4 +1,4 @@
-"""Neighbour search: cell grids, spatial hashing and kd-trees (thesis section 3.4).
+"""Neighbour search (cell grids, spatial hashing, kd-trees; thesis section 3.4) and triangle queries.
 
 Every meshless method in unmesh needs the points near a point: MLS projection,
 SPH sums, surfel normals and radii, shell nodes.  This package answers the two query
@@ -37,6 +37,12 @@ Public functions
     2^20 cells of size ``radius`` along an axis, or a 256-query sample shows the grid
     testing > 512 candidates per query at < 1 % hits (extremely non-uniform
     density); then the kd-tree.
+``TriangleBVH(vertices, faces)``
+    Bounding volume hierarchy over triangles (:mod:`unmesh.spatial.bvh`):
+    ``.closest(points) -> (distance, face, point, barycentric)``,
+    ``.winding_number(points)`` and ``.contains(points)`` (generalized winding
+    number > 1/2), ``.ray_hits(origins, directions, first=True) -> (t, face,
+    barycentric)`` (``t = inf`` where missed; ``first=False`` gives every hit in CSR).
 ``build_cell_grid(points, cell_size) -> CellGrid``
     Static grid for numba kernels, see below.
 ``HashGrid(cell_size, dim=3)``
@@ -159,9 +165,11 @@ roughly uniform data (SPH, surfel neighbourhoods); ``knn`` uses the kd-tree, whi
 adapts to varying density.
 """
 
+from unmesh.spatial.bvh import TriangleBVH
 from unmesh.spatial.cellgrid import CellGrid, build_cell_grid
 from unmesh.spatial.hashgrid import HashGrid
 from unmesh.spatial.kdtree import KDTree
 from unmesh.spatial.neighbors import choose_method, knn, radius_neighbors, radius_pairs
 
-__all__ = ["CellGrid", "HashGrid", "KDTree", "build_cell_grid", "choose_method", "knn", "radius_neighbors", "radius_pairs"]
+__all__ = ["CellGrid", "HashGrid", "KDTree", "TriangleBVH", "build_cell_grid", "choose_method", "knn", "radius_neighbors",
+           "radius_pairs"]

@@ -767,14 +767,39 @@ class SPHSimulation(Simulation):
         io.save(out / "frames" / f"{name}.ply", self.particles().to_particles())
         files = [f"frames/{name}.ply"]
         if self.surfaces != "none" or any(o.surface is not None for o in self.objects):
-            from unmesh.sph.surface import write_surfaces
-
-            write_surfaces(self, out / "surfaces", frame)
-            # the names write_surfaces uses: fluid_NNNNN.ply, <skin name>_NNNNN.ply
-            if self.surfaces != "none":
-                files.append(f"surfaces/fluid_{frame:05d}.ply")
-            files.extend(f"surfaces/{skin}_{frame:05d}.ply" for skin in self.skins())
+            files.extend(f"surfaces/{f}" for f in self.write_surfaces(out / "surfaces", frame))
         return files
+
+    def write_surfaces(self, outdir: Path, frame: int) -> list[str]:
+        """Write ``fluid_NNNNN.ply`` (marching cubes) and ``<object>_NNNNN.ply`` (skinned meshes).
+
+        Returns the names of the files written (relative to ``outdir``).
+
+        Called by :meth:`write_frame` when the scene asks for surfaces (``[output] surface`` /
+        ``skin``), e.g. ``sim.write_surfaces(outdir / "surfaces", 3)``; the meshes come from
+        :func:`unmesh.sph.surface.fluid_surface` and :meth:`unmesh.sph.surface.Skin.deform`.
+        """
+        from unmesh import io
+        from unmesh.sph.surface import fluid_surface
+
+        outdir = Path(outdir)
+        state = self.particles()
+        written: list[str] = []
+        if self.surfaces != "none":
+            sel = state.phases == FLUID if self.surfaces == "fluid" else np.ones(len(state), bool)
+            rho0 = float(np.average(self.mats[:, 0]))
+            mesh = fluid_surface(state.positions[sel], state.masses[sel], rho0, self.h,
+                                 step=self.surface_resolution * self.spacing)
+            written.append(f"fluid_{frame:05d}.ply")
+            io.save(outdir / written[-1], mesh)
+        skins = self.skins()
+        if skins:
+            amat = self.lattice_transforms()
+            active = (state.phases == SOLID).astype(np.float64)
+            for name, skin in skins.items():
+                written.append(f"{name}_{frame:05d}.ply")
+                io.save(outdir / written[-1], skin.deform(state.positions, amat, active))
+        return written
 
     def state_dict(self) -> dict[str, Any]:
         """Every array and counter needed to continue the run exactly."""

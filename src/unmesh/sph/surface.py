@@ -1,8 +1,9 @@
 """Surfaces of SPH results (thesis section 8.2.7).
 
 Fluids
-    Marching cubes (scikit-image) of the SPH density field
-    ``ρ(x) = Σ_j m_j W(x − x_j)`` (poly6, eq. 8.4) at half the rest density.
+    Marching cubes (:func:`unmesh.meshes.marching_cubes`) of the SPH density field
+    ``ρ(x) = Σ_j m_j W(x − x_j)`` (poly6, eq. 8.4) sampled on a grid, at half the rest
+    density; vertices are at the level of the grid's trilinear interpolant (float64).
 Solids
     A surface mesh (or surfel cloud) skinned to the particles (eq. 8.38): each
     vertex ``s`` stores its rest offsets ``s⁰_i = s − x⁰_i`` to the nearby particles
@@ -24,19 +25,17 @@ True
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numba import njit
 
 from unmesh._validate import as_array, as_points, positive_scalar
 from unmesh.kernels._kernels import poly6_3d
-from unmesh.meshes import TriangleMesh
-
-if TYPE_CHECKING:
-    from unmesh.sph.simulation import SPHSimulation
+from unmesh.meshes import TriangleMesh, marching_cubes
 
 __all__ = ["Skin", "density_grid", "fluid_surface", "write_surfaces"]
 
@@ -106,7 +105,7 @@ def fluid_surface(positions: Any, masses: Any, rest_density: float, h: float, st
     Returns
     -------
     TriangleMesh
-        Empty (no faces) when there are no particles.
+        Empty (no faces) when there are no particles or the density nowhere exceeds the level.
 
     Example
     -------
@@ -118,19 +117,10 @@ def fluid_surface(positions: Any, masses: Any, rest_density: float, h: float, st
     x = as_points(positions)
     if len(x) == 0:
         return TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
-    from skimage import measure
-
     st = h / 4.0 if step is None else positive_scalar(step, "step")
     grid, lower = density_grid(x, masses, h, st)
-    if grid.max() <= level * rest_density:
-        return TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
-    grid = np.pad(grid, 1)
-    verts, faces, _normals, _ = measure.marching_cubes(grid, level * rest_density, spacing=(st, st, st),
-                                                       gradient_direction="ascent")
-    verts = verts + lower - st
-    # ascent gradient: faces wind so that normals point to increasing density; flip to outward
-    faces = faces[:, ::-1]
-    return TriangleMesh(verts, np.ascontiguousarray(faces, dtype=np.int64))
+    # zero padding closes the surface where the grid ends (the density is 0 there)
+    return marching_cubes(np.pad(grid, 1), lower - st, st, level * rest_density, inside="above")
 
 
 @dataclass(frozen=True, eq=False)
@@ -214,26 +204,12 @@ class Skin:
         return TriangleMesh(verts[keep], remap[faces])
 
 
-def write_surfaces(sim: SPHSimulation, outdir: Path, frame: int) -> None:
-    """Write ``fluid_NNNNN.ply`` (marching cubes) and ``<object>_NNNNN.ply`` (skinned meshes).
+def write_surfaces(sim: Any, outdir: Path, frame: int) -> None:
+    """Deprecated: use :meth:`unmesh.sph.SPHSimulation.write_surfaces` (``sim.write_surfaces(outdir, frame)``).
 
-    Called by :meth:`unmesh.sph.SPHSimulation.write_frame` when the scene asks for surfaces
-    (``[output] surface`` / ``skin``), e.g. ``write_surfaces(sim, outdir / "surfaces", 3)``.
+    Kept so that old imports keep working; this module no longer knows the simulation
+    (``sph.simulation`` imports ``sph.surface``, never the other way round).
     """
-    from unmesh import io
-    from unmesh.sph.state import FLUID, SOLID
-
-    outdir = Path(outdir)
-    state = sim.particles()
-    if sim.surfaces != "none":
-        sel = state.phases == FLUID if sim.surfaces == "fluid" else np.ones(len(state), bool)
-        rho0 = float(np.average(sim.mats[:, 0]))
-        mesh = fluid_surface(state.positions[sel], state.masses[sel], rho0, sim.h,
-                             step=sim.surface_resolution * sim.spacing)
-        io.save(outdir / f"fluid_{frame:05d}.ply", mesh)
-    skins = sim.skins()
-    if skins:
-        amat = sim.lattice_transforms()
-        active = (state.phases == SOLID).astype(np.float64)
-        for name, skin in skins.items():
-            io.save(outdir / f"{name}_{frame:05d}.ply", skin.deform(state.positions, amat, active))
+    warnings.warn("unmesh.sph.surface.write_surfaces(sim, outdir, frame) is deprecated; "
+                  "use sim.write_surfaces(outdir, frame)", DeprecationWarning, stacklevel=2)
+    sim.write_surfaces(outdir, frame)
