@@ -223,7 +223,7 @@ def test_parallel_force_kernel_matches_reference(sphere, rng, monkeypatch):
     gives the reference forces and energies, as the single-threaded path does."""
     import numba
 
-    from unmesh.sim import threads as sim_threads
+    from unmesh import _threads as sim_threads
 
     x, topo = sphere
     state = random_state(x, topo, rng)

@@ -127,7 +127,7 @@ def test_force_pass_is_the_same_on_one_and_on_two_threads(torn_strip, monkeypatc
     number of threads (the thread choice of ``threads_for`` follows the machine's load)."""
     import numba
 
-    from unmesh.sim import threads
+    from unmesh import _threads as threads
 
     sim = torn_strip
     m = sim.material

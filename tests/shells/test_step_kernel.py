@@ -180,7 +180,7 @@ def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):
     """Fixed node and fiber ranges: the step does not depend on the number of threads."""
     import numba
 
-    from unmesh.sim import threads as sim_threads
+    from unmesh import _threads as sim_threads
 
     cloud, idx = sphere_with_nodes()
 

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh._threads import threads_for
 from unmesh.shells import _kernels
 from unmesh.shells.energy import FiberState
 from unmesh.shells.fibers import ARC_SAMPLES
 from unmesh.shells.topology import ShellTopology
-from unmesh.sim.threads import threads_for
 
 __all__ = ["ForceResult", "arc_gram", "arc_weights", "elastic_forces", "node_terms"]
 

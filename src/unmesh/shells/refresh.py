@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import threads_for
 from unmesh.shells import _kernels, _rebuild_kernels
 from unmesh.shells.energy import FiberState
 from unmesh.shells.forces import FORCE_CHUNKS, ForceResult, arc_gram
 from unmesh.shells.topology import ShellTopology
-from unmesh.sim.threads import threads_for
 
 __all__ = ["refreshed_forces"]
 

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import threads_for
 from unmesh.shells import _kernels, _rebuild_kernels
 from unmesh.shells.fibers import degenerate as degenerate_fibers
 from unmesh.shells.forces import node_terms
@@ -23,7 +24,6 @@ from unmesh.shells.fracture import select_cracks
 from unmesh.shells.nodes import NodeCandidates
 from unmesh.shells.rebuild import rebuild_local
 from unmesh.shells.topology import ShellTopology
-from unmesh.sim.threads import threads_for
 
 __all__ = ["DEGENERATE_RATIO", "Tearing", "warm_up"]
 
