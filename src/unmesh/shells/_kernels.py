@@ -17,6 +17,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from unmesh._csr_kernels import counting_sort_csr
 from unmesh.shells._block_kernels import BLK, ROWS, block_forces
 from unmesh.shells._fiber_kernels import (  # noqa: F401 - re-exported for the callers and tests
     FASTMATH,
@@ -464,21 +465,13 @@ def center_grid(centers, h):
     dims = np.empty(3, dtype=np.int64)
     for d in range(3):
         dims[d] = int((hi[d] - lo[d]) / h) + 1
-    start = np.zeros(dims[0] * dims[1] * dims[2] + 1, dtype=np.int64)
     key = np.empty(nc, dtype=np.int64)
     for c in range(nc):
         i0 = min(int((centers[c, 0] - lo[0]) / h), dims[0] - 1)
         i1 = min(int((centers[c, 1] - lo[1]) / h), dims[1] - 1)
         i2 = min(int((centers[c, 2] - lo[2]) / h), dims[2] - 1)
         key[c] = i0 + dims[0] * (i1 + dims[1] * i2)
-        start[key[c] + 1] += 1
-    for g in range(start.shape[0] - 1):
-        start[g + 1] += start[g]
-    fill = start[:-1].copy()
-    order = np.empty(nc, dtype=np.int64)
-    for c in range(nc):
-        order[fill[key[c]]] = c
-        fill[key[c]] += 1
+    order, start = counting_sort_csr(key, dims[0] * dims[1] * dims[2])
     return lo, h, dims, start, order
 
 
@@ -560,21 +553,3 @@ def fiber_excess(lengths, angles, lorig, lplast, aorig, aplast, gamma_s, gamma_b
             out_excess[m] = e
             m += 1
     return m
-
-
-@njit(cache=True)
-def group_order(groups, count, out_offsets, out_order):
-    """Stable counting sort of entries by key: CSR offsets (count + 1,) and entry order (M,).
-
-    Same result as ``np.argsort(groups, kind="stable")`` with ``bincount`` offsets, in O(M).
-    """
-    out_offsets[:] = 0
-    for e in range(groups.shape[0]):
-        out_offsets[groups[e] + 1] += 1
-    for g in range(count):
-        out_offsets[g + 1] += out_offsets[g]
-    fill = out_offsets[:-1].copy()
-    for e in range(groups.shape[0]):
-        g = groups[e]
-        out_order[fill[g]] = e
-        fill[g] += 1

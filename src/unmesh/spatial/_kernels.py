@@ -28,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from unmesh._csr_kernels import counting_sort_csr
+
 # ---------------------------------------------------------------------------
 # Scalar helpers, callable from other numba kernels
 # ---------------------------------------------------------------------------
@@ -204,18 +206,9 @@ def compute_keys(points, origin, inv_cell, dims):
 
 @njit(cache=True)
 def counting_sort(keys, nkeys):
-    """Stable permutation sorting ``keys`` (values in ``[0, nkeys)``), shape (N,) int64."""
-    counts = np.zeros(nkeys + 1, np.int64)
-    for a in range(keys.shape[0]):
-        counts[keys[a] + 1] += 1
-    for c in range(nkeys):
-        counts[c + 1] += counts[c]
-    order = np.empty(keys.shape[0], np.int64)
-    for a in range(keys.shape[0]):
-        c = keys[a]
-        order[counts[c]] = a
-        counts[c] += 1
-    return order
+    """Stable permutation sorting ``keys`` (values in ``[0, nkeys)``), shape (N,) int64
+    (the ``order`` of :func:`unmesh._csr_kernels.counting_sort_csr`)."""
+    return counting_sort_csr(keys, nkeys)[0]
 
 
 @njit(cache=True)

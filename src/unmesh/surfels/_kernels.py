@@ -20,6 +20,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from unmesh._csr_kernels import counting_sort_csr
+
 # ---------------------------------------------------------------------------
 # LDC sampling: rasterise every triangle into the ray lattice of one axis
 # ---------------------------------------------------------------------------
@@ -506,19 +508,16 @@ def forest_bfs(n, ta, tb, seeds):  # pragma: no cover - numba
     Each tree is entered at its vertex listed first in ``seeds`` (a permutation of
     all vertices, preferred roots first). Also returns the component label (N,).
     """
-    deg = np.zeros(n + 1, np.int64)
-    for e in range(ta.shape[0]):
-        deg[ta[e] + 1] += 1
-        deg[tb[e] + 1] += 1
-    for i in range(n):
-        deg[i + 1] += deg[i]
-    adj = np.empty(deg[n], np.int64)
-    fill = deg[:n].copy()
-    for e in range(ta.shape[0]):
-        adj[fill[ta[e]]] = tb[e]
-        fill[ta[e]] += 1
-        adj[fill[tb[e]]] = ta[e]
-        fill[tb[e]] += 1
+    m = ta.shape[0]
+    ends = np.empty(2 * m, np.int64)     # edge e as the entries 2e (at ta[e]) and 2e + 1 (at tb[e])
+    other = np.empty(2 * m, np.int64)
+    for e in range(m):
+        ends[2 * e] = ta[e]
+        ends[2 * e + 1] = tb[e]
+        other[2 * e] = tb[e]
+        other[2 * e + 1] = ta[e]
+    slot, deg = counting_sort_csr(ends, n)
+    adj = other[slot]
     order = np.empty(n, np.int64)
     parent = -np.ones(n, np.int64)
     comp = -np.ones(n, np.int64)
