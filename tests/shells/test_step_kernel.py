@@ -210,7 +210,7 @@ def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):
 def test_force_pass_counts_the_degenerate_fibers_of_the_reference():
     """The one-kernel step finds degenerate fibers in its force pass (block and scalar paths),
     from the gathered edge vectors and the new umbrella vectors: the fibers the numpy test finds."""
-    from unmesh.shells import _kernels
+    from unmesh.shells import _force_kernels
     from unmesh.shells._block_kernels import BLK
     from unmesh.shells.fibers import degenerate
     from unmesh.shells.forces import FORCE_CHUNKS, arc_gram
@@ -231,7 +231,7 @@ def test_force_pass_counts_the_degenerate_fibers_of_the_reference():
     counts = np.diff(big.fiber_offsets)
     bad = 0
     for c in range(FORCE_CHUNKS):
-        _, b = _kernels.chunk_forces(c * nn // FORCE_CHUNKS, (c + 1) * nn // FORCE_CHUNKS, y, big.pairs,
+        _, b = _force_kernels.chunk_forces(c * nn // FORCE_CHUNKS, (c + 1) * nn // FORCE_CHUNKS, y, big.pairs,
                                      big.pair_offsets[:-1], np.diff(big.pair_offsets), big.soft, big.fibers,
                                      big.fiber_offsets[:-1], counts, state.length_orig, state.length_plastic,
                                      state.angle_orig, state.angle_plastic, state.stretch_scale, state.bend_scale, 1.0,

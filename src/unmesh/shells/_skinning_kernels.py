@@ -17,9 +17,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from unmesh._linalg_kernels import smallest_eigenvector
 from unmesh.shells._fiber_kernels import FASTMATH, atan2
-from unmesh.shells._kernels import center_grid
-from unmesh.surfels._kernels import smallest_eigenvector
+from unmesh.shells._visibility_kernels import center_grid
 
 #: Doubles stored per frame: local coordinates of the offset p - x_0 and of the two tangent axes.
 COORDS = 9
@@ -225,7 +225,7 @@ def _cos_small(y):
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
 def smallest_eigenvector_sel(a00, a01, a02, a11, a12, a22):
-    """:func:`unmesh.surfels._kernels.smallest_eigenvector` with selects instead of branches (vectorisable).
+    """:func:`unmesh._linalg_kernels.smallest_eigenvector` with selects instead of branches (vectorisable).
 
     Same method (trigonometric roots of the characteristic cubic, then the largest cross
     product of two rows of ``A - l I``); atan2 and cos are polynomial (within round-off).

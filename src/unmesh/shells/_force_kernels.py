@@ -17,23 +17,13 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from unmesh._csr_kernels import counting_sort_csr
 from unmesh.shells._block_kernels import BLK, ROWS, block_forces
-from unmesh.shells._fiber_kernels import (  # noqa: F401 - re-exported for the callers and tests
+from unmesh.shells._fiber_kernels import (
     FASTMATH,
-    SOFT_X,
     _cross,
     angle,
     arc,
-    degenerate,
     degenerate_edges,
-    fiber_angle_batch,
-    fiber_length_batch,
-    fiber_measure,
-    fiber_measures,
-    gram_weights,
-    sample_weights,
-    umbrella,
     umbrella_at,
 )
 
@@ -314,7 +304,6 @@ def sum_chunks(i, chunks, buf, span):
     return f0, f1, f2
 
 
-#: The node loops must run one after the other: no fusion of the parallel loops.
 @njit(cache=True, parallel={"fusion": False}, fastmath=FASTMATH, error_model="numpy")
 def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
                  sscale, bscale, ks, kb, gram, ref, offs, cap, buf, out_force, out_len, out_ang, out_s,
@@ -363,193 +352,3 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
         out_force[i, 0] = f0
         out_force[i, 1] = f1
         out_force[i, 2] = f2
-
-
-@njit(cache=True)
-def discs_near_segments(p, q, centers, radii):
-    """Indices of the discs whose centre lies within (1 + 1e-9) radius of the bounding box of all
-    segments p[m]-q[m]: only those can block one of them (7.3.2)."""
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    for k in range(p.shape[0]):
-        for d in range(3):
-            lo[d] = min(lo[d], p[k, d], q[k, d])
-            hi[d] = max(hi[d], p[k, d], q[k, d])
-    out = np.empty(centers.shape[0], dtype=np.int64)
-    m = 0
-    for c in range(centers.shape[0]):
-        g = 0.0
-        for d in range(3):
-            e = max(lo[d] - centers[c, d], centers[c, d] - hi[d], 0.0)
-            g += e * e
-        if g <= radii[c] * radii[c] * (1.0 + 1e-9) + 1e-300:
-            out[m] = c
-            m += 1
-    return out[:m]
-
-
-@njit(cache=True, inline="always")
-def _disc_hit(p, q, k, mx, my, mz, half, centers, normals, radii, c):
-    """Segment ``k`` of :func:`segments_blocked` against disc ``c``."""
-    dx = mx - centers[c, 0]
-    dy = my - centers[c, 1]
-    dz = mz - centers[c, 2]
-    reach = half + radii[c]
-    if dx * dx + dy * dy + dz * dz > reach * reach:
-        return False
-    dp = (normals[c, 0] * (p[k, 0] - centers[c, 0]) + normals[c, 1] * (p[k, 1] - centers[c, 1])
-          + normals[c, 2] * (p[k, 2] - centers[c, 2]))
-    dq = (normals[c, 0] * (q[k, 0] - centers[c, 0]) + normals[c, 1] * (q[k, 1] - centers[c, 1])
-          + normals[c, 2] * (q[k, 2] - centers[c, 2]))
-    if (dp >= 0.0) == (dq >= 0.0):
-        return False
-    t = dp / (dp - dq)
-    ix = p[k, 0] + t * (q[k, 0] - p[k, 0]) - centers[c, 0]
-    iy = p[k, 1] + t * (q[k, 1] - p[k, 1]) - centers[c, 1]
-    iz = p[k, 2] + t * (q[k, 2] - p[k, 2]) - centers[c, 2]
-    return ix * ix + iy * iy + iz * iz <= radii[c] * radii[c]
-
-
-@njit(cache=True, inline="always")
-def _segment(p, q, k):
-    mx = 0.5 * (p[k, 0] + q[k, 0])
-    my = 0.5 * (p[k, 1] + q[k, 1])
-    mz = 0.5 * (p[k, 2] + q[k, 2])
-    half = 0.5 * math.sqrt((q[k, 0] - p[k, 0]) ** 2 + (q[k, 1] - p[k, 1]) ** 2 + (q[k, 2] - p[k, 2]) ** 2)
-    return mx, my, mz, half
-
-
-@njit(cache=True, parallel=True)
-def segments_blocked(p, q, centers, normals, radii, out):
-    """out[m] = True when segment p[m]-q[m] crosses one of the crack discs (7.3.2).
-
-    A disc (c, n, r) separates the closed half-space n.(x - c) >= 0 from the open one
-    n.(x - c) < 0; a segment with ends on different sides is blocked when it meets the
-    disc's plane within distance r of c. A node on the plane belongs to the + side.
-    """
-    m = p.shape[0]
-    nc = centers.shape[0]
-    for k in prange(m):
-        mx, my, mz, half = _segment(p, q, k)
-        hit = False
-        for c in range(nc):
-            if _disc_hit(p, q, k, mx, my, mz, half, centers, normals, radii, c):
-                hit = True
-                break
-        out[k] = hit
-
-
-@njit(cache=True)
-def center_grid(centers, h):
-    """Uniform grid over the bounding box of ``centers`` (C, 3) with cells of edge at least ``h``
-    (doubled until there are at most 8 C + 64 cells), the centres binned by a counting sort.
-
-    Returns ``(lo, edge, dims, start, order)``: the box corner (3,), the cell edge, the cell
-    counts (3,) int64, and the centres of cell ``g = i0 + dims[0] (i1 + dims[1] i2)``,
-    ``order[start[g]:start[g + 1]]``. A point within ``h`` of a centre lies in one of the 27
-    cells around the centre's cell (the last cell of each axis reaches to the box's end).
-    """
-    nc = centers.shape[0]
-    lo = np.empty(3)
-    hi = np.empty(3)
-    for d in range(3):
-        lo[d] = np.inf
-        hi[d] = -np.inf
-        for c in range(nc):
-            lo[d] = min(lo[d], centers[c, d])
-            hi[d] = max(hi[d], centers[c, d])
-    ext = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
-    while ((int((hi[0] - lo[0]) / h) + 1) * (int((hi[1] - lo[1]) / h) + 1) * (int((hi[2] - lo[2]) / h) + 1)
-           > 8 * nc + 64):
-        h = max(2.0 * h, ext / 64.0)
-    dims = np.empty(3, dtype=np.int64)
-    for d in range(3):
-        dims[d] = int((hi[d] - lo[d]) / h) + 1
-    key = np.empty(nc, dtype=np.int64)
-    for c in range(nc):
-        i0 = min(int((centers[c, 0] - lo[0]) / h), dims[0] - 1)
-        i1 = min(int((centers[c, 1] - lo[1]) / h), dims[1] - 1)
-        i2 = min(int((centers[c, 2] - lo[2]) / h), dims[2] - 1)
-        key[c] = i0 + dims[0] * (i1 + dims[1] * i2)
-    order, start = counting_sort_csr(key, dims[0] * dims[1] * dims[2])
-    return lo, h, dims, start, order
-
-
-@njit(cache=True, parallel=True)
-def segments_blocked_grid(p, q, centers, normals, radii, out):
-    """:func:`segments_blocked` with the discs in a uniform grid (many segments and discs).
-
-    The cell edge is at least the largest half segment length plus the largest radius, so a
-    disc that passes the first test of a segment (its centre within half length plus radius
-    of the segment's midpoint) lies in the 27 cells around the midpoint's cell: the result
-    is the same, and each segment meets only the discs near it (:func:`center_grid`).
-    """
-    m = p.shape[0]
-    hmax = 0.0
-    for k in range(m):
-        hmax = max(hmax, _segment(p, q, k)[3])
-    rmax = 0.0
-    for c in range(centers.shape[0]):
-        rmax = max(rmax, radii[c])
-    lo, h, dims, start, order = center_grid(centers, (hmax + rmax) * (1.0 + 1e-9) + 1e-300)
-    n0, n1, n2 = dims[0], dims[1], dims[2]
-    for k in prange(m):
-        mx, my, mz, half = _segment(p, q, k)
-        c0 = math.floor((mx - lo[0]) / h)       # any value is safe: the cell ranges are clipped
-        c1 = math.floor((my - lo[1]) / h)
-        c2 = math.floor((mz - lo[2]) / h)
-        hit = False
-        for j2 in range(max(c2 - 1, 0), min(c2 + 2, n2)):
-            for j1 in range(max(c1 - 1, 0), min(c1 + 2, n1)):
-                for j0 in range(max(c0 - 1, 0), min(c0 + 2, n0)):
-                    g = j0 + n0 * (j1 + n1 * j2)
-                    for e in range(start[g], start[g + 1]):
-                        if not hit and _disc_hit(p, q, k, mx, my, mz, half, centers, normals, radii, order[e]):
-                            hit = True
-        out[k] = hit
-
-
-@njit(cache=True, parallel=True)
-def fracture_scan(x, fibers, s, soft, lengths, angles, rest_length, rest_angle, gamma_s, gamma_b, ratio2):
-    """Cheap per-step test: (fibers over a fracture threshold (7.24), degenerate fibers).
-
-    ratio2 is the squared ratio below which an end tangent, projected as the tangent angle
-    sees it (with the umbrella vectors ``s`` (N, 3) and regularisation ``soft`` (N,) of the
-    centres), counts as vanished relative to the centre tangent (0 disables that test;
-    :func:`unmesh.shells.fibers.degenerate`). Parallel over fibers (integer reductions).
-    """
-    over = 0
-    bad = 0
-    for k in prange(fibers.shape[0]):
-        if lengths[k] > rest_length[k] * (1.0 + gamma_s[k]) or abs(angles[k] - rest_angle[k]) > gamma_b[k]:
-            over += 1
-        i = fibers[k, 1]
-        if ratio2 > 0.0 and degenerate(x, fibers[k, 0], i, fibers[k, 2], s[i, 0], s[i, 1], s[i, 2], soft[i], ratio2):
-            bad += 1
-    return over, bad
-
-
-@njit(cache=True, error_model="numpy")
-def fiber_excess(lengths, angles, lorig, lplast, aorig, aplast, gamma_s, gamma_b, out_index, out_excess):
-    """Fibers with ``max(strain / gamma_s, |dtheta| / gamma_b) > 1`` (7.24) and that excess, in fiber order.
-
-    The arithmetic of :func:`unmesh.shells.fracture.fracture_candidates` (non-finite
-    thresholds count 0, NaN 0, infinities the largest float); returns the count.
-    """
-    big = 1.7976931348623157e308
-    m = 0
-    for k in range(lengths.shape[0]):
-        es = 0.0
-        if math.isfinite(gamma_s[k]):
-            es = (lengths[k] / (lorig[k] + lplast[k]) - 1.0) / gamma_s[k]
-        eb = 0.0
-        if math.isfinite(gamma_b[k]):
-            eb = abs(angles[k] - (aorig[k] + aplast[k])) / gamma_b[k]
-        es = 0.0 if math.isnan(es) else min(max(es, -big), big)
-        eb = 0.0 if math.isnan(eb) else min(max(eb, -big), big)
-        e = max(es, eb)
-        if e > 1.0:
-            out_index[m] = k
-            out_excess[m] = e
-            m += 1
-    return m
