@@ -11,7 +11,7 @@ with ``numpy.searchsorted`` offsets (``tests/test_csr_kernels.py``).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 __all__ = ["counting_sort_csr", "csr_rows"]
 
@@ -47,7 +47,7 @@ def counting_sort_csr(keys, nkeys):  # pragma: no cover - numba
     return order, offsets
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def csr_rows(offsets):  # pragma: no cover - numba
     """Row of every entry (offsets[-1],) int64 of the CSR layout ``offsets`` (R + 1,).
 
@@ -58,7 +58,7 @@ def csr_rows(offsets):  # pragma: no cover - numba
     [0, 0, 2]
     """
     rows = np.empty(offsets[-1], np.int64)
-    for r in range(offsets.shape[0] - 1):
+    for r in prange(offsets.shape[0] - 1):
         for k in range(offsets[r], offsets[r + 1]):
             rows[k] = r
     return rows

@@ -15,7 +15,9 @@ One implementation per algorithm, each tested against numpy (``tests/test_linalg
   Reference: ``numpy.linalg.inv``.
 * :func:`smallest_eigenvector` (:func:`smallest_eigenvectors` for a stack): closed-form unit
   eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix, for normal estimation,
-  MLS (3.5) and shell skinning (7.26). Reference: ``numpy.linalg.eigh``.
+  MLS (3.5) and shell skinning (7.26); :func:`smallest_eigenvector_sel` is the same
+  implementation evaluated for vectorised fast-math loops (polynomial :func:`atan2` and cos).
+  Reference: ``numpy.linalg.eigh``.
 
 Helpers called from kernels compiled with other flags set theirs explicitly (:data:`PLAIN`):
 numba passes a caller's ``fastmath`` and ``error_model`` on to callees that do not set them, so
@@ -30,11 +32,16 @@ import math
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["PLAIN", "inv3", "jacobi3", "jacobi_eigh", "jacobi_eigh4", "smallest_eigenvector", "smallest_eigenvectors",
-           "svd_rot", "sym_adjugate", "sym_eig3"]
+__all__ = ["FASTMATH", "PLAIN", "atan2", "inv3", "jacobi3", "jacobi_eigh", "jacobi_eigh4", "smallest_eigenvector",
+           "smallest_eigenvector_sel", "smallest_eigenvectors", "smallest_eigenvectors_sel", "svd_rot", "sym_adjugate",
+           "sym_eig3"]
 
 #: Explicit compile flags of helpers shared by kernels with different flags (strict IEEE arithmetic).
 PLAIN = {"cache": True, "fastmath": False, "error_model": "python"}
+
+#: Fast-math flags of the vectorised loops (shells): FMA contraction, reciprocal and reassociation;
+#: NaN/inf semantics kept.
+FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 
 
 @njit(cache=True)
@@ -387,37 +394,112 @@ def sym_adjugate(s00, s01, s02, s11, s12, s22):
     return c00, c01, c02, c11, c12, c22, s00 * c00 + s01 * c01 + s02 * c02
 
 
-# -- smallest eigenvector (normals, MLS, skinning) --------------------------------------------
+# -- polynomial atan2 (branch-free; the shell kernels' too) -------------------------------------
+
+
+#: Coefficients of the rational approximation ``atan(t) = t + t z P(z)/Q(z)``, ``z = t^2``, on
+#: ``|t| <= 0.66`` (Cephes ``atan``; leading coefficient of Q is 1), and the low part of pi/2.
+_ATAN_P = (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
+           -1.228866684490136173410e2, -6.485021904942025371773e1)
+_ATAN_Q = (2.485846490142306297962e1, 1.650270098316988542046e2, 4.328810604912902668951e2,
+           4.853903996359136964868e2, 1.945506571482613964425e2)
+_PIO2_LO = 6.123233995736765886130e-17
+
+
+@njit(cache=True, inline="always")
+def atan2(y, x):
+    """``atan2(y, x)`` within 2 ulp of the C library's, without a library call (no branches but
+    selects; reference ``numpy.arctan2``, tested). ``atan2(0, 0) = 0``; the sign of a zero ``y``
+    is not looked at (the results -pi and pi are the same angle)."""
+    p0, p1, p2, p3, p4 = _ATAN_P
+    q0, q1, q2, q3, q4 = _ATAN_Q
+    ax = abs(x)
+    ay = abs(y)
+    mx = max(ax, ay)
+    mn = min(ax, ay)
+    big = mn > 0.66 * mx               # reduce atan(t) = pi/4 + atan((t - 1)/(t + 1)), t = mn/mx
+    num = mn - mx if big else mn
+    den = mn + mx if big else mx
+    t = num / den if den > 0.0 else 0.0
+    z = t * t
+    p = (((p0 * z + p1) * z + p2) * z + p3) * z + p4
+    q = ((((z + q0) * z + q1) * z + q2) * z + q3) * z + q4
+    r = t + t * (z * p / q)
+    r = r + (0.25 * math.pi + 0.5 * _PIO2_LO) if big else r
+    r = (0.5 * math.pi + _PIO2_LO) - r if ay > ax else r
+    r = math.pi - r if x < 0.0 else r
+    return -r if y < 0.0 else r
 
 
 @njit(cache=True)
-def smallest_eigenvector(a00, a01, a02, a11, a12, a22):  # pragma: no cover - numba
-    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (upper triangle).
+def atan2_batch(y, x, out):
+    """:func:`atan2` elementwise (for tests)."""
+    for k in range(y.shape[0]):
+        out[k] = atan2(y[k], x[k])
+
+
+# -- smallest eigenvector (normals, MLS, skinning) --------------------------------------------
+
+
+#: Taylor coefficients (-1)^k / (2k)! of cos, k = 0 .. 9 (exact to round-off on [0, pi/3]).
+_COS = (1.0, -0.5, 1.0 / 24, -1.0 / 720, 1.0 / 40320, -1.0 / 3628800, 1.0 / 479001600, -1.0 / 87178291200,
+        1.0 / 20922789888000, -1.0 / 6402373705728000)
+
+
+@njit(cache=True, inline="always")
+def _cos_small(y):
+    """cos(y) for |y| <= pi/3 (Taylor polynomial to y^18)."""
+    c0, c1, c2, c3, c4, c5, c6, c7, c8, c9 = _COS
+    z = y * y
+    return c0 + z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * (c6 + z * (c7 + z * (c8 + z * c9))))))))
+
+
+@njit(cache=True, inline="always")
+def _smallest_eigenvector(a00, a01, a02, a11, a12, a22, fast):  # pragma: no cover - numba
+    """The one implementation of :func:`smallest_eigenvector` (``fast`` False) and
+    :func:`smallest_eigenvector_sel` (``fast`` True, a constant: the other path compiles away).
 
     Closed-form eigenvalues (trigonometric solution of the characteristic cubic) of the
     matrix scaled to unit max-norm, then the eigenvector as the largest cross product of two
-    rows of ``A - l I``. Where that eigenspace is more than one-dimensional any unit vector in
-    it is returned; the zero matrix gives ``(0, 0, 1)``. Shared by normal estimation, MLS
-    (3.5) and shell skinning (7.26). Reference: ``numpy.linalg.eigh``.
+    rows of ``A - l I``, chosen by selects (no branches). ``fast`` scales by the reciprocal
+    and evaluates atan2 and cos as polynomials (within round-off) so a loop over matrices
+    vectorises; otherwise the library functions and divisions.
     """
     s = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
-    if s == 0.0:
-        return 0.0, 0.0, 1.0
-    a00 /= s
-    a01 /= s
-    a02 /= s
-    a11 /= s
-    a12 /= s
-    a22 /= s
-    m = (a00 + a11 + a22) / 3.0
+    if fast:
+        inv_s0 = 1.0 / s
+        inv_s = inv_s0 if s > 0.0 else 0.0
+        a00 *= inv_s
+        a01 *= inv_s
+        a02 *= inv_s
+        a11 *= inv_s
+        a12 *= inv_s
+        a22 *= inv_s
+        m = (a00 + a11 + a22) * (1.0 / 3.0)
+    else:
+        if s != 0.0:            # s == 0: the matrix is zero already (and the result (0, 0, 1))
+            a00 /= s
+            a01 /= s
+            a02 /= s
+            a11 /= s
+            a12 /= s
+            a22 /= s
+        m = (a00 + a11 + a22) / 3.0
     k00 = a00 - m
     k11 = a11 - m
     k22 = a22 - m
-    p = (k00 * k00 + k11 * k11 + k22 * k22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
+    if fast:
+        p = (k00 * k00 + k11 * k11 + k22 * k22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) * (1.0 / 6.0)
+    else:
+        p = (k00 * k00 + k11 * k11 + k22 * k22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
     q = 0.5 * (k00 * (k11 * k22 - a12 * a12) - a01 * (a01 * k22 - a12 * a02) + a02 * (a01 * a12 - k11 * a02))
     sp = math.sqrt(max(p, 0.0))
-    phi = math.atan2(math.sqrt(max(p * p * p - q * q, 0.0)), q) / 3.0
-    lam = m + 2.0 * sp * math.cos(phi + 2.0 * math.pi / 3.0)
+    if fast:
+        phi = atan2(math.sqrt(max(p * p * p - q * q, 0.0)), q) * (1.0 / 3.0)
+        lam = m - 2.0 * sp * _cos_small(math.pi / 3.0 - phi)          # cos(phi + 2 pi/3) = -cos(pi/3 - phi)
+    else:
+        phi = math.atan2(math.sqrt(max(p * p * p - q * q, 0.0)), q) / 3.0
+        lam = m + 2.0 * sp * math.cos(phi + 2.0 * math.pi / 3.0)
     r0x, r0y, r0z = a00 - lam, a01, a02
     r1x, r1y, r1z = a01, a11 - lam, a12
     r2x, r2y, r2z = a02, a12, a22 - lam
@@ -439,31 +521,67 @@ def smallest_eigenvector(a00, a01, a02, a11, a12, a22):  # pragma: no cover - nu
     lmax = max(l0, l1, l2)
     # |cross| <= 1e-6 |row|^2: the rows are parallel (a repeated smallest eigenvalue).
     tiny = 1e-12 * lmax * lmax + 1e-300
-    if n0 >= n1 and n0 >= n2 and n0 > tiny:
-        vx, vy, vz, nn = c0x, c0y, c0z, n0
-    elif n1 >= n2 and n1 > tiny:
-        vx, vy, vz, nn = c1x, c1y, c1z, n1
-    elif n2 > tiny:
-        vx, vy, vz, nn = c2x, c2y, c2z, n2
-    else:
-        # rank <= 1: any vector orthogonal to the largest row of A - l I
-        if l0 >= l1 and l0 >= l2:
-            bx, by, bz, bl = r0x, r0y, r0z, l0
-        elif l1 >= l2:
-            bx, by, bz, bl = r1x, r1y, r1z, l1
-        else:
-            bx, by, bz, bl = r2x, r2y, r2z, l2
-        if bl <= 1e-30:
-            return 0.0, 0.0, 1.0
-        if abs(bx) <= abs(by) and abs(bx) <= abs(bz):
-            vx, vy, vz = 0.0, -bz, by
-        elif abs(by) <= abs(bz):
-            vx, vy, vz = bz, 0.0, -bx
-        else:
-            vx, vy, vz = -by, bx, 0.0
-        nn = vx * vx + vy * vy + vz * vz
-    inv = 1.0 / math.sqrt(nn)
+    pick0 = n0 >= n1 and n0 >= n2 and n0 > tiny
+    pick1 = not pick0 and n1 >= n2 and n1 > tiny
+    pick2 = not pick0 and not pick1 and n2 > tiny
+    # rank <= 1: a vector orthogonal to the largest row of A - l I
+    big0 = l0 >= l1 and l0 >= l2
+    big1 = not big0 and l1 >= l2
+    bx = r0x if big0 else (r1x if big1 else r2x)
+    by = r0y if big0 else (r1y if big1 else r2y)
+    bz = r0z if big0 else (r1z if big1 else r2z)
+    bl = l0 if big0 else (l1 if big1 else l2)
+    ax = abs(bx)
+    ay = abs(by)
+    az = abs(bz)
+    ox = ax <= ay and ax <= az
+    oy = not ox and ay <= az
+    wx = 0.0 if ox else (bz if oy else -by)
+    wy = -bz if ox else (0.0 if oy else bx)
+    wz = by if ox else (-bx if oy else 0.0)
+    flat = not (pick0 or pick1 or pick2)
+    vx = c0x if pick0 else (c1x if pick1 else (c2x if pick2 else wx))
+    vy = c0y if pick0 else (c1y if pick1 else (c2y if pick2 else wy))
+    vz = c0z if pick0 else (c1z if pick1 else (c2z if pick2 else wz))
+    none = s == 0.0 or (flat and bl <= 1e-30)
+    vx = 0.0 if none else vx
+    vy = 0.0 if none else vy
+    vz = 1.0 if none else vz
+    inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
     return vx * inv, vy * inv, vz * inv
+
+
+@njit(cache=True)
+def smallest_eigenvector(a00, a01, a02, a11, a12, a22):  # pragma: no cover - numba
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (upper triangle).
+
+    Closed-form eigenvalues (trigonometric solution of the characteristic cubic) of the
+    matrix scaled to unit max-norm, then the eigenvector as the largest cross product of two
+    rows of ``A - l I``. Where that eigenspace is more than one-dimensional any unit vector in
+    it is returned; the zero matrix gives ``(0, 0, 1)``. Shared by normal estimation, MLS
+    (3.5) and shell skinning (7.26). Reference: ``numpy.linalg.eigh``.
+
+    Example
+    -------
+    >>> smallest_eigenvector(2.0, 0.0, 0.0, 3.0, 0.0, 1.0)
+    (0.0, 0.0, 1.0)
+    """
+    return _smallest_eigenvector(a00, a01, a02, a11, a12, a22, False)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
+def smallest_eigenvector_sel(a00, a01, a02, a11, a12, a22):  # pragma: no cover - numba
+    """:func:`smallest_eigenvector` vectorisable: reciprocal scaling, polynomial atan2 and cos
+    (within round-off), for the fast-math loops of shell skinning (inlined into them)."""
+    return _smallest_eigenvector(a00, a01, a02, a11, a12, a22, True)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def smallest_eigenvectors_sel(cov, out):  # pragma: no cover - numba
+    """:func:`smallest_eigenvector_sel` of every symmetric matrix (S, 3, 3) into ``out`` (S, 3) (for tests)."""
+    for k in range(cov.shape[0]):
+        c = cov[k]
+        out[k, 0], out[k, 1], out[k, 2] = smallest_eigenvector_sel(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2])
 
 
 @njit(cache=True, parallel=True)

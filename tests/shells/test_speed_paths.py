@@ -159,7 +159,7 @@ def test_unvalidated_topology_build_equals_the_validated_one(torn_strip):
 def test_branch_free_plane_eigenvector_matches_eigh():
     """The vectorisable smallest eigenvector of the skinning (7.26) against numpy, also for
     degenerate matrices (rank one, repeated eigenvalues, zero)."""
-    from unmesh.shells._skinning_kernels import smallest_eigenvectors_sel as run
+    from unmesh._linalg_kernels import smallest_eigenvectors_sel as run
 
     rng = np.random.default_rng(5)
     pts = rng.normal(size=(4000, 7, 3)) * [1.0, 0.7, 0.01]               # nearly planar node sets

@@ -15,7 +15,7 @@ from unmesh.shells.topology import ShellTopology
 
 
 def test_fast_atan2_is_within_two_ulp_of_numpy():
-    from unmesh.shells._fiber_kernels import atan2_batch as run
+    from unmesh._linalg_kernels import atan2_batch as run
 
     rng = np.random.default_rng(7)
     y = rng.normal(size=200_000) * np.exp(3 * rng.normal(size=200_000))

@@ -3,7 +3,7 @@
 Used by fracture (7.3: a crack tip's new fibers must not cross the opened surface) and tearing
 (which partners of a node are still connected across a crack). :func:`segments_blocked` tests
 every segment against every disc; :func:`segments_blocked_grid` the same with the discs in a
-uniform grid (:func:`center_grid`), for many segments and discs. Numpy reference: the tests'
+uniform grid (:func:`unmesh.spatial._kernels.dense_grid`), for many segments and discs. Numpy reference: the tests'
 brute-force segment/disc intersection (``tests/shells/test_speed_paths.py``).
 """
 
@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from unmesh._csr_kernels import counting_sort_csr
+from unmesh.spatial._kernels import cell_key, dense_cell, dense_grid
 
 
 @njit(cache=True)
@@ -91,42 +91,6 @@ def segments_blocked(p, q, centers, normals, radii, out):
         out[k] = hit
 
 
-@njit(cache=True)
-def center_grid(centers, h):
-    """Uniform grid over the bounding box of ``centers`` (C, 3) with cells of edge at least ``h``
-    (doubled until there are at most 8 C + 64 cells), the centres binned by a counting sort.
-
-    Returns ``(lo, edge, dims, start, order)``: the box corner (3,), the cell edge, the cell
-    counts (3,) int64, and the centres of cell ``g = i0 + dims[0] (i1 + dims[1] i2)``,
-    ``order[start[g]:start[g + 1]]``. A point within ``h`` of a centre lies in one of the 27
-    cells around the centre's cell (the last cell of each axis reaches to the box's end).
-    """
-    nc = centers.shape[0]
-    lo = np.empty(3)
-    hi = np.empty(3)
-    for d in range(3):
-        lo[d] = np.inf
-        hi[d] = -np.inf
-        for c in range(nc):
-            lo[d] = min(lo[d], centers[c, d])
-            hi[d] = max(hi[d], centers[c, d])
-    ext = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
-    while ((int((hi[0] - lo[0]) / h) + 1) * (int((hi[1] - lo[1]) / h) + 1) * (int((hi[2] - lo[2]) / h) + 1)
-           > 8 * nc + 64):
-        h = max(2.0 * h, ext / 64.0)
-    dims = np.empty(3, dtype=np.int64)
-    for d in range(3):
-        dims[d] = int((hi[d] - lo[d]) / h) + 1
-    key = np.empty(nc, dtype=np.int64)
-    for c in range(nc):
-        i0 = min(int((centers[c, 0] - lo[0]) / h), dims[0] - 1)
-        i1 = min(int((centers[c, 1] - lo[1]) / h), dims[1] - 1)
-        i2 = min(int((centers[c, 2] - lo[2]) / h), dims[2] - 1)
-        key[c] = i0 + dims[0] * (i1 + dims[1] * i2)
-    order, start = counting_sort_csr(key, dims[0] * dims[1] * dims[2])
-    return lo, h, dims, start, order
-
-
 @njit(cache=True, parallel=True)
 def segments_blocked_grid(p, q, centers, normals, radii, out):
     """:func:`segments_blocked` with the discs in a uniform grid (many segments and discs).
@@ -134,7 +98,7 @@ def segments_blocked_grid(p, q, centers, normals, radii, out):
     The cell edge is at least the largest half segment length plus the largest radius, so a
     disc that passes the first test of a segment (its centre within half length plus radius
     of the segment's midpoint) lies in the 27 cells around the midpoint's cell: the result
-    is the same, and each segment meets only the discs near it (:func:`center_grid`).
+    is the same, and each segment meets only the discs near it (:func:`unmesh.spatial._kernels.dense_grid`).
     """
     m = p.shape[0]
     hmax = 0.0
@@ -143,18 +107,15 @@ def segments_blocked_grid(p, q, centers, normals, radii, out):
     rmax = 0.0
     for c in range(centers.shape[0]):
         rmax = max(rmax, radii[c])
-    lo, h, dims, start, order = center_grid(centers, (hmax + rmax) * (1.0 + 1e-9) + 1e-300)
-    n0, n1, n2 = dims[0], dims[1], dims[2]
+    lo, _, inv, dims, start, order = dense_grid(centers, (hmax + rmax) * (1.0 + 1e-9) + 1e-300, 8 * centers.shape[0] + 64)
     for k in prange(m):
         mx, my, mz, half = _segment(p, q, k)
-        c0 = math.floor((mx - lo[0]) / h)       # any value is safe: the cell ranges are clipped
-        c1 = math.floor((my - lo[1]) / h)
-        c2 = math.floor((mz - lo[2]) / h)
+        c0, c1, c2 = dense_cell(mx, my, mz, lo, inv)       # any value is safe: the cell ranges are clipped
         hit = False
-        for j2 in range(max(c2 - 1, 0), min(c2 + 2, n2)):
-            for j1 in range(max(c1 - 1, 0), min(c1 + 2, n1)):
-                for j0 in range(max(c0 - 1, 0), min(c0 + 2, n0)):
-                    g = j0 + n0 * (j1 + n1 * j2)
+        for j0 in range(max(c0 - 1, 0), min(c0 + 2, dims[0])):
+            for j1 in range(max(c1 - 1, 0), min(c1 + 2, dims[1])):
+                for j2 in range(max(c2 - 1, 0), min(c2 + 2, dims[2])):
+                    g = cell_key(j0, j1, j2, dims)
                     for e in range(start[g], start[g + 1]):
                         if not hit and _disc_hit(p, q, k, mx, my, mz, half, centers, normals, radii, order[e]):
                             hit = True
