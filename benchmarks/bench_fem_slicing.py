@@ -123,7 +123,7 @@ def main() -> None:
           f"({lag.background_factorizations} in the background, {lag.waited:.2f} s "
           f"waited for them), the factorisation kept across {lag.remaps} cuts; load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    from unmesh.sim.threads import _TUNERS
+    from unmesh._threads import _TUNERS
 
     chosen = [f"{key} ({2 ** (size - 1)}+ items): {'1 thread' if t.serial else 'all'} "
               f"(probed {t.best[True] * 1e3:.1f} vs {t.best[False] * 1e3:.1f} ms, {t.calls} calls)"

@@ -99,7 +99,7 @@ def measure(figure: str, frames: int) -> dict:
             t = time.perf_counter()
             sim.write_frame(tmp, k)
             io_time = time.perf_counter() - t
-    from unmesh.sim.threads import _TUNERS
+    from unmesh._threads import _TUNERS
 
     tuner = _TUNERS.get(("step", len(sim.topology.fibers).bit_length()))
     threads = "-" if tuner is None else ("1" if tuner.serial else "all")
@@ -144,7 +144,7 @@ def main() -> None:
     print("\nAll times in ms (setup in s): wall-clock averages per frame. 'cpu' is the process CPU time per")
     print("frame (all threads; less sensitive to other load). 'write' is the time to write one frame's files")
     print("(not in 'total'). 'thr': threads the time step chose by timing (1, or all of numba's threads;")
-    print("'-' = below unmesh.sim.threads.PARALLEL_MIN or one thread only); the results do not depend on it.")
+    print("'-' = below unmesh._threads.PARALLEL_MIN or one thread only); the results do not depend on it.")
     print(f"Load average at the end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}.")
 
 

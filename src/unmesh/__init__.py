@@ -19,7 +19,7 @@ import os as _os
 # every parallel region before it sleeps. On cores shared with other busy processes the
 # spinning worker takes the core the computation needs: with two CPU-bound processes beside
 # it, a shell step of Fig. 7.5 took 16-89 ms per frame instead of ~4 ms. 30,000 rounds keep
-# the speed on idle cores (see unmesh.sim.threads). libgomp reads the variable when numba
+# the speed on idle cores (see unmesh._threads). libgomp reads the variable when numba
 # first loads it; a value the user set is kept.
 _os.environ.setdefault("GOMP_SPINCOUNT", "30000")
 

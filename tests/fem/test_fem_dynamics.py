@@ -595,10 +595,10 @@ def test_rotations_carried_across_a_cut_equal_a_fresh_horn_pass(twice):
 def test_steps_with_cuts_are_the_same_on_one_and_on_two_threads(monkeypatch):
     """The per-element kernels (Horn, forces, assembly, integration, stiffness, pattern, matvec) give
     the same results on any number of threads, so the tuner's choice does not change the simulation."""
+    from unmesh import _threads as sim_threads
     from unmesh.fem import dynamics, krylov
     from unmesh.fem.events import BladeEvent
     from unmesh.fem.simulation import FemSimulation
-    from unmesh.sim import threads as sim_threads
 
     for name in ("ELEMENT_PARALLEL_MIN", "CHANGED_PARALLEL_MIN", "SERIAL_NODES"):
         monkeypatch.setattr(dynamics, name, 0)

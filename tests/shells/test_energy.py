@@ -197,7 +197,7 @@ def test_sphere_curvature_is_positive_and_uniform(sphere):
 
 
 def test_kernel_fiber_measures_match_reference(sphere, rng):
-    from unmesh.shells import _kernels
+    from unmesh.shells import _fiber_kernels
     from unmesh.shells import fibers as fb
 
     x, topo = sphere
@@ -205,13 +205,13 @@ def test_kernel_fiber_measures_match_reference(sphere, rng):
     f = topo.fibers
     n = rng.normal(size=(len(f), 3))
     lk, gk = np.empty(len(f)), np.empty((len(f), 3, 3))
-    _kernels.fiber_length_batch(y, f, _kernels.sample_weights(4), lk, gk)
+    _fiber_kernels.fiber_length_batch(y, f, _fiber_kernels.sample_weights(4), lk, gk)
     lr, gr = fb.arc_length_gradient(y[f[:, 0]], y[f[:, 1]], y[f[:, 2]], 4)
     np.testing.assert_allclose(lk, lr, rtol=1e-13)
     np.testing.assert_allclose(gk, gr, atol=1e-13)
     soft = rng.uniform(0, 0.3, len(f))
     tk, tg, tn = np.empty(len(f)), np.empty((len(f), 3, 3)), np.empty((len(f), 3))
-    _kernels.fiber_angle_batch(y, f, n, soft, tk, tg, tn)
+    _fiber_kernels.fiber_angle_batch(y, f, n, soft, tk, tg, tn)
     tr, tgr, tnr = fb.bending_angle_gradient(y[f[:, 0]], y[f[:, 1]], y[f[:, 2]], n, soft, fb.TANGENT_SOFTENING)
     np.testing.assert_allclose(tk, tr, atol=1e-13)
     np.testing.assert_allclose(tg, tgr, atol=1e-11)
@@ -223,7 +223,7 @@ def test_parallel_force_kernel_matches_reference(sphere, rng, monkeypatch):
     gives the reference forces and energies, as the single-threaded path does."""
     import numba
 
-    from unmesh.sim import threads as sim_threads
+    from unmesh import _threads as sim_threads
 
     x, topo = sphere
     state = random_state(x, topo, rng)

@@ -257,8 +257,8 @@ def test_degenerate_fibers_are_those_whose_projected_end_tangent_vanishes(rng):
 
 
 def test_degenerate_kernels_match_the_reference(rng):
-    """Per-step scan (:func:`unmesh.shells._kernels.fracture_scan`) counts the fibers the numpy test finds."""
-    from unmesh.shells import _kernels
+    """Per-step scan (:func:`unmesh.shells._fracture_kernels.fracture_scan`) counts the fibers the numpy test finds."""
+    from unmesh.shells import _fracture_kernels
 
     f = 30_000
     x = rng.normal(size=(3 * f, 3))
@@ -269,6 +269,6 @@ def test_degenerate_kernels_match_the_reference(rng):
     soft[::5] = 0.0
     ref = fb.degenerate(x[fibers[:, 0]], x[fibers[:, 1]], x[fibers[:, 2]], s[fibers[:, 1]], soft[fibers[:, 1]], 0.3)
     z, one = np.zeros(f), np.ones(f)
-    _, bad = _kernels.fracture_scan(x, fibers, s, soft, z, z, one, z, one, one, 0.09)
+    _, bad = _fracture_kernels.fracture_scan(x, fibers, s, soft, z, z, one, z, one, one, 0.09)
     assert 0 < ref.sum() < f
     assert bad == ref.sum()

@@ -127,7 +127,7 @@ def test_force_pass_is_the_same_on_one_and_on_two_threads(torn_strip, monkeypatc
     number of threads (the thread choice of ``threads_for`` follows the machine's load)."""
     import numba
 
-    from unmesh.sim import threads
+    from unmesh import _threads as threads
 
     sim = torn_strip
     m = sim.material
@@ -159,7 +159,7 @@ def test_unvalidated_topology_build_equals_the_validated_one(torn_strip):
 def test_branch_free_plane_eigenvector_matches_eigh():
     """The vectorisable smallest eigenvector of the skinning (7.26) against numpy, also for
     degenerate matrices (rank one, repeated eigenvalues, zero)."""
-    from unmesh.shells._skinning_kernels import smallest_eigenvectors_sel as run
+    from unmesh._linalg_kernels import smallest_eigenvectors_sel as run
 
     rng = np.random.default_rng(5)
     pts = rng.normal(size=(4000, 7, 3)) * [1.0, 0.7, 0.01]               # nearly planar node sets
@@ -300,7 +300,7 @@ def test_forces_after_a_rebuild_from_the_changed_centres_equal_a_full_pass(monke
 @given(st.integers(0, 10**6), st.integers(1, 60), st.floats(0.05, 3.0))
 def test_crack_grid_visibility_equals_the_plain_test(seed, cracks, length):
     """The grid of crack discs (many segments) answers the visibility test (7.3.2) as the plain loop."""
-    from unmesh.shells import _kernels
+    from unmesh.shells import _visibility_kernels
 
     rng = np.random.default_rng(seed)
     cen = rng.uniform(0, 4, (cracks, 3)) * [1, 1, rng.uniform(0, 1)]
@@ -311,8 +311,8 @@ def test_crack_grid_visibility_equals_the_plain_test(seed, cracks, length):
     q = p + rng.normal(scale=length, size=p.shape)
     q[:10] = p[:10]                                           # degenerate segments
     a, b = np.zeros(len(p), bool), np.zeros(len(p), bool)
-    _kernels.segments_blocked(p, q, cen, nrm, rad, a)
-    _kernels.segments_blocked_grid(p, q, cen, nrm, rad, b)
+    _visibility_kernels.segments_blocked(p, q, cen, nrm, rad, a)
+    _visibility_kernels.segments_blocked_grid(p, q, cen, nrm, rad, b)
     np.testing.assert_array_equal(a, b)
 
 

@@ -15,7 +15,7 @@ from unmesh.shells.topology import ShellTopology
 
 
 def test_fast_atan2_is_within_two_ulp_of_numpy():
-    from unmesh.shells._fiber_kernels import atan2_batch as run
+    from unmesh._linalg_kernels import atan2_batch as run
 
     rng = np.random.default_rng(7)
     y = rng.normal(size=200_000) * np.exp(3 * rng.normal(size=200_000))
@@ -180,7 +180,7 @@ def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):
     """Fixed node and fiber ranges: the step does not depend on the number of threads."""
     import numba
 
-    from unmesh.sim import threads as sim_threads
+    from unmesh import _threads as sim_threads
 
     cloud, idx = sphere_with_nodes()
 
@@ -210,7 +210,7 @@ def test_one_kernel_step_is_the_same_on_one_and_on_two_threads(monkeypatch):
 def test_force_pass_counts_the_degenerate_fibers_of_the_reference():
     """The one-kernel step finds degenerate fibers in its force pass (block and scalar paths),
     from the gathered edge vectors and the new umbrella vectors: the fibers the numpy test finds."""
-    from unmesh.shells import _kernels
+    from unmesh.shells import _force_kernels
     from unmesh.shells._block_kernels import BLK
     from unmesh.shells.fibers import degenerate
     from unmesh.shells.forces import FORCE_CHUNKS, arc_gram
@@ -231,7 +231,7 @@ def test_force_pass_counts_the_degenerate_fibers_of_the_reference():
     counts = np.diff(big.fiber_offsets)
     bad = 0
     for c in range(FORCE_CHUNKS):
-        _, b = _kernels.chunk_forces(c * nn // FORCE_CHUNKS, (c + 1) * nn // FORCE_CHUNKS, y, big.pairs,
+        _, b = _force_kernels.chunk_forces(c * nn // FORCE_CHUNKS, (c + 1) * nn // FORCE_CHUNKS, y, big.pairs,
                                      big.pair_offsets[:-1], np.diff(big.pair_offsets), big.soft, big.fibers,
                                      big.fiber_offsets[:-1], counts, state.length_orig, state.length_plastic,
                                      state.angle_orig, state.angle_plastic, state.stretch_scale, state.bend_scale, 1.0,

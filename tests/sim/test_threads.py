@@ -1,12 +1,12 @@
-"""The thread tuner shared by shells and FEM (:mod:`unmesh.sim.threads`)."""
+"""The one thread policy (:mod:`unmesh._threads`): the tuner of shells and FEM, serial regions, small-work policy."""
 
 from __future__ import annotations
 
 import numba
 import pytest
 
-from unmesh.sim import threads
-from unmesh.sim.threads import _Tuner, available_threads, serial_region, threads_for
+from unmesh import _threads as threads
+from unmesh._threads import SERIAL_BELOW, _Tuner, available_threads, serial_if_small, serial_region, threads_for
 
 TWO = min(2, numba.config.NUMBA_NUM_THREADS)
 
@@ -75,7 +75,7 @@ def test_a_disabled_serial_region_changes_nothing(restore_threads):
 def test_background_work_keeps_its_core(restore_threads, monkeypatch):
     import threading
 
-    from unmesh.sim.threads import background_work
+    from unmesh._threads import background_work
 
     monkeypatch.setattr(threads, "_TUNERS", {})
     numba.set_num_threads(2)
@@ -114,3 +114,44 @@ def test_import_sets_a_short_openmp_spin_unless_the_user_set_one():
     out = subprocess.run([sys.executable, "-c", code], env={**env, "GOMP_SPINCOUNT": "7"}, capture_output=True,
                          text=True, check=True)
     assert out.stdout.strip() == "7"
+
+
+def test_serial_if_small_runs_small_work_on_one_thread_and_leaves_large_work_alone():
+    before = numba.get_num_threads()
+    numba.set_num_threads(TWO)
+    try:
+        with serial_if_small(SERIAL_BELOW - 1):
+            assert numba.get_num_threads() == 1
+            assert available_threads() == TWO      # a threads_for inside may still use the outer count
+        assert numba.get_num_threads() == TWO
+        with serial_if_small(SERIAL_BELOW):
+            assert numba.get_num_threads() == TWO
+        with serial_if_small(10, below=10):
+            assert numba.get_num_threads() == TWO
+        with serial_if_small(9, below=10):
+            assert numba.get_num_threads() == 1
+    finally:
+        numba.set_num_threads(before)
+
+
+def test_deprecated_sim_threads_is_the_shared_module():
+    import importlib
+    import sys
+    import warnings
+
+    sys.modules.pop("unmesh.sim.threads", None)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = importlib.import_module("unmesh.sim.threads")
+    assert any(issubclass(w.category, DeprecationWarning) for w in caught)
+    assert old.threads_for is threads_for and old.serial_region is serial_region
+    assert old._TUNERS is threads._TUNERS and old.serial_if_small is serial_if_small
+
+
+def test_every_layer_uses_the_one_policy():
+    from unmesh.render import _kernels as render_kernels
+    from unmesh.spatial import kdtree, neighbors
+
+    assert render_kernels.serial_if_small is serial_if_small
+    assert kdtree.serial_if_small is serial_if_small and neighbors.serial_if_small is serial_if_small
+    assert render_kernels.SERIAL_BELOW == kdtree.SERIAL_BELOW == SERIAL_BELOW

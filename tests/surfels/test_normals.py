@@ -5,17 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from unmesh._linalg_kernels import smallest_eigenvectors
 from unmesh.errors import InputError
 from unmesh.shapes import Blob, Box, Plane, Sphere, Torus
 from unmesh.spatial import knn
 from unmesh.surfels import estimate_normals, orient_normals, pca_normals
-from unmesh.surfels._kernels import (
-    forest_bfs,
-    kruskal_forest,
-    neighbour_covariances,
-    propagate_orientation,
-    smallest_eigenvectors,
-)
+from unmesh.surfels._normals_kernels import forest_bfs, kruskal_forest, neighbour_covariances, propagate_orientation
 from unmesh.surfels.normals import covariance_reference, orient_reference, propagate_reference
 
 

@@ -9,7 +9,7 @@ from unmesh.errors import InputError
 from unmesh.shapes import Disc, Sphere, Torus
 from unmesh.spatial import knn
 from unmesh.surfels import SurfelCloud, estimate_radii, tangent_frame
-from unmesh.surfels._kernels import voronoi_radii
+from unmesh.surfels._radii_kernels import voronoi_radii
 from unmesh.surfels.radii import voronoi_radii_reference
 
 from .helpers import uncovered

@@ -45,8 +45,8 @@ from unmesh.fem.slivers import find_slivers, remove_slivers
 __all__ = [
     "Dynamics",
     "ElementIntegration",
-    "IntegrationRule",
     "Ground",
+    "IntegrationRule",
     "Load",
     "PlaneCut",
     "PolyMesh",

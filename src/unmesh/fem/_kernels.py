@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from unmesh._csr_kernels import counting_sort_csr, csr_rows
+
 
 @njit(cache=True)
 def _newell(points, nodes, start, stop):
@@ -202,23 +204,13 @@ def element_node_sets(elem_offsets, elem_faces, face_offsets, face_nodes, n_node
 
 @njit(cache=True)
 def node_faces(face_offsets, face_nodes, n_nodes):
-    """CSR ``(offsets (n+1,), faces)`` of the faces containing each node, ascending (counting sort).
+    """CSR ``(offsets (n+1,), faces)`` of the faces containing each node, ascending
+    (:func:`unmesh._csr_kernels.counting_sort_csr` of the face node lists).
 
     The numpy reference is a stable argsort of ``face_nodes`` (in the tests).
     """
-    off = np.zeros(n_nodes + 1, np.int64)
-    for k in range(face_nodes.shape[0]):
-        off[face_nodes[k] + 1] += 1
-    for i in range(n_nodes):
-        off[i + 1] += off[i]
-    fill = off[:-1].copy()
-    faces = np.empty(face_nodes.shape[0], np.int64)
-    for f in range(face_offsets.shape[0] - 1):
-        for k in range(face_offsets[f], face_offsets[f + 1]):
-            v = face_nodes[k]
-            faces[fill[v]] = f
-            fill[v] += 1
-    return off, faces
+    order, off = counting_sort_csr(face_nodes, n_nodes)
+    return off, csr_rows(face_offsets)[order]
 
 
 @njit(cache=True)

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from unmesh._csr_kernels import counting_sort_csr, csr_rows
+
 #: Fixed number of row ranges of the pattern build, each with its own marker arrays (the
 #: result does not depend on the number of threads: every row is built alone).
 PATTERN_CHUNKS = 16
@@ -19,23 +21,11 @@ def node_incidence(node_off, nodes, n_nodes):
     """Node -> (element, local index) incidence: ``(inc_off (n+1,), inc_e, inc_a)``, elements ascending.
 
     Node i is local node ``inc_a[t]`` of element ``inc_e[t]`` for ``t`` in
-    ``inc_off[i]:inc_off[i+1]`` (a counting sort of the element node lists).
+    ``inc_off[i]:inc_off[i+1]`` (:func:`unmesh._csr_kernels.counting_sort_csr` of the element node lists).
     """
-    ne = node_off.shape[0] - 1
-    inc_off = np.zeros(n_nodes + 1, np.int64)
-    for k in range(nodes.shape[0]):
-        inc_off[nodes[k] + 1] += 1
-    for i in range(n_nodes):
-        inc_off[i + 1] += inc_off[i]
-    fill = inc_off[:-1].copy()
-    inc_e = np.empty(nodes.shape[0], np.int64)
-    inc_a = np.empty(nodes.shape[0], np.int64)
-    for e in range(ne):
-        for a in range(node_off[e + 1] - node_off[e]):
-            i = nodes[node_off[e] + a]
-            inc_e[fill[i]] = e
-            inc_a[fill[i]] = a
-            fill[i] += 1
+    order, inc_off = counting_sort_csr(nodes, n_nodes)
+    inc_e = csr_rows(node_off)[order]
+    inc_a = order - node_off[inc_e]
     return inc_off, inc_e, inc_a
 
 

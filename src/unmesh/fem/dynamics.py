@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from unmesh._threads import serial_region, threads_for
 from unmesh._validate import as_array, as_indices, positive_scalar, scalar
 from unmesh.errors import InputError
 from unmesh.fem import _fe_kernels as FK
@@ -49,7 +50,6 @@ from unmesh.fem.integration import ElementIntegration, integrate_elements, merge
 from unmesh.fem.mesh import PolyMesh
 from unmesh.fem.rotations import _horn_all, piece_rotations
 from unmesh.fem.solvers import PCG, SOLVERS, LaggedLU, direct_solve
-from unmesh.sim.threads import serial_region, threads_for
 
 __all__ = ["Dynamics", "Ground", "Load", "Prescribed", "kernel_threads"]
 
@@ -58,7 +58,7 @@ __all__ = ["Dynamics", "Ground", "Load", "Prescribed", "kernel_threads"]
 #: shared (oversubscribed) machine they were measured up to 10x slower than serial.
 SERIAL_NODES = 30000
 #: Meshes with at least this many elements may run the heavy per-element kernels (Horn
-#: rotations, warped forces and assembly) on all threads: :class:`unmesh.sim.threads.threads_for`
+#: rotations, warped forces and assembly) on all threads: :class:`unmesh._threads.threads_for`
 #: times one thread against all now and then and keeps the faster (the second core helps when
 #: it is free and hurts when other jobs keep it busy).
 ELEMENT_PARALLEL_MIN = 4096
@@ -79,7 +79,7 @@ CONTACT_ROUNDS = 8
 def kernel_threads(n_nodes: int) -> serial_region:
     """Use one numba thread for small problems inside the block.
 
-    The heavy per-element kernels run inside it under :class:`unmesh.sim.threads.threads_for`,
+    The heavy per-element kernels run inside it under :class:`unmesh._threads.threads_for`,
     which may still use the threads in effect outside (one, if the user set one).
 
     Example

@@ -38,8 +38,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from unmesh._threads import background_work
 from unmesh.fem import _solve_kernels as SK
-from unmesh.sim.threads import background_work
 
 __all__ = ["Factorization", "Job", "block_csr", "nested_dissection"]
 
@@ -228,7 +228,7 @@ class Job:
             self._error = exc
 
     def _run_background(self, fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any]) -> None:
-        # the main thread's numba kernels leave this thread its core (unmesh.sim.threads)
+        # the main thread's numba kernels leave this thread its core (unmesh._threads)
         with background_work():
             self._run(fn, args, kwargs)
 

@@ -21,13 +21,13 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import threads_for
 from unmesh.fem import _solve_kernels as SK
-from unmesh.sim.threads import threads_for
 
 __all__ = ["PCG", "pcg"]
 
 #: Systems of at least this many nodes may run the matrix-vector product on all threads
-#: (:class:`unmesh.sim.threads.threads_for` keeps the faster choice).
+#: (:class:`unmesh._threads.threads_for` keeps the faster choice).
 MATVEC_PARALLEL_MIN = 4096
 
 

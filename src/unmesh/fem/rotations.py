@@ -26,30 +26,10 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
-from unmesh._linalg_kernels import jacobi_eigh
+from unmesh._linalg_kernels import jacobi_eigh, jacobi_eigh4
 from unmesh._validate import as_array, as_points
 
 __all__ = ["horn_matrix", "horn_rotations", "jacobi_eigh4", "piece_rotations", "polar_rotations", "quaternion_to_matrix"]
-
-
-@njit(cache=True)
-def jacobi_eigh4(N):
-    """Eigenvalues (4,) and eigenvectors (columns, 4×4) of a symmetric 4×4 matrix (cyclic Jacobi).
-
-    Example
-    -------
-    >>> import numpy as np
-    >>> w, v = jacobi_eigh4(np.diag([1.0, 4.0, 2.0, 3.0]))
-    >>> sorted(w.tolist())
-    [1.0, 2.0, 3.0, 4.0]
-    """
-    A = N.copy()
-    V = np.empty((4, 4))
-    jacobi_eigh(A, V)
-    w = np.empty(4)
-    for i in range(4):
-        w[i] = A[i, i]
-    return w, V
 
 
 @njit(cache=True)

@@ -45,8 +45,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from unmesh._linalg_kernels import smallest_eigenvector
 from unmesh.spatial._kernels import point_cell, stencil_ranges
-from unmesh.surfels._kernels import smallest_eigenvector
 
 #: Status codes of :func:`project_kernel`.
 CONVERGED, NOT_CONVERGED, NO_NEIGHBORS, LOST = 0, 1, 2, 3

@@ -14,20 +14,18 @@ so ``d_z = 1`` and the ray parameter ``t`` of a hit *is* its depth. Plain numpy 
 
 from __future__ import annotations
 
-import contextlib
 import math
-from collections.abc import Iterator
 
-import numba
 import numpy as np
 from numba import njit, prange
+
+from unmesh._threads import SERIAL_BELOW, serial_if_small
 
 __all__ = ["SERIAL_BELOW", "bin_boxes", "box_visits", "load_tile", "serial_if_small", "shade_pixels", "sphere_box",
            "tile_order", "tile_rect"]
 
-#: Work items (primitives) below which kernels run on one thread: launching a parallel region
-#: costs more than it saves for small partial updates, and much more on a loaded machine.
-SERIAL_BELOW = 20000
+# The thread policy (one thread below SERIAL_BELOW work items: launching a parallel region costs
+# more than it saves for small partial updates) is unmesh._threads'; re-exported for the renderers.
 
 
 def box_visits(box: np.ndarray) -> int:
@@ -35,20 +33,6 @@ def box_visits(box: np.ndarray) -> int:
     w = np.clip(box[:, 1].astype(np.int64) - box[:, 0] + 1, 0, None)
     h = np.clip(box[:, 3].astype(np.int64) - box[:, 2] + 1, 0, None)
     return int(np.sum(w * h))
-
-
-@contextlib.contextmanager
-def serial_if_small(n: int, below: int = SERIAL_BELOW) -> Iterator[None]:
-    """Run the enclosed numba kernels on one thread when ``n < below``."""
-    if n >= below:
-        yield
-        return
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)
 
 
 @njit(cache=True)

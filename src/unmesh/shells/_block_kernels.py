@@ -199,7 +199,7 @@ def block_forces(a, b, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, l
     (with a non-empty mask ``only`` (N,), the forces of the listed nodes only).
 
     The fibers of the block (at most :data:`BLK`) go through :func:`block_geometry`; then
-    per node as :func:`unmesh.shells._kernels.node_forces`: ``buf -= dE/dx``. Returns the
+    per node as :func:`unmesh.shells._force_kernels.node_forces`: ``buf -= dE/dx``. Returns the
     number of fibers whose angle moved by more than pi/2 from ``ref`` and (``ratio2 > 0``)
     the number of degenerate fibers
     (:func:`unmesh.shells._fiber_kernels.degenerate_edges`, from the gathered edge vectors).

@@ -28,11 +28,11 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from unmesh._linalg_kernels import FASTMATH, atan2
+
 #: Regularisation of the tangent angle's cosine part (unmesh.shells.fibers.TANGENT_SOFTENING).
 SOFT_X = 0.05
 
-#: Fast-math flags: FMA contraction, reciprocal and reassociation; NaN/inf semantics kept.
-FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 
 
 def sample_weights(samples: int) -> np.ndarray:
@@ -51,47 +51,6 @@ def gram_weights(weights: np.ndarray) -> np.ndarray:
     inv_n = 2.0 / len(w)
     return np.ascontiguousarray(np.stack([a * a, 2.0 * a * g, g * g, a * a * inv_n, a * g * inv_n, g * g * inv_n],
                                          axis=1))
-
-
-#: Coefficients of the rational approximation ``atan(t) = t + t z P(z)/Q(z)``, ``z = t^2``, on
-#: ``|t| <= 0.66`` (Cephes ``atan``; leading coefficient of Q is 1), and the low part of pi/2.
-_ATAN_P = (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
-           -1.228866684490136173410e2, -6.485021904942025371773e1)
-_ATAN_Q = (2.485846490142306297962e1, 1.650270098316988542046e2, 4.328810604912902668951e2,
-           4.853903996359136964868e2, 1.945506571482613964425e2)
-_PIO2_LO = 6.123233995736765886130e-17
-
-
-@njit(cache=True, inline="always")
-def atan2(y, x):
-    """``atan2(y, x)`` within 2 ulp of the C library's, without a library call (no branches but
-    selects; reference ``numpy.arctan2``, tested). ``atan2(0, 0) = 0``; the sign of a zero ``y``
-    is not looked at (the results -pi and pi are the same angle)."""
-    p0, p1, p2, p3, p4 = _ATAN_P
-    q0, q1, q2, q3, q4 = _ATAN_Q
-    ax = abs(x)
-    ay = abs(y)
-    mx = max(ax, ay)
-    mn = min(ax, ay)
-    big = mn > 0.66 * mx               # reduce atan(t) = pi/4 + atan((t - 1)/(t + 1)), t = mn/mx
-    num = mn - mx if big else mn
-    den = mn + mx if big else mx
-    t = num / den if den > 0.0 else 0.0
-    z = t * t
-    p = (((p0 * z + p1) * z + p2) * z + p3) * z + p4
-    q = ((((z + q0) * z + q1) * z + q2) * z + q3) * z + q4
-    r = t + t * (z * p / q)
-    r = r + (0.25 * math.pi + 0.5 * _PIO2_LO) if big else r
-    r = (0.5 * math.pi + _PIO2_LO) - r if ay > ax else r
-    r = math.pi - r if x < 0.0 else r
-    return -r if y < 0.0 else r
-
-
-@njit(cache=True)
-def atan2_batch(y, x, out):
-    """:func:`atan2` elementwise (for tests)."""
-    for k in range(y.shape[0]):
-        out[k] = atan2(y[k], x[k])
 
 
 @njit(cache=True, inline="always")

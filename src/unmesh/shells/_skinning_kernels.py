@@ -17,9 +17,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from unmesh.shells._fiber_kernels import FASTMATH, atan2
-from unmesh.shells._kernels import center_grid
-from unmesh.surfels._kernels import smallest_eigenvector
+from unmesh._linalg_kernels import FASTMATH, smallest_eigenvector, smallest_eigenvector_sel
+from unmesh.spatial._kernels import cell_key, dense_cell, dense_grid
 
 #: Doubles stored per frame: local coordinates of the offset p - x_0 and of the two tangent axes.
 COORDS = 9
@@ -109,17 +108,15 @@ def within_reach(points, rows, reach, radius, centers):
     h = 0.0
     for t in range(rows.shape[0]):
         h = max(h, reach[rows[t]] + radius)
-    lo, h, dims, start, order = center_grid(centers, h * (1.0 + 1e-9) + 1e-300)
+    lo, _, inv, dims, start, order = dense_grid(centers, h * (1.0 + 1e-9) + 1e-300, 8 * nc + 64)
     for t in range(rows.shape[0]):
         r = rows[t]
         lim = reach[r] + radius
-        c0 = math.floor((points[r, 0] - lo[0]) / h)       # any value is safe: the cell ranges are clipped
-        c1 = math.floor((points[r, 1] - lo[1]) / h)
-        c2 = math.floor((points[r, 2] - lo[2]) / h)
-        for j2 in range(max(c2 - 1, 0), min(c2 + 2, dims[2])):
+        c0, c1, c2 = dense_cell(points[r, 0], points[r, 1], points[r, 2], lo, inv)  # any value: ranges are clipped
+        for j0 in range(max(c0 - 1, 0), min(c0 + 2, dims[0])):
             for j1 in range(max(c1 - 1, 0), min(c1 + 2, dims[1])):
-                for j0 in range(max(c0 - 1, 0), min(c0 + 2, dims[0])):
-                    g = j0 + dims[0] * (j1 + dims[1] * j2)
+                for j2 in range(max(c2 - 1, 0), min(c2 + 2, dims[2])):
+                    g = cell_key(j0, j1, j2, dims)
                     for e in range(start[g], start[g + 1]):
                         if not out[t] and _near(points, r, lim, centers, order[e]):
                             out[t] = True
@@ -209,101 +206,6 @@ SBLK = 64
 #: Scratch rows: node count (0), sum of node normals (1-3), covariance (4-9), plane normal (10-12).
 SROWS = 13
 _CNT, _NSUM, _COV, _M = 0, 1, 4, 10
-
-#: Taylor coefficients (-1)^k / (2k)! of cos, k = 0 .. 9 (exact to round-off on [0, pi/3]).
-_COS = (1.0, -0.5, 1.0 / 24, -1.0 / 720, 1.0 / 40320, -1.0 / 3628800, 1.0 / 479001600, -1.0 / 87178291200,
-        1.0 / 20922789888000, -1.0 / 6402373705728000)
-
-
-@njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
-def _cos_small(y):
-    """cos(y) for |y| <= pi/3 (Taylor polynomial to y^18)."""
-    c0, c1, c2, c3, c4, c5, c6, c7, c8, c9 = _COS
-    z = y * y
-    return c0 + z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * (c6 + z * (c7 + z * (c8 + z * c9))))))))
-
-
-@njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
-def smallest_eigenvector_sel(a00, a01, a02, a11, a12, a22):
-    """:func:`unmesh.surfels._kernels.smallest_eigenvector` with selects instead of branches (vectorisable).
-
-    Same method (trigonometric roots of the characteristic cubic, then the largest cross
-    product of two rows of ``A - l I``); atan2 and cos are polynomial (within round-off).
-    """
-    s = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
-    inv_s0 = 1.0 / s
-    inv_s = inv_s0 if s > 0.0 else 0.0
-    a00 *= inv_s
-    a01 *= inv_s
-    a02 *= inv_s
-    a11 *= inv_s
-    a12 *= inv_s
-    a22 *= inv_s
-    m = (a00 + a11 + a22) * (1.0 / 3.0)
-    k00 = a00 - m
-    k11 = a11 - m
-    k22 = a22 - m
-    p = (k00 * k00 + k11 * k11 + k22 * k22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) * (1.0 / 6.0)
-    q = 0.5 * (k00 * (k11 * k22 - a12 * a12) - a01 * (a01 * k22 - a12 * a02) + a02 * (a01 * a12 - k11 * a02))
-    sp = math.sqrt(max(p, 0.0))
-    phi = atan2(math.sqrt(max(p * p * p - q * q, 0.0)), q) * (1.0 / 3.0)
-    lam = m - 2.0 * sp * _cos_small(math.pi / 3.0 - phi)          # cos(phi + 2 pi/3) = -cos(pi/3 - phi)
-    r0x, r0y, r0z = a00 - lam, a01, a02
-    r1x, r1y, r1z = a01, a11 - lam, a12
-    r2x, r2y, r2z = a02, a12, a22 - lam
-    c0x = r0y * r1z - r0z * r1y
-    c0y = r0z * r1x - r0x * r1z
-    c0z = r0x * r1y - r0y * r1x
-    c1x = r0y * r2z - r0z * r2y
-    c1y = r0z * r2x - r0x * r2z
-    c1z = r0x * r2y - r0y * r2x
-    c2x = r1y * r2z - r1z * r2y
-    c2y = r1z * r2x - r1x * r2z
-    c2z = r1x * r2y - r1y * r2x
-    n0 = c0x * c0x + c0y * c0y + c0z * c0z
-    n1 = c1x * c1x + c1y * c1y + c1z * c1z
-    n2 = c2x * c2x + c2y * c2y + c2z * c2z
-    l0 = r0x * r0x + r0y * r0y + r0z * r0z
-    l1 = r1x * r1x + r1y * r1y + r1z * r1z
-    l2 = r2x * r2x + r2y * r2y + r2z * r2z
-    lmax = max(l0, l1, l2)
-    tiny = 1e-12 * lmax * lmax + 1e-300
-    pick0 = n0 >= n1 and n0 >= n2 and n0 > tiny
-    pick1 = not pick0 and n1 >= n2 and n1 > tiny
-    pick2 = not pick0 and not pick1 and n2 > tiny
-    # rank <= 1: a vector orthogonal to the largest row of A - l I
-    big0 = l0 >= l1 and l0 >= l2
-    big1 = not big0 and l1 >= l2
-    bx = r0x if big0 else (r1x if big1 else r2x)
-    by = r0y if big0 else (r1y if big1 else r2y)
-    bz = r0z if big0 else (r1z if big1 else r2z)
-    bl = l0 if big0 else (l1 if big1 else l2)
-    ax = abs(bx)
-    ay = abs(by)
-    az = abs(bz)
-    ox = ax <= ay and ax <= az
-    oy = not ox and ay <= az
-    wx = 0.0 if ox else (bz if oy else -by)
-    wy = -bz if ox else (0.0 if oy else bx)
-    wz = by if ox else (-bx if oy else 0.0)
-    flat = not (pick0 or pick1 or pick2)
-    vx = c0x if pick0 else (c1x if pick1 else (c2x if pick2 else wx))
-    vy = c0y if pick0 else (c1y if pick1 else (c2y if pick2 else wy))
-    vz = c0z if pick0 else (c1z if pick1 else (c2z if pick2 else wz))
-    none = s == 0.0 or (flat and bl <= 1e-30)
-    vx = 0.0 if none else vx
-    vy = 0.0 if none else vy
-    vz = 1.0 if none else vz
-    inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
-    return vx * inv, vy * inv, vz * inv
-
-
-@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def smallest_eigenvectors_sel(cov, out):
-    """:func:`smallest_eigenvector_sel` of every symmetric matrix (S, 3, 3) into ``out`` (S, 3) (for tests)."""
-    for k in range(cov.shape[0]):
-        c = cov[k]
-        out[k, 0], out[k, 1], out[k, 2] = smallest_eigenvector_sel(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2])
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")

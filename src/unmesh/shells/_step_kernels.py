@@ -2,7 +2,7 @@
 
 :func:`shell_step` does in one call what :meth:`unmesh.shells.ShellSimulation.step_plain`
 does with numpy and several kernel calls: the velocity-Verlet step of (7.18) with the
-elastic forces of :func:`unmesh.shells._kernels.node_forces`, gravity, mass-proportional
+elastic forces of :func:`unmesh.shells._force_kernels.node_forces`, gravity, mass-proportional
 damping, pressure and given extra forces, the kinematic (pinned and handle) nodes, plane
 and sphere colliders, the crumbs that follow their anchors, plasticity (7.19-7.23, 7.25)
 and the per-step fracture test (7.24). The plain path is its reference
@@ -20,7 +20,8 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.shells._block_kernels import BLK, ROWS
-from unmesh.shells._kernels import FASTMATH, SCRATCH, chunk_forces, sum_chunks, touched_range
+from unmesh.shells._fiber_kernels import FASTMATH
+from unmesh.shells._force_kernels import SCRATCH, chunk_forces, sum_chunks, touched_range
 
 #: Collider kinds in ``col_type``; ``col_data`` rows are (point, normal, restitution, friction)
 #: for planes and (center, radius, -, -, restitution, friction) for spheres.
@@ -116,11 +117,11 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
         -2 free node, -1 pinned at rest, h >= 0 moved by handle ``h``: ``x = rest + hdisp[h]``,
         ``v = hvel[h]`` (H, 3), evaluated at the new time.
     pairs .. cap
-        Topology (as for :func:`unmesh.shells._kernels.force_chunks`).
+        Topology (as for :func:`unmesh.shells._force_kernels.force_chunks`).
     lorig .. gamma_b : (F,)
         Fiber state; ``lplast``, ``aplast`` and ``gamma_b`` are updated by plasticity.
     ks, kb, gram, ref, offs
-        As for :func:`unmesh.shells._kernels.node_forces`.
+        As for :func:`unmesh.shells._force_kernels.node_forces`.
     gravity : (3,)
     damping : float
         ``D`` of the force ``-D m v``.

@@ -119,15 +119,15 @@ class FiberState:
         Measured with the same kernels as the forces, so the rest state has exactly zero
         energy and force. Extra keyword arrays (e.g. ``stretch_scale``) override the uniform defaults.
         """
-        from unmesh.shells import _kernels
+        from unmesh.shells import _fiber_kernels
         from unmesh.shells.arcs import arc_gram
 
         x = as_points(rest, "rest", length=topology.n_nodes)
         f = topology.fibers
         s, normals = np.empty_like(x), np.empty_like(x)
-        _kernels.umbrella(x, topology.pairs, topology.pair_offsets, s, normals)
+        _fiber_kernels.umbrella(x, topology.pairs, topology.pair_offsets, s, normals)
         length, angle = np.empty(len(f)), np.empty(len(f))
-        _kernels.fiber_measures(x, f, np.ascontiguousarray(s[f[:, 1]]), np.ascontiguousarray(topology.soft[f[:, 1]]),
+        _fiber_kernels.fiber_measures(x, f, np.ascontiguousarray(s[f[:, 1]]), np.ascontiguousarray(topology.soft[f[:, 1]]),
                                 arc_gram(samples), length, angle)
         state = cls.uniform(length, angle)
         return dataclasses.replace(state, **fields) if fields else state
@@ -137,14 +137,14 @@ class FiberState:
                 which: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """Arc lengths and tangent angles (principal branch) of the fibers ``which`` (default all)
         at node positions ``x``, with the force kernels' arithmetic."""
-        from unmesh.shells import _kernels
+        from unmesh.shells import _fiber_kernels
         from unmesh.shells.arcs import arc_gram
 
         f = topology.fibers if which is None else np.ascontiguousarray(topology.fibers[which])
         s, normals = np.empty_like(x), np.empty_like(x)
-        _kernels.umbrella(x, topology.pairs, topology.pair_offsets, s, normals)
+        _fiber_kernels.umbrella(x, topology.pairs, topology.pair_offsets, s, normals)
         length, angle = np.empty(len(f)), np.empty(len(f))
-        _kernels.fiber_measures(x, f, np.ascontiguousarray(s[f[:, 1]]), np.ascontiguousarray(topology.soft[f[:, 1]]),
+        _fiber_kernels.fiber_measures(x, f, np.ascontiguousarray(s[f[:, 1]]), np.ascontiguousarray(topology.soft[f[:, 1]]),
                                 arc_gram(samples), length, angle)
         return length, angle
 

@@ -43,7 +43,7 @@ Two quantities are measured on a fiber:
 All functions take the fiber nodes as arrays of shape (F, 3) (or (3,) for one fiber) and
 return per-fiber arrays; gradients have shape (F, 3, 3) with axis 1 the node (``x1``,
 ``x``, ``x2``) and axis 2 the coordinate. The numba versions used by the force kernels are
-in :mod:`unmesh.shells._kernels`.
+in :mod:`unmesh.shells._force_kernels`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Elastic forces of a fiber-sampled shell with numba kernels (thesis 7.2.2, eqs. 7.12-7.17).
 
 Same energy and forces as :func:`unmesh.shells.energy.elastic_forces_reference`, computed
-in the two passes of 7.2.2 (see :mod:`unmesh.shells._kernels`). The result also carries
+in the two passes of 7.2.2 (see :mod:`unmesh.shells._force_kernels`). The result also carries
 the current fiber lengths and angles and the node normals, which plasticity (7.19-7.23),
 fracture (7.24) and the pressure force reuse without recomputing them.
 """
@@ -12,12 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from unmesh.shells import _kernels
+from unmesh._threads import threads_for
+from unmesh.shells import _force_kernels
 from unmesh.shells.arcs import arc_gram, arc_weights  # re-exported: callers import them from here
 from unmesh.shells.energy import FiberState
 from unmesh.shells.fibers import ARC_SAMPLES
 from unmesh.shells.topology import ShellTopology
-from unmesh.sim.threads import threads_for
 
 __all__ = ["ForceResult", "arc_gram", "arc_weights", "elastic_forces", "node_terms"]
 
@@ -124,7 +124,7 @@ def _elastic_forces(x: np.ndarray, topology: ShellTopology, state: FiberState, k
     cap = int(counts.max()) if n else 0
     ref = state.rest_angle() if reference is None else np.ascontiguousarray(reference, dtype=np.float64)
     buf = np.empty((chunks, n, 3)) if scatter else np.empty((chunks, 0, 3))
-    _kernels.force_chunks(chunks, np.ascontiguousarray(x, dtype=np.float64), topology.pairs,
+    _force_kernels.force_chunks(chunks, np.ascontiguousarray(x, dtype=np.float64), topology.pairs,
                           topology.pair_offsets[:-1], np.diff(topology.pair_offsets), topology.soft, topology.fibers,
                           topology.fiber_offsets[:-1], counts, state.length_orig, state.length_plastic,
                           state.angle_orig, state.angle_plastic, state.stretch_scale, state.bend_scale, float(ks),

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.shells import _kernels
+from unmesh.shells import _fracture_kernels, _visibility_kernels
 from unmesh.shells.energy import FiberState
 from unmesh.shells.nodes import create_fibers, node_neighborhoods, umbrella_pairs, umbrella_softening
 from unmesh.shells.topology import ShellTopology, csr_from_groups
@@ -96,11 +96,11 @@ class CrackSet:
             p = np.ascontiguousarray(p, dtype=np.float64)
             q = np.ascontiguousarray(q, dtype=np.float64)
             # only discs that reach the segments' bounding box can block one (the kernel's own test)
-            near = _kernels.discs_near_segments(p, q, self.centers, self.radii)
+            near = _visibility_kernels.discs_near_segments(p, q, self.centers, self.radii)
             if len(near):
                 # the grid pays for many discs, or for a few dozen discs and many segments
                 grid = len(near) > 48 or (len(near) > 8 and len(p) >= 4096)
-                kernel = _kernels.segments_blocked_grid if grid else _kernels.segments_blocked
+                kernel = _visibility_kernels.segments_blocked_grid if grid else _visibility_kernels.segments_blocked
                 kernel(p, q, np.ascontiguousarray(self.centers[near]), np.ascontiguousarray(self.normals[near]),
                        np.ascontiguousarray(self.radii[near]), out)
         return out
@@ -153,7 +153,7 @@ def fracture_candidates_fast(state: FiberState, lengths: np.ndarray, angles: np.
     """
     idx = np.empty(len(lengths), dtype=np.int64)
     exc = np.empty(len(lengths))
-    m = _kernels.fiber_excess(np.ascontiguousarray(lengths, dtype=np.float64), np.ascontiguousarray(angles, dtype=np.float64),
+    m = _fracture_kernels.fiber_excess(np.ascontiguousarray(lengths, dtype=np.float64), np.ascontiguousarray(angles, dtype=np.float64),
                               state.length_orig, state.length_plastic, state.angle_orig, state.angle_plastic,
                               state.fracture_stretch, state.fracture_bend, idx, exc)
     order = np.argsort(-exc[:m], kind="stable")

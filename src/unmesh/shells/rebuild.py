@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.shells import _kernels, _rebuild_kernels
+from unmesh.shells import _fiber_kernels, _rebuild_kernels
 from unmesh.shells.energy import _FIELDS, FiberState
 from unmesh.shells.forces import arc_gram
 from unmesh.shells.fracture import MIN_VISIBLE, CrackSet, FiberMaterial, fracture_candidates
@@ -66,10 +66,10 @@ def _measure(x: np.ndarray, fibers: np.ndarray, pairs: np.ndarray, pair_offsets:
     counts = np.zeros(n, dtype=np.int64)
     counts[rows] = np.diff(pair_offsets)
     np.cumsum(counts, out=full[1:])
-    _kernels.umbrella(np.ascontiguousarray(x), np.ascontiguousarray(pairs), full, s, nrm)
+    _fiber_kernels.umbrella(np.ascontiguousarray(x), np.ascontiguousarray(pairs), full, s, nrm)
     f = np.ascontiguousarray(fibers)
     length, angle = np.empty(len(f)), np.empty(len(f))
-    _kernels.fiber_measures(np.ascontiguousarray(x), f, np.ascontiguousarray(s[f[:, 1]]),
+    _fiber_kernels.fiber_measures(np.ascontiguousarray(x), f, np.ascontiguousarray(s[f[:, 1]]),
                             np.ascontiguousarray(soft[f[:, 1]]), arc_gram(samples), length, angle)
     return length, angle
 

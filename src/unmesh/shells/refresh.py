@@ -9,7 +9,7 @@ is a crumb that followed its anchor) differ, so::
     F_new(x) = F_last - sum_{c in D} f_c(old arrays, x_last) + sum_{c in D} f_c(new arrays, x)
 
 with both sums from force passes restricted to those centres ``D``
-(:func:`unmesh.shells._kernels.force_chunks` with a mask). The fiber measures, normals and
+(:func:`unmesh.shells._force_kernels.force_chunks` with a mask). The fiber measures, normals and
 node terms of the other centres are carried over. The result is that of a full force pass
 up to round-off (``tests/shells/test_speed_paths.py``); :func:`refreshed_forces` returns
 None when too much changed for this to pay.
@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.shells import _kernels, _rebuild_kernels
+from unmesh._threads import threads_for
+from unmesh.shells import _force_kernels, _rebuild_kernels
 from unmesh.shells.energy import FiberState
 from unmesh.shells.forces import FORCE_CHUNKS, ForceResult, arc_gram
 from unmesh.shells.topology import ShellTopology
-from unmesh.sim.threads import threads_for
 
 __all__ = ["refreshed_forces"]
 
@@ -41,7 +41,7 @@ def _masked_pass(x: np.ndarray, t: ShellTopology, st: FiberState, ks: float, kb:
     counts = np.diff(t.fiber_offsets)
     cap = int(counts.max()) if n else 0
     with threads_for(int(counts[only].sum()), key="refresh"):
-        _kernels.force_chunks(FORCE_CHUNKS, np.ascontiguousarray(x, dtype=np.float64), t.pairs, t.pair_offsets[:-1],
+        _force_kernels.force_chunks(FORCE_CHUNKS, np.ascontiguousarray(x, dtype=np.float64), t.pairs, t.pair_offsets[:-1],
                               np.diff(t.pair_offsets), t.soft, t.fibers, t.fiber_offsets[:-1], counts, st.length_orig,
                               st.length_plastic, st.angle_orig, st.angle_plastic, st.stretch_scale, st.bend_scale,
                               float(ks), float(kb), arc_gram(int(samples)), np.ascontiguousarray(ref, dtype=np.float64),

@@ -41,12 +41,12 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import threads_for
 from unmesh._validate import as_points
 from unmesh.errors import InputError
 from unmesh.shells import _skinning_kernels as _sk
 from unmesh.shells.nodes import hide_blocked
 from unmesh.shells.rebinding import Rebinding, _cover_pairs, _cover_pairs_reference, _Passive  # noqa: F401
-from unmesh.sim.threads import threads_for
 from unmesh.surfels import SurfelCloud
 
 __all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "SkinnedSurface", "bind_points",
@@ -54,7 +54,7 @@ __all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "SkinnedSurface
 
 #: Nodes per passive point: x_0 and K further nodes (K - 1 weighted frames).
 DEFAULT_SKIN_NODES = 6
-#: Below this many passive points the skinning kernel runs on one thread (see unmesh.sim.threads).
+#: Below this many passive points the skinning kernel runs on one thread (see unmesh._threads).
 SKIN_PARALLEL_MIN = 4000
 #: Rest neighbours per dense surfel whose stretch sets its splat radius (:func:`cover_radii_reference`).
 COVER_NEIGHBORS = 6

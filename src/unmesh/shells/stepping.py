@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import threads_for
 from unmesh.shells import _step_kernels
 from unmesh.shells.dynamics import PlaneCollider, SphereCollider
 from unmesh.shells.forces import FORCE_CHUNKS, ForceResult, arc_gram
-from unmesh.sim.threads import threads_for
 
 __all__ = ["FusedStep"]
 

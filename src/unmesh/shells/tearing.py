@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.shells import _kernels, _rebuild_kernels
+from unmesh._threads import threads_for
+from unmesh.shells import _fracture_kernels, _rebuild_kernels, _visibility_kernels
 from unmesh.shells.fibers import degenerate as degenerate_fibers
 from unmesh.shells.forces import node_terms
 from unmesh.shells.fracture import fracture_candidates_fast as fracture_candidates
@@ -23,7 +24,6 @@ from unmesh.shells.fracture import select_cracks
 from unmesh.shells.nodes import NodeCandidates
 from unmesh.shells.rebuild import rebuild_local
 from unmesh.shells.topology import ShellTopology
-from unmesh.sim.threads import threads_for
 
 __all__ = ["DEGENERATE_RATIO", "Tearing", "warm_up"]
 
@@ -33,7 +33,7 @@ DEGENERATE_RATIO = 0.3
 
 def warm_up() -> None:
     """Load the compiled kernels of a crack event now (from numba's cache) rather than at the first crack."""
-    from unmesh.shells import _skinning_kernels
+    from unmesh.shells import _fracture_kernels, _skinning_kernels
 
     i1, i2, f1, b1 = np.zeros(1, np.int64), np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.bool_)
     p3 = np.zeros((0, 3))
@@ -49,9 +49,9 @@ def warm_up() -> None:
                                    n1.copy())
     _rebuild_kernels.mark_on_fiber(np.zeros((0, 3), np.int64), b0.copy())
     _rebuild_kernels.carry(np.zeros(0, np.int64), f1, f1, f1.copy())
-    _kernels.fiber_excess(f1, f1, f1, f1, f1, f1, f1, f1, np.zeros(0, np.int64), f1.copy())
-    _kernels.discs_near_segments(p3, p3, np.zeros((1, 3)), np.ones(1))
-    for kernel in (_kernels.segments_blocked, _kernels.segments_blocked_grid):
+    _fracture_kernels.fiber_excess(f1, f1, f1, f1, f1, f1, f1, f1, np.zeros(0, np.int64), f1.copy())
+    _visibility_kernels.discs_near_segments(p3, p3, np.zeros((1, 3)), np.ones(1))
+    for kernel in (_visibility_kernels.segments_blocked, _visibility_kernels.segments_blocked_grid):
         kernel(p3, p3, np.zeros((1, 3)), np.ones((1, 3)), np.ones(1), b1.copy())
     _skinning_kernels.within_reach(p3, np.zeros(0, np.int64), f1, 1.0, np.zeros((1, 3)))
 
@@ -89,7 +89,7 @@ class Tearing:
     def _fracture(self) -> None:
         st = self.fibers
         with threads_for(len(st), key="fracture_scan"):
-            over, bad = _kernels.fracture_scan(self._x_force, self.topology.fibers, self._last.umbrella, self.topology.soft,
+            over, bad = _fracture_kernels.fracture_scan(self._x_force, self.topology.fibers, self._last.umbrella, self.topology.soft,
                                                self._last.lengths, self._last.angles,
                                                st.rest_length(), st.rest_angle(), st.fracture_stretch,
                                                st.fracture_bend, DEGENERATE_RATIO**2)

@@ -59,12 +59,9 @@ def csr_from_groups(groups: np.ndarray, count: int) -> tuple[np.ndarray, np.ndar
     >>> csr_from_groups(np.array([1, 0, 1]), 3)
     (array([0, 1, 3, 3]), array([1, 0, 2]))
     """
-    from unmesh.shells import _kernels
+    from unmesh._csr_kernels import counting_sort_csr
 
-    keys = np.ascontiguousarray(groups, dtype=np.int64)
-    offsets = np.empty(int(count) + 1, dtype=np.int64)
-    order = np.empty(len(keys), dtype=np.int64)
-    _kernels.group_order(keys, int(count), offsets, order)
+    order, offsets = counting_sort_csr(np.ascontiguousarray(groups, dtype=np.int64), int(count))
     return offsets, order
 
 

@@ -25,8 +25,12 @@ and the tests themselves).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
+
+from unmesh._csr_kernels import counting_sort_csr, csr_rows
 
 # ---------------------------------------------------------------------------
 # Scalar helpers, callable from other numba kernels
@@ -151,14 +155,11 @@ def stencil_table(cell_keys, cell_start, dims, reach):
     return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def cell_of_sorted(cell_start, n):
-    """Non-empty-cell index of every sorted point, shape (N,) int64."""
-    out = np.empty(n, np.int64)
-    for c in prange(cell_start.shape[0] - 1):
-        for a in range(cell_start[c], cell_start[c + 1]):
-            out[a] = c
-    return out
+    """Non-empty-cell index of every sorted point, shape (N,) int64 (``n == cell_start[-1]``;
+    :func:`unmesh._csr_kernels.csr_rows`)."""
+    return csr_rows(cell_start)
 
 
 @njit(cache=True, parallel=True)
@@ -204,18 +205,9 @@ def compute_keys(points, origin, inv_cell, dims):
 
 @njit(cache=True)
 def counting_sort(keys, nkeys):
-    """Stable permutation sorting ``keys`` (values in ``[0, nkeys)``), shape (N,) int64."""
-    counts = np.zeros(nkeys + 1, np.int64)
-    for a in range(keys.shape[0]):
-        counts[keys[a] + 1] += 1
-    for c in range(nkeys):
-        counts[c + 1] += counts[c]
-    order = np.empty(keys.shape[0], np.int64)
-    for a in range(keys.shape[0]):
-        c = keys[a]
-        order[counts[c]] = a
-        counts[c] += 1
-    return order
+    """Stable permutation sorting ``keys`` (values in ``[0, nkeys)``), shape (N,) int64
+    (the ``order`` of :func:`unmesh._csr_kernels.counting_sort_csr`)."""
+    return counting_sort_csr(keys, nkeys)[0]
 
 
 @njit(cache=True)
@@ -411,3 +403,68 @@ def sample_efficiency(sp, cell_keys, cell_start, origin, inv_cell, dims, reach, 
                 if _dist2(sp, a, samples, b) <= r2:
                     hits += 1
     return cand, hits
+
+
+# ---------------------------------------------------------------------------
+# Dense grid for use inside other kernels (every cell stored, same keying)
+# ---------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def dense_grid(points, cell, max_cells):
+    """Dense cell grid of the (N, 3) ``points`` built inside a kernel, with this module's keying.
+
+    Cells of edge at least ``cell`` over the points' bounding box, the edge doubled until
+    there are at most ``max_cells`` cells; point ``a`` is in cell :func:`point_cell` with key
+    :func:`cell_key`. Unlike the sparse grid of :func:`unmesh.spatial.build_cell_grid` every
+    cell has an entry, so a kernel visits the cells around a point by key without a search.
+    A point within ``cell`` of a grid point lies in the 27 cells around its
+    :func:`dense_cell` (clipped to the grid).
+
+    Returns
+    -------
+    origin : (3,) float64
+        The box's lower corner.
+    cell, inv_cell : float
+        The cell edge used and its inverse.
+    dims : (3,) int64
+        Cells per axis.
+    start, order : int64 arrays
+        The points of key ``g`` are ``order[start[g]:start[g + 1]]``
+        (:func:`unmesh._csr_kernels.counting_sort_csr`).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> origin, cell, inv, dims, start, order = dense_grid(np.array([[0.0, 0, 0], [1.0, 0, 0]]), 0.6, 64)
+    >>> dims.tolist(), order.tolist()
+    ([2, 1, 1], [0, 1])
+    """
+    n = points.shape[0]
+    if n == 0:
+        origin = np.zeros(3)
+        upper = np.zeros(3)
+    else:
+        origin, upper = bounds(points)
+    ext = max(upper[0] - origin[0], upper[1] - origin[1], upper[2] - origin[2])
+    h = cell
+    while ((int((upper[0] - origin[0]) / h) + 1) * (int((upper[1] - origin[1]) / h) + 1)
+           * (int((upper[2] - origin[2]) / h) + 1) > max_cells):
+        h = max(2.0 * h, ext / 64.0)
+    inv = 1.0 / h
+    dims = np.empty(3, np.int64)
+    for d in range(3):
+        dims[d] = int((upper[d] - origin[d]) * inv) + 1
+    keys = np.empty(n, np.int64)
+    for a in range(n):
+        i, j, k = point_cell(points[a], origin, inv, dims)
+        keys[a] = cell_key(i, j, k, dims)
+    order, start = counting_sort_csr(keys, dims[0] * dims[1] * dims[2])
+    return origin, h, inv, dims, start, order
+
+
+@njit(cache=True, inline="always")
+def dense_cell(x, y, z, origin, inv_cell):
+    """Unclamped cell ``(i, j, k)`` of the point ``(x, y, z)`` in a :func:`dense_grid` (clip the ranges)."""
+    return (math.floor((x - origin[0]) * inv_cell), math.floor((y - origin[1]) * inv_cell),
+            math.floor((z - origin[2]) * inv_cell))

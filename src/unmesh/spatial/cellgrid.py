@@ -16,10 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
 from unmesh._validate import as_points, positive_scalar
 from unmesh.errors import InputError
 from unmesh.spatial import _kernels as K
-from unmesh.spatial._threads import serial_if_small
 
 __all__ = ["MAX_CELLS_PER_AXIS", "CellGrid", "build_cell_grid", "cell_reach"]
 

@@ -13,10 +13,10 @@ import math
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
 from unmesh._validate import as_array, as_points, first_index, positive_scalar
 from unmesh.errors import InputError
 from unmesh.spatial import _hash_kernels as H
-from unmesh.spatial._threads import serial_if_small
 
 __all__ = ["HashGrid"]
 

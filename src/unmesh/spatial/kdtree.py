@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from unmesh._threads import SERIAL_BELOW, serial_if_small
 from unmesh._validate import as_points, positive_scalar
 from unmesh.errors import InputError
 from unmesh.spatial import _kernels as K
-from unmesh.spatial._threads import SERIAL_BELOW, serial_if_small
 
 __all__ = ["KDTree"]
 

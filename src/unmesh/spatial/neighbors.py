@@ -10,11 +10,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from unmesh._threads import serial_if_small
 from unmesh._validate import as_points, scalar
 from unmesh.errors import InputError
 from unmesh.spatial import _kernels as K
 from unmesh.spatial import _pair_kernels as PK
-from unmesh.spatial._threads import serial_if_small
 from unmesh.spatial.cellgrid import CellGrid, _build, _dim_of
 from unmesh.spatial.kdtree import KDTree
 

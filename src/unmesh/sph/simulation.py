@@ -32,15 +32,15 @@ Example
 
 from __future__ import annotations
 
-import contextlib
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
 from unmesh._validate import as_array, as_points
 from unmesh.errors import InputError
 from unmesh.sim import Simulation
@@ -57,7 +57,8 @@ from unmesh.sph.state import FLUID, SOLID, ParticleState
 
 __all__ = ["SPHConfig", "SPHObject", "SPHSimulation"]
 
-#: Below this many particles the kernels run on one thread (thread start-up costs more than it saves).
+#: Below this many particles the kernels run on one thread (thread start-up costs more than it saves;
+#: :func:`unmesh._threads.serial_if_small`).
 PARALLEL_MIN = 2000
 
 _PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed")
@@ -204,22 +205,6 @@ class _Timers:
     extra: dict[str, float] = field(default_factory=dict)
 
 
-@contextlib.contextmanager
-def _threads(n: int) -> Iterator[None]:
-    """Run numba kernels on one thread for small particle counts."""
-    import numba
-
-    if n >= PARALLEL_MIN:
-        yield
-        return
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)
-
-
 class SPHSimulation(Simulation):
     """Weakly compressible SPH with elastic lattice forces, phase changes and fracture.
 
@@ -314,7 +299,7 @@ class SPHSimulation(Simulation):
         self._problem: str | None = None
         self._diag = (0.0, 0.0, 0.0, 0.0, 0)
         self._skins = self._bind_skins()
-        with _threads(len(self.x)):
+        with serial_if_small(len(self.x), PARALLEL_MIN):
             self._update(prime=True)
             self._diag = K.diagnostics(self.x, self.v, self.a, self.m, self.rho, self.mat, self.mats)
         self._v_limit = self._speed_limit()
@@ -586,7 +571,7 @@ class SPHSimulation(Simulation):
 
     def step(self) -> float:
         """Advance one time step (kick-drift-kick velocity Verlet); returns Δt."""
-        with _threads(len(self.x)):
+        with serial_if_small(len(self.x), PARALLEL_MIN):
             return self._step()
 
     def _step(self) -> float:
@@ -821,7 +806,7 @@ class SPHSimulation(Simulation):
         self.dt_last = float(state["dt_last"])
         self._problem = None
         # neighbour lists for diagnostics and surfaces at the restored positions
-        with _threads(len(self.x)):
+        with serial_if_small(len(self.x), PARALLEL_MIN):
             self._sort()
             self._density()
             self._ensure_scratch()

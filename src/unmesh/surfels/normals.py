@@ -67,7 +67,8 @@ def pca_normals(points: Any, k: int = 16) -> np.ndarray:
 
 
 def _pca(pts: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    from unmesh.surfels._kernels import neighbour_covariances, smallest_eigenvectors
+    from unmesh._linalg_kernels import smallest_eigenvectors
+    from unmesh.surfels._normals_kernels import neighbour_covariances
 
     return smallest_eigenvectors(neighbour_covariances(pts, idx))
 
@@ -100,7 +101,7 @@ def orient_normals(points: Any, normals: Any, k: int = 16) -> np.ndarray:
 
 def _orient(pts: np.ndarray, nrm: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """Orient unit normals ``nrm`` in place along the MST of the neighbour graph ``idx``."""
-    from unmesh.surfels._kernels import forest_bfs, kruskal_forest, propagate_orientation
+    from unmesh.surfels._normals_kernels import forest_bfs, kruskal_forest, propagate_orientation
 
     n = len(pts)
     kg = min(idx.shape[1], GRAPH_K + 1)
@@ -209,7 +210,7 @@ def orient_reference(points: np.ndarray, normals: np.ndarray, idx: np.ndarray) -
 
 
 def covariance_reference(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
-    """Numpy reference of :func:`unmesh.surfels._kernels.neighbour_covariances`."""
+    """Numpy reference of :func:`unmesh.surfels._normals_kernels.neighbour_covariances`."""
     out = np.zeros((len(points), 3, 3))
     for i, row in enumerate(nbrs):
         sel = points[row[row >= 0]]
@@ -221,7 +222,7 @@ def covariance_reference(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
 
 def propagate_reference(points: np.ndarray, normals: np.ndarray, order: np.ndarray, parent: np.ndarray,
                         min_dot: float = 0.3) -> np.ndarray:
-    """Python reference of :func:`unmesh.surfels._kernels.propagate_orientation` (returns a copy)."""
+    """Python reference of :func:`unmesh.surfels._normals_kernels.propagate_orientation` (returns a copy)."""
     out = normals.copy()
     for i in order:
         p = parent[i]

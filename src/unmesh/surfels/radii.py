@@ -84,7 +84,7 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
     0.707107
     """
     from unmesh.spatial import KDTree
-    from unmesh.surfels._kernels import voronoi_radii
+    from unmesh.surfels._radii_kernels import voronoi_radii
 
     pts = as_points(points, "points")
     n = len(pts)
@@ -147,7 +147,7 @@ def _positive_scale(dist: np.ndarray) -> np.ndarray:
 def _subset_radii(pts: np.ndarray, nrm: np.ndarray, rows: np.ndarray, nbrs: np.ndarray, clip: np.ndarray,
                   oriented: bool) -> tuple[np.ndarray, np.ndarray]:
     """Voronoi radii of the points ``rows`` with neighbour lists ``nbrs`` (indices into pts)."""
-    from unmesh.surfels._kernels import voronoi_radii
+    from unmesh.surfels._radii_kernels import voronoi_radii
 
     # Put the subset first, followed by every point it references, and relabel.
     used = np.unique(np.concatenate([rows, nbrs[nbrs >= 0]]))
@@ -187,7 +187,7 @@ def _valid_scale(dist: np.ndarray, valid: np.ndarray, k: int) -> np.ndarray:
 def voronoi_radii_reference(points: np.ndarray, normals: np.ndarray, nbrs: np.ndarray, clip: np.ndarray,
                             oriented: bool, min_dot: float = MIN_DOT, sides: int = 16,
                             rows: Any = None) -> tuple[np.ndarray, np.ndarray]:
-    """Numpy reference of :func:`unmesh.surfels._kernels.voronoi_radii`.
+    """Numpy reference of :func:`unmesh.surfels._radii_kernels.voronoi_radii`.
 
     Independent formulation: the cell's vertices are all pairwise intersections
     of its bounding lines (bisectors and clip-polygon edges) that satisfy every

@@ -53,7 +53,7 @@ def ldc_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float,
     Ordered by ray axis (x, y, z), then by face, then by lattice position.
     ``vertices`` (V,3) float64 and ``faces`` (F,3) int64 must be C-contiguous.
     """
-    from unmesh.surfels._kernels import ldc_count, ldc_fill
+    from unmesh.surfels._sampling_kernels import ldc_count, ldc_fill
 
     nf = len(faces)
     bar = None

@@ -106,7 +106,7 @@ def cluster(points: Any, normals: Any = None, *, target: int | None = None, max_
     >>> int(labels.max()) + 1, int(np.bincount(labels).min()) > 0
     (50, True)
     """
-    from unmesh.surfels._kernels import cluster_split
+    from unmesh.surfels._cluster_kernels import cluster_split
 
     pts = as_points(points, "points")
     n = len(pts)
@@ -256,7 +256,7 @@ def cluster_reference(points: np.ndarray, normals: np.ndarray | None, target: in
         return max(w[2], 0.0), canonical(axis), (w[0] / tot if tot > 0 else 0.0), c, spread
 
     def split(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from unmesh.surfels._kernels import MIN_NORMAL_SHARE
+        from unmesh.surfels._cluster_kernels import MIN_NORMAL_SHARE
 
         _, axis, _, c, spread = stats(idx)
         side = (normals[idx] @ axis <= 0) if spread else ((pts[idx] - c) @ axis <= 0)
@@ -272,7 +272,7 @@ def cluster_reference(points: np.ndarray, normals: np.ndarray | None, target: in
 
     clusters: list[np.ndarray] = [np.arange(n)]
     if target > 0:
-        from unmesh.surfels._kernels import SPREAD_WEIGHT
+        from unmesh.surfels._cluster_kernels import SPREAD_WEIGHT
 
         def key(idx: np.ndarray) -> float:
             if len(idx) < 2:
