@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unmesh.errors import InputError
+from unmesh.errors import FormatError, InputError
 from unmesh.io._common import colors_from_file, fail, float32_exact, format_rows, is_file, read_image, write_png
 from unmesh.io._meshbuild import fan_triangulate, split_corners
 from unmesh.io.atomic import atomic_path
@@ -132,6 +132,8 @@ def _parse_faces(rows: list[str], lines: list[int], path: str | os.PathLike[str]
                 if max(abs(x) for x in ref) > _MAX_INDEX:
                     raise fail(path, "f", f"line {lines[r] + 1}: vertex reference {t[:40]!r} out of range")
                 out.append(ref)
+        except FormatError:
+            raise
         except ValueError:
             raise fail(path, "f", f"line {lines[r] + 1}: cannot parse vertex reference {t[:40]!r}") from None
     offsets = np.zeros(len(rows) + 1, np.int64)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unmesh.errors import InputError
+from unmesh.errors import FormatError, InputError
 from unmesh.io._common import colors_from_file, fail, float32_exact, format_rows
 from unmesh.io._meshbuild import fan_triangulate
 from unmesh.meshes import TriangleMesh
@@ -171,6 +171,8 @@ def _face_table(path: str | os.PathLike[str], rows: list[str]) -> tuple[np.ndarr
                 if ids and max(abs(i) for i in ids) > 2**62:
                     raise fail(path, "face", f"row {r}: vertex index {max(ids, key=abs)} out of range")
                 out.extend(ids)
+        except FormatError:
+            raise
         except ValueError:
             raise fail(path, "face", f"row {r}: cannot parse {row[:60]!r}") from None
         if not ok:
