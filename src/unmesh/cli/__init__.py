@@ -87,7 +87,10 @@ def _split_debug(argv: Sequence[str]) -> tuple[list[str], bool]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered sub-command."""
-    parser = _Parser(prog="unmesh", description="Modeling and animation with relaxed connectivity.")
+    parser = _Parser(prog="unmesh", description="Modeling and animation with relaxed connectivity.",
+                     epilog="Environment: UNMESH_MEMORY_BUDGET (default 4GiB, 0 = no limit) caps what a file "
+                            "header or a scene may make unmesh allocate; larger inputs are refused up front "
+                            "with an estimate. 'unmesh scenes' lists the shipped example scenes.")
     parser.add_argument("--version", action="version", version=f"unmesh {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
