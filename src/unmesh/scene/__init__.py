@@ -7,6 +7,18 @@ key. :meth:`Table.finish` rejects unknown keys with a suggestion, so typos never
 pass silently. Paths inside a scene are relative to the scene file. Shape specs
 (built-in shapes or mesh files) are described in :mod:`unmesh.scene.shapes`.
 
+Shared by every simulation (sph, shells, fem), so that they read and report alike:
+
+- :meth:`Table.guard` / :meth:`Table.call`: the one conversion of an
+  :class:`~unmesh.errors.InputError` or :class:`~unmesh.errors.FormatError` raised
+  while building from a key into a SceneError naming the file and key;
+- ``Table.number(key, infinite=True)`` with :func:`parse_infinite`: the one reading
+  of "no limit" values (TOML ``inf``, ``"inf"``, ``"off"``, ``"none"``);
+- :meth:`Table.check_budget`: sizes a scene implies against the memory budget
+  (``UNMESH_MEMORY_BUDGET``, :mod:`unmesh.io.budget`), refused with the estimate;
+- :func:`resolve_scene` / :func:`shipped_scenes` / :func:`describe_scene`: shipped
+  scenes by name (``unmesh sph dam_break``) and ``unmesh scenes``.
+
 Example
 -------
 >>> import tempfile, pathlib

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.errors import FormatError, InputError
+from unmesh.errors import SceneError
 
 __all__ = ["COORDINATE_LIMIT", "placement_matrix", "shape_from_table"]
 
@@ -107,18 +107,12 @@ def shape_from_table(t: Any) -> Any:
         from unmesh import io
 
         path = t.path("file")
-        try:
-            mesh = io.load_mesh(path)
-        except (FormatError, InputError) as exc:
-            raise t.error("file", str(exc)) from None
+        mesh = t.call("file", io.load_mesh, path)
         lo, hi = mesh.bounds()
         shift = np.eye(4)
         shift[:3, 3] = -(lo + hi) / 2.0
         mesh = mesh.transformed(placement_matrix(center, rotate, scale) @ shift)
-        try:
-            return shapes.MeshShape(mesh)
-        except InputError as exc:
-            raise t.error("file", str(exc)) from None
+        return t.call("file", shapes.MeshShape, mesh)
     kind = t.string("type")
     params: dict[str, Any] = {}
     for key in t.keys():
@@ -126,9 +120,9 @@ def shape_from_table(t: Any) -> Any:
             continue
         params[key] = _param(t, key, t.raw(key))
     try:
-        shape = shapes.by_name(kind, **params)
-    except InputError as exc:
-        raise t.error("type", str(exc)) from None
+        shape = t.call("type", shapes.by_name, kind, **params)
+    except SceneError:
+        raise
     except (TypeError, ValueError) as exc:  # parameters of the wrong kind for this shape
         raise t.error("type", f"bad parameters for shape {kind!r}: {exc}") from None
     m = placement_matrix(center, rotate, scale)
