@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import struct
-import warnings
 
 import numpy as np
 import pytest
 
 from unmesh import io
-from unmesh.errors import FormatError
+from unmesh.errors import FormatError, InputError
 from unmesh.io.budget import budget_problem, format_bytes, memory_budget, parse_size
 from unmesh.meshes import TriangleMesh
 
@@ -114,9 +113,19 @@ def test_knn_point_at_1e200_and_normals(rng):
         full = np.sqrt(((pts[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2))
     order = np.lexsort((np.broadcast_to(np.arange(30), (30, 30)), full), axis=1)[:, :6]
     np.testing.assert_array_equal(i, order)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        assert estimate_normals(pts).shape == (30, 3)
+    with pytest.raises(InputError, match=r"points: expected coordinates of magnitude <= 1e\+150 .* at row 7"):
+        estimate_normals(pts)
+
+
+def test_point_file_at_1e200_without_normals_is_a_documented_error(tmp_path, rng):
+    from unmesh.particles import Particles
+
+    pts = rng.random((30, 3))
+    pts[7] = [1e200, 1.0, 0.0]
+    p = tmp_path / "far.ply"
+    io.save(p, Particles(pts))
+    with pytest.raises(InputError, match="row 7"):
+        io.load_surfels(p)
 
 
 def test_memory_budget_parsing(monkeypatch):
