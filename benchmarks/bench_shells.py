@@ -63,11 +63,11 @@ def overrides(figure: str) -> tuple[str, dict]:
 def measure(figure: str, frames: int) -> dict:
     from unmesh.scene import load_scene
     from unmesh.scenes import path
-    from unmesh.shells.scene import build_shell_simulation
+    from unmesh.shells.scene import build_simulation
 
     name, over = overrides(figure)
     t0 = time.perf_counter()
-    sim, settings = build_shell_simulation(load_scene(path(f"shells/{name}.toml"), over))
+    sim, settings = build_simulation(load_scene(path(f"shells/{name}.toml"), over))
     setup = time.perf_counter() - t0
     steps = round(1.0 / FPS / sim.dt)
     if frames <= 0:  # the whole animation of the scene, as the thesis averaged

@@ -9,7 +9,7 @@ import pytest
 
 from unmesh.errors import SceneError
 from unmesh.scene import load_scene
-from unmesh.shells.scene import build_shell_simulation
+from unmesh.shells.scene import build_simulation
 
 SHEET = """
 [simulation]
@@ -92,13 +92,13 @@ def test_resume_continues_a_run(tmp_path):
 
 def test_scene_errors_name_file_and_key(tmp_path):
     with pytest.raises(SceneError, match=r"sheet.toml: unknown key 'material.stifness'"):
-        build_shell_simulation(load_scene(write(tmp_path, extra="stifness = 3")))
+        build_simulation(load_scene(write(tmp_path, extra="stifness = 3")))
     with pytest.raises(SceneError, match=r"sheet.toml: key 'surface.nodes': expected fewer simulation nodes"):
-        build_shell_simulation(load_scene(write(tmp_path, nodes=5000)))
+        build_simulation(load_scene(write(tmp_path, nodes=5000)))
     with pytest.raises(SceneError, match="at least 10 simulation nodes"):
-        build_shell_simulation(load_scene(write(tmp_path, nodes=4)))
+        build_simulation(load_scene(write(tmp_path, nodes=4)))
     with pytest.raises(SceneError, match=r"material\.fracture\.gamma_s"):
-        build_shell_simulation(load_scene(write(tmp_path, extra="[material.fracture]\ngamma_s = -1")))
+        build_simulation(load_scene(write(tmp_path, extra="[material.fracture]\ngamma_s = -1")))
 
 
 def test_disconnected_input_is_rejected(tmp_path):
@@ -113,7 +113,7 @@ def test_disconnected_input_is_rejected(tmp_path):
     scene.write_text('[simulation]\ndt = 0.001\nduration = 0.1\n[surface]\nsurfels = "two.ply"\nnodes = 200\n'
                      '[material]\nks = 1.0\nkb = 1.0\n')
     with pytest.raises(SceneError, match="disconnected"):
-        build_shell_simulation(load_scene(scene))
+        build_simulation(load_scene(scene))
 
 
 def test_non_manifold_mesh_is_rejected(tmp_path):
@@ -127,14 +127,14 @@ def test_non_manifold_mesh_is_rejected(tmp_path):
     scene.write_text('[simulation]\ndt = 0.001\nduration = 0.1\n[surface]\nshape = { file = "fin.obj" }\n'
                      'spacing = 0.02\nnodes = 50\n[material]\nks = 1.0\nkb = 1.0\n')
     with pytest.raises(SceneError, match="non-manifold"):
-        build_shell_simulation(load_scene(scene))
+        build_simulation(load_scene(scene))
 
 
 @pytest.mark.parametrize("name", ["elastic_drop", "plastic_drop", "tearing_poster", "balloon", "hanging_sheet"])
 def test_shipped_scenes_build(name):
     from unmesh.scenes import path
 
-    sim, settings = build_shell_simulation(load_scene(path(f"shells/{name}.toml"), {
+    sim, settings = build_simulation(load_scene(path(f"shells/{name}.toml"), {
         "surface.nodes": 150, "surface.spacing": {"elastic_drop": 1.0, "plastic_drop": 1.2, "tearing_poster": 0.8,
                                                  "balloon": 0.8, "hanging_sheet": 0.03}[name]}))
     assert len(sim.rest) == 150 and settings.duration > 0

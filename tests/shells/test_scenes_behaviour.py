@@ -9,13 +9,13 @@ import pytest
 
 from unmesh import io
 from unmesh.scenes import path
-from unmesh.shells.scene import build_shell_simulation
+from unmesh.shells.scene import build_simulation
 from unmesh.sim.cli import run_scene
 
 
 def run(tmp_path, name, overrides=None, duration=None):
     out = tmp_path / name
-    run_scene(path(f"shells/{name}.toml"), out, build_shell_simulation, overrides=overrides, duration=duration,
+    run_scene(path(f"shells/{name}.toml"), out, build_simulation, overrides=overrides, duration=duration,
               progress=False)
     return out, json.loads((out / "summary.json").read_text())
 

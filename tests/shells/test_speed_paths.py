@@ -324,7 +324,7 @@ def test_local_rebuild_equals_the_reference_on_the_tearing_poster(monkeypatch):
     from unmesh.scenes import path
     from unmesh.shells import rebuild, tearing
     from unmesh.shells.fracture import rebuild_near as reference
-    from unmesh.shells.scene import build_shell_simulation
+    from unmesh.shells.scene import build_simulation
 
     events = []
 
@@ -341,7 +341,7 @@ def test_local_rebuild_equals_the_reference_on_the_tearing_poster(monkeypatch):
         return got
 
     monkeypatch.setattr(tearing, "rebuild_local", both)
-    sim, _ = build_shell_simulation(load_scene(path("shells/tearing_poster.toml")))
+    sim, _ = build_simulation(load_scene(path("shells/tearing_poster.toml")))
     for _ in range(1100):
         sim.step()
         assert sim.check() is None

@@ -40,6 +40,7 @@ from unmesh.fem.integration import ElementIntegration, IntegrationRule, integrat
 from unmesh.fem.mesh import PolyMesh
 from unmesh.fem.mvc import mean_value_coordinates
 from unmesh.fem.rotations import horn_rotations
+from unmesh.fem.scene import build_simulation
 from unmesh.fem.slivers import find_slivers, remove_slivers
 
 __all__ = [
@@ -53,6 +54,7 @@ __all__ = [
     "PolygonCut",
     "Prescribed",
     "apply_cuts",
+    "build_simulation",
     "constitutive_matrix",
     "convex_polyhedron",
     "cut_by_plane",

@@ -23,8 +23,10 @@ def _build(scene: Any) -> Any:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from unmesh.scene import resolve_scene
     from unmesh.sim.cli import run_scene_command
 
+    args.scene = str(resolve_scene(args.scene, "fem"))  # a shipped scene by name: unmesh fem blob_slicing
     return run_scene_command(args, _build)
 
 
@@ -43,6 +45,7 @@ def register(sub: Any) -> None:
                        description="Run a finite element scene: polyhedral meshes with mean value shape functions, "
                                    "stiffness warping, implicit Euler, scripted cuts. Writes frames/mesh_NNNNN.vtu + "
                                    "mesh.pvd (ParaView), frames/surface_NNNNN.ply, frames.json and summary.json "
-                                   "into OUTDIR (docs/fem_scene.md).")
+                                   "into OUTDIR (docs/fem_scene.md). SCENE may also name a shipped scene, e.g. "
+                                   "'unmesh fem blob_slicing -o out' (list: 'unmesh scenes').")
     add_run_arguments(p)
     p.set_defaults(func=_run)

@@ -22,11 +22,8 @@ Example
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from unmesh.errors import FormatError, InputError
 from unmesh.fem import builders
 from unmesh.fem.dynamics import Dynamics, Ground, Load, Prescribed
 from unmesh.fem.events import BladeEvent, CutEvent, PlaneEvent, PolygonEvent, RandomSplitsEvent
@@ -40,11 +37,9 @@ __all__ = ["build_mesh", "build_simulation"]
 MESH_TYPES = ("hex_grid", "voronoi", "convex", "tetgen", "file")
 
 
-def _wrap(t: Table, key: str, fn: Any, *args: Any, **kw: Any) -> Any:
-    try:
-        return fn(*args, **kw)
-    except (InputError, FormatError) as exc:
-        raise t.error(key, str(exc)) from None
+#: Bytes per hexahedral cell of a grid mesh: its 24x24 stiffness block and the
+#: sparse-matrix, integration and cutting data that go with it.
+_CELL_BYTES = 8192
 
 
 def build_mesh(t: Table) -> PolyMesh:
@@ -65,44 +60,47 @@ def build_mesh(t: Table) -> PolyMesh:
             raise t.error("cells", f"expected three positive integers, got {cells.tolist()}")
         size = t.vector("size", 3, (1.0, 1.0, 1.0), positive=True)
         origin = t.vector("origin", 3, (0.0, 0.0, 0.0))
-        return _wrap(t, "cells", builders.hex_grid, cells.astype(int), size, origin)
+        ncells = float(np.prod(cells))
+        t.check_budget("cells", ncells * _CELL_BYTES, f"a hex grid of {' x '.join(str(int(c)) for c in cells)} "
+                                                      f"= {ncells:.3g} cells")
+        return t.call("cells", builders.hex_grid, cells.astype(int), size, origin)
     if kind == "voronoi":
         n = t.integer("cells", minimum=1)
         size = t.vector("size", 3, (1.0, 1.0, 1.0), positive=True)
         origin = t.vector("origin", 3, (0.0, 0.0, 0.0))
         seed = t.integer("seed", 0, minimum=0)
-        return _wrap(t, "cells", builders.voronoi_foam, n, size, origin, seed)
+        t.check_budget("cells", float(n) * _CELL_BYTES * 4, f"a Voronoi foam of {n} cells")
+        return t.call("cells", builders.voronoi_foam, n, size, origin, seed)
     if kind == "convex":
         if "points" in t:
             pts = t.array_of_numbers("points", shape=(None, 3))
         else:
             count = t.integer("random", minimum=4)
+            t.check_budget("random", float(count) * 512, f"a convex hull of {count} random points")
             radius = t.number("radius", 0.5, positive=True)
             center = t.vector("center", 3, (0.0, 0.0, 0.0))
             seed = t.integer("seed", 0, minimum=0)
             rng = np.random.default_rng(seed)
             d = rng.normal(size=(count, 3))
             pts = center + radius * d / np.linalg.norm(d, axis=1, keepdims=True)
-        return _wrap(t, "points", builders.convex_polyhedron, pts)
+        return t.call("points", builders.convex_polyhedron, pts)
     if kind == "tetgen":
         shape = t.shape("shape")
         spacing = t.number("spacing", None, positive=True)
         max_volume = t.number("max_volume", None, positive=True)
         quality = t.number("quality", 1.6, minimum=1.0)
-        try:
+        with t.guard("shape"):
             surf = shape.mesh(spacing) if spacing is not None else shape.mesh()
-        except InputError as exc:
-            raise t.error("shape", str(exc)) from None
-        return _wrap(t, "shape", builders.tetrahedralize, surf, max_volume=max_volume, quality=quality)
+        return t.call("shape", builders.tetrahedralize, surf, max_volume=max_volume, quality=quality)
     path = t.path("file")
     from unmesh.fem.vtk_io import read_vtu
 
     if path.suffix.lower() == ".vtu":
-        return _wrap(t, "file", read_vtu, path)[0]
+        return t.call("file", read_vtu, path)[0]
     from unmesh import io
 
-    surf = _wrap(t, "file", io.load_mesh, path)
-    return _wrap(t, "file", builders.tetrahedralize, surf, max_volume=t.number("max_volume", None, positive=True))
+    surf = t.call("file", io.load_mesh, path)
+    return t.call("file", builders.tetrahedralize, surf, max_volume=t.number("max_volume", None, positive=True))
 
 
 def _material(t: Table | None, default: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -160,10 +158,7 @@ def _events(scene: Table) -> list[CutEvent]:
             start = c.number("start", nonnegative=True)
             stop = c.number("stop", positive=True)
             path = c.array_of_numbers("path", shape=(None, 2, 3))
-            try:
-                out.append(BladeEvent(start, stop, path))
-            except InputError as exc:
-                raise c.error("path", str(exc)) from None
+            out.append(c.call("path", BladeEvent, start, stop, path))
     return out
 
 
@@ -214,18 +209,16 @@ def build_simulation(scene: Table) -> tuple[FemSimulation, RunSettings]:
     for b in scene.array("boundary"):
         nodes = _select(b, mesh, "select")
         prescribed.append(Prescribed(nodes, tuple(b.vector("velocity", 3, (0.0, 0.0, 0.0))),
-                                     b.number("start", 0.0, nonnegative=True), b.number("stop", float("inf"), positive=True)))
+                                     b.number("start", 0.0, nonnegative=True), b.number("stop", float("inf"), positive=True, infinite=True)))
     loads = []
     for ld in scene.array("loads"):
         loads.append(Load(_select(ld, mesh, "select"), tuple(ld.vector("force", 3))))
     events = _events(scene)
     scene.finish()
-    try:
+    with scene.guard(None):
         dyn = Dynamics(mesh, young, poisson, density, gravity=gravity, prescribed=prescribed, ground=ground,
                        loads=loads, rayleigh=(float(damping[0]), float(damping[1])), solver=solver, warping=warping,
                        correction=correction, cg_tol=cg_tol)
-    except InputError as exc:
-        raise scene.error(None, str(exc)) from None
     offset = 0
     for m, v in zip(meshes, vels, strict=True):
         dyn.v[offset:offset + m.n_nodes] = v

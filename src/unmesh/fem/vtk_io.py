@@ -155,24 +155,91 @@ def write_pvd(path: str | os.PathLike[str], files: Sequence[str], times: Sequenc
 
 
 def _read_array(el: ET.Element, path: Path) -> np.ndarray:
+    """One DataArray as (n,) or (n, NumberOfComponents); every inconsistency is a FormatError."""
+    name = el.get("Name")
+    where = f"{path}: DataArray {name!r}"
     dtype = _NP.get(el.get("type", ""))
     if dtype is None:
-        raise FormatError(f"{path}: DataArray {el.get('Name')!r}: unsupported type {el.get('type')!r}")
+        raise FormatError(f"{where}: unsupported type {el.get('type')!r}")
+    raw_comp = el.get("NumberOfComponents", "1")
+    try:
+        ncomp = int(raw_comp)
+    except ValueError:
+        ncomp = 0
+    if not 1 <= ncomp <= 64:
+        raise FormatError(f"{where}: NumberOfComponents: expected an integer from 1 to 64, got {raw_comp[:40]!r}")
     fmt = el.get("format", "ascii")
     text = (el.text or "").strip()
     if fmt == "ascii":
-        arr = np.array(text.split(), dtype=dtype)
+        try:
+            arr = np.array(text.split(), dtype=dtype)
+        except (ValueError, OverflowError):
+            raise FormatError(f"{where}: values that are not {el.get('type')} numbers") from None
     elif fmt == "binary":
         try:
-            raw = base64.b64decode(text)
+            raw = base64.b64decode(text, validate=True)
         except ValueError:
-            raise FormatError(f"{path}: DataArray {el.get('Name')!r}: bad base64 data") from None
+            raise FormatError(f"{where}: bad base64 data") from None
+        if len(raw) < 8:
+            raise FormatError(f"{where}: binary data shorter than its 8-byte length header")
         nbytes = struct.unpack("<Q", raw[:8])[0]
-        arr = np.frombuffer(raw[8:8 + nbytes], dtype=dtype).copy()
+        if nbytes != len(raw) - 8:
+            raise FormatError(f"{where}: the length header says {nbytes} bytes, the data has {len(raw) - 8}")
+        if nbytes % dtype.itemsize:
+            raise FormatError(f"{where}: {nbytes} bytes is not a whole number of {el.get('type')} values")
+        arr = np.frombuffer(raw, dtype=dtype.newbyteorder("<"), offset=8).astype(dtype)
     else:
-        raise FormatError(f"{path}: DataArray {el.get('Name')!r}: format {fmt!r} not supported (ascii or binary)")
-    ncomp = int(el.get("NumberOfComponents", "1"))
+        raise FormatError(f"{where}: format {fmt!r} not supported (ascii or binary)")
+    if arr.size % ncomp:
+        raise FormatError(f"{where}: {arr.size} values are not a whole number of tuples of {ncomp} components")
     return arr.reshape(-1, ncomp) if ncomp > 1 else arr
+
+
+def _count(piece: ET.Element, key: str, path: Path) -> int | None:
+    raw = piece.get(key)
+    if raw is None:
+        return None
+    try:
+        n = int(raw)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise FormatError(f"{path}: Piece {key}: expected a count >= 0, got {raw[:40]!r}")
+    return n
+
+
+def _polyhedra(faces: np.ndarray, ends: np.ndarray, npts: int, path: Path) -> list[list[list[int]]]:
+    """The ``faces`` / ``faceoffsets`` arrays -> cells as lists of faces (vertex lists), checked."""
+    if ends.ndim != 1 or faces.ndim != 1:
+        raise FormatError(f"{path}: DataArray 'faces' / 'faceoffsets': expected one component")
+    cells = []
+    start = 0
+    nfaces = len(faces)
+    for e, end in enumerate(ends.tolist()):
+        if not start < end <= nfaces:
+            raise FormatError(f"{path}: cell {e}: faceoffsets {end} outside ({start}, {nfaces}] "
+                              "(offsets must increase and stay inside the faces array)")
+        k = start
+        nf = int(faces[k])
+        k += 1
+        if not 1 <= nf <= end - k:
+            raise FormatError(f"{path}: cell {e}: {nf} faces announced in {end - start} values")
+        cell = []
+        for _ in range(nf):
+            if k >= end:
+                raise FormatError(f"{path}: cell {e}: faces array ends inside the cell")
+            sz = int(faces[k])
+            if not 0 <= sz <= end - k - 1:
+                raise FormatError(f"{path}: cell {e}: a face of {sz} vertices does not fit in the cell's values")
+            cell.append(faces[k + 1:k + 1 + sz].tolist())
+            k += 1 + sz
+        if k != end:
+            raise FormatError(f"{path}: cell {e}: faceoffsets does not match the faces array")
+        if len(cell) and (min(min(f, default=0) for f in cell) < 0 or max(max(f, default=0) for f in cell) >= npts):
+            raise FormatError(f"{path}: cell {e}: a vertex index outside [0, {npts})")
+        cells.append(cell)
+        start = end
+    return cells
 
 
 def read_vtu(path: str | os.PathLike[str], *, tolerance: float = 1e-6, abs_tolerance: float = 0.0,
@@ -204,7 +271,7 @@ def read_vtu(path: str | os.PathLike[str], *, tolerance: float = 1e-6, abs_toler
     p = Path(path)
     try:
         root = ET.parse(p).getroot()
-    except ET.ParseError as exc:
+    except (ET.ParseError, UnicodeError, ValueError) as exc:
         raise FormatError(f"{p}: not a valid XML file ({exc})") from None
     if root.get("type") != "UnstructuredGrid":
         raise FormatError(f"{p}: expected a VTK UnstructuredGrid file, got type {root.get('type')!r}")
@@ -219,33 +286,34 @@ def read_vtu(path: str | os.PathLike[str], *, tolerance: float = 1e-6, abs_toler
     for need in ("Points", "faces", "faceoffsets", "types"):
         if need not in arrays:
             raise FormatError(f"{p}: missing DataArray {need!r} (expected polyhedron cells)")
-    if np.any(arrays["types"] != VTK_POLYHEDRON):
-        raise FormatError(f"{p}: cell {int(np.flatnonzero(arrays['types'] != VTK_POLYHEDRON)[0])}: expected polyhedron (42)")
+    pts = arrays["Points"]
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise FormatError(f"{p}: DataArray 'Points': expected NumberOfComponents=\"3\", got shape {pts.shape}")
+    pts = pts.astype(np.float64)
+    if not np.all(np.isfinite(pts)):
+        raise FormatError(f"{p}: DataArray 'Points': NaN or infinite coordinates")
+    types = arrays["types"]
+    ends = arrays["faceoffsets"].astype(np.int64)
+    if types.ndim != 1 or len(types) != len(ends):
+        raise FormatError(f"{p}: DataArray 'types': {len(types)} cell types for {len(ends)} cells ('faceoffsets')")
+    for key, n in (("NumberOfPoints", len(pts)), ("NumberOfCells", len(ends))):
+        want = _count(piece, key, p)
+        if want is not None and want != n:
+            raise FormatError(f"{p}: Piece {key}={want} but the arrays hold {n}")
+    if np.any(types != VTK_POLYHEDRON):
+        raise FormatError(f"{p}: cell {int(np.flatnonzero(types != VTK_POLYHEDRON)[0])}: expected polyhedron (42)")
     pd_el = piece.find("PointData")
     pdata = {a.get("Name"): _read_array(a, p) for a in pd_el.iter("DataArray")} if pd_el is not None else {}
-    pts = arrays["Points"].astype(np.float64)
+    for name, arr in pdata.items():
+        if len(arr) != len(pts):
+            raise FormatError(f"{p}: point data {name!r}: {len(arr)} rows for {len(pts)} points")
     if "displacement" in pdata:
-        pts = pts - pdata["displacement"]
-    faces = arrays["faces"].astype(np.int64)
-    ends = arrays["faceoffsets"].astype(np.int64)
-    cells = []
-    start = 0
-    for e, end in enumerate(ends):
-        k = start
-        if k >= len(faces):
-            raise FormatError(f"{p}: cell {e}: faces array truncated")
-        nf = int(faces[k])
-        k += 1
-        cell = []
-        for _ in range(nf):
-            sz = int(faces[k])
-            cell.append(faces[k + 1:k + 1 + sz].tolist())
-            k += 1 + sz
-        if k != end:
-            raise FormatError(f"{p}: cell {e}: faceoffsets does not match the faces array")
-        cells.append(cell)
-        start = end
+        disp = pdata["displacement"]
+        if disp.shape != pts.shape or not np.all(np.isfinite(disp)):
+            raise FormatError(f"{p}: point data 'displacement': expected finite (N, 3) values, got shape {disp.shape}")
+        pts = pts - disp
+    cells = _polyhedra(arrays["faces"].astype(np.int64), ends, len(pts), p)
     try:
         return PolyMesh(pts, cells, tolerance=tolerance, abs_tolerance=abs_tolerance, check=check), pdata
-    except InputError as exc:
+    except (InputError, ValueError, IndexError) as exc:  # the mesh's own validation
         raise FormatError(f"{p}: {exc}") from None

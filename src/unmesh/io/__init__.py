@@ -15,7 +15,10 @@ Formats
 Every malformed, truncated or inconsistent file raises
 :class:`unmesh.errors.FormatError` whose message names the file and the element
 (``bunny.ply: element 'vertex': file ends after 120 of 3000 rows``); nothing is
-returned half-read. Every file is written atomically (temporary file + rename, see
+returned half-read. Counts and lengths read from a header are checked against the
+file's length before anything is allocated; scenes check the sizes they imply
+against the memory budget of :mod:`unmesh.io.budget` (environment variable
+``UNMESH_MEMORY_BUDGET``, default 4 GiB). Every file is written atomically (temporary file + rename, see
 :mod:`unmesh.io.atomic`): a failure leaves the previous file, or none.
 
 Example

@@ -31,9 +31,11 @@ from unmesh.errors import FormatError, InputError
 
 __all__ = [
     "PLY_TYPES",
+    "RECORDED_DTYPES",
     "fail",
     "float32_exact",
     "format_rows",
+    "is_file",
     "pack_attributes",
     "ply_type_for",
     "read_image",
@@ -55,6 +57,17 @@ PLY_NAME: dict[str, str] = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "u
                             "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
 
 _GROUP = re.compile(r"^(.+)_(\d+)$")
+
+#: The dtypes ``comment unmesh dtype NAME DTYPE`` may restore (those PLY cannot hold).
+RECORDED_DTYPES = frozenset({"bool", "int64", "uint64", "float16"})
+
+
+def is_file(path: Path) -> bool:
+    """``path.is_file()``, but False (not OSError) for names the OS refuses (e.g. too long)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def fail(path: str | os.PathLike[str], element: str | None, message: str) -> FormatError:
@@ -253,10 +266,10 @@ def regroup_attributes(columns: list[tuple[str, np.ndarray]], dtypes: Mapping[st
             i += k
         want = dtypes.get(name)
         if want is not None:
-            try:
-                arr = arr.astype(np.dtype(want))
-            except TypeError:
-                pass
+            if want not in RECORDED_DTYPES:
+                raise fail(path, element, f"comment 'unmesh dtype {name} {want}': expected one of "
+                                          f"{', '.join(sorted(RECORDED_DTYPES))}, got {want!r}")
+            arr = arr.astype(np.dtype(want))
         key = safe_attribute_name(name) if identifiers else name
         if key != name:
             warnings.warn(f"{os.fspath(path)}: element {element!r}: property {name!r} renamed to attribute {key!r}",
@@ -305,8 +318,8 @@ def colors_from_file(values: np.ndarray) -> np.ndarray:
 
 def read_image(path: Path, owner: str | os.PathLike[str], what: str) -> np.ndarray | None:
     """Read an RGB image as uint8 (H,W,3); a missing or unreadable file gives a warning and None."""
-    if not path.is_file():
-        warnings.warn(f"{os.fspath(owner)}: {what} file {os.fspath(path)!r} not found; loading without it",
+    if not is_file(path):
+        warnings.warn(f"{os.fspath(owner)}: {what} file {os.fspath(path)[:200]!r} not found; loading without it",
                       stacklevel=4)
         return None
     from PIL import Image

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from unmesh.io._common import PLY_NAME, PLY_TYPES, fail, format_rows
+from unmesh.io.budget import format_bytes
 
 __all__ = ["Element", "Header", "ListColumn", "Prop", "encode_ply", "parse_header", "read_ply"]
 
@@ -228,6 +229,12 @@ def _binary_element(data: bytes, pos: int, el: Element, bo: str,
         return {p.name: (ListColumn(np.zeros(1, np.int64), np.empty(0, p.code)) if p.is_list
                          else np.empty(0, p.code)) for p in el.props}, pos
     avail = len(data) - pos
+    minrow = sum(np.dtype(p.count_code if p.is_list else p.code).itemsize for p in el.props)
+    if el.count * minrow > avail:  # checked before allocating anything for the rows
+        exact = not any(p.is_list for p in el.props)
+        raise fail(path, el.name, f"file ends after {'' if exact else 'at most '}{avail // minrow} of "
+                                  f"{el.count} rows (the header announces {format_bytes(el.count * minrow)}"
+                                  f"{'' if exact else ' or more'}, {format_bytes(avail)} follow)")
     # Layout of the first row fixes the list lengths of the fast path.
     off = pos
     lengths: dict[int, int] = {}
@@ -241,6 +248,9 @@ def _binary_element(data: bytes, pos: int, el: Element, bo: str,
                 raise fail(path, el.name, f"row 0: property {p.name!r}: negative list length {n}")
             lengths[i] = n
             off += csz + n * np.dtype(p.code).itemsize
+            if off > len(data):
+                raise fail(path, el.name, f"row 0: property {p.name!r}: a list of {n} values runs past "
+                                          "the end of the file")
         else:
             off += np.dtype(p.code).itemsize
     fields: list[tuple] = []
@@ -384,7 +394,7 @@ def _ascii_element(rows: list[str], el: Element, path: str | os.PathLike[str]) -
                 break
             if p.is_list:
                 lens = table[:, c]
-                k = int(lens[0]) if lens[0] >= 0 and lens[0] == int(lens[0]) else -1
+                k = int(lens[0]) if np.isfinite(lens[0]) and 0 <= lens[0] <= ncol and lens[0] == int(lens[0]) else -1
                 if k < 0 or not np.all(lens == k) or c + 1 + k > ncol:
                     out = {}
                     break

@@ -40,8 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from unmesh.errors import InputError
-from unmesh.io._common import colors_from_file, fail, float32_exact, format_rows, read_image, write_png
+from unmesh.errors import FormatError, InputError
+from unmesh.io._common import colors_from_file, fail, float32_exact, format_rows, is_file, read_image, write_png
 from unmesh.io._meshbuild import fan_triangulate, split_corners
 from unmesh.io.atomic import atomic_path
 from unmesh.meshes import TriangleMesh
@@ -54,6 +54,12 @@ _CONTINUATION = re.compile(r"\\[ \t]*(\r\n|\n|\r)")
 _MAP_FIXED = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-clamp": 1, "-imfchan": 1,
               "-mm": 2, "-texres": 1, "-type": 1}
 DEFAULT_KD = (0.8, 0.8, 0.8)
+#: Statement keywords of the OBJ specification (a file with none of them is not an OBJ file).
+_STATEMENTS = frozenset("v vt vn vp f l p o g s mg mtllib usemtl cstype deg bmat step curv curv2 surf parm "
+                        "trim hole scrv sp end con bevel c_interp d_interp lod maptype usemap shadow_obj "
+                        "trace_obj ctech stech call csh".split())
+#: Largest index magnitude accepted (larger ones cannot address any file's rows).
+_MAX_INDEX = 2**62
 
 
 def _parse_floats(rows: list[str], lines: list[int], path: str | os.PathLike[str], element: str,
@@ -96,7 +102,7 @@ def _parse_faces(rows: list[str], lines: list[int], path: str | os.PathLike[str]
             k = arr.shape[1] // m
             total = len(rows) * k
             ok = text.count("//") == (total if double else 0) and text.count("/") == total * nslash
-    except ValueError:
+    except (ValueError, OverflowError):
         ok = False
     if ok:
         corners = np.zeros((total, 3), np.int64)
@@ -121,10 +127,15 @@ def _parse_faces(rows: list[str], lines: list[int], path: str | os.PathLike[str]
                 p = t.split("/")
                 if len(p) > 3:
                     raise ValueError
-                out.append((int(p[0]), int(p[1]) if len(p) > 1 and p[1] else 0,
-                            int(p[2]) if len(p) > 2 and p[2] else 0))
+                ref = (int(p[0]), int(p[1]) if len(p) > 1 and p[1] else 0,
+                       int(p[2]) if len(p) > 2 and p[2] else 0)
+                if max(abs(x) for x in ref) > _MAX_INDEX:
+                    raise fail(path, "f", f"line {lines[r] + 1}: vertex reference {t[:40]!r} out of range")
+                out.append(ref)
+        except FormatError:
+            raise
         except ValueError:
-            raise fail(path, "f", f"line {lines[r] + 1}: cannot parse vertex reference {t!r}") from None
+            raise fail(path, "f", f"line {lines[r] + 1}: cannot parse vertex reference {t[:40]!r}") from None
     offsets = np.zeros(len(rows) + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
     return offsets, np.array(out, dtype=np.int64).reshape(-1, 3)
@@ -239,7 +250,10 @@ def read_obj(path: str | os.PathLike[str]) -> TriangleMesh:
     >>> read_obj(p).faces.tolist()
     [[0, 1, 2], [0, 2, 3]]
     """
-    text = Path(path).read_bytes().decode("utf-8", errors="replace")
+    raw = Path(path).read_bytes()
+    if b"\0" in raw:
+        raise fail(path, None, "binary data (NUL bytes): not an OBJ text file")
+    text = raw.decode("utf-8", errors="replace")
     if "\\" in text:
         text = _CONTINUATION.sub(" ", text)
     if "#" in text:
@@ -256,11 +270,16 @@ def read_obj(path: str | os.PathLike[str]) -> TriangleMesh:
     mtllibs: list[str] = []
     used: dict[str, int] = {}
     cur = -1
+    unknown = known = 0
     for i, line in enumerate(text.splitlines()):
         parts = line.split(None, 1)
         if not parts:
             continue
         key = parts[0]
+        if key in _STATEMENTS:
+            known += 1
+        else:
+            unknown += 1
         if key == "v":
             v.append(parts[1] if len(parts) > 1 else "")
             v_line.append(i)
@@ -279,6 +298,9 @@ def read_obj(path: str | os.PathLike[str]) -> TriangleMesh:
         elif key == "mtllib" and len(parts) > 1:
             mtllibs.append(parts[1].strip())
 
+    if unknown and not known:
+        raise fail(path, None, f"no OBJ statement (v, vt, vn, f, ...) in {unknown} non-empty lines: "
+                               "not an OBJ file")
     vals = _parse_floats(v, v_line, path, "v", 3)
     colors = None
     if isinstance(vals, np.ndarray):
@@ -380,11 +402,11 @@ def _load_materials(path: str | os.PathLike[str], mtllibs: list[str]) -> dict[st
     base = Path(path).parent
     for spec in mtllibs:
         spec = spec.replace("\\", "/")
-        files = [spec] if (base / spec).is_file() else spec.split()
+        files = [spec] if is_file(base / spec) else spec.split()
         for name in files:
             p = base / name
-            if not p.is_file():
-                warnings.warn(f"{os.fspath(path)}: material file {name!r} not found; loading without materials",
+            if not is_file(p):
+                warnings.warn(f"{os.fspath(path)}: material file {name[:200]!r} not found; loading without materials",
                               stacklevel=3)
                 continue
             for k, m in _read_mtl(p, path).items():

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from unmesh.errors import InputError
+from unmesh.errors import FormatError, InputError
 from unmesh.io._common import colors_from_file, fail, float32_exact, format_rows
 from unmesh.io._meshbuild import fan_triangulate
 from unmesh.meshes import TriangleMesh
@@ -157,7 +157,7 @@ def _face_table(path: str | os.PathLike[str], rows: list[str]) -> tuple[np.ndarr
         if arr.shape[0] == len(rows) and arr.shape[1] >= 4 and np.all(arr[:, 0] == arr.shape[1] - 1):
             k = arr.shape[1] - 1
             return np.arange(len(rows) + 1, dtype=np.int64) * k, arr[:, 1:].reshape(-1)
-    except ValueError:
+    except (ValueError, OverflowError):
         pass
     counts = np.empty(len(rows), np.int64)
     out: list[int] = []
@@ -167,7 +167,12 @@ def _face_table(path: str | os.PathLike[str], rows: list[str]) -> tuple[np.ndarr
             n = int(toks[0])
             ok = 0 <= n <= len(toks) - 1
             if ok:
-                out.extend(int(t) for t in toks[1:n + 1])
+                ids = [int(t) for t in toks[1:n + 1]]
+                if ids and max(abs(i) for i in ids) > 2**62:
+                    raise fail(path, "face", f"row {r}: vertex index {max(ids, key=abs)} out of range")
+                out.extend(ids)
+        except FormatError:
+            raise
         except ValueError:
             raise fail(path, "face", f"row {r}: cannot parse {row[:60]!r}") from None
         if not ok:

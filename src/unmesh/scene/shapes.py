@@ -19,18 +19,59 @@ load the mesh (path relative to the scene file) as :class:`unmesh.shapes.MeshSha
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+import math
+from typing import Any
 
 import numpy as np
 
-from unmesh.errors import FormatError, InputError
+from unmesh.errors import SceneError
 
-if TYPE_CHECKING:
-    from unmesh.scene.table import Table
-
-__all__ = ["placement_matrix", "shape_from_table"]
+__all__ = ["COORDINATE_LIMIT", "placement_matrix", "shape_from_table"]
 
 _PLACEMENT = ("center", "rotate", "scale")
+#: Largest magnitude accepted for shape coordinates, sizes and scale factors in a scene
+#: (beyond it products of coordinates overflow float64 in sampling and geometry).
+COORDINATE_LIMIT = 1e9
+
+
+def _param(t: Any, key: str, value: Any) -> Any:
+    """A shape parameter checked for type and range: a finite number, a string or bool, or
+    an array of finite numbers (all below :data:`COORDINATE_LIMIT` in magnitude)."""
+    if isinstance(value, str | bool):
+        return value
+    if isinstance(value, int | float):
+        if not math.isfinite(value) or abs(value) > COORDINATE_LIMIT:
+            raise t.error(key, f"expected a finite number of magnitude <= {COORDINATE_LIMIT:g}, got {value!r}")
+        return value
+    if isinstance(value, list):
+        flat: list[Any] = []
+        stack = [value]
+        while stack:
+            for x in stack.pop():
+                (stack.append(x) if isinstance(x, list) else flat.append(x))
+        if any(isinstance(x, bool) or not isinstance(x, int | float) for x in flat):
+            raise t.error(key, f"expected an array of numbers, got {value!r}"[:300])
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except ValueError:
+            raise t.error(key, "expected a rectangular array of numbers (rows of equal length)") from None
+        if not np.all(np.isfinite(arr)) or (arr.size and np.abs(arr).max() > COORDINATE_LIMIT):
+            raise t.error(key, f"expected finite numbers of magnitude <= {COORDINATE_LIMIT:g}, got {value!r}"[:300])
+        return arr
+    raise t.error(key, f"expected a number, string or array of numbers, got a {type(value).__name__}")
+
+
+def _placement(t: Any) -> tuple[np.ndarray, np.ndarray, float]:
+    center = t.vector("center", 3, default=(0.0, 0.0, 0.0))
+    rotate = t.vector("rotate", 3, default=(0.0, 0.0, 0.0))
+    scale = t.number("scale", default=1.0, positive=True)
+    if np.abs(center).max() > COORDINATE_LIMIT:
+        raise t.error("center", f"expected coordinates of magnitude <= {COORDINATE_LIMIT:g}, got {center.tolist()}")
+    if np.abs(rotate).max() > 1e6:
+        raise t.error("rotate", f"expected angles of magnitude <= 1e6 degrees, got {rotate.tolist()}")
+    if not 1.0 / COORDINATE_LIMIT <= scale <= COORDINATE_LIMIT:
+        raise t.error("scale", f"expected a factor between {1 / COORDINATE_LIMIT:g} and {COORDINATE_LIMIT:g}, got {scale}")
+    return center, rotate, scale
 
 
 def placement_matrix(center: Any = (0.0, 0.0, 0.0), rotate: Any = (0.0, 0.0, 0.0), scale: float = 1.0) -> np.ndarray:
@@ -52,40 +93,38 @@ def placement_matrix(center: Any = (0.0, 0.0, 0.0), rotate: Any = (0.0, 0.0, 0.0
     return m
 
 
-def shape_from_table(t: Table) -> Any:
-    """Build the shape an inline shape table describes (see module docstring)."""
+def shape_from_table(t: Any) -> Any:
+    """Build the shape an inline shape table describes (see module docstring).
+
+    ``t`` is an :class:`unmesh.scene.Table` (this module does not import it: the
+    table module imports this one). Parameters are type- and range-checked
+    (:data:`COORDINATE_LIMIT`); every error is a SceneError naming the key.
+    """
     from unmesh import shapes
 
-    center = t.vector("center", 3, default=(0.0, 0.0, 0.0))
-    rotate = t.vector("rotate", 3, default=(0.0, 0.0, 0.0))
-    scale = t.number("scale", default=1.0, positive=True)
+    center, rotate, scale = _placement(t)
     if "file" in t:
         from unmesh import io
 
         path = t.path("file")
-        try:
-            mesh = io.load_mesh(path)
-        except (FormatError, InputError) as exc:
-            raise t.error("file", str(exc)) from None
+        mesh = t.call("file", io.load_mesh, path)
         lo, hi = mesh.bounds()
         shift = np.eye(4)
         shift[:3, 3] = -(lo + hi) / 2.0
         mesh = mesh.transformed(placement_matrix(center, rotate, scale) @ shift)
-        try:
-            return shapes.MeshShape(mesh)
-        except InputError as exc:
-            raise t.error("file", str(exc)) from None
+        return t.call("file", shapes.MeshShape, mesh)
     kind = t.string("type")
     params: dict[str, Any] = {}
     for key in t.keys():
         if key in _PLACEMENT or key == "type":
             continue
-        value = t.raw(key)
-        params[key] = np.asarray(value, dtype=np.float64) if isinstance(value, list) else value
+        params[key] = _param(t, key, t.raw(key))
     try:
-        shape = shapes.by_name(kind, **params)
-    except InputError as exc:
-        raise t.error("type", str(exc)) from None
+        shape = t.call("type", shapes.by_name, kind, **params)
+    except SceneError:
+        raise
+    except (TypeError, ValueError) as exc:  # parameters of the wrong kind for this shape
+        raise t.error("type", f"bad parameters for shape {kind!r}: {exc}") from None
     m = placement_matrix(center, rotate, scale)
     if np.allclose(m, np.eye(4)):
         return shape

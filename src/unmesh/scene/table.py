@@ -10,16 +10,19 @@ Every accessor records the key as read, converts and checks the value, and raise
 
 from __future__ import annotations
 
+import contextlib
 import difflib
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from unmesh.errors import InputError, SceneError
+from unmesh.errors import FormatError, InputError, SceneError
+from unmesh.scene.shapes import shape_from_table
 
-__all__ = ["REQUIRED", "Table"]
+__all__ = ["INFINITY_WORDS", "REQUIRED", "Table", "parse_infinite"]
 
 
 class _Required:
@@ -29,6 +32,29 @@ class _Required:
 
 #: Sentinel default meaning "this key must be present".
 REQUIRED: Any = _Required()
+
+#: Strings a number accepting infinity reads as +inf ("off" = no limit).
+INFINITY_WORDS = ("inf", "+inf", "infinity", "off", "none")
+
+
+def parse_infinite(value: Any) -> Any:
+    """The shared reading of "no limit" values: ``"inf"``, ``"off"``, ... -> ``math.inf``.
+
+    ``"-inf"`` / ``"-infinity"`` give ``-math.inf``; any other value is returned
+    unchanged (TOML's own ``inf`` and ``-inf`` are already floats).
+
+    Example
+    -------
+    >>> parse_infinite("off"), parse_infinite("-inf"), parse_infinite(2.5)
+    (inf, -inf, 2.5)
+    """
+    if isinstance(value, str):
+        word = value.strip().lower()
+        if word in INFINITY_WORDS:
+            return math.inf
+        if word in ("-inf", "-infinity"):
+            return -math.inf
+    return value
 
 
 def _describe(value: Any) -> str:
@@ -92,7 +118,9 @@ class Table:
             self._used.add(key)
             return self._data[key]
         if default is REQUIRED:
-            raise self.error(key, "missing (required)")
+            found = difflib.get_close_matches(key, [k for k in self._data if k not in self._queried], n=1, cutoff=0.7)
+            extra = f"; found '{self.dotted(found[0])}' instead (misspelt?)" if found else ""
+            raise self.error(key, f"missing (required){extra}")
         return default
 
     def raw(self, key: str, default: Any = REQUIRED) -> Any:
@@ -101,15 +129,25 @@ class Table:
 
     # -- scalars --------------------------------------------------------------------
     def number(self, key: str, default: Any = REQUIRED, *, positive: bool = False, nonnegative: bool = False,
-               minimum: float | None = None, maximum: float | None = None) -> float:
-        """A finite float; integers are accepted."""
+               minimum: float | None = None, maximum: float | None = None, infinite: bool = False) -> float:
+        """A finite float; integers are accepted.
+
+        With ``infinite=True`` the value may also be ``inf`` / ``-inf`` (TOML) or one of
+        the words of :func:`parse_infinite` (``"inf"``, ``"off"``, ...): "no limit".
+        """
         value = self._get(key, default)
         if value is None or (value is default and key not in self._data):
             return value
+        if infinite:
+            value = parse_infinite(value)
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(key, f"expected a number, got {_describe(value)}")
-        v = float(value)
-        if not np.isfinite(v):
+            words = " or 'inf' / 'off'" if infinite else ""
+            raise self.error(key, f"expected a number{words}, got {_describe(value)}")
+        try:
+            v = float(value)
+        except OverflowError:  # integers beyond the float range
+            raise self.error(key, f"expected a number of magnitude below 1e308, got {value}") from None
+        if math.isnan(v) or (not infinite and not np.isfinite(v)):
             raise self.error(key, f"expected a finite number, got {v}")
         if positive and v <= 0:
             raise self.error(key, f"expected a positive number, got {value}")
@@ -242,8 +280,6 @@ class Table:
 
     def shape(self, key: str, default: Any = REQUIRED) -> Any:
         """A shape spec (inline table) as an ``unmesh.shapes`` shape; see :mod:`unmesh.scene.shapes`."""
-        from unmesh.scene.shapes import shape_from_table
-
         value = self._get(key, default)
         if value is None or (value is default and key not in self._data):
             return value
@@ -266,6 +302,43 @@ class Table:
         for child in self._children:
             child.finish()
 
-    def wrap_input_error(self, key: str, exc: InputError) -> SceneError:
-        """Turn an InputError raised while building from ``key`` into a SceneError."""
+    # -- errors of the code a scene drives -------------------------------------------
+    def wrap_input_error(self, key: str | None, exc: Exception) -> SceneError:
+        """The SceneError naming the file and ``key`` for an error raised while building from ``key``.
+
+        The one conversion every simulation uses (through :meth:`guard` and :meth:`call`).
+        ``key=None`` names this table only.
+        """
         return self.error(key, str(exc))
+
+    @contextlib.contextmanager
+    def guard(self, key: str | None = None) -> Iterator[None]:
+        """Turn :class:`InputError` / :class:`FormatError` raised inside into a SceneError naming ``key``.
+
+        Example
+        -------
+        >>> t = Table({"n": -1}, Path("s.toml"))
+        >>> try:
+        ...     with t.guard("n"):
+        ...         raise InputError("n: expected a positive integer, got -1")
+        ... except SceneError as exc:
+        ...     print(exc)
+        s.toml: key 'n': n: expected a positive integer, got -1
+        """
+        try:
+            yield
+        except (InputError, FormatError) as exc:
+            raise self.wrap_input_error(key, exc) from None
+
+    def call(self, key: str | None, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """``fn(*args, **kwargs)`` inside :meth:`guard` (``key``)."""
+        with self.guard(key):
+            return fn(*args, **kwargs)
+
+    def check_budget(self, key: str, nbytes: float, what: str) -> None:
+        """SceneError naming ``key`` when ``nbytes`` exceed the memory budget (:mod:`unmesh.io.budget`)."""
+        from unmesh.io.budget import budget_problem
+
+        problem = budget_problem(nbytes, what)
+        if problem is not None:
+            raise self.error(key, problem)

@@ -46,7 +46,7 @@ from unmesh.shells.fracture import CrackSet
 from unmesh.shells.material import Anisotropy, MaterialRegion, ShellMaterial
 from unmesh.shells.nodes import build_topology, create_fibers, grid_sheet, node_neighborhoods, select_nodes
 from unmesh.shells.plasticity import Plasticity
-from unmesh.shells.scene import build_shell_simulation
+from unmesh.shells.scene import build_shell_simulation, build_simulation
 from unmesh.shells.simulation import ShellSimulation, stable_time_step
 from unmesh.shells.skinning import SkinnedSurface
 from unmesh.shells.topology import ShellTopology
@@ -73,6 +73,7 @@ __all__ = [
     "bending_angle",
     "bending_angle_gradient",
     "build_shell_simulation",
+    "build_simulation",
     "build_topology",
     "create_fibers",
     "elastic_energy",

@@ -16,13 +16,14 @@ scene file. Writes OUTDIR/frames/frame_NNNNN.ply (the dense surfel cloud, render
 velocities), OUTDIR/fibers/frame_NNNNN.npz, OUTDIR/frames.json (the manifest of written
 files) and OUTDIR/summary.json (energies, momentum,
 fiber and crack counts, pieces, time per frame split into forces, fracture and surface).
-Example scenes: examples/shells/*.toml."""
+Example scenes: examples/shells/*.toml; SCENE may also name a shipped scene, e.g.
+'unmesh shell tearing_poster -o out' (list: 'unmesh scenes')."""
 
 
 def _build(scene: Any) -> Any:
-    from unmesh.shells.scene import build_shell_simulation
+    from unmesh.shells.scene import build_simulation
 
-    return build_shell_simulation(scene)
+    return build_simulation(scene)
 
 
 def register(sub: Any) -> None:
@@ -34,4 +35,12 @@ def register(sub: Any) -> None:
     p = sub.add_parser("shell", help="simulate a point-sampled thin shell from a scene file",
                        description=_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_run_arguments(p)
-    p.set_defaults(func=lambda args: run_scene_command(args, _build))
+    p.set_defaults(func=lambda args: run_scene_command(_shipped(args), _build))
+
+
+def _shipped(args: Any) -> Any:
+    """A shipped scene by name: ``unmesh shell tearing_poster``."""
+    from unmesh.scene import resolve_scene
+
+    args.scene = str(resolve_scene(args.scene, "shells"))
+    return args

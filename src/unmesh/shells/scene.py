@@ -11,27 +11,26 @@ clipping plane), ``[material]`` (K_s, K_b, damping D, density, with optional
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
 
-from unmesh.errors import FormatError, InputError
 from unmesh.scene import Table
 from unmesh.shells.dynamics import PlaneCollider, Pressure, SphereCollider
 from unmesh.shells.material import Anisotropy, MaterialRegion, ShellMaterial
 from unmesh.shells.plasticity import Plasticity
 from unmesh.sim import RunSettings
 
-__all__ = ["build_shell_simulation", "read_surface"]
+#: Bytes per surfel while sampling a surface (the cloud and the sampler's temporaries).
+_SURFEL_BYTES = 256
+
+__all__ = ["build_shell_simulation", "build_simulation", "read_surface"]
 
 
 def _inf(t: Table, key: str, default: float = math.inf, **kw: Any) -> float:
-    value = t.raw(key, None)
-    if value is None:
-        return default
-    if isinstance(value, str) and value.lower() in ("inf", "infinity", "off", "none"):
-        return math.inf
-    return t.number(key, **kw)
+    """A number where ``inf`` / ``"off"`` mean "no limit" (the shared :func:`unmesh.scene.parse_infinite`)."""
+    return t.number(key, default, infinite=True, **kw)
 
 
 def _check_manifold_mesh(t: Table, key: str, shape: Any) -> None:
@@ -66,19 +65,18 @@ def read_surface(t: Table) -> tuple[Any, float | None]:
         shape = t.shape("shape")
         _check_manifold_mesh(t, "shape", shape)
         spacing = t.number("spacing", positive=True)
-        try:
-            cloud = shape.surfels(spacing, color=color)
+        with t.guard("shape"):
             area = float(shape.area())
-        except InputError as exc:
-            raise t.wrap_input_error("shape", exc) from None
+        count = area / spacing**2 if np.isfinite(area) else math.inf
+        t.check_budget("spacing", count * _SURFEL_BYTES, f"sampling the surface at spacing {spacing:g} "
+                                                         f"(about {count:.3g} surfels)")
+        with t.guard("shape"):
+            cloud = shape.surfels(spacing, color=color)
     else:
         from unmesh import io
 
         path = t.path("surfels")
-        try:
-            cloud = io.load(path)
-        except (FormatError, InputError) as exc:
-            raise t.error("surfels", str(exc)) from None
+        cloud = t.call("surfels", io.load, path)
         if not isinstance(cloud, SurfelCloud):
             raise t.error("surfels", f"expected a surfel PLY (x y z nx ny nz radius ...), got a {type(cloud).__name__}; "
                                      "use 'shape = { file = ... }' for meshes")
@@ -119,24 +117,19 @@ def _material(t: Table) -> ShellMaterial:
     aniso = None
     at = t.table("anisotropy", required=False)
     if at is not None:
-        try:
-            aniso = Anisotropy(at.vector("direction", 3), at.vector("stretch", 2, default=(1.0, 1.0)),
-                               at.vector("bend", 2, default=(1.0, 1.0)))
-        except InputError as exc:
-            raise at.wrap_input_error("direction", exc) from None
+        aniso = at.call("direction", Anisotropy, at.vector("direction", 3), at.vector("stretch", 2, default=(1.0, 1.0)),
+                        at.vector("bend", 2, default=(1.0, 1.0)))
     regions = []
     for r in t.array("regions"):
         regions.append(MaterialRegion(r.shape("region"), r.number("stretch", default=1.0, nonnegative=True),
                                       r.number("bend", default=1.0, nonnegative=True),
                                       r.number("fracture", default=1.0, positive=True)))
-    try:
+    with t.guard(None):
         return ShellMaterial(ks=t.number("ks", nonnegative=True), kb=t.number("kb", nonnegative=True),
                              damping=t.number("damping", default=0.0, nonnegative=True),
                              density=t.number("density", default=1.0, positive=True), plasticity=plasticity,
                              fracture_stretch=gs, fracture_bend=gb, anisotropy=aniso, regions=tuple(regions),
                              arc_samples=t.integer("arc_samples", default=4, minimum=1))
-    except InputError as exc:
-        raise t.error(None, str(exc)) from None
 
 
 def _colliders(scene: Table) -> list[Any]:
@@ -155,7 +148,7 @@ def _colliders(scene: Table) -> list[Any]:
     return out
 
 
-def build_shell_simulation(scene: Table) -> tuple[Any, RunSettings]:
+def build_simulation(scene: Table) -> tuple[Any, RunSettings]:
     """Build the simulation and run settings of a shell scene (the ``unmesh shell`` builder).
 
     Parameters
@@ -213,11 +206,16 @@ def build_shell_simulation(scene: Table) -> tuple[Any, RunSettings]:
                                   "lower 'nodes' or the surfel 'spacing'")
     scene.finish()
     name = scene.file.stem
-    try:
+    with scene.guard(None):
         shell = ShellSimulation(cloud, material, dt, nodes=nodes, neighbors=neighbors, min_angle=min_angle,
                                 skin_nodes=skin, gravity=gravity, velocity=velocity, colliders=colliders,
                                 pinned=pinned, handles=handles, pulls=pulls, pressure=pressure, total_area=area,
                                 max_cracks=max_cracks, name=name)
-    except InputError as exc:
-        raise scene.error(None, str(exc)) from None
     return shell, settings
+
+
+def build_shell_simulation(scene: Table) -> tuple[Any, RunSettings]:
+    """Deprecated name of :func:`build_simulation` (the builders of sph, shells and fem share one name)."""
+    warnings.warn("unmesh.shells.build_shell_simulation is deprecated; use unmesh.shells.build_simulation",
+                  DeprecationWarning, stacklevel=2)
+    return build_simulation(scene)

@@ -40,18 +40,55 @@ def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any], meta: d
         np.savez(fh, **arrays)
 
 
+class _State(dict):
+    """A checkpoint's state: a key the simulation needs but the file lacks is a SimulationError."""
+
+    def __init__(self, data: dict[str, Any], path: Path) -> None:
+        super().__init__(data)
+        self._path = path
+
+    def __missing__(self, key: str) -> Any:
+        raise SimulationError(f"{self._path}: the checkpoint has no {key!r} (written by another kind of "
+                              "simulation or another version?); run without --resume to start over")
+
+
+#: Bookkeeping every checkpoint carries: key -> accepted types.
+_META = {"frame": (int,), "steps": (int,), "wall_seconds": (int, float), "frames": (list,)}
+
+
 def load_checkpoint(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Read a checkpoint; returns ``(state, meta)``."""
+    """Read a checkpoint; returns ``(state, meta)``.
+
+    Raises
+    ------
+    SimulationError
+        The file is missing, truncated or not a checkpoint (the message names it),
+        its bookkeeping is malformed, or a key the simulation asks ``state`` for is
+        absent (another simulation's checkpoint).
+    """
     p = Path(path)
     if not p.is_file():
         raise SimulationError(f"no checkpoint to resume from: {p} does not exist")
     try:
         with np.load(p, allow_pickle=False) as npz:
+            if not hasattr(npz, "files"):
+                raise ValueError("not an .npz archive")
             blob = json.loads(bytes(npz["__json__"]).decode("utf-8"))
             state: dict[str, Any] = {k[2:]: npz[k] for k in npz.files if k.startswith("s/")}
-    except (OSError, ValueError, KeyError) as exc:
-        raise SimulationError(f"{p}: unreadable checkpoint ({exc})") from None
-    if blob.get("format") != _FORMAT:
-        raise SimulationError(f"{p}: checkpoint format {blob.get('format')} is not supported")
-    state.update(blob["state"])
-    return state, blob["meta"]
+    except Exception as exc:  # zipfile, zlib, numpy and json raise many types for damaged files
+        raise SimulationError(f"{p}: unreadable checkpoint ({type(exc).__name__}: {exc}); "
+                              "run without --resume to start over") from None
+    if not isinstance(blob, dict) or blob.get("format") != _FORMAT:
+        got = blob.get("format") if isinstance(blob, dict) else type(blob).__name__
+        raise SimulationError(f"{p}: checkpoint format {got} is not supported")
+    meta, other = blob.get("meta"), blob.get("state")
+    if not isinstance(meta, dict) or not isinstance(other, dict):
+        raise SimulationError(f"{p}: malformed checkpoint (no 'meta' and 'state' tables)")
+    for key, types in _META.items():
+        value = meta.get(key)
+        if isinstance(value, bool) or not isinstance(value, types):
+            raise SimulationError(f"{p}: malformed checkpoint: meta {key!r} is {value!r}")
+    if meta["frame"] < 0 or meta["steps"] < 0:
+        raise SimulationError(f"{p}: malformed checkpoint: negative frame or step count")
+    state.update(other)
+    return _State(state, p), meta

@@ -133,7 +133,16 @@ class KDTree:
         # SciPy starts its worker threads on every call: for small queries that costs more than the search
         workers = -1 if len(q) * kk >= SERIAL_BELOW else 1
         d, i = self._tree.query(q, k=kk, workers=workers)
-        return d.reshape(len(q), kk), np.ascontiguousarray(i.reshape(len(q), kk), dtype=np.int64)
+        d = d.reshape(len(q), kk)
+        i = np.ascontiguousarray(i.reshape(len(q), kk), dtype=np.int64)
+        n = len(self)
+        # SciPy marks neighbours whose squared distance overflows (points near 1e200) with
+        # index n; they are at infinite distance, which a stable sort orders by index.
+        for r in np.flatnonzero((i >= n).any(axis=1)):
+            found = i[r][i[r] < n]
+            rest = np.setdiff1d(np.arange(n, dtype=np.int64), found, assume_unique=True)
+            i[r] = np.concatenate([found, rest[:kk - len(found)]])
+        return d, i
 
     def _finish(self, q: np.ndarray, cand: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Exact distances of the candidates, rows sorted by (distance, index); first k."""

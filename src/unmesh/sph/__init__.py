@@ -55,6 +55,7 @@ Example
 from unmesh.sph.boundary import BoundaryParticles, Plane, box_planes, sample_boundary, wall_tables
 from unmesh.sph.materials import Material
 from unmesh.sph.phase import HeatSource
+from unmesh.sph.scene import build_simulation
 from unmesh.sph.simulation import SPHConfig, SPHObject, SPHSimulation
 from unmesh.sph.state import FLUID, SOLID, ParticleState
 
@@ -70,6 +71,7 @@ __all__ = [
     "SPHObject",
     "SPHSimulation",
     "box_planes",
+    "build_simulation",
     "sample_boundary",
     "wall_tables",
 ]

@@ -14,9 +14,11 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    from unmesh.scene import resolve_scene
     from unmesh.sim.cli import run_scene_command
     from unmesh.sph.scene import build_simulation
 
+    args.scene = str(resolve_scene(args.scene, "sph"))  # a shipped scene by name: unmesh sph dam_break
     return run_scene_command(args, build_simulation)
 
 
@@ -38,6 +40,7 @@ def register(sub: Any) -> None:
         description="Weakly compressible SPH with connectivity-free elasticity (thesis chapter 8). Writes "
                     "frames/frame_NNNNN.ply (x y z vx vy vz density pressure temperature phase object), "
                     "boundary.ply, frames.json, summary.json and checkpoint.npz into OUTDIR. Scene format: "
-                    "docs/sph_scene.md.")
+                    "docs/sph_scene.md. SCENE may also name a shipped scene, e.g. 'unmesh sph dam_break -o out' "
+                    "(list: 'unmesh scenes').")
     add_run_arguments(p)
     p.set_defaults(func=_run)

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.errors import InputError, SceneError
+from unmesh.errors import SceneError
 from unmesh.scene import Table
 from unmesh.sim import RunSettings
 from unmesh.sph.boundary import BoundaryParticles, Plane, box_planes, sample_boundary
@@ -55,32 +55,28 @@ MATERIAL_KEYS: dict[str, Any] = {
 }
 
 
-def _number(t: Table, key: str, default: Any) -> float:
-    """A number that may be ±inf (TOML ``inf``)."""
-    value = t.raw(key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
-        raise t.error(key, f"expected a number, got {value!r}")
-    return float(value)
-
-
 def _material(name: str, t: Table) -> Material:
     values: dict[str, Any] = {}
     for key, default in MATERIAL_KEYS.items():
         if key == "freeze_min_neighbors":
             values[key] = t.integer(key, default=default, minimum=0)
         else:
-            values[key] = _number(t, key, default)
-    try:
-        return Material(name, **values)
-    except InputError as exc:
-        raise t.error(None, str(exc)) from None
+            values[key] = t.number(key, default, infinite=True)
+    return t.call(None, Material, name, **values)
+
+
+#: Bytes per lattice point while sampling a shape (positions, inside tests, temporaries).
+_SAMPLE_BYTES = 128
 
 
 def _sample(obj: Table, shape: Any, spacing: float, dim: int, lattice: str) -> np.ndarray:
-    try:
-        return sample_shape(shape, spacing, dim, lattice=lattice)
-    except InputError as exc:
-        raise obj.error("shape", str(exc)) from None
+    with obj.guard("shape"):
+        lo, hi = np.asarray(shape.bounds(), dtype=np.float64)
+    extent = np.maximum(hi - lo, spacing)[:dim]
+    points = float(np.prod(extent / spacing + 1.0))
+    obj.check_budget("shape", points * _SAMPLE_BYTES, f"sampling this shape at spacing {spacing:g} "
+                                                       f"(about {points:.3g} lattice points)")
+    return obj.call("shape", sample_shape, shape, spacing, dim, lattice=lattice)
 
 
 def _boundaries(scene: Table, dim: int, spacing: float, h: float) -> tuple[list[Plane], BoundaryParticles | None,
@@ -90,7 +86,7 @@ def _boundaries(scene: Table, dim: int, spacing: float, h: float) -> tuple[list[
     shapes: list[tuple[Any, bool]] = []
     for b in scene.array("boundaries"):
         kind = b.string("type", choices=("box", "plane", "particles"))
-        try:
+        with b.guard(None):
             if kind == "box":
                 planes += box_planes(b.vector("min", 3), b.vector("max", 3), dim, open_top=b.boolean("open_top", False),
                                      no_slip=b.boolean("no_slip", False))
@@ -105,8 +101,6 @@ def _boundaries(scene: Table, dim: int, spacing: float, h: float) -> tuple[list[
                 parts.append(sample_boundary(shape, b.number("spacing", default=spacing, positive=True), h, dim,
                                              b.boolean("no_slip", False)))
                 shapes.append((shape, inside))
-        except InputError as exc:
-            raise b.error(None, str(exc)) from None
     boundary = None
     if parts:
         pos = np.concatenate([p.positions for p in parts])
@@ -163,11 +157,8 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
     wall_pressure = sim_t.number("wall_pressure", default=2.0, positive=True)
     name = sim_t.string("name", default=scene.file.stem)
     lattice = sim_t.string("lattice", default="closest", choices=LATTICES)
-    try:
-        config = SPHConfig(dim=dim, spacing=spacing, dt=dt, smoothing=smoothing, cfl=cfl, gravity=gravity, seed=seed,
-                           wall_pressure=wall_pressure, lattice=lattice)
-    except InputError as exc:
-        raise sim_t.error(None, str(exc)) from None
+    config = sim_t.call(None, SPHConfig, dim=dim, spacing=spacing, dt=dt, smoothing=smoothing, cfl=cfl,
+                        gravity=gravity, seed=seed, wall_pressure=wall_pressure, lattice=lattice)
     out_t = scene.table("output", required=False)
     surfaces = "none"
     resolution = 0.5
@@ -193,15 +184,13 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
         surface = None
         if o.boolean("skin", default=True) and skin:
             surface = shape.mesh(spacing)
-        try:
+        with o.guard(None):
             objects.append(SPHObject(
                 oname, pos, mat, velocity=o.vector("velocity", 3, default=(0.0, 0.0, 0.0)),
                 angular_velocity=o.vector("angular_velocity", 3, default=(0.0, 0.0, 0.0)),
                 temperature=o.number("temperature", default=0.0),
                 phase=o.string("phase", default="fluid", choices=("fluid", "solid")),
                 fixed=o.boolean("fixed", default=False), anchor=o.shape("anchor", default=None), surface=surface))
-        except InputError as exc:
-            raise o.error(None, str(exc)) from None
     if not objects:
         raise scene.error(None, "the scene has no objects: add at least one [[objects]] table")
     _check_overlaps(scene, objects, shapes)
@@ -209,15 +198,11 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
     planes, boundary, bshapes = _boundaries(scene, dim, spacing, h)
     heat: list[HeatSource] = []
     for k, hs in enumerate(scene.array("heat_sources")):
-        try:
+        with hs.guard(None):
             heat.append(HeatSource(hs.shape("shape"), hs.number("temperature"), hs.number("rate", positive=True),
                                    hs.number("distance", default=0.0, nonnegative=True), name=f"heat_sources[{k}]"))
-        except InputError as exc:
-            raise hs.error(None, str(exc)) from None
     scene.finish()
-    try:
-        sim = SPHSimulation(config, materials, objects, planes=planes, boundary=boundary, boundary_shapes=bshapes,
-                            heat_sources=heat, surfaces=surfaces, surface_resolution=resolution, name=name)
-    except InputError as exc:
-        raise SceneError(f"{scene.file.name}: {exc}") from None
+    sim = scene.call(None, SPHSimulation, config, materials, objects, planes=planes, boundary=boundary,
+                     boundary_shapes=bshapes, heat_sources=heat, surfaces=surfaces, surface_resolution=resolution,
+                     name=name)
     return sim, RunSettings(duration=duration, fps=fps)

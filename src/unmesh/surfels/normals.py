@@ -39,6 +39,18 @@ __all__ = [
     "propagate_reference",
 ]
 
+#: Largest coordinate magnitude whose squared neighbour distances and covariances
+#: stay finite in float64 (issue 24: a point at 1e200 overflowed them).
+_MAX_COORDINATE = 1e150
+
+
+def _bounded(pts: np.ndarray) -> np.ndarray:
+    if pts.size and np.abs(pts).max() > _MAX_COORDINATE:
+        row = int(np.flatnonzero((np.abs(pts) > _MAX_COORDINATE).any(axis=1))[0])
+        raise InputError(f"points: expected coordinates of magnitude <= {_MAX_COORDINATE:g} (squared distances "
+                         f"overflow beyond), got {pts[row].tolist()} at row {row}")
+    return pts
+
 
 def _check_k(k: Any, n: int) -> int:
     kk = int(k)
@@ -59,7 +71,7 @@ def pca_normals(points: Any, k: int = 16) -> np.ndarray:
     """
     from unmesh.spatial import knn
 
-    pts = as_points(points, "points")
+    pts = _bounded(as_points(points, "points"))
     if len(pts) < 3:
         raise InputError(f"points: expected at least 3 points to fit planes, got {len(pts)}")
     kk = _check_k(k, len(pts))
@@ -86,7 +98,7 @@ def orient_normals(points: Any, normals: Any, k: int = 16) -> np.ndarray:
     """
     from unmesh.spatial import knn
 
-    pts = as_points(points, "points")
+    pts = _bounded(as_points(points, "points"))
     nrm = as_points(normals, "normals", length=len(pts)).copy()
     n = len(pts)
     if n == 0:
@@ -161,7 +173,7 @@ def estimate_normals(points: Any, k: int = 16) -> np.ndarray:
     """
     from unmesh.spatial import knn
 
-    pts = as_points(points, "points")
+    pts = _bounded(as_points(points, "points"))
     if len(pts) < 3:
         raise InputError(f"points: expected at least 3 points to fit planes, got {len(pts)}")
     idx = knn(pts, _check_k(k, len(pts)))[1]

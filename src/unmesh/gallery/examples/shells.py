@@ -26,9 +26,9 @@ def run_shell_scene(ctx: ExampleContext, name: str, quick: dict[str, Any], durat
 
     Returns the output directory.
     """
-    from unmesh.shells.scene import build_shell_simulation
+    from unmesh.shells.scene import build_simulation
 
-    return ctx.run_scene(f"shells/{name}", build_shell_simulation, quick if ctx.quick else None, duration)[0]
+    return ctx.run_scene(f"shells/{name}", build_simulation, quick if ctx.quick else None, duration)[0]
 
 
 def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path | None = None, size: int = 320,
