@@ -106,8 +106,13 @@ def _pressure_fit(sim, width: float) -> tuple[float, float, float]:
     return float(r2), float(slope / 9.81), int(sel.sum())
 
 
+@pytest.mark.slow
 def test_hydrostatic_pressure_linear_2d():
-    """The shipped 2D hydrostatic scene at rest: per-particle pressure linear in depth."""
+    """The shipped 2D hydrostatic scene at rest (1.5 s): per-particle pressure linear in depth.
+
+    Measured: R² 0.994, slope 0.990 ρ0 g (without the filter, ``density_diffusion = "off"``: R² 0.54,
+    slope 1.03 on the same particles; 0.72 on all of them). Slow: about 30–90 s.
+    """
     sim, settings = build_simulation(load_scene(scene_path("sph/hydrostatic.toml")))
     while sim.time < settings.duration - 1e-9:
         sim.step()
