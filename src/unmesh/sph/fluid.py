@@ -13,7 +13,9 @@ Brute-force (all pairs within ``h``) versions of what the numba passes in
   central force, so it conserves linear and angular momentum;
 - XSPH (8.19): ``Δv_i = ξ Σ_j 2m_j/(ρ_i+ρ_j) (v_j − v_i) W_ij`` (``(1−ξ)v + ξ⟨v⟩``
   written with the symmetric, momentum-conserving SPH average of ``v_j − v_i``);
-- penalty collisions (8.37, :mod:`unmesh.sph.collisions`).
+- penalty collisions (8.37, :mod:`unmesh.sph.collisions`);
+- the δ-SPH density filter (Molteni & Colagrossi 2009, Antuono et al. 2010) of
+  :mod:`unmesh.sph._diffusion_kernels`, :func:`density_diffusion_reference`.
 
 Example
 -------
@@ -31,10 +33,10 @@ from typing import Any
 import numpy as np
 
 from unmesh._validate import as_array, as_points
-from unmesh.kernels import poly6, spiky_gradient
+from unmesh.kernels import poly6, spiky_derivative, spiky_gradient
 from unmesh.sph.collisions import penalty_projection
 
-__all__ = ["acceleration_reference", "density_reference", "pressure", "xsph_reference"]
+__all__ = ["acceleration_reference", "density_diffusion_reference", "density_reference", "pressure", "xsph_reference"]
 
 
 def _pairs(x: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
@@ -129,3 +131,49 @@ def xsph_reference(x: Any, v: Any, m: Any, rho: Any, xi: float, h: float, dim: i
     out = np.zeros((n, 3))
     np.add.at(out, i, (xi * 2.0 * mm[j] / (rr[i] + rr[j]) * w)[:, None] * (vv[j] - vv[i]))
     return out
+
+
+def density_diffusion_reference(x: Any, m: Any, rho: Any, delta: float, h: float, dim: int,
+                                fluid: Any = None) -> np.ndarray:
+    """The δ-SPH filtered density ``ρ + δ D/Λ`` (Antuono-corrected diffusion), shape (N,).
+
+    Brute force over all pairs within ``h``; ``fluid`` (N,) bool marks the particles that
+    are filtered and serve as neighbours (default: all). Definitions of ``D``, ``Λ`` and
+    the renormalised gradient: :mod:`unmesh.sph._diffusion_kernels`.
+
+    Example
+    -------
+    >>> from unmesh.sph.sampling import closest_packing
+    >>> x = closest_packing([0, 0, 0], [0.2, 0.2, 0], 0.02, 2)
+    >>> rho = 1.0 + 0.01 * x[:, 1]                     # a linear (hydrostatic) field
+    >>> out = density_diffusion_reference(x, np.ones(len(x)), rho, 1.0, 0.04, 2)
+    >>> bool(np.abs(out - rho).max() < 1e-12)
+    True
+    """
+    pts = as_points(x)
+    n = len(pts)
+    mm = as_array(m, "m", (None,), length=n)
+    rr = as_array(rho, "rho", (None,), length=n)
+    fl = np.ones(n, bool) if fluid is None else np.asarray(fluid, bool)
+    i, j = _pairs(pts, h)
+    keep = fl[i] & fl[j]
+    i, j = i[keep], j[keep]
+    xij = pts[i] - pts[j]
+    r = np.linalg.norm(xij, axis=1)
+    gf = np.asarray(spiky_derivative(r, h, dim)) / r        # w'(r)/r
+    vj = mm[j] / rr[j]
+    # L_i = (Σ_j V_j x_ji ⊗ ∇W_ij)⁻¹, ⟨∇ρ⟩_i = L_i Σ_j V_j (ρ_j − ρ_i) ∇W_ij
+    amat = np.zeros((n, 3, 3))
+    np.add.at(amat, i, (-vj * gf)[:, None, None] * xij[:, :, None] * xij[:, None, :])
+    gsum = np.zeros((n, 3))
+    np.add.at(gsum, i, (vj * gf * (rr[j] - rr[i]))[:, None] * xij)
+    grad = np.zeros((n, 3))
+    for a in np.flatnonzero(fl):
+        sub = amat[a, :dim, :dim]
+        if abs(np.linalg.det(sub)) > 1e-12 * np.prod(np.diag(sub)):
+            grad[a, :dim] = np.linalg.solve(sub, gsum[a, :dim])
+    psi = (rr[j] - rr[i]) + 0.5 * np.einsum("ij,ij->i", grad[i] + grad[j], xij)   # x_ji = −x_ij
+    d = np.zeros(n)
+    np.add.at(d, i, 2.0 * mm[j] / (rr[i] + rr[j]) * 2.0 * psi * (-gf))
+    lam = (60.0 if dim == 3 else 80.0) / (h * h)
+    return np.where(fl, rr + delta * d / lam, rr)

@@ -14,7 +14,7 @@ Example
 -------
 >>> jelly = Material("jelly", stiffness=200.0, xsph=0.1, negative_pressure=0.01, elastic_stiffness=39528.0)
 >>> jelly.is_elastic, material_table([jelly]).shape
-(True, (1, 24))
+(True, (1, 26))
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ __all__ = ["Material", "material_table"]
 RHO0, K, GAMMA, ZETA, VISC, XI, KE, GOAL, LMU, LLAM, DIFF = range(11)
 DOCK_MAX, DOCK_GAIN, DOCK_LOSS, FRACTURE, MELT_RATE, MELT_T = range(11, 17)
 FREEZE_RATE, FREEZE_T, FREEZE_NMIN, FREEZE_VMAX, FREEZE_FMAX = range(17, 22)
-ALPHA, SOUND = 22, 23
-NCOL = 24
+ALPHA, SOUND, DENSITY_DIFFUSION, DENSITY_PASSES = 22, 23, 24, 25
+NCOL = 26
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,20 @@ class Material:
         ``v_max`` of ``c_v`` in eq. (8.36) (m/s).
     freeze_max_force : float
         ``F_max`` of ``c_F`` in eq. (8.36), as an acceleration (m/s²).
+    density_diffusion : float
+        ``δ`` in [0, 1] of the δ-SPH density filter of the fluid phase (Molteni & Colagrossi
+        2009 with Antuono et al.'s 2010 correction, :mod:`unmesh.sph._diffusion_kernels`):
+        the summation density (8.4) of a fluid particle moves the fraction ``δ`` of the way
+        to the linearly corrected average of its fluid neighbours before the pressure
+        (8.15) is taken from it. It removes the particle-scale pressure noise of a
+        disordered arrangement (a resting column's pressure becomes linear in depth),
+        conserves mass (``Σ m_i Δρ_i = 0``) and leaves a linear density field unchanged.
+        0 (the default) disables it: the thesis' plain summation density. Solid particles
+        are never filtered.
+    density_passes : int
+        Number of filter passes per force evaluation (each on the previous result); the
+        particle-scale smoothing grows with it, and so does the cost (two neighbour loops
+        per pass).
 
     Example
     -------
@@ -119,6 +133,8 @@ class Material:
     freeze_min_neighbors: int = 1
     freeze_max_velocity: float = math.inf
     freeze_max_force: float = math.inf
+    density_diffusion: float = 0.0
+    density_passes: int = 1
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -137,9 +153,12 @@ class Material:
         for key in nonneg:
             if not getattr(self, key) >= 0:
                 raise InputError(f"{self.name}.{key}: expected a number >= 0, got {getattr(self, key)}")
-        for key in ("negative_pressure", "xsph", "goal_deformation"):
+        for key in ("negative_pressure", "xsph", "goal_deformation", "density_diffusion"):
             if not 0.0 <= getattr(self, key) <= 1.0:
                 raise InputError(f"{self.name}.{key}: expected a number in [0, 1], got {getattr(self, key)}")
+        if (isinstance(self.density_passes, float) and not self.density_passes.is_integer()) or self.density_passes < 1:
+            raise InputError(f"{self.name}.density_passes: expected an integer >= 1, got {self.density_passes!r}")
+        object.__setattr__(self, "density_passes", int(self.density_passes))
         if not -1.0 < self.poisson < 0.5:
             raise InputError(f"{self.name}.poisson: expected a Poisson ratio in (-1, 0.5), got {self.poisson}")
         for key in ("elastic_stiffness", "young", "viscosity", "diffusivity", "artificial_viscosity"):
@@ -164,7 +183,7 @@ class Material:
 
 
 def material_table(materials: list[Material]) -> np.ndarray:
-    """Pack materials into the (n_materials, 24) float64 table of the numba kernels.
+    """Pack materials into the (n_materials, 26) float64 table of the numba kernels.
 
     Example
     -------
@@ -185,4 +204,6 @@ def material_table(materials: list[Material]) -> np.ndarray:
             mat.freeze_max_force)
         t[i, ALPHA] = mat.artificial_viscosity
         t[i, SOUND] = mat.sound_speed
+        t[i, DENSITY_DIFFUSION] = mat.density_diffusion
+        t[i, DENSITY_PASSES] = mat.density_passes
     return t

@@ -51,15 +51,18 @@ MATERIAL_KEYS: dict[str, Any] = {
     "young": 0.0, "poisson": 0.3, "docking_rate": math.inf, "docking_gain": math.inf, "docking_loss": 0.0,
     "fracture_stretch": math.inf, "diffusivity": 0.0, "melt_rate": 0.0, "melting_point": math.inf,
     "freeze_rate": 0.0, "freezing_point": -math.inf, "freeze_min_neighbors": 1, "freeze_max_velocity": math.inf,
-    "freeze_max_force": math.inf,
+    "freeze_max_force": math.inf, "density_diffusion": 0.0,
+    "density_passes": 1,
 }
 
 
 def _material(name: str, t: Table) -> Material:
     values: dict[str, Any] = {}
     for key, default in MATERIAL_KEYS.items():
-        if key == "freeze_min_neighbors":
-            values[key] = t.integer(key, default=default, minimum=0)
+        if key == "density_diffusion" and t.raw(key, default) == "off":  # δ-SPH density filter disabled
+            values[key] = 0.0
+        elif key in ("freeze_min_neighbors", "density_passes"):
+            values[key] = t.integer(key, default=default, minimum=0 if key == "freeze_min_neighbors" else 1)
         else:
             values[key] = t.number(key, default, infinite=True)
     return t.call(None, Material, name, **values)

@@ -44,6 +44,7 @@ from unmesh._threads import serial_if_small
 from unmesh._validate import as_array, as_points
 from unmesh.errors import InputError
 from unmesh.sim import Simulation
+from unmesh.sph import _diffusion_kernels as DK
 from unmesh.sph import _elastic_kernels as EK
 from unmesh.sph import _kernels as K
 from unmesh.sph import _phase_kernels as PK
@@ -491,7 +492,8 @@ class SPHSimulation(Simulation):
         self._dense = dense = K.cell_starts(g, getattr(self, "_dense", None))
         n = len(self.x)
         if self._rows is None or self._rows["xm"].shape[0] != n:
-            self._rows = {"xm": np.empty((n, 4)), "pk": np.empty((n, K.PK_COLS))}
+            self._rows = {"xm": np.empty((n, 4)), "pk": np.empty((n, K.PK_COLS)), "dgrad": np.empty((n, 3)),
+                          "drho": np.empty(n)}
         while True:
             K.density_pass(self.x, self.m, self.mat, self.mats, self.h, self.dim, g.origin, g.inv_cell, g.dims,
                            g.cell_keys, g.cell_start, dense, self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol,
@@ -500,9 +502,12 @@ class SPHSimulation(Simulation):
             need = int(self.nnbr.max()) if len(self.nnbr) else 0
             bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
             if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1]:
-                return
+                break
             self.nbr = np.zeros((n, max(need + 9, self.nbr.shape[1])), np.int32)
             self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
+        if np.any(self.mats[:, MT.DENSITY_DIFFUSION] > 0):  # δ-SPH density filter of the fluids
+            DK.density_diffusion_pass(self.x, self.m, self.rho, self.p, self.phase, self.mat, self.mats, self.nbr,
+                                      self.nnbr, self.h, self.dim, self._rows["dgrad"], self._rows["drho"])
 
     def _update(self, prime: bool = False) -> None:
         """Sort, density, lattice and force passes at the current positions."""
