@@ -309,13 +309,14 @@ class SplatRenderer:
             raise InputError(f"options: expected SplatOptions, got {type(self.options).__name__}")
         self.param_dtype = np.float32 if self.options.precision == "single" else np.float64
         self.clip_surfels: ClipSurfels | None = None
+        self._adopt_opaque = False  # set by _render_in_place: clear() takes the opaque layer without a copy
         self.clear()
 
     # -- buffers -------------------------------------------------------------------------
     def clear(self, opaque: GBuffer | None = None) -> SplatRenderer:
         """Empty the buffers. ``opaque`` (meshes, particles) occludes splats and shows where none are."""
         h, w = self.camera.shape
-        self._opaque = GBuffer.empty(h, w) if opaque is None else opaque.copy()
+        self._opaque = GBuffer.empty(h, w) if opaque is None else opaque if self._adopt_opaque else opaque.copy()
         if self._opaque.depth.shape != (h, w):
             raise InputError(f"opaque: expected buffers of shape {(h, w)}, got {self._opaque.depth.shape}")
         self.zvis = self._opaque.depth.copy()
@@ -442,15 +443,11 @@ class SplatRenderer:
         the buffer, and copying 1024x1024 G-buffers twice costs as much as the binning). The
         image is the same as ``render(clouds, opaque=gbuffer).gbuffer()``. The renderer is
         spent afterwards: its opaque layer is the result, so it must not be updated further."""
-        if clip_surfels is not None and not isinstance(clip_surfels, ClipSurfels):
-            raise InputError(f"clip_surfels: expected ClipSurfels, got {type(clip_surfels).__name__}")
-        h, w = self.camera.shape
-        if gbuffer.depth.shape != (h, w):
-            raise InputError(f"opaque: expected buffers of shape {(h, w)}, got {gbuffer.depth.shape}")
-        self._opaque = gbuffer
-        self.zvis = gbuffer.depth.copy()
-        self.clip_surfels = clip_surfels
-        self._run(clouds, None, visibility=True, sign=1)
+        self._adopt_opaque = True
+        try:
+            self.render(clouds, opaque=gbuffer, clip_surfels=clip_surfels)
+        finally:
+            self._adopt_opaque = False
         return self._resolve(gbuffer)
 
     def result(self, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0)) -> RenderResult:
