@@ -5,7 +5,8 @@ Pipeline (all camera conventions as in :mod:`unmesh.render._kernels`):
 1. :func:`splat_setup` (parallel over surfels) writes per-surfel parameters ``P`` (N, NPARAM)
    and a pixel box (N, 4).
 2. :func:`unmesh.render._kernels.bin_boxes` buckets surfels into screen tiles (front-facing
-   surfels first) and :func:`gather_rows` copies their parameter rows into tile order.
+   surfels first); :func:`splat_setup_bin` fuses steps 1 and 2 into one pass; then
+   :func:`gather_rows` copies the parameter rows into tile order (tiles read them contiguously).
 3. :func:`splat_tiles` (parallel over tiles; a tile owns its pixels, so there are no write
    races) runs the visibility pass (extended depth test, 3.2.1: the buffer keeps
    ``min(z_f + eps_s)``; fragments that may still pass are recorded) and the accumulation pass
@@ -34,7 +35,7 @@ from numba import njit, prange
 
 from unmesh.render._kernels import load_tile, sphere_box, tile_rect
 
-__all__ = ["NPARAM", "fill_tiles", "gather_rows", "splat_resolve", "splat_setup", "splat_tiles"]
+__all__ = ["NPARAM", "fill_tiles", "gather_rows", "splat_resolve", "splat_setup", "splat_setup_bin", "splat_tiles"]
 
 #: Parameter layout of one (surfel, tile) pair (rows written in tile order):
 #: 0 cz, 1-3 n (camera), 4 c.n, 5-7 b1 = a1/|a1|^2, 8-10 b2 = a2/|a2|^2, 11 c.b1, 12 c.b2
@@ -116,6 +117,100 @@ def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, ne
     return x0, x1, y0, y1
 
 
+@njit(cache=True)
+def _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
+                  rfilter, P, box, group):
+    """Row ``i`` of :func:`splat_setup`: parameters ``P[i]``, pixel box ``box[i]`` and ``group[i]``."""
+    c0, c1, c2 = _camera_point(frame, eye, pos[i])
+    n0, n1, n2 = _camera_vector(frame, nrm[i])
+    if elliptical:
+        a00, a01, a02 = _camera_vector(frame, axes[i, 0])
+        a10, a11, a12 = _camera_vector(frame, axes[i, 1])
+    else:
+        rad = radii[i]
+        sg = 1.0 if n2 >= 0.0 else -1.0
+        aa = -1.0 / (sg + n2)
+        bb = n0 * n1 * aa
+        a00 = (1.0 + sg * n0 * n0 * aa) * rad
+        a01 = sg * bb * rad
+        a02 = -sg * n0 * rad
+        a10 = bb * rad
+        a11 = (sg + n1 * n1 * aa) * rad
+        a12 = -n1 * rad
+    # dual basis b1, b2 of the (possibly non-orthogonal) axes: b_i . a_j = delta_ij in the
+    # surfel plane, so (u, v) = ((p - c) . b1, (p - c) . b2) are the ellipse coordinates of
+    # {c + u a1 + v a2 : u^2 + v^2 <= 1}; for orthogonal axes b_i = a_i / |a_i|^2 (eq. 3.13).
+    g00 = a00 * a00 + a01 * a01 + a02 * a02
+    g11 = a10 * a10 + a11 * a11 + a12 * a12
+    g01 = a00 * a10 + a01 * a11 + a02 * a12
+    det = g00 * g11 - g01 * g01
+    tr = g00 + g11
+    valid = g00 > 1e-300 and g11 > 1e-300 and det > 1e-12 * tr * tr
+    hd = 0.5 * (g00 - g11)
+    r = math.sqrt(0.5 * tr + math.sqrt(hd * hd + g01 * g01))  # largest semi-axis
+    if valid:
+        idet = 1.0 / det
+        b10 = (g11 * a00 - g01 * a10) * idet
+        b11 = (g11 * a01 - g01 * a11) * idet
+        b12 = (g11 * a02 - g01 * a12) * idet
+        b20 = (g00 * a10 - g01 * a00) * idet
+        b21 = (g00 * a11 - g01 * a01) * idet
+        b22 = (g00 * a12 - g01 * a02) * idet
+    else:
+        b10 = b11 = b12 = b20 = b21 = b22 = 0.0
+    P[i, 0] = c2
+    P[i, 1] = n0
+    P[i, 2] = n1
+    P[i, 3] = n2
+    P[i, 4] = c0 * n0 + c1 * n1 + c2 * n2
+    P[i, 5] = b10
+    P[i, 6] = b11
+    P[i, 7] = b12
+    P[i, 8] = b20
+    P[i, 9] = b21
+    P[i, 10] = b22
+    P[i, 11] = c0 * b10 + c1 * b11 + c2 * b12 if valid else np.inf
+    P[i, 12] = c0 * b20 + c1 * b21 + c2 * b22 if valid else np.inf
+    if ortho:
+        P[i, 13] = cx + f * c0
+        P[i, 14] = cy - f * c1
+    elif c2 > near:
+        P[i, 13] = cx + f * c0 / c2
+        P[i, 14] = cy - f * c1 / c2
+    else:
+        P[i, 13] = np.nan
+        P[i, 14] = np.nan
+    P[i, 15] = r
+    # depth range of the fragments: the ellipse itself (r) plus the screen filter footprint
+    # (rfilter pixels in world units at the centre depth) on the tilted plane
+    if ortho:
+        fw = rfilter / f
+        cos = abs(n2)
+    else:
+        fw = rfilter * c2 / f if c2 > near else 0.0
+        cl = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        cos = abs(c0 * n0 + c1 * n1 + c2 * n2) / cl if cl > 0.0 else 1.0
+    sin = math.sqrt(max(1.0 - cos * cos, 0.0))
+    if sin > EDGE_ON_TAN * cos:
+        P[i, 23] = -(r + fw * EDGE_ON_TAN)
+    else:
+        P[i, 23] = r + fw * sin / cos
+    for j in range(3):
+        P[i, 16 + j] = colors[i, j]
+    x0, x1, y0, y1 = _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H,
+                                rfilter)
+    box[i, 0] = x0
+    box[i, 1] = x1
+    box[i, 2] = y0
+    box[i, 3] = y1
+    P[i, 19] = x0
+    P[i, 20] = x1
+    P[i, 21] = y0
+    P[i, 22] = y1
+    facing = n2 if ortho else c0 * n0 + c1 * n1 + c2 * n2
+    group[i] = 0 if facing <= 0.0 else 1
+
+
 @njit(cache=True, parallel=True)
 def splat_setup(pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H, rfilter,
                 P, box, group):
@@ -128,96 +223,69 @@ def splat_setup(pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy
     ``group`` is 0 for surfels facing the camera, 1 otherwise (binned after the front-facing
     ones so that early depth rejection works).
     """
+    for i in prange(pos.shape[0]):
+        _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
+                      rfilter, P, box, group)
+
+
+
+@njit(cache=True, parallel=True)
+def splat_setup_bin(pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H, rfilter,
+                    P, box, group, tile, ntx, nty, nchunks):
+    """:func:`splat_setup` and the tile binning of its boxes in one parallel pass over the surfels.
+
+    Writes ``P``, ``box``, ``group`` as :func:`splat_setup` and returns ``offsets, items, visits``:
+    ``offsets`` (ntx*nty + 1,) int64 and ``items`` (pairs,) int32 exactly as
+    :func:`unmesh.render._kernels.bin_boxes` with two groups and ``nchunks`` chunks (tile ``t``
+    holds ``items[offsets[t]:offsets[t+1]]``, front-facing surfels first, then ascending), and
+    ``visits`` the total number of pixels in the boxes (a work estimate). The per-tile counts are
+    taken while each surfel's row is still in cache, so the surfels are read once before the fill.
+    """
     n = pos.shape[0]
-    for i in prange(n):
-        c0, c1, c2 = _camera_point(frame, eye, pos[i])
-        n0, n1, n2 = _camera_vector(frame, nrm[i])
-        if elliptical:
-            a00, a01, a02 = _camera_vector(frame, axes[i, 0])
-            a10, a11, a12 = _camera_vector(frame, axes[i, 1])
-        else:
-            rad = radii[i]
-            sg = 1.0 if n2 >= 0.0 else -1.0
-            aa = -1.0 / (sg + n2)
-            bb = n0 * n1 * aa
-            a00 = (1.0 + sg * n0 * n0 * aa) * rad
-            a01 = sg * bb * rad
-            a02 = -sg * n0 * rad
-            a10 = bb * rad
-            a11 = (sg + n1 * n1 * aa) * rad
-            a12 = -n1 * rad
-        # dual basis b1, b2 of the (possibly non-orthogonal) axes: b_i . a_j = delta_ij in the
-        # surfel plane, so (u, v) = ((p - c) . b1, (p - c) . b2) are the ellipse coordinates of
-        # {c + u a1 + v a2 : u^2 + v^2 <= 1}; for orthogonal axes b_i = a_i / |a_i|^2 (eq. 3.13).
-        g00 = a00 * a00 + a01 * a01 + a02 * a02
-        g11 = a10 * a10 + a11 * a11 + a12 * a12
-        g01 = a00 * a10 + a01 * a11 + a02 * a12
-        det = g00 * g11 - g01 * g01
-        tr = g00 + g11
-        valid = g00 > 1e-300 and g11 > 1e-300 and det > 1e-12 * tr * tr
-        hd = 0.5 * (g00 - g11)
-        r = math.sqrt(0.5 * tr + math.sqrt(hd * hd + g01 * g01))  # largest semi-axis
-        if valid:
-            idet = 1.0 / det
-            b10 = (g11 * a00 - g01 * a10) * idet
-            b11 = (g11 * a01 - g01 * a11) * idet
-            b12 = (g11 * a02 - g01 * a12) * idet
-            b20 = (g00 * a10 - g01 * a00) * idet
-            b21 = (g00 * a11 - g01 * a01) * idet
-            b22 = (g00 * a12 - g01 * a02) * idet
-        else:
-            b10 = b11 = b12 = b20 = b21 = b22 = 0.0
-        P[i, 0] = c2
-        P[i, 1] = n0
-        P[i, 2] = n1
-        P[i, 3] = n2
-        P[i, 4] = c0 * n0 + c1 * n1 + c2 * n2
-        P[i, 5] = b10
-        P[i, 6] = b11
-        P[i, 7] = b12
-        P[i, 8] = b20
-        P[i, 9] = b21
-        P[i, 10] = b22
-        P[i, 11] = c0 * b10 + c1 * b11 + c2 * b12 if valid else np.inf
-        P[i, 12] = c0 * b20 + c1 * b21 + c2 * b22 if valid else np.inf
-        if ortho:
-            P[i, 13] = cx + f * c0
-            P[i, 14] = cy - f * c1
-        elif c2 > near:
-            P[i, 13] = cx + f * c0 / c2
-            P[i, 14] = cy - f * c1 / c2
-        else:
-            P[i, 13] = np.nan
-            P[i, 14] = np.nan
-        P[i, 15] = r
-        # depth range of the fragments: the ellipse itself (r) plus the screen filter footprint
-        # (rfilter pixels in world units at the centre depth) on the tilted plane
-        if ortho:
-            fw = rfilter / f
-            cos = abs(n2)
-        else:
-            fw = rfilter * c2 / f if c2 > near else 0.0
-            cl = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-            cos = abs(c0 * n0 + c1 * n1 + c2 * n2) / cl if cl > 0.0 else 1.0
-        sin = math.sqrt(max(1.0 - cos * cos, 0.0))
-        if sin > EDGE_ON_TAN * cos:
-            P[i, 23] = -(r + fw * EDGE_ON_TAN)
-        else:
-            P[i, 23] = r + fw * sin / cos
-        for j in range(3):
-            P[i, 16 + j] = colors[i, j]
-        x0, x1, y0, y1 = _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H,
-                                    rfilter)
-        box[i, 0] = x0
-        box[i, 1] = x1
-        box[i, 2] = y0
-        box[i, 3] = y1
-        P[i, 19] = x0
-        P[i, 20] = x1
-        P[i, 21] = y0
-        P[i, 22] = y1
-        facing = n2 if ortho else c0 * n0 + c1 * n1 + c2 * n2
-        group[i] = 0 if facing <= 0.0 else 1
+    ntiles = ntx * nty
+    nslot = ntiles * 2
+    counts = np.zeros((nchunks, nslot), dtype=np.int64)
+    cvisits = np.zeros(nchunks, dtype=np.int64)
+    step = (n + nchunks - 1) // nchunks
+    for c in prange(nchunks):
+        lo = c * step
+        hi = min(n, lo + step)
+        v = 0
+        for i in range(lo, hi):
+            _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
+                          rfilter, P, box, group)
+            if box[i, 0] > box[i, 1] or box[i, 2] > box[i, 3]:
+                continue
+            v += np.int64(box[i, 1] - box[i, 0] + 1) * (box[i, 3] - box[i, 2] + 1)
+            g = group[i]
+            for ty in range(box[i, 2] // tile, box[i, 3] // tile + 1):
+                for tx in range(box[i, 0] // tile, box[i, 1] // tile + 1):
+                    counts[c, (ty * ntx + tx) * 2 + g] += 1
+        cvisits[c] = v
+    offsets = np.zeros(ntiles + 1, dtype=np.int64)
+    starts = np.zeros((nchunks, nslot), dtype=np.int64)
+    total = 0
+    for t in range(ntiles):
+        offsets[t] = total
+        for g in range(2):
+            for c in range(nchunks):
+                starts[c, t * 2 + g] = total
+                total += counts[c, t * 2 + g]
+    offsets[ntiles] = total
+    items = np.empty(total, dtype=np.int32)
+    for c in prange(nchunks):
+        lo = c * step
+        hi = min(n, lo + step)
+        for i in range(lo, hi):
+            if box[i, 0] > box[i, 1] or box[i, 2] > box[i, 3]:
+                continue
+            g = group[i]
+            for ty in range(box[i, 2] // tile, box[i, 3] // tile + 1):
+                for tx in range(box[i, 0] // tile, box[i, 1] // tile + 1):
+                    q = (ty * ntx + tx) * 2 + g
+                    items[starts[c, q]] = i
+                    starts[c, q] += 1
+    return offsets, items, cvisits.sum()
 
 
 @njit(cache=True, parallel=True)

@@ -304,8 +304,7 @@ def _draw_surfels(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], context: Draw
     opts = context.options
     if opts.method == "splat":
         renderer = SplatRenderer(context.camera, opts.splat)
-        renderer.render(surfel_arrays(clouds, colors), opaque=gbuffer, clip_surfels=context.clip_surfels)
-        return renderer.gbuffer()
+        return renderer._render_in_place(surfel_arrays(clouds, colors), gbuffer, clip_surfels=context.clip_surfels)
     from unmesh.render.raycast import draw_mls
 
     draw_mls(gbuffer, clouds, context.camera, colors=colors, mls_options=opts.mls, progress=opts.progress)
@@ -447,6 +446,8 @@ def render(
         if items:
             drawn = kind.draw(gbuf, items, context)
             if drawn is not None:
-                gbuf = drawn
+                # render() owns gbuf (the splatter and from_gbuffer write into it in place): a
+                # buffer returned by a registered kind is copied, the splatter's own is not
+                gbuf = drawn if kind.draw is _draw_surfels else drawn.copy()
     color = _with_legend(shade(gbuf, camera, options.shading, options.background_rgb), options, crange)
-    return RenderResult.from_gbuffer(gbuf, camera, color, crange)
+    return RenderResult.from_gbuffer(gbuf, camera, color, crange, copy=False)

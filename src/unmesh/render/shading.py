@@ -242,10 +242,11 @@ class RenderResult:
 
     @classmethod
     def from_gbuffer(cls, gbuffer: GBuffer, camera: Camera, color: np.ndarray,
-                     color_range: tuple[float, float] | None = None) -> RenderResult:
+                     color_range: tuple[float, float] | None = None, *, copy: bool = True) -> RenderResult:
         """The result of a G-buffer and its shaded ``color`` (H,W,3): background pixels (not
         covered) get depth ``inf``, zero normal and zero weight; coverage is copied, the albedo
-        is shared.
+        is shared. With ``copy=False`` the G-buffer's depth, normal and weight are set so in
+        place and all its arrays are shared (for a caller that owns the G-buffer).
 
         Example
         -------
@@ -256,6 +257,13 @@ class RenderResult:
         ((2, 3, 3), True)
         """
         cov = gbuffer.coverage
+        if not copy:
+            bg = ~cov
+            np.copyto(gbuffer.depth, np.inf, where=bg)
+            np.copyto(gbuffer.normal, 0.0, where=bg[..., None])
+            np.copyto(gbuffer.weight, 0.0, where=bg)
+            return cls(color=color, depth=gbuffer.depth, normal=gbuffer.normal, coverage=cov, weight=gbuffer.weight,
+                       albedo=gbuffer.albedo, camera=camera, color_range=color_range)
         return cls(color=color, depth=np.where(cov, gbuffer.depth, np.inf), normal=np.where(cov[..., None], gbuffer.normal, 0.0),
                    coverage=cov.copy(), weight=np.where(cov, gbuffer.weight, 0.0), albedo=gbuffer.albedo, camera=camera,
                    color_range=color_range)

@@ -39,6 +39,7 @@ Example
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -47,14 +48,19 @@ import numpy as np
 
 from unmesh._validate import as_array, as_indices, scalar
 from unmesh.errors import InputError
-from unmesh.render._kernels import SERIAL_BELOW, bin_boxes, box_visits, serial_if_small, tile_order
-from unmesh.render._splat_kernels import NPARAM, gather_rows, splat_resolve, splat_setup, splat_tiles
+from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, tile_order
+from unmesh.render._splat_kernels import NPARAM, gather_rows, splat_resolve, splat_setup_bin, splat_tiles
 from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.surfels import SurfelCloud
 from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCONTINUITY
 
 __all__ = ["ClipPlanes", "ClipSurfels", "SplatOptions", "SplatRenderer", "SurfelArrays", "surfel_arrays"]
+
+#: Per-thread work arrays of :meth:`SplatRenderer._run` (surfel parameters, boxes, groups, pair
+#: rows), shared by all renderers of a thread: their contents live only during one update, and
+#: reusing them spares every ``render()`` call the page faults of ~200 MB per 10^6 surfels.
+_SCRATCH = threading.local()
 
 
 @dataclass(frozen=True)
@@ -298,19 +304,19 @@ class SplatRenderer:
         if not isinstance(camera, Camera):
             raise InputError(f"camera: expected a Camera, got {type(camera).__name__}")
         self.camera = camera
-        self._buffers: dict[str, np.ndarray] = {}
         self.options = options if options is not None else SplatOptions()
         if not isinstance(self.options, SplatOptions):
             raise InputError(f"options: expected SplatOptions, got {type(self.options).__name__}")
         self.param_dtype = np.float32 if self.options.precision == "single" else np.float64
         self.clip_surfels: ClipSurfels | None = None
+        self._adopt_opaque = False  # set by _render_in_place: clear() takes the opaque layer without a copy
         self.clear()
 
     # -- buffers -------------------------------------------------------------------------
     def clear(self, opaque: GBuffer | None = None) -> SplatRenderer:
         """Empty the buffers. ``opaque`` (meshes, particles) occludes splats and shows where none are."""
         h, w = self.camera.shape
-        self._opaque = GBuffer.empty(h, w) if opaque is None else opaque.copy()
+        self._opaque = GBuffer.empty(h, w) if opaque is None else opaque if self._adopt_opaque else opaque.copy()
         if self._opaque.depth.shape != (h, w):
             raise InputError(f"opaque: expected buffers of shape {(h, w)}, got {self._opaque.depth.shape}")
         self.zvis = self._opaque.depth.copy()
@@ -382,29 +388,33 @@ class SplatRenderer:
         ntx = (w + tile - 1) // tile
         nty = (h + tile - 1) // tile
         with serial_if_small(n):  # small partial updates: no parallel launch overhead
-            splat_setup(arrays.positions, arrays.normals, arrays.radii, axes, elliptical, arrays.colors, frame,
-                        cam.eye, f, cx, cy, ortho, near, w, h, rf, params, box, group)
-            offsets, items = bin_boxes(box, group, 2, tile, ntx, nty, 8)
+            offsets, items, visits = splat_setup_bin(arrays.positions, arrays.normals, arrays.radii, axes, elliptical,
+                                                     arrays.colors, frame, cam.eye, f, cx, cy, ortho, near, w, h, rf,
+                                                     params, box, group, tile, ntx, nty, 8)
             pt = self._scratch("pairs", (len(items), NPARAM), self.param_dtype)
             gather_rows(params, items, pt)
-        visits = box_visits(box)
         if clip is None:
             coff, cpl, cmode, has_clip = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8), False
         else:
             coff, cpl, cmode, has_clip = clip.offsets, clip.planes, clip.mode, True
-        with serial_if_small(visits, 20 * SERIAL_BELOW):
+        with serial_if_small(int(visits), 20 * SERIAL_BELOW):
             splat_tiles(pt, items, offsets, tile_order(ntx * nty), tile, w, h, f, cx, cy, ortho, near, rf,
                         opt.kappa, opt.depth_tolerance, has_clip, cam.eye, frame, coff, cpl, cmode, visibility,
                         float(sign), self.zvis, self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth,
                         self.count)
 
-    def _scratch(self, name: str, shape: tuple[int, ...], dtype: Any) -> np.ndarray:
-        """A reusable work array (grown geometrically) so repeated renders avoid page faults."""
+    @staticmethod
+    def _scratch(name: str, shape: tuple[int, ...], dtype: Any) -> np.ndarray:
+        """A reusable work array of this thread (grown geometrically, see :data:`_SCRATCH`), so
+        repeated renders, also by new renderers, avoid page faults."""
         size = int(np.prod(shape))
-        buf = self._buffers.get(name)
+        buffers = getattr(_SCRATCH, "buffers", None)
+        if buffers is None:
+            buffers = _SCRATCH.buffers = {}
+        buf = buffers.get(name)
         if buf is None or buf.dtype != np.dtype(dtype) or buf.size < size:
             buf = np.empty(max(size, int(1.25 * buf.size) if buf is not None else size), dtype=dtype)
-            self._buffers[name] = buf
+            buffers[name] = buf
         return buf[:size].reshape(shape)
 
     # -- results -------------------------------------------------------------------------
@@ -417,11 +427,28 @@ class SplatRenderer:
             albedo = ``sum w c / sum w``, normal = normalised ``sum w n``, depth = ``sum w z / sum w``,
             weight = ``sum w``.
         """
-        g = self._opaque.copy()
+        return self._resolve(self._opaque.copy())
+
+    def _resolve(self, g: GBuffer) -> GBuffer:
+        """Normalise the sums into ``g`` (the opaque layer) in place; returns ``g``."""
         with serial_if_small(self.count.size, 4 * SERIAL_BELOW):
             splat_resolve(self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth, self.count,
                           self.camera.rotation, g.albedo, g.normal, g.depth, g.coverage, g.weight)
         return g
+
+    def _render_in_place(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, gbuffer: GBuffer,
+                         clip_surfels: ClipSurfels | None = None) -> GBuffer:
+        """:meth:`render` against the opaque layer ``gbuffer``, then :meth:`gbuffer` written into
+        ``gbuffer`` itself instead of a copy (what :func:`unmesh.render.render` needs: it owns
+        the buffer, and copying 1024x1024 G-buffers twice costs as much as the binning). The
+        image is the same as ``render(clouds, opaque=gbuffer).gbuffer()``. The renderer is
+        spent afterwards: its opaque layer is the result, so it must not be updated further."""
+        self._adopt_opaque = True
+        try:
+            self.render(clouds, opaque=gbuffer, clip_surfels=clip_surfels)
+        finally:
+            self._adopt_opaque = False
+        return self._resolve(gbuffer)
 
     def result(self, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0)) -> RenderResult:
         """The normalised, shaded image and buffers as a :class:`~unmesh.render.shading.RenderResult`.
