@@ -22,17 +22,11 @@ records one.
 
 :class:`background_work` marks work of this process running in a background thread (FEM's
 background refactorisation): while it runs, :class:`threads_for` leaves it a core (on two
-cores, one thread without timing). Measured on the FEM bunny benchmark while SuperLU
-factorised in a background thread: the block mat-vec took 12 ms on two threads, 1.8 ms on
-one (the second numba thread waits for the core the factorisation holds).
+cores, one thread without timing).
 
 Spinning workers: ``import unmesh`` sets ``GOMP_SPINCOUNT=30000`` unless the user set it
-(numba's OpenMP layer, libgomp, spins 300,000 rounds by default after each parallel region).
-Measured with two CPU-bound processes on the 2 cores (``bench_shells.py --rows 7.5``): 16-23 ms
-per frame by default (89 ms once, when the tuner had chosen one thread while the other worker
-spun), 3.9-4.5 ms with 30,000 (4.4 ms with ``--threads 1``); on idle cores the rows 7.5, 7.10
-and 7.4 kept their times within the noise (1.6/19.6/4.4 ms against 1.7/19.8/4.4 ms), and the
-FEM bunny benchmark took 0.59 s per frame against 0.61 s (0.80 s CPU against 0.88 s).
+(numba's OpenMP layer, libgomp, spins 300,000 rounds by default after each parallel region). The figures behind both choices are in
+``docs/performance.md``.
 
 Example
 -------
