@@ -97,7 +97,7 @@ def register_command(cmd: Command) -> None:
 
 for _cmd in (
     Command("sph", "scene", "unmesh.sph.scene", _SCENE, builder="unmesh.sph.scene:build_simulation"),
-    Command("shell", "scene", "unmesh.shells.scene", _SCENE, builder="unmesh.shells.scene:build_shell_simulation"),
+    Command("shell", "scene", "unmesh.shells.scene", _SCENE, builder="unmesh.shells.scene:build_simulation"),
     Command("fem", "scene", "unmesh.fem.scene", _SCENE, builder="unmesh.fem.scene:build_simulation"),
     Command("csg", "scene", "unmesh.csg.cli", _ARGV),
     Command("render", "inputs", "unmesh.render.cli", _ARGV, output="{stem}.png"),

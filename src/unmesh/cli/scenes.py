@@ -13,7 +13,7 @@ from typing import Any
 __all__ = ["register", "run"]
 
 #: Scene kind -> the sub-command that runs it.
-COMMANDS = {"sph": "sph", "shells": "shell", "fem": "fem"}
+COMMANDS = {"sph": "sph", "shells": "shell", "fem": "fem", "batch": "batch"}
 
 
 def register(sub: Any) -> None:
@@ -47,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
         if args.paths:
             line += f"  [{path}]"
         print(line)
-    if names:
-        print(f"\nrun one with: unmesh {COMMANDS[names[0].split('/', 1)[0]]} {names[0].split('/', 1)[1]} -o OUTDIR")
+    runnable = [n for n in names if n.split("/", 1)[0] != "batch"]  # sweeps are run by path
+    if runnable:
+        kind, stem = runnable[0].split("/", 1)
+        print(f"\nrun one with: unmesh {COMMANDS[kind]} {stem} -o OUTDIR")
     return 0

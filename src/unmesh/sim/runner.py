@@ -495,11 +495,11 @@ def _resume(r: _Run, sim: Simulation, out: Path) -> None:
     if busy:
         raise SimulationError(busy)
     state, meta = load_checkpoint(r.checkpoint_path)
+    sim.load_state_dict(state)  # first: a checkpoint of another kind of simulation is named as such
     manifest = meta.get("manifest")
     if not isinstance(manifest, dict):
         raise SimulationError(f"{r.checkpoint_path}: the checkpoint predates {MANIFEST} (the record of the run's "
                               "files); start the run again with --force (force=True)")
-    sim.load_state_dict(state)
     r.frame = int(meta["frame"])
     r.checkpoint_frame = r.frame
     r.steps = int(meta["steps"])
