@@ -139,3 +139,43 @@ def test_memory_budget_parsing(monkeypatch):
     monkeypatch.setenv("UNMESH_MEMORY_BUDGET", "lots")
     with pytest.raises(ValueError, match="UNMESH_MEMORY_BUDGET"):
         memory_budget()
+
+
+def _points_ply(n: int, binary: bool) -> bytes:
+    from unmesh.io._plyformat import encode_ply
+
+    pts = np.zeros((n, 3), np.float32)
+    return encode_ply([("vertex", n, [(c, pts[:, i], "f4", None) for i, c in enumerate("xyz")])], binary=binary)
+
+
+def test_ply_decoded_size_is_checked_against_the_budget(tmp_path, monkeypatch):
+    monkeypatch.setenv("UNMESH_MEMORY_BUDGET", "4K")
+    p = tmp_path / "pts.ply"
+    # ASCII "0 0 0" rows: 6 bytes of text decode to 12 bytes of values, a 24-byte float table and a line
+    p.write_bytes(_points_ply(1000, binary=False))
+    with pytest.raises(FormatError, match=r"pts\.ply: element 'vertex': the decoded rows up to element 'vertex' "
+                                          r"\(1000 rows\) would need about 89\.8 KiB, more than the memory budget"):
+        io.load(p)
+    # binary rows decode to their own size: a file over the budget is bounded by its length already
+    p.write_bytes(_points_ply(1000, binary=True))
+    assert len(p.read_bytes()) > 4096 and len(io.load(p)) == 1000
+    # 10000 empty binary lists: 1-byte lengths become 8-byte offsets
+    head = ("ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+            "property float z\nelement face 10000\nproperty list uchar int vertex_indices\nend_header\n")
+    p.write_bytes(head.encode() + bytes(36) + bytes(10000))
+    with pytest.raises(FormatError, match=r"element 'face': .* would need about 78\.2 KiB, more than the memory"):
+        io.load(p)
+    monkeypatch.setenv("UNMESH_MEMORY_BUDGET", "1M")
+    with pytest.raises(FormatError, match=r"element 'face': row 0: a face needs at least 3 vertices, got 0"):
+        io.load(p)  # within the budget, the file's own problem
+    p.write_bytes(_points_ply(1000, binary=False))
+    assert len(io.load(p)) == 1000
+
+
+def test_ascii_ply_with_a_huge_count_reports_where_the_file_ends(tmp_path, monkeypatch):
+    monkeypatch.setenv("UNMESH_MEMORY_BUDGET", "4K")
+    p = tmp_path / "huge.ply"
+    text = _points_ply(3, binary=False).replace(b"element vertex 3", b"element vertex 1000000000000")
+    p.write_bytes(text)
+    with pytest.raises(FormatError, match=r"huge\.ply: element 'vertex': file ends after 3 of 1000000000000 rows"):
+        io.load(p)

@@ -19,6 +19,15 @@ Every problem raises :class:`unmesh.errors.FormatError` naming the file and the
 element: malformed headers, unknown types, truncated bodies (``file ends after 120
 of 3000 rows``), values that do not parse or do not fit their type, negative list
 lengths, lines with missing or extra values, and data after the last element.
+
+Sizes announced by the header are checked before anything is allocated for them:
+first against the file's length (each row needs at least its fixed bytes, or in
+ASCII one character and a separator per value), then the decoded arrays against
+the memory budget (:mod:`unmesh.io.budget`). Binary rows decode to about their own
+size, so a binary file is bounded by its length already; the budget refuses only
+decoded arrays that are both over the budget and larger than the file (ASCII
+bodies, whose ``"0 "`` tokens become 8-byte values, or zero-length lists whose
+offsets are 8 bytes each), naming the element and the estimate.
 """
 
 from __future__ import annotations
@@ -32,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from unmesh.io._common import PLY_NAME, PLY_TYPES, fail, format_rows
-from unmesh.io.budget import format_bytes
+from unmesh.io.budget import budget_problem, format_bytes
 
 __all__ = ["Element", "Header", "ListColumn", "Prop", "encode_ply", "parse_header", "read_ply"]
 
@@ -200,11 +209,50 @@ def read_ply(path: str | os.PathLike[str]) -> tuple[Header, dict[str, dict[str, 
     """
     data = Path(path).read_bytes()
     header = parse_header(data, path)
+    _check_sizes(data, header, path)
     if header.format == "ascii":
         tables = _read_ascii(data, header, path)
     else:
         tables = _read_binary(data, header, path)
     return header, tables
+
+
+def _decoded_row_bytes(el: Element, ascii: bool) -> tuple[int, int]:
+    """(fewest decoded bytes of one row, fewest ASCII values in it), from the header alone.
+
+    ASCII rows are parsed into a float64 table (8 bytes per value) plus a line object
+    (about 56 bytes); a list contributes its length value and an int64 offset.
+    """
+    nvalues = len(el.props)
+    out = sum(8 if p.is_list else np.dtype(p.code).itemsize for p in el.props)
+    if ascii:
+        out += 8 * nvalues + 56
+    return out, nvalues
+
+
+def _check_sizes(data: bytes, header: Header, path: str | os.PathLike[str]) -> None:
+    """The decoded arrays of the rows the file can hold against the memory budget, before allocating.
+
+    Counts beyond what the file's length can hold are left to the readers, which report
+    exactly where the file ends; only the rows that fit (each needs its fixed bytes, or
+    in ASCII a character and a separator per value) are counted here.
+    """
+    ascii = header.format == "ascii"
+    left = len(data) - header.body_start + (1 if ascii else 0)  # the last ASCII newline may be missing
+    decoded = 0
+    for el in header.elements:
+        row, nvalues = _decoded_row_bytes(el, ascii)
+        if ascii:
+            minrow = max(2 * nvalues, 1)
+        else:
+            minrow = sum(np.dtype(p.count_code if p.is_list else p.code).itemsize for p in el.props)
+        rows = el.count if minrow == 0 else min(el.count, max(left, 0) // minrow)
+        left -= rows * minrow
+        decoded += rows * row
+        if decoded > len(data):
+            problem = budget_problem(decoded, f"the decoded rows up to element {el.name!r} ({el.count} rows)")
+            if problem is not None:
+                raise fail(path, el.name, problem)
 
 
 # -- binary ---------------------------------------------------------------------------------
