@@ -98,3 +98,50 @@ def test_ascii_garbage_values(vtu):
     vtu.write_text(_replace_array(text, "types", "42 4x2", attrs=head))
     with pytest.raises(FormatError, match=r"m\.vtu: DataArray 'types': values that are not UInt8 numbers"):
         read_vtu(vtu)
+
+
+# -- PVD series ---------------------------------------------------------------------------------
+def _series(tmp_path):
+    from unmesh.fem.vtk_io import write_pvd
+
+    for k in range(2):
+        write_vtu(tmp_path / f"m{k}.vtu", hex_grid((k + 1, 1, 1)))
+    p = tmp_path / "s.pvd"
+    write_pvd(p, ["m0.vtu", "m1.vtu"], [0.0, 0.25])
+    return p
+
+
+def test_pvd_series_round_trip(tmp_path):
+    from unmesh.fem.vtk_io import read_pvd, read_series
+
+    p = _series(tmp_path)
+    assert [(t, f.name) for t, f in read_pvd(p)] == [(0.0, "m0.vtu"), (0.25, "m1.vtu")]
+    assert [(t, m.n_elements) for t, m, _ in read_series(p)] == [(0.0, 1), (0.25, 2)]
+
+
+@pytest.mark.parametrize(("old", "new", "message"), [
+    ('timestep="0.25"', 'timestep="nan"', r"s\.pvd: DataSet 1: timestep: expected a finite number, got 'nan'"),
+    ('timestep="0.25"', 'timestep="x"', r"s\.pvd: DataSet 1: timestep: expected a finite number, got 'x'"),
+    (' timestep="0.25"', "", r"s\.pvd: DataSet 1: timestep: expected a finite number, got '\(none\)'"),
+    ('file="m1.vtu"', 'file="gone.vtu"', r"s\.pvd: DataSet 1: file 'gone\.vtu' not found next to the \.pvd"),
+    ('file="m1.vtu"', 'file="' + "m" * 300 + '.vtu"', r"s\.pvd: DataSet 1: file 'mmm+' not found"),
+    ('file="m1.vtu"', 'file=""', r"s\.pvd: DataSet 1: no 'file' attribute"),
+    ('type="Collection"', 'type="UnstructuredGrid"', r"s\.pvd: expected a VTK Collection \(\.pvd\) file"),
+    ("<Collection>", "<Collection", r"s\.pvd: not a valid XML file"),
+])
+def test_pvd_errors_name_file_and_entry(tmp_path, old, new, message):
+    from unmesh.fem.vtk_io import read_pvd
+
+    p = _series(tmp_path)
+    p.write_text(p.read_text().replace(old, new))
+    with pytest.raises(FormatError, match=message):
+        read_pvd(p)
+
+
+def test_pvd_listing_a_broken_vtu_names_the_vtu(tmp_path):
+    from unmesh.fem.vtk_io import read_series
+
+    p = _series(tmp_path)
+    (tmp_path / "m1.vtu").write_text("<VTKFile")
+    with pytest.raises(FormatError, match=r"m1\.vtu: not a valid XML file"):
+        list(read_series(p))

@@ -1,4 +1,4 @@
-"""Fuzzing the loaders (issue 24): mutated PLY, OBJ/MTL, OFF, VTU, scene and checkpoint files
+"""Fuzzing the loaders (issue 24): mutated PLY, OBJ/MTL, OFF, VTU, PVD, scene and checkpoint files
 raise only the documented errors and write nothing.
 
 The default suite runs a few hundred seeded mutations per format (the whole file takes
@@ -157,6 +157,27 @@ def _fuzz_vtu(tmp_path: Path, count: int, seed: int) -> None:
         _check(tmp_path, mutate(data, rng), "m.vtu", _load_vtu, (FormatError,))
 
 
+def _load_pvd(p: Path) -> object:
+    from unmesh.fem.vtk_io import read_series
+
+    return list(read_series(p))
+
+
+def _fuzz_pvd(tmp_path: Path, count: int, seed: int) -> None:
+    from unmesh.fem import hex_grid
+    from unmesh.fem.vtk_io import write_pvd, write_vtu
+
+    case = tmp_path / "case"
+    case.mkdir(exist_ok=True)
+    for k in range(2):  # the series' frames sit next to the mutated .pvd
+        write_vtu(case / f"m{k}.vtu", hex_grid((k + 1, 1, 1)))
+    write_pvd(tmp_path / "s.pvd", ["m0.vtu", "m1.vtu"], [0.0, 0.25])
+    data = (tmp_path / "s.pvd").read_bytes()
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        _check(tmp_path, mutate(data, rng), "s.pvd", _load_pvd, (FormatError,))
+
+
 def _fuzz_scenes(tmp_path: Path, count: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
     for kind, data, n in (("fem", FEM_SCENE, count), ("sph", SPH_SCENE, max(1, count // 2))):
@@ -189,6 +210,10 @@ def test_fuzz_vtu(tmp_path):
     _fuzz_vtu(tmp_path, 200, seed=2)
 
 
+def test_fuzz_pvd(tmp_path):
+    _fuzz_pvd(tmp_path, 150, seed=5)
+
+
 def test_fuzz_scenes(tmp_path):
     _fuzz_scenes(tmp_path, 120, seed=3)
 
@@ -202,5 +227,6 @@ def test_fuzz_checkpoints(tmp_path):
 def test_fuzz_many(tmp_path, seed):
     _fuzz_files(tmp_path, 1500, seed=seed)
     _fuzz_vtu(tmp_path, 1500, seed=seed)
+    _fuzz_pvd(tmp_path, 1000, seed=seed)
     _fuzz_checkpoints(tmp_path, 1500, seed=seed)
     _fuzz_scenes(tmp_path, 500, seed=seed)

@@ -6,7 +6,10 @@ headers) with one VTK_POLYHEDRON (type 42) cell per element, its faces in the
 the cell). Points are the current (deformed) positions; the point array
 ``displacement`` holds ``current - rest``. :func:`read_vtu` reads such files back
 into a :class:`PolyMesh` (rest positions = points - displacement when present).
-:func:`write_pvd` lists a frame series with times.
+:func:`write_pvd` lists a frame series with times; :func:`read_pvd` reads such a
+list back (checked: every entry a finite time and an existing file next to it) and
+:func:`read_series` loads the meshes it lists. Every problem is a
+:class:`~unmesh.errors.FormatError` naming the file and the element.
 
 Example
 -------
@@ -21,10 +24,11 @@ Example
 from __future__ import annotations
 
 import base64
+import math
 import os
 import struct
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +38,7 @@ from unmesh.errors import FormatError, InputError
 from unmesh.fem.mesh import PolyMesh
 from unmesh.io.atomic import atomic_write_text
 
-__all__ = ["read_vtu", "write_pvd", "write_vtu"]
+__all__ = ["read_pvd", "read_series", "read_vtu", "write_pvd", "write_vtu"]
 
 VTK_POLYHEDRON = 42
 _TYPES = {np.dtype(np.float64): "Float64", np.dtype(np.float32): "Float32", np.dtype(np.int64): "Int64",
@@ -269,10 +273,7 @@ def read_vtu(path: str | os.PathLike[str], *, tolerance: float = 1e-6, abs_toler
     ['displacement']
     """
     p = Path(path)
-    try:
-        root = ET.parse(p).getroot()
-    except (ET.ParseError, UnicodeError, ValueError) as exc:
-        raise FormatError(f"{p}: not a valid XML file ({exc})") from None
+    root = _parse_xml(p)
     if root.get("type") != "UnstructuredGrid":
         raise FormatError(f"{p}: expected a VTK UnstructuredGrid file, got type {root.get('type')!r}")
     if root.get("compressor"):
@@ -317,3 +318,92 @@ def read_vtu(path: str | os.PathLike[str], *, tolerance: float = 1e-6, abs_toler
         return PolyMesh(pts, cells, tolerance=tolerance, abs_tolerance=abs_tolerance, check=check), pdata
     except (InputError, ValueError, IndexError) as exc:  # the mesh's own validation
         raise FormatError(f"{p}: {exc}") from None
+
+
+def _parse_xml(p: Path) -> ET.Element:
+    try:
+        return ET.parse(p).getroot()
+    except (ET.ParseError, UnicodeError, ValueError) as exc:
+        raise FormatError(f"{p}: not a valid XML file ({exc})") from None
+
+
+def read_pvd(path: str | os.PathLike[str]) -> list[tuple[float, Path]]:
+    """The ``(time, file)`` entries of a ParaView collection (as written by :func:`write_pvd`).
+
+    Parameters
+    ----------
+    path : path
+        A ``.pvd`` file; its ``DataSet`` files are relative to its folder.
+
+    Returns
+    -------
+    list of (float, Path)
+        In file order; times are finite, files exist.
+
+    Raises
+    ------
+    FormatError
+        Naming the file and the ``DataSet`` entry (0-based): not XML, not a
+        ``Collection``, a missing or non-finite ``timestep``, a missing ``file``
+        attribute, or a listed file that does not exist.
+
+    Example
+    -------
+    >>> import tempfile, pathlib
+    >>> from unmesh.fem import hex_grid
+    >>> d = pathlib.Path(tempfile.mkdtemp()); write_vtu(d / "m0.vtu", hex_grid((1, 1, 1)))
+    >>> write_pvd(d / "s.pvd", ["m0.vtu"], [0.5])
+    >>> [(t, f.name) for t, f in read_pvd(d / "s.pvd")]
+    [(0.5, 'm0.vtu')]
+    """
+    p = Path(path)
+    root = _parse_xml(p)
+    if root.tag != "VTKFile" or root.get("type") != "Collection":
+        raise FormatError(f"{p}: expected a VTK Collection (.pvd) file, got {root.tag[:40]!r} "
+                          f"of type {(root.get('type') or '')[:40]!r}")
+    coll = root.find("Collection")
+    if coll is None:
+        raise FormatError(f"{p}: missing the Collection element")
+    out = []
+    for i, ds in enumerate(coll.findall("DataSet")):
+        where = f"{p}: DataSet {i}"
+        raw = ds.get("timestep")
+        try:
+            t = float(raw) if raw is not None else math.nan
+        except ValueError:
+            t = math.nan
+        if not math.isfinite(t):
+            raise FormatError(f"{where}: timestep: expected a finite number, got {(raw or '(none)')[:40]!r}")
+        name = ds.get("file")
+        if not name:
+            raise FormatError(f"{where}: no 'file' attribute")
+        f = p.parent / name
+        try:
+            exists = f.is_file()
+        except (OSError, ValueError):  # over-long names, NUL bytes
+            exists = False
+        if not exists:
+            raise FormatError(f"{where}: file {name[:80]!r} not found next to the .pvd")
+        out.append((t, f))
+    return out
+
+
+def read_series(path: str | os.PathLike[str], **options: Any) -> Iterator[tuple[float, PolyMesh, dict[str, np.ndarray]]]:
+    """Load the meshes of a ``.pvd`` series one by one: ``(time, mesh, point_data)``.
+
+    ``options`` go to :func:`read_vtu` (e.g. ``check=False`` for cut meshes). The
+    collection is read and checked first (:func:`read_pvd`), so a bad entry fails
+    before any mesh is loaded.
+
+    Example
+    -------
+    >>> import tempfile, pathlib
+    >>> from unmesh.fem import hex_grid
+    >>> d = pathlib.Path(tempfile.mkdtemp()); write_vtu(d / "m0.vtu", hex_grid((2, 1, 1)))
+    >>> write_pvd(d / "s.pvd", ["m0.vtu"], [0.0])
+    >>> [(t, m.n_elements) for t, m, _ in read_series(d / "s.pvd")]
+    [(0.0, 2)]
+    """
+    for t, f in read_pvd(path):
+        mesh, pdata = read_vtu(f, **options)
+        yield t, mesh, pdata
