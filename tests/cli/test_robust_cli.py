@@ -82,7 +82,7 @@ def test_oversized_scene_is_refused_before_any_output(tmp_path):
 
 
 def test_resume_with_a_truncated_or_foreign_checkpoint(tmp_path, capsys):
-    from unmesh.sim.checkpoint import save_checkpoint
+    from unmesh.sim.checkpoint import load_checkpoint, save_checkpoint
 
     scene = tmp_path / "drop.toml"
     scene.write_text(FEM_DROP.format(duration=0.02, cells="[1, 1, 1]"))
@@ -90,6 +90,8 @@ def test_resume_with_a_truncated_or_foreign_checkpoint(tmp_path, capsys):
     assert main(["fem", str(scene), "-o", str(out), "--no-progress"]) == 0
     capsys.readouterr()
     ck = out / "checkpoint.npz"
+    good, good_meta = load_checkpoint(ck)
+    good = dict(good)
     data = ck.read_bytes()
     ck.write_bytes(data[: len(data) // 2])
     assert main(["fem", str(scene), "-o", str(out), "--resume", "--no-progress"]) == 1
@@ -99,6 +101,12 @@ def test_resume_with_a_truncated_or_foreign_checkpoint(tmp_path, capsys):
     assert main(["fem", str(scene), "-o", str(out), "--resume", "--no-progress"]) == 1
     line = _one_line(capsys.readouterr().err)
     assert "checkpoint.npz: the checkpoint has no 'points' (written by another kind of simulation" in line
+    # same keys, other shapes (another scene's checkpoint): the array and both shapes in one line
+    state = {k: (np.zeros((3, 3)) if k == "u" else v) for k, v in good.items()}
+    save_checkpoint(ck, state, good_meta)
+    assert main(["fem", str(scene), "-o", str(out), "--resume", "--no-progress"]) == 1
+    line = _one_line(capsys.readouterr().err)
+    assert "checkpoint.npz: array 'u' has shape (3, 3) but this scene needs (8, 3)" in line
 
 
 def test_scenes_command_lists_one_line_per_shipped_scene(capsys):

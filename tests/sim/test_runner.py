@@ -144,3 +144,29 @@ def test_resume_without_checkpoint_and_bad_settings(tmp_path):
         RunSettings(duration=0)
     with pytest.raises(InputError, match="fps"):
         RunSettings(duration=1, fps=-1)
+
+
+class StrictOscillator(Oscillator):
+    """Restores in place, so a checkpoint of the wrong shape fails inside load_state_dict."""
+
+    def load_state_dict(self, s):
+        super().load_state_dict(s)
+        self.x = np.array([1.0, 0.0])
+        self.x[:] = s["x"]
+
+
+def test_foreign_checkpoint_with_matching_keys_but_other_shapes(tmp_path):
+    from unmesh.sim.checkpoint import expect_shapes, load_checkpoint, save_checkpoint
+
+    run(StrictOscillator(), tmp_path, RunSettings(duration=0.1, fps=20), progress=False)
+    ck = tmp_path / "checkpoint.npz"
+    state, meta = load_checkpoint(ck)
+    state = dict(state, x=np.zeros(3))
+    save_checkpoint(ck, state, meta)
+    # a simulation that checks its shapes names the array and both shapes
+    with pytest.raises(SimulationError, match=r"checkpoint\.npz: array 'x' has shape \(3,\) but this scene needs "
+                                              r"\(2,\) \(the checkpoint belongs to another scene\)"):
+        expect_shapes(load_checkpoint(ck)[0], {"x": (2,), "v": (2,)})
+    # one that does not still gets one line naming the checkpoint, not an unexpected ValueError
+    with pytest.raises(SimulationError, match=r"checkpoint\.npz: the checkpoint does not fit this scene \(ValueError: "):
+        run(StrictOscillator(), tmp_path, RunSettings(duration=0.2, fps=20), resume=True, progress=False)

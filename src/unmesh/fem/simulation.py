@@ -35,6 +35,7 @@ from unmesh.fem.events import CutEvent
 from unmesh.fem.mesh import PolyMesh
 from unmesh.fem.vtk_io import write_pvd, write_vtu
 from unmesh.sim import Simulation
+from unmesh.sim.checkpoint import expect_shapes
 
 __all__ = ["CutSkippedWarning", "FemSimulation"]
 
@@ -195,10 +196,14 @@ class FemSimulation(Simulation):
                 "frame_files": [f for f, _ in self.frames], "frame_times": np.array([t for _, t in self.frames])}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        old = self.dyn
+        pts = np.shape(state["points"])
+        n = pts[0] if pts else 0  # cuts add nodes: the count is the checkpoint's own
+        expect_shapes(state, {"points": (None, 3), "u": (n, 3), "v": (n, 3), "contact": (n,),
+                              "groups": (len(old.groups), n), "loads": (len(old.loads), n)})
         mesh = PolyMesh.from_arrays(state["points"], state["face_nodes"], state["face_offsets"], state["elem_faces"],
                                     state["elem_signs"], state["elem_offsets"], tolerance=float(state["tolerance"]),
                                     abs_tolerance=float(state["abs_tolerance"]), check=False)
-        old = self.dyn
         groups = [(np.asarray(m, bool), p) for m, (_, p) in zip(state["groups"], old.groups, strict=True)]
         new = Dynamics(mesh, state["young"], state["poisson"], state["density"], gravity=old.gravity,
                        ground=old.ground, rayleigh=(old.alpha, old.beta), solver=old.solver, warping=old.warping,

@@ -31,6 +31,7 @@ from unmesh.shells.skinning import DEFAULT_SKIN_NODES, SkinnedSurface
 from unmesh.shells.tearing import DEGENERATE_RATIO, Tearing, warm_up
 from unmesh.shells.topology import ShellTopology, csr_entries
 from unmesh.sim import Simulation
+from unmesh.sim.checkpoint import expect_shapes
 from unmesh.surfels import SurfelCloud
 
 __all__ = ["ShellSimulation", "node_areas", "stable_time_step"]
@@ -524,6 +525,8 @@ class ShellSimulation(Tearing, Simulation):
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore :meth:`state_dict`; rebinds the surface to the restored cracks."""
+        n = len(self.rest)
+        expect_shapes(state, {"x": (n, 3), "v": (n, 3), "acc": (n, 3), "neighbor_offsets": (n + 1,)})
         self.time = float(state["time"])
         self.steps = int(state["steps"])
         self.x = np.ascontiguousarray(state["x"], dtype=np.float64)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,7 @@ import numpy as np
 from unmesh.errors import SimulationError
 from unmesh.io.atomic import atomic_path
 
-__all__ = ["load_checkpoint", "save_checkpoint"]
+__all__ = ["expect_shapes", "load_checkpoint", "save_checkpoint"]
 
 _FORMAT = 1
 
@@ -92,3 +93,37 @@ def load_checkpoint(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[
         raise SimulationError(f"{p}: malformed checkpoint: negative frame or step count")
     state.update(other)
     return _State(state, p), meta
+
+
+def expect_shapes(state: Mapping[str, Any], shapes: Mapping[str, tuple[int | None, ...]]) -> None:
+    """Check the shapes of a checkpoint's arrays before a simulation restores them.
+
+    Parameters
+    ----------
+    state : mapping
+        What :func:`load_checkpoint` returned (or a plain ``state_dict``).
+    shapes : mapping of str to tuple
+        Expected shape per key; ``None`` matches any length on that axis.
+
+    Raises
+    ------
+    SimulationError
+        One line naming the checkpoint, the array and both shapes (a checkpoint of
+        another scene whose keys match), or the missing key.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> expect_shapes({"x": np.zeros((4, 3))}, {"x": (4, 3)})
+    >>> expect_shapes({"x": np.zeros((5, 3))}, {"x": (4, None)})
+    Traceback (most recent call last):
+    ...
+    unmesh.errors.SimulationError: checkpoint: array 'x' has shape (5, 3) but this scene needs (4, any) ...
+    """
+    where = getattr(state, "_path", "checkpoint")
+    for key, want in shapes.items():
+        got = np.shape(state[key])
+        if len(got) != len(want) or any(w is not None and g != w for g, w in zip(got, want, strict=True)):
+            need = "(" + ", ".join("any" if w is None else str(w) for w in want) + ("," if len(want) == 1 else "") + ")"
+            raise SimulationError(f"{where}: array {key!r} has shape {tuple(got)} but this scene needs {need} "
+                                  "(the checkpoint belongs to another scene); run without --resume to start over")

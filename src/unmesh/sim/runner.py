@@ -495,7 +495,11 @@ def _resume(r: _Run, sim: Simulation, out: Path) -> None:
     if busy:
         raise SimulationError(busy)
     state, meta = load_checkpoint(r.checkpoint_path)
-    sim.load_state_dict(state)  # first: a checkpoint of another kind of simulation is named as such
+    try:  # first: a checkpoint of another kind of simulation is named as such
+        sim.load_state_dict(state)
+    except (ValueError, IndexError, TypeError) as exc:  # a simulation that does not check its arrays' shapes
+        raise SimulationError(f"{r.checkpoint_path}: the checkpoint does not fit this scene "
+                              f"({type(exc).__name__}: {exc}); run without --resume to start over") from None
     manifest = meta.get("manifest")
     if not isinstance(manifest, dict):
         raise SimulationError(f"{r.checkpoint_path}: the checkpoint predates {MANIFEST} (the record of the run's "
