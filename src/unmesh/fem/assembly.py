@@ -113,7 +113,8 @@ class ElementStiffness:
 
 
 def element_stiffness(mesh: PolyMesh | ElementIntegration, young: Any, poisson: Any,
-                      correction: bool = True, rule: IntegrationRule | str | None = None) -> ElementStiffness:
+                      correction: bool = True, rule: IntegrationRule | str | None = None, *,
+                      of_mesh: PolyMesh | None = None, elements: np.ndarray | None = None) -> ElementStiffness:
     """Element stiffness matrices (9.19 with the volume factor).
 
     Parameters
@@ -127,6 +128,12 @@ def element_stiffness(mesh: PolyMesh | ElementIntegration, young: Any, poisson: 
     rule : IntegrationRule or str, optional
         Quadrature when integrating here (default the thesis rule (9.19); see
         :class:`unmesh.fem.integration.IntegrationRule`).
+    of_mesh : PolyMesh, optional
+        The mesh ``mesh``'s integration data belong to, when given data: the
+        ``incompatible`` rule builds its hexahedra's stiffness from the geometry.
+    elements : (k,) int array, optional
+        The mesh's elements the stiffness is for, in this order (the integration data
+        then hold these elements only; with a mesh, only these are integrated).
 
     Returns
     -------
@@ -140,7 +147,10 @@ def element_stiffness(mesh: PolyMesh | ElementIntegration, young: Any, poisson: 
     (24, 24)
     """
     rule = IntegrationRule.parse(rule)
-    integ = integrate_elements(mesh, correction, rule=rule) if isinstance(mesh, PolyMesh) else mesh
+    if isinstance(mesh, PolyMesh):
+        geometry, integ = mesh, integrate_elements(mesh, correction, elements, rule)
+    else:
+        geometry, integ = of_mesh, mesh
     ne = integ.n_elements
     lam, mu = lame_parameters(_per_element(young, ne, "young"), _per_element(poisson, ne, "poisson"))
     n = np.diff(integ.node_offsets)
@@ -148,15 +158,22 @@ def element_stiffness(mesh: PolyMesh | ElementIntegration, young: Any, poisson: 
     data = FK.element_stiffness(integ.node_offsets, integ.sample_offsets, integ.grad_offsets, integ.weights,
                                 integ.grads, lam, mu, koff)
     if rule.kind == "incompatible":
-        if not isinstance(mesh, PolyMesh):
-            raise InputError("rule: the 'incompatible' stiffness needs the mesh, got an ElementIntegration")
+        if geometry is None:
+            raise InputError("rule: the 'incompatible' stiffness needs the mesh, got an ElementIntegration "
+                             "without of_mesh")
         from unmesh.fem.hexcells import hex_cells, incompatible_stiffness, trilinear_gradients
 
-        is_hex, corners = hex_cells(mesh)
-        h = np.flatnonzero(is_hex)
+        is_hex, corners = hex_cells(geometry)
+        sel = np.arange(geometry.n_elements) if elements is None else np.asarray(elements, dtype=np.int64)
+        if len(sel) != ne:
+            raise InputError(f"elements: expected {ne} element indices (one per integrated element), got {len(sel)}")
+        slot = np.full(geometry.n_elements, -1, np.int64)
+        slot[is_hex] = np.arange(int(is_hex.sum()))
+        h = np.flatnonzero(is_hex[sel])                 # positions in the integration that are hexahedra
+        corners = corners[slot[sel[h]]]
         if len(h):
             loc = integ.nodes[integ.node_offsets[h][:, None] + corners]
-            x = mesh.points[loc]
+            x = geometry.points[loc]
             # the integration's trilinear gradients carry the interface correction: pass it on
             g0 = integ.grads[(integ.grad_offsets[h][:, None] + np.arange(8)).ravel()].reshape(len(h), 8, 3)
             shift = g0[np.arange(len(h))[:, None], corners] - trilinear_gradients(x)[0][:, 0]

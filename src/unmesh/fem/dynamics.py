@@ -46,7 +46,7 @@ from unmesh.errors import InputError
 from unmesh.fem import _fe_kernels as FK
 from unmesh.fem import _solve_kernels as SK
 from unmesh.fem.assembly import BlockPattern, ElementStiffness, element_stiffness, lame_parameters
-from unmesh.fem.integration import ElementIntegration, integrate_elements, merge_csr
+from unmesh.fem.integration import ElementIntegration, IntegrationRule, integrate_elements, merge_csr
 from unmesh.fem.mesh import PolyMesh
 from unmesh.fem.rotations import _horn_all, piece_rotations
 from unmesh.fem.solvers import PCG, SOLVERS, LaggedLU, direct_solve
@@ -190,6 +190,12 @@ class Dynamics:
         Consistency correction of the element quadrature.
     cg_tol : float
         Relative residual of the PCG solve.
+    rule : IntegrationRule or str, optional
+        Element integration (:class:`~unmesh.fem.integration.IntegrationRule`; default the
+        thesis rule (9.19)); the scene key ``simulation.integration``. After a cut the
+        re-integrated elements get the same rule: under ``"incompatible"`` those that are
+        still hexahedra get the incompatible-mode stiffness rebuilt from the cut mesh, the
+        cut pieces (no longer hexahedra) the thesis rule; the unchanged cells keep theirs.
 
     Attributes
     ----------
@@ -210,7 +216,8 @@ class Dynamics:
     def __init__(self, mesh: PolyMesh, young: Any, poisson: Any, density: Any = 1.0, *,
                  gravity: Any = (0.0, -9.81, 0.0), prescribed: list[Prescribed] | None = None,
                  ground: Ground | None = None, loads: list[Load] | None = None, rayleigh: tuple[float, float] = (0.0, 0.0), solver: str = "auto",
-                 warping: bool = True, correction: bool = True, cg_tol: float = 1e-6, cg_maxiter: int = 5000) -> None:
+                 warping: bool = True, correction: bool = True, cg_tol: float = 1e-6, cg_maxiter: int = 5000,
+                 rule: IntegrationRule | str | None = None) -> None:
         if solver not in SOLVERS:
             raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         ne = mesh.n_elements
@@ -227,6 +234,7 @@ class Dynamics:
         self.solver = solver
         self.warping = bool(warping)
         self.correction = bool(correction)
+        self.rule = IntegrationRule.parse(rule)
         self.cg_tol = positive_scalar(cg_tol, "cg_tol")
         self.cg_maxiter = int(cg_maxiter)
         self.lagged = LaggedLU()
@@ -253,14 +261,15 @@ class Dynamics:
         self._kspare: np.ndarray | None = None  # buffer the stiffness data of the next topology change goes into
         self.last = StepInfo()
         t0 = time.perf_counter()
-        self.integ = integrate_elements(mesh, self.correction)
+        self.integ = integrate_elements(mesh, self.correction, rule=self.rule)
         self._setup_element_data()
         self.last.reintegration_seconds = time.perf_counter() - t0
 
     # -- element data ----------------------------------------------------------------------
     def _setup_element_data(self, kstiff: ElementStiffness | None = None) -> None:
         integ = self.integ
-        self.kstiff = kstiff if kstiff is not None else element_stiffness(integ, self.young, self.poisson)
+        self.kstiff = kstiff if kstiff is not None else element_stiffness(integ, self.young, self.poisson,
+                                                                          rule=self.rule, of_mesh=self.mesh)
         n = self.mesh.n_nodes
         per = np.repeat(integ.volumes * self.density, np.diff(integ.node_offsets)) * integ.mu
         self.masses = np.bincount(integ.nodes, weights=per, minlength=n)
@@ -627,8 +636,9 @@ class Dynamics:
         from_new = pend.kept < 0
         changed = np.flatnonzero(from_new)
         with threads_for(len(changed), CHANGED_PARALLEL_MIN, "fem.integrate", TUNER_PERIOD):
-            new = integrate_elements(mesh, self.correction, elements=changed)
-            ks_new = element_stiffness(new, self.young[changed], self.poisson[changed])
+            new = integrate_elements(mesh, self.correction, elements=changed, rule=self.rule)
+            ks_new = element_stiffness(new, self.young[changed], self.poisson[changed], rule=self.rule,
+                                       of_mesh=mesh, elements=changed)
         # element i comes from the old data (row kept[i]) or the re-integrated data (its rank in `changed`)
         src = np.where(from_new, np.cumsum(from_new) - 1, pend.kept)
         noff, nodes = mesh.element_nodes()

@@ -27,6 +27,7 @@ import numpy as np
 from unmesh.fem import builders
 from unmesh.fem.dynamics import Dynamics, Ground, Load, Prescribed
 from unmesh.fem.events import BladeEvent, CutEvent, PlaneEvent, PolygonEvent, RandomSplitsEvent
+from unmesh.fem.integration import IntegrationRule
 from unmesh.fem.mesh import PolyMesh
 from unmesh.fem.simulation import FemSimulation
 from unmesh.scene import Table
@@ -177,6 +178,7 @@ def build_simulation(scene: Table) -> tuple[FemSimulation, RunSettings]:
     cg_tol = sim_t.number("cg_tolerance", 1e-6, positive=True)
     warping = sim_t.boolean("warping", True)
     correction = sim_t.boolean("correction", True)
+    integration = sim_t.call("integration", IntegrationRule.parse, sim_t.string("integration", "thesis"))
     gravity = sim_t.vector("gravity", 3, (0.0, -9.81, 0.0))
     damping = sim_t.vector("damping", 2, (0.0, 0.0))
     if np.any(damping < 0):
@@ -218,7 +220,7 @@ def build_simulation(scene: Table) -> tuple[FemSimulation, RunSettings]:
     with scene.guard(None):
         dyn = Dynamics(mesh, young, poisson, density, gravity=gravity, prescribed=prescribed, ground=ground,
                        loads=loads, rayleigh=(float(damping[0]), float(damping[1])), solver=solver, warping=warping,
-                       correction=correction, cg_tol=cg_tol)
+                       correction=correction, cg_tol=cg_tol, rule=integration)
     offset = 0
     for m, v in zip(meshes, vels, strict=True):
         dyn.v[offset:offset + m.n_nodes] = v

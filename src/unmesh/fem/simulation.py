@@ -207,7 +207,8 @@ class FemSimulation(Simulation):
         groups = [(np.asarray(m, bool), p) for m, (_, p) in zip(state["groups"], old.groups, strict=True)]
         new = Dynamics(mesh, state["young"], state["poisson"], state["density"], gravity=old.gravity,
                        ground=old.ground, rayleigh=(old.alpha, old.beta), solver=old.solver, warping=old.warping,
-                       correction=old.correction, cg_tol=old.cg_tol, cg_maxiter=old.cg_maxiter)
+                       correction=old.correction, cg_tol=old.cg_tol, cg_maxiter=old.cg_maxiter,
+                       rule=old.rule)
         new.groups = groups
         new.loads = [(np.asarray(m, bool), ld) for m, (_, ld) in zip(state["loads"], old.loads, strict=True)]
         new.u = np.asarray(state["u"], dtype=np.float64).copy()
