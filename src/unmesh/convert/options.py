@@ -43,6 +43,9 @@ class ConvertOptions:
     texture_error : float
         Threshold of the per-patch error (6.1): area-weighted mean RGB distance between the
         surfel colours and the bilinear texture at the surfel centres. Default 0.02.
+    normal_error : float
+        Threshold of the normal error (mean ``1 - N_s . N_t``, eq. 6.2). Default 0.005 (about
+        6 degrees).
     normal_map : bool
         Bake a tangent-space normal texture (6.2) besides the colour texture.
     page_size : int
@@ -70,6 +73,7 @@ class ConvertOptions:
     mesh_error: float = 0.01
     faces: int | None = None
     texture_error: float = 0.02
+    normal_error: float = 0.005
     normal_map: bool = True
     page_size: int = 2048
     mipmaps: bool = False
@@ -86,6 +90,7 @@ class ConvertOptions:
                 raise InputError(f"faces: expected an integer >= 4, got {self.faces!r}")
             object.__setattr__(self, "faces", f)
         object.__setattr__(self, "texture_error", scalar(self.texture_error, "texture_error", 1e-6, 2.0))
+        object.__setattr__(self, "normal_error", scalar(self.normal_error, "normal_error", 1e-7, 2.0))
         object.__setattr__(self, "page_size", _pow2(self.page_size, "page_size", 64, 16384))
         object.__setattr__(self, "grid_factor", scalar(self.grid_factor, "grid_factor", 0.5, 20.0))
         lvl = int(self.max_level)
