@@ -162,7 +162,7 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
     Placement
     """
     n = len(masks)
-    for i, m in enumerate(masks):
+    for m in masks:
         if m.shape[1] > page_size or m.shape[0] > page_size:
             raise InputError(f"page_size: a patch of {m.shape[1]} x {m.shape[0]} texels does not fit pages of {page_size}")
     out = Placement(np.zeros(n, np.int64), np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.zeros(n, bool),

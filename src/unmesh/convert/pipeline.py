@@ -30,7 +30,26 @@ from unmesh.meshes import TriangleMesh
 from unmesh.mls import MLSSurface
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["Conversion", "convert_cloud", "to_textured_mesh"]
+__all__ = ["Conversion", "cloud_from_mesh", "convert_cloud", "to_textured_mesh"]
+
+
+def cloud_from_mesh(mesh: TriangleMesh) -> SurfelCloud:
+    """The vertices of a mesh (a scan) as surfels: vertex normals, estimated radii, vertex colours.
+
+    Example
+    -------
+    >>> from unmesh.shapes import Sphere
+    >>> c = cloud_from_mesh(Sphere().mesh(0.2))
+    >>> bool((c.radii > 0).all())
+    True
+    """
+    from unmesh.surfels import estimate_radii
+
+    used = np.unique(mesh.faces)
+    nrm = mesh.computed_vertex_normals()[used]
+    pos = mesh.vertices[used]
+    col = None if mesh.vertex_colors is None else mesh.vertex_colors[used]
+    return SurfelCloud(pos, nrm, radii=estimate_radii(pos, nrm), colors=col)
 
 
 @dataclass
