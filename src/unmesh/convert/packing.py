@@ -1,0 +1,198 @@
+"""Packing triangular patches into 2^n x 2^n atlas pages (thesis 6.3, Algorithm 6.1).
+
+Each patch is a triangle with its longest (base) edge along x and the apex above it, plus the
+texels a bilinear lookup needs (its *footprint*, :mod:`unmesh.convert._patch_kernels`). Rows of
+similar height are filled one after the other (Algorithm 6.1): the row height is the tallest
+remaining patch, candidates are the patches at most ``dh`` lower; the next patch is the one
+whose base angle is closest to the free base angle beta of the last patch of the row, flipped
+horizontally when its right base angle fits better, every second one flipped vertically (apex
+down, aligned with the top of the row), and pushed as far left as the row's per-scanline right
+profile allows (``insert``). A patch that does not fit is left for a later row. When the
+candidates are used up and the row still has room, it goes on with the tallest remaining
+patches (an extension: Algorithm 6.1 would start a new row, which wastes most of the rows when
+few patches share a height).
+
+Pages: when the remaining footprints fill the smallest power-of-two page that could hold them
+to at least ``target - 0.1`` and they all fit, that page ends the atlas; otherwise a page of the
+largest power-of-two edge they can fill completely (at most ``page_size``) is packed and the
+rest goes on. So every page but possibly the last is full, and the last is small. Fill is
+reported per page.
+
+Example
+-------
+>>> import numpy as np
+>>> masks = [np.ones((3, 4), bool)] * 10
+>>> base = np.array([[1.0, 0.0]] * 10)  # base angles (left, right) in radians
+>>> pl = pack(masks, np.full((10, 2), 1.0), page_size=64)
+>>> len(pl.pages), bool((pl.x >= 0).all())
+(1, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from unmesh.errors import InputError
+
+__all__ = ["Placement", "base_angles", "pack"]
+
+
+@dataclass
+class Placement:
+    """Where every patch went.
+
+    Attributes
+    ----------
+    page, x, y : (P,) int64
+        Page index and top-left texel of the patch's (flipped) mask in the page.
+    flip_h, flip_v : (P,) bool
+        Mirrored left-right / top-bottom.
+    pages : list of int
+        Edge of every page (powers of two).
+    fill : list of float
+        Footprint texels / page texels, per page.
+    """
+
+    page: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    flip_h: np.ndarray
+    flip_v: np.ndarray
+    pages: list[int]
+    fill: list[float]
+
+
+def base_angles(length: np.ndarray, apex: np.ndarray) -> np.ndarray:
+    """Base angles (P, 2) (left, right) in radians of triangles with base ``length`` and apex (x, y)."""
+    left = np.arctan2(apex[:, 1], apex[:, 0])
+    right = np.arctan2(apex[:, 1], length - apex[:, 0])
+    return np.stack([left, right], axis=1)
+
+
+def _profiles(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First and last used column per mask row (empty rows: l = width, r = -1)."""
+    w = mask.shape[1]
+    any_ = mask.any(axis=1)
+    left = np.where(any_, mask.argmax(axis=1), w)
+    right = np.where(any_, w - 1 - mask[:, ::-1].argmax(axis=1), -1)
+    return left, right
+
+
+def _pack_page(items: list[int], masks: list[np.ndarray], angles: np.ndarray, edge: int, dh_frac: float,
+               out: Placement, page: int) -> list[int]:
+    """Algorithm 6.1 on one page; returns the items that did not fit."""
+    heights = np.array([masks[i].shape[0] for i in items], np.int64)
+    remaining = np.ones(len(items), bool)
+    ymin = 0
+    while remaining.any():
+        hbar = int(heights[remaining].max())
+        if ymin + hbar > edge:
+            break
+        dh = max(1, int(dh_frac * hbar))
+        cand = np.flatnonzero(remaining & (heights > hbar - dh))
+        right_prof = np.zeros(hbar, np.int64)  # first free column per scanline of the row
+        beta = np.pi / 2
+        mirror = False
+        failures = 0
+        while failures < 8:
+            if not len(cand):
+                # the row still has room: go on with the tallest remaining patches (an extension
+                # of Algorithm 6.1, which would leave the rest of the row empty)
+                if not remaining.any():
+                    break
+                h2 = int(heights[remaining].max())
+                cand = np.flatnonzero(remaining & (heights > h2 - max(1, int(dh_frac * h2))))
+            al = angles[[items[c] for c in cand]]
+            dl = np.abs(al[:, 0] - beta)
+            dr = np.abs(al[:, 1] - beta)
+            best = int(np.argmin(np.minimum(dl, dr)))
+            ci = cand[best]
+            i = items[ci]
+            flip_h = bool(dl[best] > dr[best])
+            mask = masks[i][:, ::-1] if flip_h else masks[i]
+            new_beta = al[best, 0] if flip_h else al[best, 1]
+            if mirror:
+                mask = mask[::-1]
+            h, w = mask.shape
+            rows = np.arange(h) if mirror else np.arange(hbar - h, hbar)
+            lft, rgt = _profiles(mask)
+            used = rgt >= 0
+            x0 = int(max(0, (right_prof[rows[used]] - lft[used]).max())) if used.any() else 0
+            cand = np.delete(cand, best)
+            if x0 + w > edge:
+                failures += 1
+                if not len(cand):
+                    break
+                continue
+            right_prof[rows[used]] = x0 + rgt[used] + 1
+            out.page[i], out.x[i], out.y[i] = page, x0, ymin + (0 if mirror else hbar - h)
+            out.flip_h[i], out.flip_v[i] = flip_h, mirror
+            remaining[ci] = False
+            beta = new_beta
+            mirror = not mirror
+        ymin += hbar
+    return [items[k] for k in np.flatnonzero(remaining)]
+
+
+def _copy(p: Placement) -> Placement:
+    return Placement(p.page.copy(), p.x.copy(), p.y.copy(), p.flip_h.copy(), p.flip_v.copy(), [], [])
+
+
+def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, target: float = 0.9,
+         dh_frac: float = 0.25) -> Placement:
+    """Pack patch footprints (Algorithm 6.1) into power-of-two pages.
+
+    Parameters
+    ----------
+    masks : list of (h, w) bool arrays
+        Footprint of every patch, base edge at the bottom, apex up.
+    angles : (P, 2) float64
+        Base angles (left, right), :func:`base_angles`.
+    page_size : int
+        Largest page edge (a power of two).
+    target : float
+        Fill goal of the last page (see the module notes).
+    dh_frac : float
+        Height tolerance of a row (fraction of its height).
+
+    Returns
+    -------
+    Placement
+    """
+    n = len(masks)
+    for m in masks:
+        if m.shape[1] > page_size or m.shape[0] > page_size:
+            raise InputError(f"page_size: a patch of {m.shape[1]} x {m.shape[0]} texels does not fit pages of {page_size}")
+    out = Placement(np.zeros(n, np.int64), np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.zeros(n, bool),
+                    np.zeros(n, bool), [], [])
+    area = np.array([m.sum() for m in masks], np.float64)
+    order = sorted(range(n), key=lambda i: -masks[i].shape[0])
+    left = order
+    while left:
+        need = area[left].sum()
+        big = max(max(masks[i].shape) for i in left)
+        smallest = max(16, 1 << int(np.ceil(np.log2(big))))
+        up = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.97))))))
+        down = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
+        page = len(out.pages)
+        trial = None
+        if need / up**2 >= target - 0.1 or up == smallest or down == page_size:
+            trial = _copy(out)
+            rest = _pack_page(left, masks, angles, up, dh_frac, trial, page)
+            edge = up
+            if rest and up < page_size:
+                trial = None  # did not take everything: fill a full page instead
+        if trial is None:
+            trial = _copy(out)
+            rest = _pack_page(left, masks, angles, down, dh_frac, trial, page)
+            edge = down
+        if len(rest) == len(left):
+            raise InputError(f"page_size: {page_size} is too small for the patches")
+        out.page, out.x, out.y, out.flip_h, out.flip_v = trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v
+        placed = np.setdiff1d(left, rest)
+        out.pages.append(edge)
+        out.fill.append(float(area[placed].sum() / edge**2))
+        left = rest
+    return out

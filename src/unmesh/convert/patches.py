@@ -1,0 +1,380 @@
+"""Per-triangle texture patches by orthographic EWA splatting with iterative refinement (6.2.1).
+
+For every triangle t the surfels are projected orthogonally onto its plane, its longest edge
+along the x axis and the third corner above it (Fig. 6.1 a), and splatted with the renderer's
+EWA splatter (:class:`unmesh.render.SplatRenderer`, visibility splatting included). Patch
+size follows level ``l``: ``2**l`` texels along the longest edge (texel spacing
+``h_t = L_t / 2**l``) plus a one-texel border on every side. Starting at ``l = 0`` the level
+grows until the error (6.1)
+
+    E_t = sum_s A_s e(C_s, T(x_s, y_s)) / sum_s A_s
+
+over the visible surfels whose centres project into t drops below the threshold, for the
+colour (``e`` = RGB distance) and, with normal maps, the normal (``e_N = 1 - N_s . N_t``, 6.2),
+or until the texel spacing reaches ``d_min / (2 sqrt 2)`` (d_min: the smallest distance
+between two of the triangle's surfels) or ``max_level``. Normalising by the surfel area makes
+the threshold independent of the triangle size (a mean colour error).
+
+Batching: all the patches of one level are laid out side by side on *canvases* (orthographic
+views of 1024 x 1024 pixels whose world unit is one texel); each triangle's candidate surfels
+are transformed into its patch frame (rotation, scale ``1 / h_t``, offset of its slot) and the
+whole canvas is splatted with one :meth:`SplatRenderer.render`. Slots are separated by more
+than the largest splat, so patches do not see each other's surfels. Candidates of t are the
+surfels whose nearest triangle shares a vertex with t and whose normal faces t's side.
+
+Colour and normal patches share the texel layout at the larger of the two levels (one uv set,
+as OBJ, glTF viewers and the rasteriser use); each level is recorded. Texels of the patch
+footprint no splat reached (Fig. 6.7: the projection does not cover the triangle) take the
+colour and normal of the nearest surfel, and the triangles with such texels are counted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from unmesh.convert._patch_kernels import bilinear
+from unmesh.meshes import TriangleMesh
+from unmesh.render import Camera, SplatRenderer
+from unmesh.render.splat import SurfelArrays
+from unmesh.spatial import TriangleBVH, knn
+from unmesh.surfels import SurfelCloud
+
+__all__ = ["CANVAS", "Patches", "TriangleFrames", "render_patches", "triangle_frames"]
+
+#: Canvas edge (pixels) of the batched patch renders.
+CANVAS = 1024
+
+
+@dataclass(frozen=True)
+class TriangleFrames:
+    """The patch frame of every triangle (Fig. 6.1 a).
+
+    Attributes
+    ----------
+    origin : (F, 3) float64
+        First corner of the longest edge.
+    rotation : (F, 3, 3) float64
+        Rows ``(e_x, e_y, n)``: longest edge direction, in-plane normal to it towards the third
+        corner, face normal. Local coordinates are ``rotation @ (p - origin)``.
+    length : (F,) float64
+        Longest edge length L.
+    apex : (F, 2) float64
+        Local (x, y) of the third corner; ``0 <= x <= L``, ``y > 0``.
+    first : (F,) int64
+        Which corner k of the face starts the longest edge (corners k, k+1, k+2 map to
+        (0, 0), (L, 0), apex).
+    """
+
+    origin: np.ndarray
+    rotation: np.ndarray
+    length: np.ndarray
+    apex: np.ndarray
+    first: np.ndarray
+
+    def corners_local(self) -> np.ndarray:
+        """Local (x, y) of the face corners in the face's own order (F, 3, 2)."""
+        nf = len(self.length)
+        loc = np.zeros((nf, 3, 2))
+        ar = np.arange(nf)
+        loc[ar, (self.first + 1) % 3, 0] = self.length
+        loc[ar, (self.first + 2) % 3] = self.apex
+        return loc
+
+
+def triangle_frames(mesh: TriangleMesh) -> TriangleFrames:
+    """Patch frames of all triangles of ``mesh`` (non-degenerate faces expected)."""
+    v = mesh.vertices[mesh.faces]
+    edges = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)
+    lens = np.linalg.norm(edges, axis=2)
+    k = np.argmax(lens, axis=1)
+    ar = np.arange(len(k))
+    a = v[ar, k]
+    ex = edges[ar, k] / lens[ar, k][:, None]
+    n = mesh.face_normals()
+    ey = np.cross(n, ex)
+    rot = np.stack([ex, ey, n], axis=1)
+    c = v[ar, (k + 2) % 3] - a
+    apex = np.stack([np.einsum("ij,ij->i", c, ex), np.einsum("ij,ij->i", c, ey)], axis=1)
+    return TriangleFrames(a, np.ascontiguousarray(rot), lens[ar, k], apex, k.astype(np.int64))
+
+
+@dataclass
+class Patches:
+    """The texture patches of all triangles (output of :func:`render_patches`).
+
+    Attributes
+    ----------
+    level : (F,) int64
+        Layout level: ``2**level`` texels along the longest edge.
+    color_level, normal_level : (F,) int64
+        The levels at which each error first dropped below its threshold (or the cap).
+    width, height : (F,) int64
+        Patch size in texels, borders included.
+    color, normal : list of (height, width, 3) float64 arrays
+        Colour in [0, 1]; unit normals in the triangle's local frame.
+    color_error, normal_error : (F,) float64
+        Error (6.1) at the final level.
+    capped : (F,) bool
+        Refinement stopped by ``d_min / (2 sqrt 2)`` or ``max_level`` instead of the threshold.
+    uncovered : (F,) int64
+        Footprint texels inside the triangle that no splat reached (filled from the nearest
+        surfels).
+    samples : (F,) int64
+        Surfels whose centres project into the triangle and are visible.
+    """
+
+    level: np.ndarray
+    color_level: np.ndarray
+    normal_level: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+    color: list[np.ndarray]
+    normal: list[np.ndarray]
+    color_error: np.ndarray
+    normal_error: np.ndarray
+    capped: np.ndarray
+    uncovered: np.ndarray
+    samples: np.ndarray
+
+
+def patch_size(frames: TriangleFrames, level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Patch width and height (texels, one-texel borders included) at the given levels."""
+    n = 2.0 ** level
+    h = frames.length / n
+    hy = np.ceil(frames.apex[:, 1] / h - 1e-9).astype(np.int64)
+    return (n.astype(np.int64) + 2, np.maximum(hy, 1) + 2)
+
+
+def _candidate_pairs(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFrames) -> tuple[np.ndarray, np.ndarray]:
+    """(triangle, surfel) pairs: surfels whose nearest triangle shares a vertex with the triangle."""
+    from scipy import sparse
+
+    nf = len(mesh.faces)
+    nv = len(mesh.vertices)
+    _, nearest, _, _ = TriangleBVH(mesh.vertices, mesh.faces).closest(cloud.positions)
+    ns = len(cloud)
+    fv = sparse.csr_matrix((np.ones(3 * nf), (np.repeat(np.arange(nf), 3), mesh.faces.ravel())), shape=(nf, nv))
+    adj = (fv @ fv.T).astype(bool).astype(np.float64)
+    fs = sparse.csr_matrix((np.ones(ns), (nearest, np.arange(ns))), shape=(nf, ns))
+    pairs = (adj @ fs).tocsr()
+    pairs.sort_indices()
+    counts = np.diff(pairs.indptr)
+    pt = np.repeat(np.arange(nf), counts)
+    return pt, pairs.indices.astype(np.int64)
+
+
+def _layout(widths: np.ndarray, heights: np.ndarray, gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shelf layout of rectangles on canvases of CANVAS x CANVAS: (canvas, x, y) per rectangle."""
+    order = np.lexsort((-widths, -heights))
+    canvas = np.zeros(len(widths), np.int64)
+    xs = np.zeros(len(widths), np.int64)
+    ys = np.zeros(len(widths), np.int64)
+    c = x = y = shelf = 0
+    for i in order:
+        w, h = int(widths[i]) + gap, int(heights[i]) + gap
+        if x + w > CANVAS:
+            x, y, shelf = 0, y + shelf, 0
+        if y + h > CANVAS:
+            c, x, y, shelf = c + 1, 0, 0, 0
+        canvas[i], xs[i], ys[i] = c, x + gap, y + gap
+        x += w
+        shelf = max(shelf, h)
+    return canvas, xs, ys
+
+
+def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: float, normal_error: float | None,
+                   max_level: int, progress: bool = False) -> Patches:
+    """Adaptive texture patches of every triangle of ``mesh`` from the surfels (6.2.1).
+
+    Parameters
+    ----------
+    mesh : TriangleMesh
+        Non-degenerate triangles, outward.
+    cloud : SurfelCloud
+        The surfels (colours and normals are baked).
+    texture_error : float
+        Colour threshold of the error (6.1) (mean RGB distance).
+    normal_error : float or None
+        Normal threshold (mean ``1 - N_s . N_t``, eq. 6.2); None: no normal refinement.
+    max_level : int
+        Largest level.
+    progress : bool
+        Progress bar over the levels.
+    """
+    frames = triangle_frames(mesh)
+    nf = len(mesh.faces)
+    pt, ps = _candidate_pairs(mesh, cloud, frames)
+    d = cloud.positions[ps] - frames.origin[pt]
+    rot = frames.rotation[pt]
+    loc = np.einsum("pij,pj->pi", rot, d)
+    lnrm = np.einsum("pij,pj->pi", rot, cloud.normals[ps])
+    front = lnrm[:, 2] > 0.0
+    pt, ps, loc, lnrm, rot = pt[front], ps[front], loc[front], lnrm[front], rot[front]
+    laxes = np.einsum("pij,pkj->pki", rot, cloud.axes[ps]) if cloud.is_elliptical else None
+    radii = np.asarray(cloud.radii)[ps]
+    area = np.pi * (np.prod(np.linalg.norm(cloud.axes[ps], axis=2), axis=1) if cloud.is_elliptical else radii**2)
+    colors = cloud.colors[ps]
+    # inside the triangle (for the error sums) and d_min per triangle (6.2.1)
+    length = frames.length[pt]
+    ax, ay = frames.apex[pt, 0], frames.apex[pt, 1]
+    x, y = loc[:, 0], loc[:, 1]
+    inside = (y >= 0) & (ax * y - ay * x <= 0) & ((length - ax) * y + ay * (x - length) <= 0)
+    nn_d, _ = knn(cloud.positions, 2)
+    dmin = np.full(nf, np.inf)
+    near_t = inside | ((x > -radii) & (x < length + radii) & (y > -radii) & (y < ay + radii))
+    np.minimum.at(dmin, pt[near_t], nn_d[ps[near_t], 1])
+    spacing_cap = dmin / (2.0 * np.sqrt(2.0))
+
+    level = np.zeros(nf, np.int64)
+    color_level = np.full(nf, -1, np.int64)
+    normal_level = np.full(nf, -1 if normal_error is not None else 0, np.int64)
+    done = np.zeros(nf, bool)
+    capped = np.zeros(nf, bool)
+    c_err = np.zeros(nf)
+    n_err = np.zeros(nf)
+    samples = np.zeros(nf, np.int64)
+    out_color: list[np.ndarray | None] = [None] * nf
+    out_normal: list[np.ndarray | None] = [None] * nf
+    out_cov: list[np.ndarray | None] = [None] * nf
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=nf, desc="texture patches", unit="tri", leave=False)
+    for lvl in range(max_level + 1):
+        active = np.flatnonzero(~done)
+        if not len(active):
+            break
+        level[active] = lvl
+        width, height = patch_size(frames, level)
+        scale = (2.0**lvl) / frames.length  # texels per unit
+        sel = ~done[pt]
+        s_p = scale[pt]
+        px = 1.0 + x * s_p
+        py = 1.0 + y * s_p
+        r_px = radii * s_p
+        sel &= (px > -r_px - 1) & (px < width[pt] + r_px + 1) & (py > -r_px - 1) & (py < height[pt] + r_px + 1)
+        gap = int(np.ceil(r_px[sel].max())) + 3 if sel.any() else 3
+        canvas, ox, oy = _layout(width[active], height[active], gap)
+        slot_c = np.zeros(nf, np.int64)
+        slot_x = np.zeros(nf, np.int64)
+        slot_y = np.zeros(nf, np.int64)
+        slot_c[active], slot_x[active], slot_y[active] = canvas, ox, oy
+        sums = np.zeros((nf, 3))  # sum A, sum A e_color, sum A e_normal
+        for c in range(int(canvas.max()) + 1):
+            tri_c = active[canvas == c]
+            on = sel & (slot_c[pt] == c)
+            on &= np.isin(pt, tri_c)
+            idx = np.flatnonzero(on)
+            t_i = pt[idx]
+            sc = s_p[idx]
+            col = slot_x[t_i] + px[idx]
+            row = slot_y[t_i] + height[t_i] - py[idx]
+            z = loc[idx, 2] * sc
+            zeye = float(z.max()) + 10.0 if len(z) else 10.0
+            cw = int(min(CANVAS, (slot_x[tri_c] + width[tri_c]).max() + gap))
+            ch = int(min(CANVAS, (slot_y[tri_c] + height[tri_c]).max() + gap))
+            cam = Camera((cw / 2, -ch / 2, zeye), (cw / 2, -ch / 2, zeye - 1.0), width=cw, height=ch, ortho=float(ch))
+            pos = np.ascontiguousarray(np.stack([col, -row, z], axis=1))
+            arr = SurfelArrays(pos, np.ascontiguousarray(lnrm[idx]), np.ascontiguousarray(r_px[idx]),
+                               None if laxes is None else np.ascontiguousarray(laxes[idx] * sc[:, None, None]),
+                               np.ascontiguousarray(colors[idx]))
+            rend = SplatRenderer(cam)
+            g = rend.render(arr).gbuffer()
+            # error (6.1) at the visible surfels inside their triangle
+            ins = inside[idx]
+            ri = np.clip(row.astype(np.int64), 0, ch - 1)
+            ci = np.clip(col.astype(np.int64), 0, cw - 1)
+            # visible: not behind the pixel's depth by more than the splatter's tolerance plus one
+            # texel (a coarse pixel averages depths over a curved region of the triangle)
+            vis = ins & ((zeye - z) <= g.depth[ri, ci] + r_px[idx] * rend.options.depth_tolerance + 1.0)
+            q = np.flatnonzero(vis)
+            if len(q):
+                tc = np.empty((len(q), 3))
+                bilinear(g.albedo, col[q], row[q], tc)
+                e_c = np.linalg.norm(colors[idx[q]] - tc, axis=1)
+                tn = np.empty((len(q), 3))
+                bilinear(g.normal, col[q], row[q], tn)
+                tn /= np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-12)
+                e_n = 1.0 - np.einsum("ij,ij->i", tn, lnrm[idx[q]])
+                a = area[idx[q]]
+                np.add.at(sums, t_i[q], np.stack([a, a * e_c, a * e_n], axis=1))
+            # extract the patches of the triangles that stop here
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ec = np.where(sums[tri_c, 0] > 0, sums[tri_c, 1] / sums[tri_c, 0], 0.0)
+                en = np.where(sums[tri_c, 0] > 0, sums[tri_c, 2] / sums[tri_c, 0], 0.0)
+            c_err[tri_c], n_err[tri_c] = ec, en
+            samples[tri_c] = np.bincount(t_i[q], minlength=nf)[tri_c] if len(q) else 0
+            ok_c = ec <= texture_error
+            ok_n = en <= normal_error if normal_error is not None else np.ones(len(tri_c), bool)
+            first_c = ok_c & (color_level[tri_c] < 0)
+            color_level[tri_c[first_c]] = lvl
+            first_n = ok_n & (normal_level[tri_c] < 0)
+            normal_level[tri_c[first_n]] = lvl
+            cap = (lvl >= max_level) | (frames.length[tri_c] / 2.0**lvl <= spacing_cap[tri_c])
+            stop = (ok_c & ok_n) | cap
+            capped[tri_c[stop & ~(ok_c & ok_n)]] = True
+            for t in tri_c[stop]:
+                r0, c0 = slot_y[t], slot_x[t]
+                sl = (slice(r0, r0 + height[t]), slice(c0, c0 + width[t]))
+                out_color[t] = g.albedo[sl].copy()
+                out_normal[t] = g.normal[sl].copy()
+                out_cov[t] = g.coverage[sl].copy()
+            done[tri_c[stop]] = True
+            if bar is not None:
+                bar.update(int(stop.sum()))
+    if bar is not None:
+        bar.close()
+    color_level[color_level < 0] = level[color_level < 0]
+    normal_level[normal_level < 0] = level[normal_level < 0]
+    width, height = patch_size(frames, level)
+    uncovered = _fill_uncovered(mesh, cloud, frames, level, width, height, out_color, out_normal, out_cov)
+    return Patches(level, color_level, normal_level, width, height, out_color, out_normal,  # type: ignore[arg-type]
+                   c_err, n_err, capped, uncovered, samples)
+
+
+def texel_positions(frames: TriangleFrames, t: np.ndarray, level: np.ndarray, height: np.ndarray,
+                    rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Local (x, y) (N, 2) and world positions (N, 3) of texel centres ``(rows, cols)`` of patches ``t``."""
+    h = frames.length[t] / 2.0 ** level[t]
+    lx = (cols + 0.5 - 1.0) * h
+    ly = (height[t] - 1.0 - (rows + 0.5)) * h
+    world = frames.origin[t] + lx[:, None] * frames.rotation[t, 0] + ly[:, None] * frames.rotation[t, 1]
+    return np.stack([lx, ly], axis=1), world
+
+
+def _fill_uncovered(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFrames, level: np.ndarray,
+                    width: np.ndarray, height: np.ndarray, colors: list, normals: list, cov: list) -> np.ndarray:
+    """Give texels no splat reached the nearest surfel's colour and normal; count those inside."""
+    nf = len(level)
+    tt, rr, cc = [], [], []
+    for t in range(nf):
+        r, c = np.nonzero(~cov[t])
+        if len(r):
+            tt.append(np.full(len(r), t))
+            rr.append(r)
+            cc.append(c)
+    uncovered = np.zeros(nf, np.int64)
+    if not tt:
+        return uncovered
+    t_all = np.concatenate(tt)
+    r_all = np.concatenate(rr)
+    c_all = np.concatenate(cc)
+    lxy, world = texel_positions(frames, t_all, level, height, r_all, c_all)
+    _, idx = knn(cloud.positions, 1, queries=world)
+    j = idx[:, 0]
+    col = cloud.colors[j]
+    nrm = np.einsum("pij,pj->pi", frames.rotation[t_all], cloud.normals[j])
+    ax, ay, length = frames.apex[t_all, 0], frames.apex[t_all, 1], frames.length[t_all]
+    x, y = lxy[:, 0], lxy[:, 1]
+    inside = (y >= 0) & (ax * y - ay * x <= 0) & ((length - ax) * y + ay * (x - length) <= 0)
+    np.add.at(uncovered, t_all[inside], 1)
+    starts = np.concatenate([[0], np.cumsum([len(a) for a in tt])])
+    for k in range(len(tt)):
+        s, e = starts[k], starts[k + 1]
+        t = int(t_all[s])
+        colors[t][r_all[s:e], c_all[s:e]] = col[s:e]
+        normals[t][r_all[s:e], c_all[s:e]] = nrm[s:e]
+    return uncovered
