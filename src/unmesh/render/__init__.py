@@ -83,7 +83,7 @@ from unmesh.render.options import ColorOptions, ParticleOptions, RenderOptions
 from unmesh.render.pipeline import DrawList, collect, render, scene_bounds, scene_points
 from unmesh.render.sequence import find_frames, render_sequence, turntable, turntable_camera
 from unmesh.render.shading import DEFAULT_LIGHTS, GBuffer, Light, RenderResult, Shading, shade
-from unmesh.render.splat import ClipPlanes, ClipSurfels, SplatOptions, SplatRenderer
+from unmesh.render.splat import ClipPlanes, ClipSurfels, ClipTree, SplatOptions, SplatRenderer
 
 __all__ = [
     "COLORMAPS",
@@ -91,6 +91,7 @@ __all__ = [
     "Camera",
     "ClipPlanes",
     "ClipSurfels",
+    "ClipTree",
     "ColorOptions",
     "DrawContext",
     "DrawList",

@@ -342,13 +342,119 @@ def _fragment(X, Y, pcx, pcy, ortho, inv_rf2, cz, nx, ny, nz, cn, b1x, b1y, b1z,
 
 
 @njit(cache=True)
-def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode):
-    """Per-fragment clip test of surfel ``s`` at depth ``z`` (chapter 4 hook).
+def _tri_and(a, b):
+    """Three-valued conjunction (4.10): -1 is unknown, ``b and unknown = b``."""
+    if a < 0:
+        return b
+    if b < 0:
+        return a
+    return 1 if (a > 0 and b > 0) else 0
 
-    Surfel ``s`` owns planes ``clip_planes[clip_offsets[s]:clip_offsets[s+1]]`` (rows
-    ``(nx, ny, nz, d)`` in world space); plane ``j`` keeps points with ``n.x + d <= 0``.
-    ``clip_mode[s] == 0`` keeps a fragment kept by *all* planes (convex corner), ``1`` by *any*
-    plane (concave corner).
+
+@njit(cache=True)
+def _tri_or(a, b):
+    """Three-valued disjunction (4.9): -1 is unknown, ``b or unknown = b``."""
+    if a < 0:
+        return b
+    if b < 0:
+        return a
+    return 1 if (a > 0 or b > 0) else 0
+
+
+@njit(cache=True)
+def _clips(P, j, x0, x1, x2):
+    """Whether partner row ``j`` (centre ``P[j, 0:3]``, normal ``P[j, 3:6]``) clips ``x`` (4.3)."""
+    return (x0 - P[j, 0]) * P[j, 3] + (x1 - P[j, 1]) * P[j, 4] + (x2 - P[j, 2]) * P[j, 5] >= 0.0
+
+
+@njit(cache=True)
+def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
+    """Algorithm 4.2 for a fragment of surfel ``s`` at world ``x``: whether it is on the surface.
+
+    ``partners[clip_offsets[s]:clip_offsets[s+1]]`` are the clipping partners of ``s`` (4.2.1),
+    rows ``(cx, cy, cz, nx, ny, nz, node)`` with ``node`` the leaf of the partner's patch;
+    ``tree`` (K, 4) int32 rows ``(op, parent, first, invert)`` in post order (op 0 intersection,
+    1 union, 2 leaf; the sub-tree of node k is ``first[k] .. k``; ``invert`` complements a leaf,
+    4.3); ``leaf[s]`` is the leaf node of ``s``. ``work`` (K, 5) float64 scratch.
+
+    insidePatch (Algorithm 4.4) uses the two partners of the patch closest to ``x``: none gives
+    unknown, one the closest-surfel test (4.3), two the concave/convex rule (4.4); insideTree
+    (Algorithm 4.3) combines them with the three-valued logic (4.9, 4.10), evaluated for every
+    node in post order; then the walk from ``leaf[s]`` to the root applies (4.5)/(4.6).
+    """
+    K = tree.shape[0]
+    for k in range(K):
+        work[k, 0] = np.inf
+        work[k, 1] = np.inf
+        work[k, 2] = -1.0
+        work[k, 3] = -1.0
+    for j in range(clip_offsets[s], clip_offsets[s + 1]):
+        node = int(partners[j, 6])
+        dx = x0 - partners[j, 0]
+        dy = x1 - partners[j, 1]
+        dz = x2 - partners[j, 2]
+        d = dx * dx + dy * dy + dz * dz
+        if d < work[node, 0]:
+            work[node, 1] = work[node, 0]
+            work[node, 3] = work[node, 2]
+            work[node, 0] = d
+            work[node, 2] = j
+        elif d < work[node, 1]:
+            work[node, 1] = d
+            work[node, 3] = j
+    for k in range(K):
+        op = tree[k, 0]
+        if op == 2:
+            i1 = int(work[k, 2])
+            if i1 < 0:
+                val = -1
+            else:
+                i2 = int(work[k, 3])
+                c1 = _clips(partners, i1, x0, x1, x2)
+                if i2 < 0:
+                    inside = not c1
+                else:
+                    c2 = _clips(partners, i2, x0, x1, x2)
+                    concave = (_clips(partners, i1, partners[i2, 0], partners[i2, 1], partners[i2, 2])
+                               and _clips(partners, i2, partners[i1, 0], partners[i1, 1], partners[i1, 2]))
+                    if concave:
+                        inside = (not c1) or (not c2)
+                    else:
+                        inside = (not c1) and (not c2)
+                if tree[k, 3] != 0:
+                    inside = not inside
+                val = 1 if inside else 0
+        else:
+            right = k - 1
+            left = tree[right, 2] - 1
+            a = int(work[left, 4])
+            b = int(work[right, 4])
+            val = _tri_and(a, b) if op == 0 else _tri_or(a, b)
+        work[k, 4] = val
+    node = leaf[s]
+    while tree[node, 1] >= 0:
+        p = tree[node, 1]
+        right = p - 1
+        sib = tree[right, 2] - 1 if node == right else right
+        inside = int(work[sib, 4])
+        if inside >= 0:
+            on = inside > 0 if tree[p, 0] == 0 else inside == 0
+            if not on:
+                return False
+        node = p
+    return True
+
+
+@njit(cache=True)
+def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, work):
+    """Per-fragment clip test of surfel ``s`` at depth ``z`` (chapter 4).
+
+    With an empty ``clip_tree``: surfel ``s`` owns planes
+    ``clip_planes[clip_offsets[s]:clip_offsets[s+1]]`` (rows ``(nx, ny, nz, d)`` in world
+    space); plane ``j`` keeps points with ``n.x + d <= 0``. ``clip_mode[s] == 0`` keeps a
+    fragment kept by *all* planes (convex corner), ``1`` by *any* plane (concave corner).
+    Otherwise ``clip_planes`` are clipping partners and the CSG tree decides
+    (:func:`keep_tree`, Algorithm 4.2).
     """
     a = clip_offsets[s]
     b = clip_offsets[s + 1]
@@ -363,6 +469,8 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode):
     wx = eye[0] + px * frame[0, 0] + py * frame[1, 0] + z * frame[2, 0]
     wy = eye[1] + px * frame[0, 1] + py * frame[1, 1] + z * frame[2, 1]
     wz = eye[2] + px * frame[0, 2] + py * frame[1, 2] + z * frame[2, 2]
+    if clip_tree.shape[0] > 0:
+        return keep_tree(s, wx, wy, wz, clip_offsets, clip_planes, clip_tree, clip_leaf, work)
     anymode = clip_mode[s] != 0
     for j in range(a, b):
         side = clip_planes[j, 0] * wx + clip_planes[j, 1] * wy + clip_planes[j, 2] * wz + clip_planes[j, 3]
@@ -389,8 +497,8 @@ def _accumulate(q, k, w, z, Pt, lw, lc, ln, ld, lcount):
 
 @njit(cache=True)
 def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa, eps_factor,
-               sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, lz, lw, lc, ln, ld, lcount,
-               frag_q, frag_k, frag_rho, frag_z):
+               sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, work, lz, lw, lc, ln, ld,
+               lcount, frag_q, frag_k, frag_rho, frag_z):
     """The fragment loop of one tile: the one place every splat fragment is generated.
 
     ``mode 0`` (visibility pass of a full update): every fragment not already behind ``lz``
@@ -456,7 +564,8 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
                 q = row + px
                 if z > lz[q]:
                     continue
-                if clip and not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode):
+                if clip and not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
+                                      clip_leaf, work):
                     continue
                 if mode == 0:
                     frag_q[nrec] = q
@@ -484,7 +593,7 @@ def _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_
 
 @njit(cache=True, parallel=True)
 def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, rfilter, kappa, eps_factor, has_clip,
-                eye, frame, clip_offsets, clip_planes, clip_mode, visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z,
+                eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z,
                 count):
     """Visibility (optional) and accumulation passes over all tiles, in parallel.
 
@@ -513,6 +622,7 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
         ln = np.zeros((m, 3))
         ld = np.zeros(m)
         lcount = np.zeros(m, dtype=np.int32)
+        work = np.empty((max(clip_tree.shape[0], 1), 5))
         if visibility:
             cap = 0
             for k in range(a, b):
@@ -525,8 +635,8 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
             frag_rho = np.empty(cap)
             frag_z = np.empty(cap)
             nrec = _tile_pass(0, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
-                              eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, lz, lw,
-                              lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
+                              eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
+                              clip_leaf, work, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
             for i in range(th):
                 for j in range(tw):
                     zvis[y0 + i, x0 + j] = lz[i * tw + j]
@@ -536,8 +646,8 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
             dummy_k = np.empty(0, dtype=np.int64)
             dummy_f = np.empty(0)
             _tile_pass(1, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
-                       eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, lz, lw, lc, ln, ld, lcount,
-                       dummy_i, dummy_k, dummy_f, dummy_f)
+                       eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf,
+                       work, lz, lw, lc, ln, ld, lcount, dummy_i, dummy_k, dummy_f, dummy_f)
         for i in range(th):
             for j in range(tw):
                 q = i * tw + j

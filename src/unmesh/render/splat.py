@@ -55,12 +55,16 @@ from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.surfels import SurfelCloud
 from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCONTINUITY
 
-__all__ = ["ClipPlanes", "ClipSurfels", "SplatOptions", "SplatRenderer", "SurfelArrays", "surfel_arrays"]
+__all__ = ["ClipPlanes", "ClipSurfels", "ClipTree", "SplatOptions", "SplatRenderer", "SurfelArrays", "surfel_arrays"]
 
 #: Per-thread work arrays of :meth:`SplatRenderer._run` (surfel parameters, boxes, groups, pair
 #: rows), shared by all renderers of a thread: their contents live only during one update, and
 #: reusing them spares every ``render()`` call the page faults of ~200 MB per 10^6 surfels.
 _SCRATCH = threading.local()
+#: Placeholders of the CSG clip arrays when splatting without a :class:`ClipTree`.
+_NO_TREE = np.zeros((0, 4), dtype=np.int32)
+_NO_LEAF = np.zeros(0, dtype=np.int32)
+_NO_MODE = np.zeros(1, dtype=np.int8)
 
 
 @dataclass(frozen=True)
@@ -138,6 +142,58 @@ class ClipPlanes:
         object.__setattr__(self, "planes", planes)
         object.__setattr__(self, "offsets", offsets)
         object.__setattr__(self, "mode", mode)
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+
+@dataclass(frozen=True)
+class ClipTree:
+    """Per-fragment CSG clipping of surfels by their clipping partners (chapter 4, 4.2.2).
+
+    Surfel ``i`` owns the partners ``partners[offsets[i]:offsets[i+1]]``, rows
+    ``(cx, cy, cz, nx, ny, nz, node)``: centre and (un-inverted, outward) normal of a surfel of
+    another patch that intersects surfel ``i``, and the tree leaf of that patch. ``tree`` is the
+    CSG tree in post order, rows ``(op, parent, first, invert)`` (op 0 intersection, 1 union,
+    2 leaf; ``first`` the first node of the sub-tree; ``invert`` 1 at complemented leaves);
+    ``leaf[i]`` is the leaf of surfel ``i``'s patch. A fragment is kept when Algorithm 4.2 says
+    it lies on the surface of the root (three-valued logic, 4.9/4.10). Surfels without partners
+    (surface surfels) are splatted unclipped. Built by :mod:`unmesh.csg`.
+
+    Example
+    -------
+    >>> # two surfels, leaves 0 and 1 of "leaf0 & leaf1"; surfel 0 is clipped by surfel 1's plane x = 0
+    >>> t = ClipTree([0, 1, 1], [[0, 0, 0, 1, 0, 0, 1]], [[2, 2, 0, 0], [2, 2, 1, 0], [0, -1, 0, 0]], [0, 1])
+    >>> len(t), t.tree.shape
+    (2, (3, 4))
+    """
+
+    offsets: Any
+    partners: Any
+    tree: Any
+    leaf: Any
+
+    def __post_init__(self) -> None:
+        partners = as_array(self.partners, "partners", (None, 7))
+        offsets = as_indices(self.offsets, "offsets", (None,), upper=len(partners) + 1)
+        if len(offsets) < 1 or offsets[0] != 0 or offsets[-1] != len(partners) or np.any(np.diff(offsets) < 0):
+            raise InputError("offsets: expected a non-decreasing array from 0 to len(partners)")
+        tree = np.ascontiguousarray(self.tree, dtype=np.int32)
+        if tree.ndim != 2 or tree.shape[1] != 4 or len(tree) == 0:
+            raise InputError(f"tree: expected shape (K, 4) with K >= 1, got {tree.shape}")
+        k = len(tree)
+        leaf = np.ascontiguousarray(self.leaf, dtype=np.int32)
+        if leaf.shape != (len(offsets) - 1,):
+            raise InputError(f"leaf: expected shape ({len(offsets) - 1},), got {leaf.shape}")
+        if len(leaf) and (leaf.min() < 0 or leaf.max() >= k or np.any(tree[leaf, 0] != 2)):
+            raise InputError("leaf: expected the indices of leaf nodes of tree")
+        nodes = partners[:, 6]
+        if len(nodes) and (nodes.min() < 0 or nodes.max() >= k or np.any(tree[nodes.astype(np.int64), 0] != 2)):
+            raise InputError("partners: expected column 6 to hold leaf nodes of tree")
+        object.__setattr__(self, "partners", partners)
+        object.__setattr__(self, "offsets", offsets)
+        object.__setattr__(self, "tree", tree)
+        object.__setattr__(self, "leaf", leaf)
 
     def __len__(self) -> int:
         return len(self.offsets) - 1
@@ -333,7 +389,7 @@ class SplatRenderer:
 
     # -- updates -------------------------------------------------------------------------
     def render(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, opaque: GBuffer | None = None,
-               clip: ClipPlanes | None = None, clip_surfels: ClipSurfels | None = None) -> SplatRenderer:
+               clip: ClipPlanes | ClipTree | None = None, clip_surfels: ClipSurfels | None = None) -> SplatRenderer:
         """Full update: clear, visibility pass, accumulation pass over all ``clouds`` together.
 
         Parameters
@@ -343,8 +399,9 @@ class SplatRenderer:
             :meth:`SurfelCloud.visible`).
         opaque : GBuffer, optional
             Already rasterised opaque geometry; its depth initialises the visibility buffer.
-        clip : ClipPlanes, optional
-            Per-surfel clip planes (one entry per surfel of the concatenated clouds).
+        clip : ClipPlanes or ClipTree, optional
+            Per-surfel clip planes, or clipping partners with a CSG tree (chapter 4), one entry
+            per surfel of the concatenated clouds.
         clip_surfels : ClipSurfels, optional
             Discontinuity surfels of the view (4.3), kept in :attr:`clip_surfels` for clipped
             splatting (chapter 4); they produce no colour.
@@ -356,21 +413,23 @@ class SplatRenderer:
         self._run(clouds, clip, visibility=True, sign=1)
         return self
 
-    def splat(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, clip: ClipPlanes | None = None) -> SplatRenderer:
+    def splat(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, clip: ClipPlanes | ClipTree | None = None) -> SplatRenderer:
         """Add surfels (accumulation only; the visibility buffer is not changed)."""
         self._run(clouds, clip, visibility=False, sign=1)
         return self
 
-    def unsplat(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, clip: ClipPlanes | None = None) -> SplatRenderer:
+    def unsplat(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, clip: ClipPlanes | ClipTree | None = None) -> SplatRenderer:
         """Remove surfels previously splatted: subtract exactly their contributions."""
         self._run(clouds, clip, visibility=False, sign=-1)
         return self
 
-    def _run(self, clouds: Any, clip: ClipPlanes | None, visibility: bool, sign: int) -> None:
+    def _run(self, clouds: Any, clip: ClipPlanes | ClipTree | None, visibility: bool, sign: int) -> None:
         arrays = clouds if isinstance(clouds, SurfelArrays) else surfel_arrays(clouds)
         n = len(arrays)
         if n == 0:
             return
+        if clip is not None and not isinstance(clip, ClipPlanes | ClipTree):
+            raise InputError(f"clip: expected ClipPlanes or ClipTree, got {type(clip).__name__}")
         if clip is not None and len(clip) != n:
             raise InputError(f"clip: expected clip data for {n} surfels, got {len(clip)}")
         cam = self.camera
@@ -393,13 +452,17 @@ class SplatRenderer:
                                                      params, box, group, tile, ntx, nty, 8)
             pt = self._scratch("pairs", (len(items), NPARAM), self.param_dtype)
             gather_rows(params, items, pt)
+        ctree, cleaf = _NO_TREE, _NO_LEAF
         if clip is None:
             coff, cpl, cmode, has_clip = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8), False
+        elif isinstance(clip, ClipTree):
+            coff, cpl, cmode, has_clip = clip.offsets, clip.partners, _NO_MODE, True
+            ctree, cleaf = clip.tree, clip.leaf
         else:
             coff, cpl, cmode, has_clip = clip.offsets, clip.planes, clip.mode, True
         with serial_if_small(int(visits), 20 * SERIAL_BELOW):
             splat_tiles(pt, items, offsets, tile_order(ntx * nty), tile, w, h, f, cx, cy, ortho, near, rf,
-                        opt.kappa, opt.depth_tolerance, has_clip, cam.eye, frame, coff, cpl, cmode, visibility,
+                        opt.kappa, opt.depth_tolerance, has_clip, cam.eye, frame, coff, cpl, cmode, ctree, cleaf, visibility,
                         float(sign), self.zvis, self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth,
                         self.count)
 
@@ -437,7 +500,7 @@ class SplatRenderer:
         return g
 
     def _render_in_place(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, gbuffer: GBuffer,
-                         clip_surfels: ClipSurfels | None = None) -> GBuffer:
+                         clip_surfels: ClipSurfels | None = None, clip: ClipPlanes | ClipTree | None = None) -> GBuffer:
         """:meth:`render` against the opaque layer ``gbuffer``, then :meth:`gbuffer` written into
         ``gbuffer`` itself instead of a copy (what :func:`unmesh.render.render` needs: it owns
         the buffer, and copying 1024x1024 G-buffers twice costs as much as the binning). The
@@ -445,7 +508,7 @@ class SplatRenderer:
         spent afterwards: its opaque layer is the result, so it must not be updated further."""
         self._adopt_opaque = True
         try:
-            self.render(clouds, opaque=gbuffer, clip_surfels=clip_surfels)
+            self.render(clouds, opaque=gbuffer, clip=clip, clip_surfels=clip_surfels)
         finally:
             self._adopt_opaque = False
         return self._resolve(gbuffer)

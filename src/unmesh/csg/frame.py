@@ -1,0 +1,227 @@
+"""One frame of a CSG model ready to splat: surfel classes, partners and the clip tree (4.1.2, 4.2).
+
+:func:`prepare` evaluates a model for its current patch transforms:
+
+1. the clipping partners of every surfel (4.2.1, :func:`unmesh.csg.partners.find_partners`);
+2. the class of every surfel (4.1.2): Algorithm 4.2 at the surfel centre, with insidePatch of
+   every patch the surfel does *not* intersect taken over the whole patch (4.4) and *unknown*
+   for the patches it intersects (in Kleene logic: unknown may be either); a surfel whose
+   centre is off the surface whatever the unknowns are is ``OUTSIDE`` (discarded), one with
+   partners is an ``EDGE`` surfel (clipped per fragment: the
+   conservative test, distance to another patch's surfel below the sum of radii), the rest
+   are ``SURFACE`` surfels (splatted as usual);
+3. the surfels to draw (normals flipped at complemented leaves, whose surface faces the other
+   way) and a :class:`unmesh.render.ClipTree` with the partners of the edge surfels.
+
+Surface and edge surfels go through one splatting pass, so they are merged before
+normalisation (4.2.3) and blend across edges.
+
+Example
+-------
+>>> from unmesh.csg.model import Patch
+>>> a = Patch.halfspace((0, 0, 0), (0, 0, 1), extent=2.0, spacing=0.25)
+>>> b = Patch.halfspace((0, 0, 0), (1, 0, 0), extent=2.0, spacing=0.25)
+>>> f = prepare(a & b)
+>>> sorted(set(f.classes.tolist()))
+[0, 1, 2]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from unmesh.csg.classify import inside_patch, maybe_on_surface, tree_values
+from unmesh.csg.model import FlatTree, Node, flatten
+from unmesh.csg.partners import find_partners
+from unmesh.errors import InputError
+from unmesh.render.splat import ClipTree, SurfelArrays
+from unmesh.surfels import SurfelCloud
+
+__all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "concatenate_frames", "prepare", "select"]
+
+#: Surfel classes of 4.1.2.
+SURFACE, EDGE, OUTSIDE = 0, 1, 2
+
+
+@dataclass(frozen=True, eq=False)
+class CSGFrame:
+    """A model evaluated for one frame.
+
+    Attributes
+    ----------
+    flat : FlatTree
+    cloud : SurfelCloud
+        Every surfel of every leaf (world space, outward normals), leaf by leaf.
+    leaf : (N,) int64
+        Leaf number of each surfel of :attr:`cloud`.
+    classes : (N,) int8
+        :data:`SURFACE`, :data:`EDGE` or :data:`OUTSIDE`.
+    offsets, partners : CSR of the clipping partners of every surfel (indices into :attr:`cloud`).
+    arrays : SurfelArrays
+        The drawn (surface and edge) surfels.
+    clip : ClipTree
+        Their clipping partners and the tree.
+    """
+
+    flat: FlatTree
+    cloud: SurfelCloud
+    leaf: np.ndarray
+    classes: np.ndarray
+    offsets: np.ndarray
+    partners: np.ndarray
+    arrays: SurfelArrays
+    clip: ClipTree
+
+    @property
+    def edge_surfels(self) -> int:
+        """Number of edge surfels."""
+        return int((self.classes == EDGE).sum())
+
+
+def prepare(model: Node, method: str = "clipbuffer", rule: str = "two") -> CSGFrame:
+    """Evaluate ``model`` for its current transforms (see the module notes).
+
+    Parameters
+    ----------
+    model : Node
+    method : {"clipbuffer", "range"}
+        Partner search (4.2.1).
+    rule : {"two", "closest"}
+        insidePatch for the surfel centres (4.4 or 4.3).
+    """
+    if not isinstance(model, Node):
+        raise InputError(f"model: expected a CSG Patch or node, got {type(model).__name__}")
+    flat = flatten(model)
+    clouds = [p.world_cloud() for p in flat.leaves]
+    cloud = SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]
+    sizes = [len(c) for c in clouds]
+    leaf = np.repeat(np.arange(len(clouds)), sizes)
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    radii = np.asarray(cloud.radii, dtype=np.float64)
+    offsets, partners = find_partners(cloud.positions, radii, leaf, cloud.normals, method)
+    n = len(cloud)
+    # which leaves each surfel intersects
+    rows = np.repeat(np.arange(n), np.diff(offsets))
+    meets = np.zeros((len(clouds), n), dtype=bool)
+    meets[leaf[partners], rows] = True
+    values = np.full((len(clouds), n), -1, dtype=np.int8)
+    raw = np.full((len(clouds), n), -1, dtype=np.int8)
+    for j, c in enumerate(clouds):
+        ask = (leaf != j) & ~meets[j]
+        if ask.any():
+            v = inside_patch(c, cloud.positions[ask], rule)
+            raw[j, ask] = v
+            values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
+    # Kleene logic: a surfel is discarded only when its centre is off the surface whatever
+    # the patches it intersects say (the neutral unknown of 4.9/4.10 could discard surfels
+    # that are partly on the surface)
+    vals = tree_values(flat, values, logic="kleene")
+    on = np.empty(n, dtype=bool)
+    for j in range(len(clouds)):
+        sl = slice(starts[j], starts[j + 1])
+        on[sl] = maybe_on_surface(flat, vals[:, sl], j) != 0
+    has = np.diff(offsets) > 0
+    classes = np.where(~on, OUTSIDE, np.where(has, EDGE, SURFACE)).astype(np.int8)
+    keep = np.flatnonzero(classes != OUTSIDE)
+    # drawn surfels
+    flip = flat.invert[flat.leaf_node[leaf[keep]]].astype(bool)
+    nrm = cloud.normals[keep].copy()
+    nrm[flip] *= -1.0
+    axes = None if cloud.axes is None else np.ascontiguousarray(cloud.tangent_axes()[keep])
+    arrays = SurfelArrays(np.ascontiguousarray(cloud.positions[keep]), np.ascontiguousarray(nrm),
+                          np.ascontiguousarray(radii[keep]), axes, np.ascontiguousarray(cloud.colors[keep]))
+    clip = ClipTree(*_partner_rows(flat, cloud, leaf, radii, offsets, partners, keep, classes, raw), flat.table(),
+                    flat.leaf_node[leaf[keep]])
+    return CSGFrame(flat, cloud, leaf, classes, offsets, partners, arrays, clip)
+
+
+def _partner_rows(flat: FlatTree, cloud: SurfelCloud, leaf: np.ndarray, radii: np.ndarray, offsets: np.ndarray,
+                  partners: np.ndarray, keep: np.ndarray, classes: np.ndarray,
+                  raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CSR offsets and rows ``(c, n, node)`` of the partners of the drawn surfels.
+
+    An edge surfel also gets one constant row for every other patch it does not intersect: a
+    plane ``100 r`` away that classifies the whole surfel as its centre was classified against
+    that patch (inside or outside). Algorithm 4.4 would return *unknown* there, and (4.9)/(4.10)
+    treat unknown as neutral, which is wrong when the surfel lies wholly outside an operand of an
+    intersection inside a union, e.g. a fragment of ``c`` in ``(a & ~b) | c`` that meets only
+    ``b`` and lies outside ``a``: it must stay, while ``unknown & ~[x inside b]`` could drop it.
+    The constant rows make the patch's known value count instead.
+    """
+    nl = len(flat.leaves)
+    edge = classes[keep] == EDGE
+    const = np.zeros((len(keep), nl), dtype=bool)
+    const[edge] = raw[:, keep[edge]].T >= 0
+    counts = np.diff(offsets)[keep] + const.sum(axis=1)
+    koff = np.zeros(len(keep) + 1, dtype=np.int64)
+    np.cumsum(counts, out=koff[1:])
+    rows = np.empty((koff[-1], 7))
+    real = np.concatenate([partners[offsets[i]:offsets[i + 1]] for i in keep]) if len(partners) else \
+        np.zeros(0, dtype=np.int64)
+    nreal = np.diff(offsets)[keep]
+    dst_real = np.repeat(koff[:-1], nreal) + (np.arange(len(real)) - np.repeat(np.cumsum(nreal) - nreal, nreal))
+    rows[dst_real, :3] = cloud.positions[real]
+    rows[dst_real, 3:6] = cloud.normals[real]
+    rows[dst_real, 6] = flat.leaf_node[leaf[real]]
+    si, lj = np.nonzero(const)
+    rank = np.arange(len(si)) - np.repeat(np.cumsum(const.sum(1)) - const.sum(1), const.sum(1))
+    dst = koff[si] + nreal[si] + rank
+    s = keep[si]
+    nrm = cloud.normals[s]
+    # inside: the plane lies 100 r in front of the surfel; outside: 100 r behind it
+    sign = np.where(raw[lj, s] > 0, 1.0, -1.0)
+    rows[dst, :3] = cloud.positions[s] + (sign * 100.0 * radii[s])[:, None] * nrm
+    rows[dst, 3:6] = nrm
+    rows[dst, 6] = flat.leaf_node[lj]
+    return koff, rows
+
+
+def concatenate_frames(frames: list[CSGFrame]) -> tuple[SurfelArrays, ClipTree]:
+    """The drawn surfels and clip trees of several frames as one splat input (node numbers of
+    later trees shifted; each tree keeps its own root)."""
+    if len(frames) == 1:
+        return frames[0].arrays, frames[0].clip
+    shift = 0
+    trees, leaves, prows, offs = [], [], [], []
+    base = 0
+    for f in frames:
+        t = f.clip.tree.copy()
+        t[:, 1] = np.where(t[:, 1] >= 0, t[:, 1] + shift, -1)
+        t[:, 2] += shift
+        trees.append(t)
+        leaves.append(f.clip.leaf + shift)
+        p = f.clip.partners.copy()
+        p[:, 6] += shift
+        prows.append(p)
+        offs.append(f.clip.offsets[:-1] + base)
+        base += len(p)
+        shift += len(t)
+    offsets = np.concatenate([*offs, np.array([base])])
+    a = [f.arrays for f in frames]
+    axes = None
+    if any(x.axes is not None for x in a):
+        axes = np.concatenate([x.axes if x.axes is not None else _circle_axes(x) for x in a])
+    arrays = SurfelArrays(*(np.ascontiguousarray(np.concatenate([getattr(x, k) for x in a]))
+                            for k in ("positions", "normals", "radii")), axes,
+                          np.ascontiguousarray(np.concatenate([x.colors for x in a])))
+    return arrays, ClipTree(offsets, np.concatenate(prows), np.concatenate(trees), np.concatenate(leaves))
+
+
+def _circle_axes(a: SurfelArrays) -> np.ndarray:
+    return SurfelCloud(a.positions, a.normals, radii=a.radii).tangent_axes()
+
+
+def select(arrays: SurfelArrays, clip: ClipTree, mask: np.ndarray) -> tuple[SurfelArrays, ClipTree]:
+    """The drawn surfels where ``mask`` (N,) bool is true, with their partners."""
+    idx = np.flatnonzero(mask)
+    counts = np.diff(clip.offsets)[idx]
+    off = np.zeros(len(idx) + 1, dtype=np.int64)
+    np.cumsum(counts, out=off[1:])
+    starts = np.repeat(clip.offsets[idx] - off[:-1], counts)
+    rows = starts + np.arange(off[-1])
+    sub = SurfelArrays(*(np.ascontiguousarray(getattr(arrays, k)[idx]) for k in ("positions", "normals", "radii")),
+                       None if arrays.axes is None else np.ascontiguousarray(arrays.axes[idx]),
+                       np.ascontiguousarray(arrays.colors[idx]))
+    return sub, ClipTree(off, clip.partners[rows], clip.tree, clip.leaf[idx])

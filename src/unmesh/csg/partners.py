@@ -1,0 +1,147 @@
+"""Clipping partners (thesis 4.2.1): the surfels of other patches that a surfel may intersect.
+
+Two surfels ``s1, s2`` of different patches are partners when ``|c1 - c2| < r1 + r2`` (the
+conservative estimate of 4.2.1; ``r`` the largest semi-axis). Two ways to find them; both
+contain every pair of truly intersecting discs (tests check this by brute force):
+
+``"range"``
+    Range queries of :class:`unmesh.spatial.KDTree`, with the surfels grouped into radius
+    classes (powers of two) so that the query radius stays tight for mixed sizes. Exactly the
+    pairs of the estimate (:func:`partners_brute_force`).
+``"clipbuffer"``
+    Algorithm 4.1: the surfels are splatted into a clip buffer (a 2D grid in an orthographic
+    view along the axis of least extent, which sees every surfel); surfels sharing a cell are
+    tested. Each surfel covers the cells of its projected box, which for surfels seen edge-on
+    is the thick line covering the degenerate ellipse (4.2.3). Any projection keeps
+    intersecting surfels overlapping, so the result is complete; pairs whose bounding spheres
+    overlap but whose projections do not are left out (they cannot intersect).
+
+Partners are recomputed for every frame (dynamic CSG); ``benchmarks/bench_csg.py`` times both.
+
+Example
+-------
+>>> import numpy as np
+>>> pos = np.array([[0.0, 0, 0], [0.15, 0, 0], [1.0, 0, 0]])
+>>> off, idx = find_partners(pos, np.array([0.1, 0.1, 0.1]), np.array([0, 1, 1]))
+>>> off.tolist(), idx.tolist()
+([0, 1, 2, 2], [1, 0])
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from unmesh.csg._kernels import clip_buffer_pairs
+from unmesh.errors import InputError
+from unmesh.spatial import KDTree
+
+__all__ = ["METHODS", "find_partners", "pairs_to_csr", "partners_brute_force"]
+
+#: Partner search methods; the first is the default (faster in ``benchmarks/bench_csg.py``).
+METHODS = ("clipbuffer", "range")
+
+
+def pairs_to_csr(pairs: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric CSR ``(offsets (n+1,), indices)`` of unique pairs (P, 2), neighbours ascending."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    order = np.lexsort((cols, rows))
+    rows, cols = rows[order], cols[order]
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=n), out=offsets[1:])
+    return offsets, np.ascontiguousarray(cols)
+
+
+def _unique_pairs(pairs: np.ndarray, n: int) -> np.ndarray:
+    if len(pairs) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    keys = np.unique(pairs[:, 0] * np.int64(n) + pairs[:, 1])
+    return np.stack([keys // n, keys % n], axis=1)
+
+
+def partners_brute_force(positions: Any, radii: Any, patch: Any) -> tuple[np.ndarray, np.ndarray]:
+    """O(N^2) reference of :func:`find_partners`."""
+    pos = np.asarray(positions, dtype=np.float64)
+    r = np.asarray(radii, dtype=np.float64)
+    p = np.asarray(patch)
+    d2 = ((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1)
+    hit = (d2 < (r[:, None] + r[None, :]) ** 2) & (p[:, None] != p[None, :])
+    i, j = np.nonzero(np.triu(hit, 1))
+    return pairs_to_csr(np.stack([i, j], axis=1), len(pos))
+
+
+def _range_pairs(pos: np.ndarray, r: np.ndarray, patch: np.ndarray) -> np.ndarray:
+    cls = np.floor(np.log2(r)).astype(np.int64)
+    groups = [np.flatnonzero(cls == c) for c in np.unique(cls)]
+    trees = [KDTree(pos[g]) for g in groups]
+    rmax = [float(r[g].max()) for g in groups]
+    out = []
+    for a, ga in enumerate(groups):
+        for b in range(a, len(groups)):
+            gb = groups[b]
+            off, idx = trees[b].radius_neighbors(pos[ga], rmax[a] + rmax[b])
+            i = np.repeat(ga, np.diff(off))
+            j = gb[idx]
+            d2 = ((pos[i] - pos[j]) ** 2).sum(-1)
+            keep = (patch[i] != patch[j]) & (d2 < (r[i] + r[j]) ** 2)
+            i, j = i[keep], j[keep]
+            out.append(np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1))
+    return np.concatenate(out) if out else np.zeros((0, 2), dtype=np.int64)
+
+
+def _clip_buffer(pos: np.ndarray, r: np.ndarray, nrm: np.ndarray, patch: np.ndarray) -> np.ndarray:
+    ext = np.ptp(pos, axis=0)
+    axis = int(np.argmin(ext))
+    au, av = [k for k in range(3) if k != axis]
+    u = np.ascontiguousarray(pos[:, au])
+    v = np.ascontiguousarray(pos[:, av])
+    # projected box of the disc {c + t : t.n = 0, |t| <= r}: half-extent r sqrt(1 - n_k^2) along k
+    hu = r * np.sqrt(np.clip(1.0 - nrm[:, au] ** 2, 0.0, 1.0)) * (1 + 1e-9) + 1e-12
+    hv = r * np.sqrt(np.clip(1.0 - nrm[:, av] ** 2, 0.0, 1.0)) * (1 + 1e-9) + 1e-12
+    u0, u1 = float((u - hu).min()), float((u + hu).max())
+    v0, v1 = float((v - hv).min()), float((v + hv).max())
+    cell = max(2.0 * float(np.median(r)), (u1 - u0) / 4096, (v1 - v0) / 4096, 1e-12)
+    nu = int((u1 - u0) / cell) + 1
+    nv = int((v1 - v0) / cell) + 1
+    return clip_buffer_pairs(pos, r, patch.astype(np.int64), u, v, hu, hv, u0, v0, cell, nu, nv)
+
+
+def find_partners(positions: Any, radii: Any, patch: Any, normals: Any = None,
+                  method: str = "clipbuffer") -> tuple[np.ndarray, np.ndarray]:
+    """Clipping partners of every surfel (4.2.1).
+
+    Parameters
+    ----------
+    positions : (N, 3) float64
+    radii : (N,) float64
+        Largest semi-axis of each surfel.
+    patch : (N,) int
+        Patch (leaf) of each surfel; surfels of one patch are never partners.
+    normals : (N, 3) float64, optional
+        Needed by ``"clipbuffer"`` (the projected box); without them a surfel covers the box of
+        its bounding sphere.
+    method : {"clipbuffer", "range"}
+
+    Returns
+    -------
+    offsets : (N+1,) int64
+    indices : int64
+        Partners of surfel ``i`` are ``indices[offsets[i]:offsets[i+1]]``, ascending.
+    """
+    if method not in METHODS:
+        raise InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    pos = np.ascontiguousarray(positions, dtype=np.float64)
+    r = np.ascontiguousarray(radii, dtype=np.float64)
+    p = np.ascontiguousarray(patch, dtype=np.int64)
+    n = len(pos)
+    if n == 0:
+        return np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    if method == "range":
+        pairs = _range_pairs(pos, r, p)
+    else:
+        nrm = np.zeros_like(pos) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+        pairs = _clip_buffer(pos, r, nrm, p)
+    return pairs_to_csr(_unique_pairs(pairs, n), n)

@@ -1,0 +1,139 @@
+"""Per-fragment clipping (Algorithm 4.2 with 4.3/4.4 and 4.9/4.10) and Appendix A's invariant."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from unmesh import SurfelCloud
+from unmesh.csg import Patch, flatten
+from unmesh.csg.classify import on_surface_reference
+from unmesh.csg.model import INTERSECTION, LEAF
+from unmesh.render._splat_kernels import keep_tree
+
+
+def _tree(draw, nleaves):
+    """A random CSG tree over patches 0..nleaves-1 with random complements."""
+    leaves = [Patch(SurfelCloud([[0, 0, 0]], [[0, 0, 1]], radii=[1.0]), name=f"P{i}") for i in range(nleaves)]
+    nodes = [~p if draw(st.booleans()) else p for p in leaves]
+    while len(nodes) > 1:
+        i = draw(st.integers(0, len(nodes) - 2))
+        a, b = nodes[i], nodes[i + 1]
+        op = draw(st.sampled_from(["|", "&", "-"]))
+        node = a | b if op == "|" else a & b if op == "&" else a - b
+        nodes[i:i + 2] = [~node if draw(st.booleans()) else node]
+    return nodes[0]
+
+
+@st.composite
+def fragments(draw):
+    nleaves = draw(st.integers(1, 6))
+    flat = flatten(_tree(draw, nleaves))
+    table = flat.table()
+    L = len(flat.leaves)
+    s_leaf = draw(st.integers(0, L - 1))
+    rows = []
+    for j in range(L):
+        if j == s_leaf:
+            continue
+        for _ in range(draw(st.integers(0, 3))):
+            c = draw(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
+            n = draw(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
+            if np.linalg.norm(n) < 1e-3:
+                n = [0, 0, 1.0]
+            rows.append([*c, *(np.array(n) / np.linalg.norm(n)), flat.leaf_node[j]])
+    partners = np.array(rows, dtype=np.float64).reshape(-1, 7)
+    x = np.array(draw(st.lists(st.floats(-1, 1), min_size=3, max_size=3)))
+    offsets = np.array([0, len(partners)], dtype=np.int64)
+    leaf = np.array([flat.leaf_node[s_leaf]], dtype=np.int32)
+    return x, offsets, partners, table, leaf, flat
+
+
+@settings(max_examples=300, deadline=None)
+@given(fragments())
+def test_kernel_matches_reference(case):
+    x, offsets, partners, table, leaf, _ = case
+    work = np.empty((len(table), 5))
+    ref = on_surface_reference(x, 0, offsets, partners, table, leaf)
+    assert keep_tree(0, x[0], x[1], x[2], offsets, partners, table, leaf, work) == ref
+
+
+def _inside_values(flat, x, partners):
+    """insideTree (three-valued) of every node for the fragment, from the partners."""
+    table = flat.table()
+    vals = {}
+    for k in range(len(table)):
+        if table[k, 0] == LEAF:
+            mine = partners[partners[:, 6] == k]
+            if len(mine) == 0:
+                vals[k] = None
+                continue
+            d = ((mine[:, :3] - x) ** 2).sum(1)
+            o = np.argsort(d, kind="stable")
+
+            def clips(r, p):
+                return float(np.dot(p - r[:3], r[3:6])) >= 0
+
+            c1 = clips(mine[o[0]], x)
+            if len(mine) == 1:
+                v = not c1
+            else:
+                a, b = mine[o[0]], mine[o[1]]
+                c2 = clips(b, x)
+                v = (not c1 or not c2) if (clips(a, b[:3]) and clips(b, a[:3])) else (not c1 and not c2)
+            vals[k] = v != bool(table[k, 3])
+        else:
+            right = k - 1
+            left = table[right, 2] - 1
+            a, b = vals[left], vals[right]
+            if a is None:
+                vals[k] = b
+            elif b is None:
+                vals[k] = a
+            else:
+                vals[k] = (a and b) if table[k, 0] == INTERSECTION else (a or b)
+    return vals
+
+
+@settings(max_examples=300, deadline=None)
+@given(fragments())
+def test_appendix_a_invariant(case):
+    """Algorithm A.1 (no early exit) keeps (A.3): on <=> x on the surface of the current node,
+    where surface membership follows (A.1)/(A.2) and an unknown sibling leaves it unchanged;
+    Algorithm 4.2 (early exit, the kernel) returns the same as A.1."""
+    x, offsets, partners, table, leaf, flat = case
+    vals = _inside_values(flat, x, partners)
+
+    def on_surface(k, start):
+        """x in S_k, for x on the leaf ``start`` (and on no other leaf)."""
+        if table[k, 0] == LEAF:
+            return k == start
+        right = k - 1
+        left = table[right, 2] - 1
+        sa, sb = on_surface(left, start), on_surface(right, start)
+        ia, ib = vals[left], vals[right]
+        out = False
+        for s_self, i_other in ((sa, ib), (sb, ia)):
+            if not s_self:
+                continue
+            if i_other is None:
+                out = True
+            elif table[k, 0] == INTERSECTION:
+                out = out or i_other
+            else:
+                out = out or not i_other
+        return out
+
+    node = int(leaf[0])
+    on = True
+    assert on == on_surface(node, int(leaf[0]))
+    while table[node, 1] >= 0:  # Algorithm A.1
+        p = int(table[node, 1])
+        right = p - 1
+        sib = table[right, 2] - 1 if node == right else right
+        v = vals[sib]
+        if v is not None:
+            on = on and (v if table[p, 0] == INTERSECTION else not v)
+        node = p
+        assert on == on_surface(node, int(leaf[0]))  # (A.3) after every iteration
+    work = np.empty((len(table), 5))
+    assert keep_tree(0, x[0], x[1], x[2], offsets, partners, table, leaf, work) == on
