@@ -31,7 +31,7 @@ from unmesh.render.splat import SurfelArrays
 
 __all__ = ["FULL_FRACTION", "MAX_PARTIAL", "PaintView", "environment", "same_camera"]
 
-FULL_FRACTION = 0.25
+FULL_FRACTION = 0.4
 MAX_PARTIAL = 64
 _SKY = np.array([0.75, 0.85, 1.0])
 _HORIZON = np.array([1.0, 0.97, 0.9])
@@ -106,6 +106,8 @@ class PaintView:
         self._partial = np.zeros(0, np.int64)
         self.last_update = "none"
         self.last_count = 0
+        self.max_partial = MAX_PARTIAL
+        self._mark = 0
 
     def _grow(self, n: int) -> None:
         if len(self._on) >= n:
@@ -144,7 +146,11 @@ class PaintView:
                 or len(dirty) > FULL_FRACTION * nvis)
         if not full and len(dirty):
             dirty = np.sort(dirty)
-            full = bool(self._partial[dirty].max() >= MAX_PARTIAL)
+            # the per-surfel update counter: rows updated in place, and resampled rows (whose
+            # counter is inherited from the surfels they replaced) since the last full update
+            cur = dirty[dirty < s.n]  # rows past s.n were removed by an undo
+            full = bool(self._partial[dirty].max() >= self.max_partial
+                        or (len(cur) and s.updates[cur].max() >= self._mark + self.max_partial))
         if full:
             self.camera = camera
             self.renderer = self.renderer if self.renderer is not None and same_camera(self.renderer.camera, camera) \
@@ -154,6 +160,7 @@ class PaintView:
             self.renderer.render(arr)
             self._on[:] = False
             self._partial[:] = 0
+            self._mark = int(s.updates[rows].max()) if len(rows) else 0
             self._store(rows, arr)
             self.last_update, self.last_count = "full", len(rows)
             return self.renderer
@@ -162,8 +169,8 @@ class PaintView:
         if len(old):
             self.renderer.unsplat(self._arrays(old, True))
             self._on[old] = False
-        vis = s.active[dirty] & s.alive[dirty] if len(dirty) else np.zeros(0, bool)
-        new = dirty[vis]
+        cur = dirty[dirty < s.n]
+        new = cur[s.active[cur] & s.alive[cur]]
         if len(new):
             arr = self._arrays(new, False)
             self.renderer.splat(arr)
