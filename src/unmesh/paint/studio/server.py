@@ -92,7 +92,7 @@ class Studio:
 
     # -- app ------------------------------------------------------------------------------
     def app(self) -> web.Application:
-        app = web.Application(middlewares=[self._guard], client_max_size=self.max_upload)
+        app = web.Application(middlewares=[self._guard])
         app.router.add_get("/", self._index)
         app.router.add_get("/static/{path:.*}", self._static)
         app.router.add_get("/ws", self._ws)
@@ -147,7 +147,13 @@ class Studio:
             raise web.HTTPForbidden(text=f"unmesh studio: {exc}\n") from None
         if request.content_length is not None and request.content_length > self.max_upload:
             raise web.HTTPRequestEntityTooLarge(max_size=self.max_upload, actual_size=request.content_length)
-        body = await request.read()  # aiohttp refuses bodies over client_max_size with 413
+        chunks, size = [], 0
+        async for chunk in request.content.iter_chunked(1 << 16):
+            size += len(chunk)
+            if size > self.max_upload:  # chunked bodies have no Content-Length to check first
+                raise web.HTTPRequestEntityTooLarge(max_size=self.max_upload, actual_size=size)
+            chunks.append(chunk)
+        body = b"".join(chunks)
         await asyncio.get_running_loop().run_in_executor(self.pool, atomic_write_bytes, path, body)
         return web.json_response({"name": path.name, "bytes": len(body)})
 
