@@ -37,6 +37,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "unmesh.shells.cli",
     "unmesh.fem.cli",
     "unmesh.batch.cli",
+    "unmesh.paint.cli",
     "unmesh.gallery.cli",
     "unmesh.cli.scenes",
 )

@@ -1,0 +1,287 @@
+"""Paint transfer in a paint buffer, with resampling of the surface (thesis 5.5, Fig. 5.6).
+
+One paint event at one brush tip:
+
+1. The least-squares plane of the original surfels around the tip carries the *paint buffer*,
+   a pixel grid with pixels one brush-surfel spacing wide.
+2. Object surfels and brush surfels are splatted into it with the renderer's EWA kernels
+   (:class:`unmesh.render.SplatRenderer`, orthographic cameras above and below the plane); the
+   depth test ``h_brush < h_object`` gives the penetrated pixels.
+3. Every buffer pixel belongs to the object surfel nearest to it in the plane (and, where
+   penetrated, to the nearest brush surfel): each surfel's paint volume is shared equally by
+   its pixels, so the pixel state is exact and every sum is conserved.
+4. Transfer per penetrated pixel is bidirectional (5.9-5.11) at a rate set by pressure and
+   penetration depth.
+5. The object surfels that own a penetrated pixel are replaced by one child per pixel of their
+   cells (attached to the father, on the replaced surfel's plane, offset by impasto relief);
+   originals are disabled, children deleted. The brush surfels get their pixels' paint back
+   (volume sum, volume-weighted colour).
+
+Example
+-------
+>>> plane_frame(np.array([0.0, 0.0, 1.0]))[0].round(6).tolist()
+[0.0, -1.0, 0.0]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from unmesh.paint.brush import BrushState
+from unmesh.paint.model import transfer
+from unmesh.paint.strokes import Paint
+from unmesh.paint.surface import PaintSurface
+from unmesh.render import Camera, SplatOptions, SplatRenderer
+from unmesh.render.splat import SurfelArrays
+from unmesh.spatial import KDTree
+from unmesh.surfels import tangent_frame
+
+__all__ = ["TransferResult", "lsq_plane", "paint_event", "plane_frame"]
+
+#: Child radius in pixels (>= sqrt(2)/2 covers the grid; 1 overlaps like the originals).
+CHILD_RADIUS = 1.0
+#: Largest paint buffer edge in pixels.
+MAX_BUFFER = 192
+#: Impasto: relief height per unit paint thickness, hair-imprint amplitude (of the thickness)
+#: and wavelength (in brush spacings); beaten-gold patch size (pixels) and tilt (degrees).
+IMPASTO = 1.0
+HAIR_AMPLITUDE = 0.6
+HAIR_WAVELENGTH = 2.0
+BEATEN_PATCH = 4
+BEATEN_TILT = 14.0
+
+_SPLAT = SplatOptions(filter_radius=0.0, precision="double", depth_tolerance=0.5)
+
+
+@dataclass(frozen=True)
+class TransferResult:
+    """Outcome of one paint event: rows removed (disabled/deleted), rows added, penetrated pixels."""
+
+    removed: np.ndarray
+    added: np.ndarray
+    pixels: int
+
+
+def plane_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents of a plane with unit ``normal`` (t1 x t2 = normal)."""
+    t1, t2 = tangent_frame(np.asarray(normal, float).reshape(1, 3))
+    return t1[0], t2[0]
+
+
+def lsq_plane(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares plane (centroid, unit normal oriented like the mean of ``normals``)."""
+    c = points.mean(axis=0)
+    cov = (points - c).T @ (points - c)
+    _, v = np.linalg.eigh(cov)
+    n = v[:, 0]
+    ref = normals.mean(axis=0)
+    if np.dot(n, ref) < 0:
+        n = -n
+    if np.linalg.norm(ref) > 0 and np.dot(n, ref / np.linalg.norm(ref)) < 0.5:
+        n = ref / np.linalg.norm(ref)  # too few or degenerate samples: the mean normal
+    return c, n / np.linalg.norm(n)
+
+
+def _hash01(a: np.ndarray, b: np.ndarray, salt: int) -> np.ndarray:
+    """Deterministic pseudo-random numbers in [0, 1) from integer pairs."""
+    h = (a.astype(np.int64) * 73856093) ^ (b.astype(np.int64) * 19349663) ^ (salt * 83492791)
+    h = (h ^ (h >> 13)) * 1274126177
+    return ((h ^ (h >> 16)) & 0xFFFFFF).astype(np.float64) / float(0x1000000)
+
+
+def _height_map(cam: Camera, pos: np.ndarray, nrm: np.ndarray, rad: np.ndarray, Z: float) -> tuple[np.ndarray, np.ndarray]:
+    """Heights along the camera's backward axis (``Z - depth``) and coverage, by splatting."""
+    arr = SurfelArrays(np.ascontiguousarray(pos), np.ascontiguousarray(nrm), np.ascontiguousarray(rad), None,
+                       np.zeros((len(pos), 3)))
+    g = SplatRenderer(cam, _SPLAT).render(arr).gbuffer()
+    return np.where(g.coverage, Z - g.depth, -np.inf), g.coverage
+
+
+def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
+                direction: np.ndarray, tip: np.ndarray | None = None, body: np.ndarray | None = None,
+                km: bool = False) -> TransferResult:
+    """One paint event at the brush tip(s) ``tip`` (default: colliding active masses' mean).
+
+    Parameters
+    ----------
+    surface : PaintSurface
+    brush : BrushState
+        Its surfels (or the subset ``body`` of a split brush's tip) carry the brush paint.
+    paint : Paint
+        The paint loaded on the brush (sets the transfer rates and the new paint attributes).
+    pressure : float in [0, 1]
+    dt : float
+        Interaction time (s) of (5.9/5.10).
+    direction : (3,) float64
+        Brush motion since the last event (hair imprints run along it).
+    """
+    empty = TransferResult(np.empty(0, np.int64), np.empty(0, np.int64), 0)
+    bpos, bnrm = brush.surfels()
+    sel = np.arange(len(bpos)) if body is None else body
+    if tip is None:
+        tip = brush.x[brush.colliding].mean(axis=0) if brush.colliding.any() else brush.x.mean(axis=0)
+    tree = surface.tree
+    no = surface.n_original
+    opos, onrm = surface.pos[:no], surface.nrm[:no]
+    _, near = tree.knn(tip[None], min(20, no))
+    o, N = lsq_plane(opos[near[0]], onrm[near[0]])
+    t1, t2 = plane_frame(N)
+    h = brush.sk.spacing
+    # brush surfels near the plane
+    bh = (bpos[sel] - o) @ N
+    reach = 3.0 * brush.brush.size
+    # the brush's lower surface (facing the object) near the plane
+    sel = sel[(bh < 2.0 * brush.sk.lower + reach * 0.25) & (bnrm[sel] @ N < 0.0)]
+    if len(sel) == 0:
+        return empty
+    bu = np.stack([(bpos[sel] - o) @ t1, (bpos[sel] - o) @ t2], axis=1)
+    # object rows near the tip: originals within reach, replaced by their children
+    rmax = float(surface.rad[:no][near[0]].max())
+    ext = float(np.abs(bu).max()) + 3.0 * rmax
+    off, ind = tree.radius_neighbors(o[None], ext * 1.5)
+    fathers = ind[off[0]:off[1]]
+    rows = [fathers]
+    for f in fathers.tolist():
+        kids = surface.children.get(f)
+        if kids:
+            rows.append(np.asarray(kids, np.int64))
+    rows = np.unique(np.concatenate(rows))
+    rows = rows[surface.active[rows] & surface.alive[rows]]
+    rel = surface.pos[rows] - o
+    rh = rel @ N
+    ok = (surface.nrm[rows] @ N > 0.2) & (np.abs(rh) < reach)
+    rows = rows[ok]
+    if len(rows) == 0:
+        return empty
+    ou = np.stack([rel[ok] @ t1, rel[ok] @ t2], axis=1)
+    # the buffer: centred on the brush footprint, margin of 3 object radii
+    lo = bu.min(axis=0) - 3.0 * rmax
+    hi = bu.max(axis=0) + 3.0 * rmax
+    size = hi - lo
+    if max(size) / h > MAX_BUFFER:
+        h = float(max(size)) / MAX_BUFFER
+    W = int(np.ceil(size[0] / h))
+    H = int(np.ceil(size[1] / h))
+    centre = o + t1 * (lo[0] + 0.5 * W * h) + t2 * (lo[1] + 0.5 * H * h)
+    Z = 4.0 * reach + 1.0
+    above = Camera(centre + N * Z, centre, up=t2, width=W, height=H, ortho=H * h)
+    below = Camera(centre - N * Z, centre, up=t2, width=W, height=H, ortho=H * h)
+    ho, cov_o = _height_map(above, surface.pos[rows], surface.nrm[rows], surface.rad[rows], Z)
+    hb, cov_b = _height_map(below, bpos[sel], bnrm[sel], np.full(len(sel), 0.75 * brush.sk.spacing), Z)
+    hb = -hb  # heights along +N of the brush's lowest surface
+    if np.dot(below.right, above.right) < 0:
+        hb, cov_b = hb[:, ::-1], cov_b[:, ::-1]
+    # pixel centres in plane coordinates (u along t1 = above.right, v along t2 = up)
+    if np.dot(above.right, t1) < 0:  # keep (u, v) consistent with the image columns
+        t1 = -t1
+        ou[:, 0] = -ou[:, 0]
+        bu[:, 0] = -bu[:, 0]
+        lo[0], hi[0] = -hi[0], -lo[0]
+    cu = ((np.arange(W) + 0.5) - 0.5 * W) * h + (lo[0] + 0.5 * W * h)
+    cv = (0.5 * H - (np.arange(H) + 0.5)) * h + (lo[1] + 0.5 * H * h)
+    U, V = np.meshgrid(cu, cv)
+    pix = np.stack([U.ravel(), V.ravel()], axis=1)
+    # ownership: nearest object surfel in the plane, within its radius
+    dist, own = KDTree(ou).knn(pix, 1)
+    dist, own = dist[:, 0], own[:, 0]
+    covered = cov_o.ravel() & (dist <= surface.rad[rows][own] * 1.05)
+    # penetration and brush ownership
+    depth = (ho - hb).ravel()
+    pen = covered & cov_b.ravel() & (depth > 0)
+    bdist, bown = KDTree(bu).knn(pix, 1)
+    bdist, bown = bdist[:, 0], bown[:, 0]
+    pen &= bdist <= 1.5 * brush.sk.spacing
+    if not pen.any():
+        return empty
+    # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer
+    inner = (ou[:, 0] - 1.5 * surface.rad[rows] > lo[0]) & (ou[:, 0] + 1.5 * surface.rad[rows] < lo[0] + W * h)
+    inner &= (ou[:, 1] - 1.5 * surface.rad[rows] > lo[1]) & (ou[:, 1] + 1.5 * surface.rad[rows] < lo[1] + H * h)
+    rep_local = np.unique(own[pen])
+    rep_local = rep_local[inner[rep_local]]
+    if len(rep_local) == 0:
+        return empty
+    is_rep = np.zeros(len(rows), bool)
+    is_rep[rep_local] = True
+    Q = np.flatnonzero(covered & is_rep[own])
+    P = pen[Q]
+    oq = own[Q]
+    rq = rows[oq]
+    npix = np.bincount(oq, minlength=len(rows)).astype(np.float64)
+    share = 1.0 / npix[oq]
+    # surface pixel state (exact shares of the owners)
+    cw = surface.wet[rq].copy()
+    vw = surface.vw[rq] * share
+    # brush pixel state on penetrated pixels
+    bq = bown[Q][P]
+    bsel = sel[bq]
+    nb = np.bincount(bq, minlength=len(sel)).astype(np.float64)
+    bshare = 1.0 / nb[bq]
+    cbp = brush.wet[bsel]
+    vbp = brush.vw[bsel] * bshare
+    press = pressure * np.clip(depth[Q][P] / max(brush.sk.lower, 1e-300), 0.0, 1.0)
+    cs2, vs2, cb2, vb2, fb = transfer(cw[P], vw[P], cbp, vbp, paint.back_transfer, paint.transfer, press, dt, km)
+    cw[P] = cs2
+    vw[P] = vs2
+    # brush write-back: per brush surfel, total volume and volume-weighted colour
+    touched = np.unique(bsel)
+    tot = np.zeros(len(brush.vw))
+    np.add.at(tot, bsel, vb2)
+    acc = np.zeros((len(brush.vw), 3))
+    np.add.at(acc, bsel, vb2[:, None] * cb2)
+    safe = np.where(tot[touched] > 0, tot[touched], 1.0)[:, None]
+    brush.wet[touched] = np.where(tot[touched][:, None] > 0, acc[touched] / safe, brush.wet[touched])
+    brush.vw[touched] = tot[touched]
+    # new paint attributes blend by the fraction of brush paint in the pixel
+    def blend(field: str, value: float) -> np.ndarray:
+        out = surface.__getattr__(field)[rq].copy()
+        out[P] = (1.0 - fb) * out[P] + fb * value
+        return out
+    rho = blend("rho", paint.density / paint.thickness)
+    kap = blend("kappa", paint.drying)
+    dif = blend("diff", paint.diffusion)
+    refl = blend("refl", paint.reflectivity)
+    shin = blend("shin", paint.shininess)
+    met = blend("metal", paint.metallic)
+    # children: pixel centres on the owner's plane
+    pu = pix[Q]
+    base_pt = o + pu[:, :1] * t1 + pu[:, 1:] * t2
+    onr = surface.nrm[rq]
+    cosn = np.maximum(onr @ N, 0.2)
+    owner_lift = surface.lift[rq]
+    opl = surface.pos[rq] - owner_lift[:, None] * onr  # owner's father-surface point
+    s = np.einsum("ij,ij->i", onr, opl - base_pt) / cosn
+    cpos = base_pt + s[:, None] * N
+    area = np.full(len(Q), h * h) / cosn
+    lift = owner_lift * 1.0
+    nrm = onr.copy()
+    if paint.relief == "hair" and P.any():
+        thick = (vw[P] + surface.vd[rq][P] * share[P]) / area[P]
+        dirn = direction - np.dot(direction, N) * N
+        ln = np.linalg.norm(dirn)
+        across = np.cross(N, dirn / ln) if ln > 1e-12 else t1
+        coord = (pu[P] @ np.array([across @ t1, across @ t2]))
+        lam = HAIR_WAVELENGTH * brush.sk.spacing
+        lift[P] = IMPASTO * thick * (1.0 + HAIR_AMPLITUDE * np.sin(2 * np.pi * coord / lam))
+    elif paint.relief == "beaten" and P.any():
+        gi = np.floor(pu[P] / (BEATEN_PATCH * h)).astype(np.int64)
+        a = np.radians(BEATEN_TILT) * _hash01(gi[:, 0], gi[:, 1], 1)
+        phi = 2 * np.pi * _hash01(gi[:, 0], gi[:, 1], 2)
+        tilt_dir = np.cos(phi)[:, None] * t1 + np.sin(phi)[:, None] * t2
+        nn = np.cos(a)[:, None] * onr[P] + np.sin(a)[:, None] * tilt_dir
+        nrm[P] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
+    cpos = cpos + lift[:, None] * onr
+    fat = surface.father[rq]
+    rad = CHILD_RADIUS * h / cosn
+    new = {
+        "pos": cpos, "nrm": nrm, "rad": rad, "father": fat, "active": np.ones(len(Q), bool),
+        "alive": np.ones(len(Q), bool), "base": surface.base[rq], "wet": cw, "dry": surface.dry[rq],
+        "vw": vw, "vd": surface.vd[rq] * share, "area": area, "rho": rho, "kappa": kap, "diff": dif,
+        "refl": refl, "shin": shin, "metal": met, "lift": lift, "updates": surface.updates[rq] + 1,
+    }
+    replaced = rows[rep_local]
+    surface.delete(replaced)
+    added = surface.append(new)
+    return TransferResult(replaced, added, int(P.sum()))
+
