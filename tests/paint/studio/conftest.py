@@ -17,17 +17,18 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-backg
                  "--disable-component-update", "--no-first-run"]
 #: Surfel spacing of the test model (a coarse blob: fast, still a few thousand surfels).
 SPACING = 0.035
-VIEWPORT = {"width": 1280, "height": 720}
+VIEWPORT = {"width": 960, "height": 600}
 
 
 def model_cloud(spacing: float = SPACING):
+    """The test model: what ``unmesh paint blob --spacing SPACING`` paints on."""
     from unmesh.shapes import Blob
 
-    return Blob().surfels(spacing=spacing, color=(0.85, 0.83, 0.78))
+    return Blob().surfels(spacing=spacing)
 
 
 def new_session(spacing: float = SPACING):
-    from unmesh.paint import Session
+    from unmesh.paint.session import Session
 
     return Session(model_cloud(spacing))
 
@@ -57,7 +58,7 @@ def studio(tmp_path_factory):
     from unmesh.paint.studio.workspace import Workspace
 
     out = tmp_path_factory.mktemp("studio") / "blob_painted.ply"
-    bg = BackgroundStudio(Workspace(new_session(), out, autosave_every=3))
+    bg = BackgroundStudio(Workspace(new_session(), out, autosave_every=3, advance_every=None))
     with bg as s:
         yield s
 
@@ -82,6 +83,34 @@ def canvas_pixels(page) -> np.ndarray:
 
     png = page.locator("#view").screenshot()
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+
+def covered_segment(studio, row_frac=(0.45, 0.75), length_frac=0.5):
+    """A horizontal segment (image pixels) across the model's widest covered run in a band of rows."""
+    res = studio.run_in_worker(lambda ws: ws.session.render(ws.camera(), brush=False))
+    cov = res.coverage
+    h = cov.shape[0]
+    best = (0, 0, 0)
+    for r in range(int(row_frac[0] * h), int(row_frac[1] * h), 4):
+        row = np.concatenate([[False], cov[r], [False]]).astype(int)
+        edges = np.flatnonzero(np.diff(row))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if b - a > best[2] - best[1]:
+                best = (r, a, b)
+    r, a, b = best
+    mid, half = 0.5 * (a + b), 0.5 * length_frac * (b - a)
+    return r + 0.5, mid - half, mid + half
+
+
+def image_to_page(page, studio, x, y):
+    cam = studio.run_in_worker(lambda ws: ws.camera())
+    box = canvas_box(page)
+    return box["x"] + x * box["width"] / cam.width, box["y"] + y * box["height"] / cam.height
+
+
+def cloud_state(studio):
+    """(positions, colours) of the model's visible surfels, copied on the worker thread."""
+    return studio.run_in_worker(lambda ws: (ws.session.cloud().positions.copy(), ws.session.cloud().colors.copy()))
 
 
 def canvas_box(page) -> dict:

@@ -230,6 +230,25 @@ class Studio:
                     with contextlib.suppress(ConnectionError, RuntimeError):
                         await client.send_json(reply)
 
+    async def _ticks(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(0.25)
+            if not self.clients or self._queue:
+                continue
+
+            def tick() -> list[bytes]:
+                try:
+                    return self.workspace.frames() if self.workspace.tick() else []
+                except Exception:
+                    traceback.print_exc(file=sys.stderr)
+                    return []
+
+            for frame in await loop.run_in_executor(self.pool, tick):
+                for client in list(self.clients):
+                    with contextlib.suppress(ConnectionError, RuntimeError):
+                        await client.send_bytes(frame)
+
     async def _forces(self) -> None:
         last_active = -1e9
         while True:
@@ -256,7 +275,7 @@ class Studio:
         await runner.setup()
         site = web.SockSite(runner, self.sock)
         await site.start()
-        self._tasks = [asyncio.create_task(self._worker()), asyncio.create_task(self._forces())]
+        self._tasks = [asyncio.create_task(t()) for t in (self._worker, self._forces, self._ticks)]
         if ready is not None:
             ready(self)
         try:

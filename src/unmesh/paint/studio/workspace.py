@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from unmesh.errors import InputError
-from unmesh.io.atomic import atomic_path, atomic_write_json
+from unmesh.io.atomic import atomic_write_json
 from unmesh.paint.studio.frames import FrameEncoder, to_uint8
 from unmesh.paint.studio.protocol import brush_spec, paint_spec, samples_spec
 from unmesh.paint.studio.security import output_path
@@ -46,7 +46,7 @@ PALETTE_SIZE = (300, 180)
 MAX_SIDE = 2048
 
 
-def palette_cloud(width: float = 1.6, height: float = 1.0, spacing: float = 0.02) -> SurfelCloud:
+def palette_cloud(width: float = 1.76, height: float = 1.06, spacing: float = 0.02) -> SurfelCloud:
     """The palette: a flat grid of surfels in the z = 0 plane facing +z, off-white."""
     xs = np.arange(-width / 2, width / 2 + 1e-9, spacing)
     ys = np.arange(-height / 2, height / 2 + 1e-9, spacing)
@@ -58,7 +58,9 @@ def palette_cloud(width: float = 1.6, height: float = 1.0, spacing: float = 0.02
 
 
 def _engine():
-    from unmesh.paint import Brush, Paint, Sample, Session
+    # the engine's defining modules (unmesh.paint's __init__ never imports the studio)
+    from unmesh.paint.session import Session
+    from unmesh.paint.strokes import Brush, Paint, Sample
 
     return Brush, Paint, Sample, Session
 
@@ -66,19 +68,25 @@ def _engine():
 class Workspace:
     """Session, palette, view and files of one studio (see the module notes)."""
 
-    def __init__(self, session: Any, out_path: str | Path, *, palette: Any = None, autosave_every: int = 5) -> None:
-        _Brush, _Paint, _Sample, Session = _engine()
+    def __init__(self, session: Any, out_path: str | Path, *, palette: Any = None, autosave_every: int = 5,
+                 advance_every: float | None = 1.0) -> None:
+        from unmesh.paint.session import PaintOptions
+
+        _, _, _, Session = _engine()
         self.session = session
         self.out_path = Path(out_path).resolve()
         self.folder = self.out_path.parent
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.palette = palette if palette is not None else Session(palette_cloud())
+        self.palette = palette if palette is not None else Session(palette_cloud(), PaintOptions(haptics=False))
         self.framing = Framing.of_points(session.cloud().positions)
         self.view = View()
         self.width, self.height = 800, 600
         pw, ph = PALETTE_SIZE
         self.palette_camera = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), width=pw, height=ph, ortho=1.04)
         self.autosave_every = int(autosave_every)
+        self.advance_every = advance_every
+        self._last_advance = time.monotonic()
+        self._force_session = self.session
         self.encoder = FrameEncoder()
         self._t0 = time.monotonic()
         self._stroke: dict[str, Any] | None = None
@@ -155,6 +163,7 @@ class Workspace:
         session, camera = self._target(target)
         brush = Brush(**brush_spec(msg.get("brush")))
         paint = Paint(**paint_spec(msg.get("paint")))
+        self._force_session = session
         self._stroke = {"target": target, "session": session, "camera": camera, "brush": brush, "paint": paint,
                         "sid": None, "t_server": time.monotonic() - self._t0, "t_client": None, "n": 0}
         return [{"type": "begun", "target": target}]
@@ -234,7 +243,9 @@ class Workspace:
         if not path.is_file():
             raise InputError(f"name: no file {path.name!r} in the output folder")
         self._stroke = None
-        self.session = Session.load(path)
+        old, self.session = self.session, Session.load(path)
+        old.close()
+        self._force_session = self.session
         self.framing = Framing.of_points(self.session.cloud().positions)
         self._pending["model"] = "full"
         return [{"type": "loaded", "name": path.name}, self.state()]
@@ -259,7 +270,9 @@ class Workspace:
             data = json.loads(path.read_text(encoding="utf-8"))
         except (ValueError, UnicodeDecodeError) as exc:
             raise InputError(f"{path.name}: expected a stroke JSON file, got a parse error ({exc})") from None
-        n = replay_strokes(self.session, data, path.name)
+        if self._stroke is not None:
+            self._on_end({})
+        n = self.session.replay(data, path.name)
         self.strokes += n
         self.changed_since_save = True
         self._pending["model"] = "full"
@@ -274,7 +287,7 @@ class Workspace:
         if not (isinstance(x, int | float) and isinstance(y, int | float) and 0 <= x < pw and 0 <= y < ph):
             raise InputError(f"x, y: expected a palette pixel within {pw}x{ph}, got {x!r}, {y!r}")
         if self._palette_albedo is None:
-            self._palette_albedo = np.asarray(self.palette.render(self.palette_camera).albedo)
+            self._palette_albedo = np.asarray(self.palette.render(self.palette_camera, shading="none").albedo)
         rgb = np.clip(self._palette_albedo[int(y), int(x)], 0.0, 1.0)
         return [{"type": "color", "color": [round(float(c), 4) for c in rgb]}]
 
@@ -292,7 +305,7 @@ class Workspace:
                     cam = cam.resized(max(8, self.width // 2), max(8, self.height // 2))
                 img = to_uint8(self.session.render(cam).color)
             else:
-                res = self.palette.render(self.palette_camera)
+                res = self.palette.render(self.palette_camera, shading="none")
                 self._palette_albedo = np.asarray(res.albedo)
                 img, scale = to_uint8(res.color), 1
             extra = {"ts": self._last_ts} if self._last_ts is not None else None
@@ -304,7 +317,7 @@ class Workspace:
 
     def force(self) -> list[float]:
         """The brush's current penalty force (3,) from the engine's haptic signal."""
-        f = np.asarray(self.session.force(), dtype=np.float64).reshape(3)
+        f = np.asarray(self._force_session.force(), dtype=np.float64).reshape(3)
         return [float(c) for c in f]
 
     @property
@@ -313,8 +326,21 @@ class Workspace:
         return self._stroke is not None
 
     def _save_model(self, path: Path) -> None:
-        with atomic_path(path, suffix=".ply") as tmp:
-            self.session.save(tmp)
+        self.session.save(path)  # atomic
+
+    def tick(self) -> bool:
+        """Background work between strokes: ``Session.advance`` over the time since the last tick
+        (drying, diffusion, downsampling; recorded in the stroke file, so a replay matches).
+        True when it ran."""
+        now = time.monotonic()
+        if self.advance_every is None or self._stroke is not None or now - self._last_advance < self.advance_every:
+            return False
+        dt, self._last_advance = now - self._last_advance, now
+        if self.strokes == 0:
+            return False
+        self.session.advance(round(dt, 3), budget=256)
+        self._pending.setdefault("model", "diff")
+        return True
 
     def autosave(self) -> dict[str, Any]:
         """Save the model to ``STEM.autosave.ply`` and the strokes to ``STEM.autosave.json``."""
@@ -328,31 +354,11 @@ class Workspace:
         """Close an open stroke and save the model to the output file if it changed."""
         if self._stroke is not None:
             self._on_end({})
+        self.session.close()
+        self.palette.close()
         if not self.changed_since_save:
             return None
         self._save_model(self.out_path)
         atomic_write_json(self.folder / (self.out_path.stem + "_strokes.json"), self.session.strokes_json())
         self.changed_since_save = False
         return self.out_path
-
-
-def replay_strokes(session: Any, data: Any, source: str = "strokes") -> int:
-    """Paint the strokes of a stroke-file object (``{"version": 1, "strokes": [...]}``) on ``session``."""
-    Brush, Paint, Sample, _ = _engine()
-    if not isinstance(data, dict) or not isinstance(data.get("strokes"), list):
-        raise InputError(f"{source}: expected an object with a 'strokes' list")
-    for i, stroke in enumerate(data["strokes"]):
-        if not isinstance(stroke, dict) or not isinstance(stroke.get("samples"), list):
-            raise InputError(f"{source}: strokes[{i}]: expected an object with 'samples'")
-        brush = Brush(**brush_spec(stroke.get("brush")))
-        paint = Paint(**paint_spec(stroke.get("paint")))
-        samples = []
-        for j, s in enumerate(stroke["samples"]):
-            try:
-                samples.append(Sample(t=float(s["t"]), point=tuple(float(c) for c in s["point"]),
-                                      pressure=float(s.get("pressure", 0.5)),
-                                      tilt=tuple(float(c) for c in s.get("tilt", (0.0, 0.0)))))
-            except (KeyError, TypeError, ValueError) as exc:
-                raise InputError(f"{source}: strokes[{i}].samples[{j}]: {exc}") from None
-        session.stroke(samples, brush=brush, paint=paint)
-    return len(data["strokes"])

@@ -11,7 +11,7 @@ const viewCtx = viewCanvas.getContext("2d"), overlayCtx = overlay.getContext("2d
 const paletteCtx = paletteCanvas.getContext("2d");
 const gauge = new Gauge($("gauge"));
 
-const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1], drying: 0.2, pressure: 0.6 };
+const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1], drying: 0.05, pressure: 0.6 };
 const stats = { frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], fps: 0, errors: [], replies: [] };
 let server = { px_per_unit: 100, palette_px_per_unit: 173, presets: {}, width: 0, height: 0 };
 let stroke = null;          // {target, resampler, toImage, canvas}

@@ -22,7 +22,7 @@ export class Gauge {
     this.ctx = canvas.getContext("2d");
     this.value = 0;
     this.peak = 0;
-    this.scale = 1;
+    this.scale = 1e-3;
     this.draw();
   }
 
@@ -30,7 +30,7 @@ export class Gauge {
     const f = Math.hypot(force[0], force[1], force[2]);
     this.value = f;
     this.peak = Math.max(f, this.peak * 0.97);
-    this.scale = Math.max(this.scale, f * 1.25, 1e-9);
+    this.scale = Math.max(this.scale * 0.998, f * 1.25, 1e-3);
     this.draw();
   }
 
