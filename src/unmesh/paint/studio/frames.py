@@ -1,0 +1,149 @@
+"""Frames for the WebSocket: full images, or only the tiles that changed, JPEG-compressed.
+
+A frame message is binary: a little-endian ``uint32`` header length, the UTF-8 JSON header,
+then the images one after another. The header lists the rectangles
+``[x, y, w, h, nbytes]`` in pixels of the full-resolution image (``scale`` > 1 for a
+low-resolution preview that the page stretches)::
+
+    {"type": "frame", "target": "model", "seq": 7, "w": 640, "h": 480, "full": false,
+     "scale": 1, "fmt": "jpeg", "rects": [[64, 32, 96, 32, 2211]], ...}
+
+While painting only the tiles whose pixels changed are sent (runs of changed
+``tile x tile`` blocks on each tile row merge into one rectangle); a view change, a first frame
+or a change covering most of the image sends the whole image.
+
+Example
+-------
+>>> import numpy as np
+>>> enc = FrameEncoder(tile=8)
+>>> img = np.zeros((16, 32, 3), np.uint8)
+>>> head, _ = decode(enc.encode("model", img))
+>>> head["full"], head["rects"][0][:4]
+(True, [0, 0, 32, 16])
+>>> img[9:11, 20:22] = 255
+>>> head, _ = decode(enc.encode("model", img))
+>>> head["full"], [r[:4] for r in head["rects"]]
+(False, [[16, 8, 8, 8]])
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FrameEncoder", "decode", "to_uint8"]
+
+
+def to_uint8(color: np.ndarray) -> np.ndarray:
+    """A float RGB image (H,W,3) in [0, 1] as uint8 (rounded)."""
+    return np.ascontiguousarray(np.clip(np.asarray(color) * 255.0 + 0.5, 0, 255).astype(np.uint8))
+
+
+def _jpeg(img: np.ndarray, quality: int) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, format="JPEG", quality=quality, subsampling=0 if quality >= 90 else 2)
+    return buf.getvalue()
+
+
+def decode(message: bytes) -> tuple[dict[str, Any], list[bytes]]:
+    """The header and image blobs of a frame message (the inverse of :meth:`FrameEncoder.encode`)."""
+    (n,) = struct.unpack_from("<I", message, 0)
+    head = json.loads(message[4:4 + n].decode("utf-8"))
+    blobs, pos = [], 4 + n
+    for rect in head["rects"]:
+        blobs.append(message[pos:pos + rect[4]])
+        pos += rect[4]
+    return head, blobs
+
+
+class FrameEncoder:
+    """Keeps the last image sent per target and encodes the next one as tiles or whole.
+
+    Parameters
+    ----------
+    tile : int
+        Tile edge in pixels (a multiple of 8 keeps JPEG blocks aligned).
+    quality : int
+        JPEG quality.
+    full_fraction : float
+        Send the whole image when more than this fraction of the tiles changed.
+    """
+
+    def __init__(self, tile: int = 32, quality: int = 90, full_fraction: float = 0.5) -> None:
+        self.tile = int(tile)
+        self.quality = int(quality)
+        self.full_fraction = float(full_fraction)
+        self._last: dict[str, np.ndarray] = {}
+        self._seq = 0
+
+    def reset(self, target: str | None = None) -> None:
+        """Forget the last image (of one target or all): the next frame is sent whole."""
+        if target is None:
+            self._last.clear()
+        else:
+            self._last.pop(target, None)
+
+    def changed_rects(self, old: np.ndarray, new: np.ndarray) -> list[tuple[int, int, int, int]]:
+        """Rectangles ``(x, y, w, h)`` covering the tiles where ``new`` differs from ``old``."""
+        t = self.tile
+        h, w = new.shape[:2]
+        ny, nx = -(-h // t), -(-w // t)
+        diff = np.any(old != new, axis=2)
+        pad = np.zeros((ny * t, nx * t), dtype=bool)
+        pad[:h, :w] = diff
+        changed = pad.reshape(ny, t, nx, t).any(axis=(1, 3))
+        rects = []
+        for ty in range(ny):
+            row = changed[ty]
+            tx = 0
+            while tx < nx:
+                if not row[tx]:
+                    tx += 1
+                    continue
+                start = tx
+                while tx < nx and row[tx]:
+                    tx += 1
+                x0, y0 = start * t, ty * t
+                rects.append((x0, y0, min(tx * t, w) - x0, min(y0 + t, h) - y0))
+        return rects
+
+    def encode(self, target: str, image: np.ndarray, *, full: bool = False, scale: int = 1,
+               extra: dict[str, Any] | None = None) -> bytes | None:
+        """The frame message for ``image`` (H,W,3) uint8; None when nothing changed.
+
+        ``scale`` > 1 marks a low-resolution preview (never used as the base of tiles).
+        """
+        img = np.ascontiguousarray(image, dtype=np.uint8)
+        h, w = img.shape[:2]
+        last = self._last.get(target)
+        if scale != 1:
+            self._last.pop(target, None)
+            rects = [(0, 0, w, h)]
+            full = True
+        elif full or last is None or last.shape != img.shape:
+            rects = [(0, 0, w, h)]
+            full = True
+        else:
+            rects = self.changed_rects(last, img)
+            if not rects:
+                return None
+            area = sum(r[2] * r[3] for r in rects)
+            if area > self.full_fraction * w * h:
+                rects, full = [(0, 0, w, h)], True
+        if scale == 1:
+            self._last[target] = img.copy()
+        blobs = [_jpeg(img[y:y + rh, x:x + rw], self.quality) for x, y, rw, rh in rects]
+        self._seq += 1
+        head = {"type": "frame", "target": target, "seq": self._seq, "w": w * scale, "h": h * scale,
+                "full": bool(full), "scale": int(scale), "fmt": "jpeg",
+                "rects": [[x, y, rw, rh, len(b)] for (x, y, rw, rh), b in zip(rects, blobs, strict=True)]}
+        if extra:
+            head.update(extra)
+        data = json.dumps(head, separators=(",", ":")).encode("utf-8")
+        return struct.pack("<I", len(data)) + data + b"".join(blobs)

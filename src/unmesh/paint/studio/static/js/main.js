@@ -1,0 +1,311 @@
+// The unmesh painting studio: canvas, tools, input and the session connection.
+import { Connection } from "./net.js";
+import { Navigator } from "./nav.js";
+import { BASE_PAINTS, Gauge, fromHex, hex } from "./panel.js";
+import { Resampler, inputPoints, pressureOf, tiltOf } from "./pen.js";
+
+const $ = (id) => document.getElementById(id);
+const token = new URLSearchParams(location.search).get("token") || "";
+const viewCanvas = $("view"), overlay = $("overlay"), paletteCanvas = $("palette");
+const viewCtx = viewCanvas.getContext("2d"), overlayCtx = overlay.getContext("2d");
+const paletteCtx = paletteCanvas.getContext("2d");
+const gauge = new Gauge($("gauge"));
+
+const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1], drying: 0.05, pressure: 0.6 };
+const stats = { frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], fps: 0, errors: [], replies: [] };
+let server = { px_per_unit: 100, palette_px_per_unit: 173, presets: {}, width: 0, height: 0 };
+let stroke = null;          // {target, resampler, toImage, canvas}
+let cursor = null;          // {x, y, p, tilt, over}
+let drawing = Promise.resolve();
+let syncId = 0;
+const syncWaiters = new Map();
+
+// ---- connection ---------------------------------------------------------------------------
+const nav = new Navigator((view, preview) => conn.send({ type: "view", view, preview }));
+const conn = new Connection(token, {
+  onOpen: () => { sizeCanvas(); conn.send({ type: "hello", width: viewCanvas.width, height: viewCanvas.height, view: nav.view }); say("connected"); },
+  onClose: (ev) => say(ev.code === 1009 ? "message too large: refused by the server" : "connection lost, reconnecting…", true),
+  onMessage: onMessage,
+  onFrame: (head, blobs) => { drawing = drawing.then(() => drawFrame(head, blobs)).catch((e) => say(String(e), true)); },
+});
+
+function onMessage(msg) {
+  if (msg.type !== "force") {
+    stats.replies.push(msg.type);
+    if (stats.replies.length > 200) stats.replies.shift();
+  }
+  switch (msg.type) {
+    case "state":
+      server = msg;
+      $("outname").textContent = msg.out;
+      $("strokes").textContent = msg.strokes;
+      break;
+    case "force": gauge.set(msg.force); break;
+    case "color": setColor(msg.color); say(`picked ${hex(msg.color)} from the palette`); break;
+    case "error": stats.errors.push(msg.message); say(msg.message, true); break;
+    case "saved": say(`saved ${msg.name}`); break;
+    case "autosaved": say(`autosaved ${msg.name}`); break;
+    case "loaded": say(`loaded ${msg.name}`); break;
+    case "exported": say(`exported ${msg.name}`, false, msg.name); break;
+    case "recorded": say(`recorded ${msg.name}`, false, msg.name); break;
+    case "replayed": say(`replayed ${msg.strokes} strokes from ${msg.name}`); break;
+    case "undone": if (!msg.ok) say("nothing to undo"); break;
+    case "redone": if (!msg.ok) say("nothing to redo"); break;
+    case "synced": {
+      const done = syncWaiters.get(msg.id);
+      if (done) { syncWaiters.delete(msg.id); drawing.then(done); }
+      break;
+    }
+  }
+}
+
+async function drawFrame(head, blobs) {
+  const model = head.target === "model";
+  const canvas = model ? viewCanvas : paletteCanvas;
+  const ctx = model ? viewCtx : paletteCtx;
+  if (!head.full && (canvas.width !== head.w || canvas.height !== head.h)) return;
+  if (head.full && model && (canvas.width !== head.w || canvas.height !== head.h)) return;  // stale size
+  const bitmaps = await Promise.all(blobs.map((b) => createImageBitmap(b)));
+  head.rects.forEach((r, i) => {
+    if (head.scale > 1) ctx.drawImage(bitmaps[i], 0, 0, head.w, head.h);
+    else ctx.drawImage(bitmaps[i], r[0], r[1]);
+    bitmaps[i].close();
+  });
+  stats.frames += 1;
+  stats.tiles += head.rects.length;
+  stats.bytes += head.rects.reduce((a, r) => a + r[4], 0);
+  if (model) stats.modelFrames += 1;
+  if (head.ts !== undefined && head.ts !== null) {
+    stats.latencies.push(performance.now() - head.ts);
+    if (stats.latencies.length > 2000) stats.latencies.shift();
+    $("latency").textContent = `${stats.latencies[stats.latencies.length - 1].toFixed(0)} ms`;
+  }
+}
+
+let fpsCount = 0;
+setInterval(() => {
+  stats.fps = stats.modelFrames - fpsCount;
+  fpsCount = stats.modelFrames;
+  $("fps").textContent = `${stats.fps} /s`;
+}, 1000);
+
+function say(text, error = false, file = null) {
+  const el = $("message");
+  el.textContent = text;
+  el.className = error ? "error" : "";
+  if (file) {
+    const a = document.createElement("a");
+    a.href = `/api/file?token=${encodeURIComponent(token)}&name=${encodeURIComponent(file)}`;
+    a.textContent = " download";
+    a.style.color = "inherit";
+    el.appendChild(a);
+  }
+}
+
+// ---- canvas size ------------------------------------------------------------------------------
+function sizeCanvas() {
+  const stage = $("stage");
+  const w = Math.max(16, Math.min(2048, Math.round(stage.clientWidth)));
+  const h = Math.max(16, Math.min(2048, Math.round(stage.clientHeight)));
+  const changed = viewCanvas.width !== w || viewCanvas.height !== h;
+  for (const c of [viewCanvas, overlay]) { c.width = w; c.height = h; }
+  return changed;
+}
+let resizeTimer = null;
+new ResizeObserver(() => {
+  clearTimeout(resizeTimer);
+  resizeTimer = setTimeout(() => { if (sizeCanvas()) conn.send({ type: "resize", width: viewCanvas.width, height: viewCanvas.height }); }, 80);
+}).observe($("stage"));
+
+// ---- painting -----------------------------------------------------------------------------------
+function imageMapper(canvas) {
+  const rect = canvas.getBoundingClientRect();
+  return (e) => [(e.clientX - rect.left) * canvas.width / rect.width, (e.clientY - rect.top) * canvas.height / rect.height];
+}
+
+function beginStroke(ev, target, canvas) {
+  const pxPerUnit = target === "model" ? server.px_per_unit : server.palette_px_per_unit;
+  const spacing = Math.max(1, 0.2 * tools.size * pxPerUnit);
+  stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas) };
+  conn.send({ type: "begin", target, brush: { type: tools.brush, size: tools.size },
+              paint: { type: tools.paint, color: tools.color, drying: tools.drying } });
+  addSamples(ev);
+}
+
+function addSamples(ev) {
+  const rows = [];
+  for (const pt of inputPoints(ev, stroke.toImage, tools.pressure)) rows.push(...stroke.resampler.push(pt));
+  if (rows.length) conn.send({ type: "samples", samples: rows, ts: ev.timeStamp });
+}
+
+function endStroke() {
+  if (!stroke) return;
+  conn.send({ type: "end" });
+  if (stroke.target === "model") $("strokes").textContent = String(Number($("strokes").textContent) + 1);
+  stroke = null;
+}
+
+overlay.addEventListener("contextmenu", (e) => e.preventDefault());
+paletteCanvas.addEventListener("contextmenu", (e) => e.preventDefault());
+
+overlay.addEventListener("pointerdown", (ev) => {
+  overlay.setPointerCapture(ev.pointerId);
+  if (ev.button === 2 && !ev.shiftKey) nav.start(ev, "rotate");
+  else if (ev.button === 1 || ev.button === 2) nav.start(ev, "pan");
+  else if (ev.button === 0) beginStroke(ev, "model", overlay);
+  ev.preventDefault();
+});
+overlay.addEventListener("pointermove", (ev) => {
+  cursor = { x: ev.clientX, y: ev.clientY, p: pressureOf(ev, tools.pressure), tilt: tiltOf(ev), over: true };
+  if (stroke && stroke.target === "model") addSamples(ev);
+  else if (nav.drag) nav.move(ev, overlay.height);
+  drawCursor();
+});
+for (const type of ["pointerup", "pointercancel"]) {
+  overlay.addEventListener(type, (ev) => {
+    if (stroke) endStroke();
+    nav.end();
+    if (ev.pointerType !== "mouse") { cursor = null; drawCursor(); }
+  });
+}
+overlay.addEventListener("pointerleave", () => { cursor = null; drawCursor(); });
+overlay.addEventListener("wheel", (ev) => {
+  ev.preventDefault();
+  if (stroke) setPressure(tools.pressure - ev.deltaY * 0.001);
+  else nav.wheel(ev);
+}, { passive: false });
+
+paletteCanvas.addEventListener("pointerdown", (ev) => {
+  const [x, y] = imageMapper(paletteCanvas)(ev);
+  if (ev.altKey || ev.button === 2) { conn.send({ type: "pick_color", x: Math.floor(x), y: Math.floor(y) }); return; }
+  if (ev.button !== 0) return;
+  paletteCanvas.setPointerCapture(ev.pointerId);
+  beginStroke(ev, "palette", paletteCanvas);
+});
+paletteCanvas.addEventListener("pointermove", (ev) => { if (stroke && stroke.target === "palette") addSamples(ev); });
+for (const type of ["pointerup", "pointercancel"]) paletteCanvas.addEventListener(type, () => endStroke());
+
+// The brush at the pen position with its shadow (5.7): the shadow falls away from the tilt.
+function drawCursor() {
+  const ctx = overlayCtx;
+  ctx.clearRect(0, 0, overlay.width, overlay.height);
+  if (!cursor || nav.drag) return;
+  const rect = overlay.getBoundingClientRect();
+  const x = (cursor.x - rect.left) * overlay.width / rect.width, y = (cursor.y - rect.top) * overlay.height / rect.height;
+  const r = Math.max(2, tools.size * server.px_per_unit * (0.55 + 0.45 * cursor.p));
+  const sx = 5 + cursor.tilt[1] * 0.15, sy = 7 + cursor.tilt[0] * 0.15;
+  ctx.save();
+  ctx.filter = "blur(3px)";
+  ctx.fillStyle = "rgba(0, 0, 0, 0.28)";
+  ctx.beginPath(); ctx.ellipse(x + sx, y + sy, r * 1.05, r * 0.8, 0.3, 0, 2 * Math.PI); ctx.fill();
+  ctx.restore();
+  ctx.lineWidth = 2;
+  ctx.strokeStyle = hex(tools.color);
+  ctx.beginPath(); ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.stroke();
+  ctx.lineWidth = 1;
+  ctx.strokeStyle = "rgba(255, 255, 255, 0.9)";
+  ctx.beginPath(); ctx.arc(x, y, r + 1.5, 0, 2 * Math.PI); ctx.stroke();
+  ctx.fillStyle = "rgba(20, 20, 20, 0.8)";
+  ctx.fillRect(x - 0.5, y - 0.5, 1.5, 1.5);
+}
+
+// ---- tools ----------------------------------------------------------------------------------------
+function choose(attr, value) {
+  document.querySelectorAll(`[data-${attr}]`).forEach((b) => b.classList.toggle("on", b.dataset[attr] === value));
+  tools[attr] = value;
+}
+document.querySelectorAll("[data-brush]").forEach((b) => b.addEventListener("click", () => choose("brush", b.dataset.brush)));
+document.querySelectorAll("[data-paint]").forEach((b) => b.addEventListener("click", () => choose("paint", b.dataset.paint)));
+document.querySelectorAll("[data-view]").forEach((b) => b.addEventListener("click", () => nav.preset(b.dataset.view, server.presets)));
+
+function bindSlider(id, key, digits) {
+  const input = $(id), out = $(id + "-out");
+  const update = () => { tools[key] = Number(input.value); out.textContent = tools[key].toFixed(digits); drawCursor(); };
+  input.addEventListener("input", update);
+  update();
+}
+bindSlider("size", "size", 3);
+bindSlider("drying", "drying", 2);
+bindSlider("pressure", "pressure", 2);
+
+function setPressure(p) {
+  const input = $("pressure");
+  input.value = String(Math.max(Number(input.min), Math.min(1, p)));
+  input.dispatchEvent(new Event("input"));
+}
+
+function setColor(rgb) {
+  tools.color = rgb.map(Number);
+  $("chip").style.background = hex(tools.color);
+  $("chip-text").textContent = hex(tools.color);
+  $("picker").value = hex(tools.color);
+  document.querySelectorAll("#swatches button").forEach((b) => b.classList.toggle("on", b.dataset.hex === hex(tools.color)));
+  drawCursor();
+}
+for (const [name, rgb] of BASE_PAINTS) {
+  const b = document.createElement("button");
+  b.title = name;
+  b.dataset.hex = hex(rgb);
+  b.style.background = hex(rgb);
+  b.addEventListener("click", () => setColor(rgb));
+  $("swatches").appendChild(b);
+}
+$("picker").addEventListener("input", (e) => setColor(fromHex(e.target.value)));
+setColor(BASE_PAINTS[3][1]);
+
+$("undo").addEventListener("click", () => conn.send({ type: "undo" }));
+$("redo").addEventListener("click", () => conn.send({ type: "redo" }));
+$("save").addEventListener("click", () => conn.send({ type: "save" }));
+$("export").addEventListener("click", () => conn.send({ type: "export" }));
+$("record").addEventListener("click", () => conn.send({ type: "record" }));
+
+let fileAction = null;
+$("load").addEventListener("click", () => { fileAction = "load"; $("file").accept = ".ply"; $("file").click(); });
+$("replay").addEventListener("click", () => { fileAction = "replay"; $("file").accept = ".json"; $("file").click(); });
+$("file").addEventListener("change", async (e) => {
+  const file = e.target.files[0];
+  e.target.value = "";
+  if (!file) return;
+  const name = await upload(file);
+  if (name) conn.send({ type: fileAction, name });
+});
+
+async function upload(file) {
+  let name = file.name.replace(/[^A-Za-z0-9._-]/g, "_").replace(/^[^A-Za-z0-9]+/, "") || "upload";
+  const res = await fetch(`/api/upload?token=${encodeURIComponent(token)}&name=${encodeURIComponent(name)}`,
+                          { method: "POST", body: file });
+  if (!res.ok) { say(`upload refused (${res.status}): ${(await res.text()).trim()}`, true); return null; }
+  name = (await res.json()).name;
+  return name;
+}
+
+window.addEventListener("keydown", (ev) => {
+  if (ev.target instanceof HTMLInputElement && ev.target.type !== "range") return;
+  const ctrl = ev.ctrlKey || ev.metaKey;
+  if (ctrl && ev.key.toLowerCase() === "z") { conn.send({ type: ev.shiftKey ? "redo" : "undo" }); ev.preventDefault(); return; }
+  if (ctrl && ev.key.toLowerCase() === "y") { conn.send({ type: "redo" }); ev.preventDefault(); return; }
+  if (ctrl && ev.key.toLowerCase() === "s") { conn.send({ type: "save" }); ev.preventDefault(); return; }
+  if (ctrl) return;
+  if (ev.key === "1" || ev.key === "2" || ev.key === "3") { choose("brush", ["round", "flat", "pencil"][Number(ev.key) - 1]); return; }
+  if (ev.key === "[" || ev.key === "]") {
+    const input = $("size");
+    input.value = String(Number(input.value) * (ev.key === "]" ? 1.25 : 0.8));
+    input.dispatchEvent(new Event("input"));
+    return;
+  }
+  if (nav.key(ev, server.presets)) ev.preventDefault();
+});
+
+// ---- test and benchmark hooks --------------------------------------------------------------
+window.studio = {
+  stats, tools, nav,
+  get server() { return server; },
+  get connected() { return conn.open; },
+  send: (msg) => conn.send(msg),
+  setColor, choose,
+  // resolves once every earlier message was handled and its frames are on the canvas
+  sync() {
+    const id = ++syncId;
+    return new Promise((resolve) => { syncWaiters.set(id, resolve); conn.send({ type: "sync", id }); });
+  },
+};

@@ -1,0 +1,364 @@
+"""The studio's state: the painting session, its palette, the view, files and autosave.
+
+A :class:`Workspace` turns the page's messages (:mod:`unmesh.paint.studio.protocol`) into calls
+on the engine (:class:`unmesh.paint.Session`) and renders what they changed. It is used from one
+thread at a time (the server's worker thread); nothing here knows about HTTP.
+
+* The model and the **palette** are two sessions: the palette is a paintable surfel plane on
+  which paint is mixed with the brush like on the object (chapter 5's palette), and
+  ``pick_color`` loads the brush with the paint under the pen.
+* Pen positions arrive in image pixels and are ray-cast onto the surface with
+  ``Session.pick``; samples that miss the surface are dropped. Sample times are the page's
+  clock mapped to seconds since the studio started, so drying follows real time and a
+  recorded session replays exactly.
+* Files are plain names inside the output file's folder (:func:`security.output_path`); all
+  writes are atomic; the model is autosaved every ``autosave_every`` strokes (to
+  ``STEM.autosave.ply``) and by :meth:`Workspace.shutdown` (to the output file).
+
+Example
+-------
+>>> # ws = Workspace(Session(cloud), "out/blob_painted.ply"); ws.handle({"type": "undo"})
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unmesh.errors import InputError
+from unmesh.io.atomic import atomic_write_json
+from unmesh.paint.studio.frames import FrameEncoder, to_uint8
+from unmesh.paint.studio.protocol import brush_spec, paint_spec, samples_spec
+from unmesh.paint.studio.security import output_path
+from unmesh.paint.studio.view import PRESETS, Framing, View, view_from_message
+from unmesh.render.camera import Camera
+from unmesh.surfels.cloud import SurfelCloud
+
+__all__ = ["PALETTE_SIZE", "Workspace", "palette_cloud"]
+
+#: Palette image size in pixels (width, height).
+PALETTE_SIZE = (300, 180)
+#: Largest model image (pixels per side).
+MAX_SIDE = 2048
+
+
+def palette_cloud(width: float = 1.76, height: float = 1.06, spacing: float = 0.02) -> SurfelCloud:
+    """The palette: a flat grid of surfels in the z = 0 plane facing +z, off-white."""
+    xs = np.arange(-width / 2, width / 2 + 1e-9, spacing)
+    ys = np.arange(-height / 2, height / 2 + 1e-9, spacing)
+    X, Y = np.meshgrid(xs, ys)
+    pos = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    nrm = np.tile([0.0, 0.0, 1.0], (len(pos), 1))
+    return SurfelCloud(pos, nrm, radii=np.full(len(pos), 0.75 * spacing),
+                       colors=np.tile([0.95, 0.94, 0.91], (len(pos), 1)))
+
+
+def _engine():
+    # the engine's defining modules (unmesh.paint's __init__ never imports the studio)
+    from unmesh.paint.session import Session
+    from unmesh.paint.strokes import Brush, Paint, Sample
+
+    return Brush, Paint, Sample, Session
+
+
+class Workspace:
+    """Session, palette, view and files of one studio (see the module notes)."""
+
+    def __init__(self, session: Any, out_path: str | Path, *, palette: Any = None, autosave_every: int = 5,
+                 advance_every: float | None = 1.0) -> None:
+        from unmesh.paint.session import PaintOptions
+
+        _, _, _, Session = _engine()
+        self.session = session
+        self.out_path = Path(out_path).resolve()
+        self.folder = self.out_path.parent
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.palette = palette if palette is not None else Session(palette_cloud(), PaintOptions(haptics=False))
+        self.framing = Framing.of_points(session.cloud().positions)
+        self.view = View()
+        self.width, self.height = 800, 600
+        pw, ph = PALETTE_SIZE
+        self.palette_camera = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), width=pw, height=ph, ortho=1.04)
+        self.autosave_every = int(autosave_every)
+        self.advance_every = advance_every
+        self._last_advance = time.monotonic()
+        self._force_session = self.session
+        self.encoder = FrameEncoder()
+        self._t0 = time.monotonic()
+        self._stroke: dict[str, Any] | None = None
+        self._since_autosave = 0
+        self.changed_since_save = False
+        self.strokes = 0
+        self._pending: dict[str, str] = {"model": "full", "palette": "full"}
+        self._palette_albedo: np.ndarray | None = None
+        self._last_ts: float | None = None
+
+    # -- cameras ------------------------------------------------------------------------
+    def camera(self) -> Camera:
+        """The model camera of the current view at the current image size."""
+        return self.framing.camera(self.view, self.width, self.height)
+
+    def px_per_unit(self) -> float:
+        """Pixels per world unit at the view's target (the brush cursor's scale)."""
+        cam = self.camera()
+        return cam.pixels_per_unit / float(np.linalg.norm(cam.target - cam.eye))
+
+    def state(self) -> dict[str, Any]:
+        """The ``state`` reply: image sizes, view, brush scale, counts."""
+        v = self.view
+        return {"type": "state", "width": self.width, "height": self.height, "palette": list(PALETTE_SIZE),
+                "view": {"yaw": v.yaw, "pitch": v.pitch, "zoom": v.zoom, "pan": list(v.pan)},
+                "px_per_unit": self.px_per_unit(), "palette_px_per_unit": PALETTE_SIZE[1] / 1.04,
+                "radius": self.framing.radius, "strokes": self.strokes, "out": self.out_path.name,
+                "presets": {k: list(p) for k, p in PRESETS.items()}}
+
+    # -- messages -----------------------------------------------------------------------
+    def handle(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        """Apply one parsed message; returns the JSON replies (frames come from :meth:`frames`)."""
+        kind = msg["type"]
+        method = getattr(self, "_on_" + kind)
+        return method(msg) or []
+
+    def _on_hello(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        self._resize(msg)
+        if "view" in msg:
+            self.view = view_from_message(msg["view"])
+        self._pending = {"model": "full", "palette": "full"}
+        self.encoder.reset()
+        return [self.state()]
+
+    def _resize(self, msg: dict[str, Any]) -> None:
+        w, h = msg.get("width", self.width), msg.get("height", self.height)
+        for key, v in (("width", w), ("height", h)):
+            if isinstance(v, bool) or not isinstance(v, int) or not 16 <= v <= MAX_SIDE:
+                raise InputError(f"{key}: expected an integer in [16, {MAX_SIDE}], got {v!r}")
+        self.width, self.height = w, h
+
+    def _on_resize(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        self._resize(msg)
+        self._pending["model"] = "full"
+        return [self.state()]
+
+    def _on_view(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        self.view = view_from_message(msg.get("view"))
+        self._pending["model"] = "preview" if msg.get("preview") is True else "full"
+        return [self.state()]
+
+    def _target(self, name: Any) -> tuple[Any, Camera]:
+        if name == "model":
+            return self.session, self.camera()
+        if name == "palette":
+            return self.palette, self.palette_camera
+        raise InputError(f"target: expected 'model' or 'palette', got {name!r}")
+
+    def _on_begin(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        Brush, Paint, _, _ = _engine()
+        if self._stroke is not None:
+            self._on_end({})
+        target = msg.get("target", "model")
+        session, camera = self._target(target)
+        brush = Brush(**brush_spec(msg.get("brush")))
+        paint = Paint(**paint_spec(msg.get("paint")))
+        self._force_session = session
+        self._stroke = {"target": target, "session": session, "camera": camera, "brush": brush, "paint": paint,
+                        "sid": None, "t_server": time.monotonic() - self._t0, "t_client": None, "n": 0}
+        return [{"type": "begun", "target": target}]
+
+    def _on_samples(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        _, _, Sample, _ = _engine()
+        st = self._stroke
+        if st is None:
+            raise InputError("samples: no stroke begun (send 'begin' first)")
+        cam = st["camera"]
+        rows = samples_spec(msg.get("samples"), cam.width, cam.height)
+        ts = msg.get("ts")
+        if isinstance(ts, int | float) and not isinstance(ts, bool) and math.isfinite(ts):
+            self._last_ts = float(ts)
+        samples = []
+        for t_ms, x, y, pressure, tilt_x, tilt_y in rows:
+            if st["t_client"] is None:
+                st["t_client"] = t_ms
+            point = st["session"].pick(cam, x, y)
+            if point is None:
+                continue
+            t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
+            samples.append(Sample(t=t, point=tuple(float(c) for c in point), pressure=pressure,
+                                  tilt=(tilt_x, tilt_y)))
+        if samples:
+            if st["sid"] is None:
+                st["sid"] = st["session"].begin_stroke(st["brush"], st["paint"])
+            st["session"].add_samples(st["sid"], samples)
+            st["n"] += len(samples)
+            self._pending.setdefault(st["target"], "diff")
+        return []
+
+    def _on_end(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        st, self._stroke = self._stroke, None
+        if st is None or st["sid"] is None:
+            return [{"type": "ended", "painted": False}]
+        st["session"].end_stroke(st["sid"])
+        self._pending.setdefault(st["target"], "diff")
+        replies: list[dict[str, Any]] = [{"type": "ended", "painted": True, "samples": st["n"]}]
+        if st["target"] == "model":
+            self.strokes += 1
+            self.changed_since_save = True
+            self._since_autosave += 1
+            if self._since_autosave >= self.autosave_every:
+                replies.append(self.autosave())
+        return replies
+
+    def _on_undo(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        if self._stroke is not None:
+            self._on_end({})
+        done = bool(self.session.undo())
+        if done:
+            self.changed_since_save = True
+            self._pending.setdefault("model", "diff")
+        return [{"type": "undone", "ok": done}]
+
+    def _on_redo(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        done = bool(self.session.redo())
+        if done:
+            self.changed_since_save = True
+            self._pending.setdefault("model", "diff")
+        return [{"type": "redone", "ok": done}]
+
+    def _name(self, msg: dict[str, Any], default: str, suffixes: tuple[str, ...]) -> Path:
+        return output_path(self.folder, msg.get("name") or default, suffixes)
+
+    def _on_save(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        path = self._name(msg, self.out_path.name, (".ply",))
+        self._save_model(path)
+        if path == self.out_path:
+            self.changed_since_save = False
+        return [{"type": "saved", "name": path.name}]
+
+    def _on_load(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        _, _, _, Session = _engine()
+        path = self._name(msg, self.out_path.name, (".ply",))
+        if not path.is_file():
+            raise InputError(f"name: no file {path.name!r} in the output folder")
+        self._stroke = None
+        old, self.session = self.session, Session.load(path)
+        old.close()
+        self._force_session = self.session
+        self.framing = Framing.of_points(self.session.cloud().positions)
+        self._pending["model"] = "full"
+        return [{"type": "loaded", "name": path.name}, self.state()]
+
+    def _on_export(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        path = self._name(msg, self.out_path.stem + ".png", (".png",))
+        self.session.render(self.camera()).save(path)
+        return [{"type": "exported", "name": path.name}]
+
+    def _on_record(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        path = self._name(msg, self.out_path.stem + "_strokes.json", (".json",))
+        atomic_write_json(path, self.session.strokes_json())
+        return [{"type": "recorded", "name": path.name}]
+
+    def _on_replay(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        import json
+
+        path = self._name(msg, self.out_path.stem + "_strokes.json", (".json",))
+        if not path.is_file():
+            raise InputError(f"name: no file {path.name!r} in the output folder")
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise InputError(f"{path.name}: expected a stroke JSON file, got a parse error ({exc})") from None
+        if self._stroke is not None:
+            self._on_end({})
+        n = self.session.replay(data, path.name)
+        self.strokes += n
+        self.changed_since_save = True
+        self._pending["model"] = "full"
+        return [{"type": "replayed", "name": path.name, "strokes": n}]
+
+    def _on_sync(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        return [{"type": "synced", "id": msg.get("id") if isinstance(msg.get("id"), int) else None}]
+
+    def _on_pick_color(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        x, y = msg.get("x"), msg.get("y")
+        pw, ph = PALETTE_SIZE
+        if not (isinstance(x, int | float) and isinstance(y, int | float) and 0 <= x < pw and 0 <= y < ph):
+            raise InputError(f"x, y: expected a palette pixel within {pw}x{ph}, got {x!r}, {y!r}")
+        if self._palette_albedo is None:
+            self._palette_albedo = np.asarray(self.palette.render(self.palette_camera, shading="none").albedo)
+        rgb = np.clip(self._palette_albedo[int(y), int(x)], 0.0, 1.0)
+        return [{"type": "color", "color": [round(float(c), 4) for c in rgb]}]
+
+    # -- output -------------------------------------------------------------------------
+    def frames(self) -> list[bytes]:
+        """Render and encode every target that changed since the last call."""
+        out = []
+        pending, self._pending = self._pending, {}
+        for target, mode in pending.items():
+            if target == "model":
+                cam = self.camera()
+                scale = 1
+                if mode == "preview":
+                    scale = 2
+                    cam = cam.resized(max(8, self.width // 2), max(8, self.height // 2))
+                img = to_uint8(self.session.render(cam).color)
+            else:
+                res = self.palette.render(self.palette_camera, shading="none")
+                self._palette_albedo = np.asarray(res.albedo)
+                img, scale = to_uint8(res.color), 1
+            extra = {"ts": self._last_ts} if self._last_ts is not None else None
+            msg = self.encoder.encode(target, img, full=mode in ("full", "preview"), scale=scale, extra=extra)
+            if msg is not None:
+                out.append(msg)
+        self._last_ts = None
+        return out
+
+    def force(self) -> list[float]:
+        """The brush's current penalty force (3,) from the engine's haptic signal."""
+        f = np.asarray(self._force_session.force(), dtype=np.float64).reshape(3)
+        return [float(c) for c in f]
+
+    @property
+    def painting(self) -> bool:
+        """True while a stroke is open."""
+        return self._stroke is not None
+
+    def _save_model(self, path: Path) -> None:
+        self.session.save(path)  # atomic
+
+    def tick(self) -> bool:
+        """Background work between strokes: ``Session.advance`` over the time since the last tick
+        (drying, diffusion, downsampling; recorded in the stroke file, so a replay matches).
+        True when it ran."""
+        now = time.monotonic()
+        if self.advance_every is None or self._stroke is not None or now - self._last_advance < self.advance_every:
+            return False
+        dt, self._last_advance = now - self._last_advance, now
+        if self.strokes == 0:
+            return False
+        self.session.advance(round(dt, 3), budget=256)
+        self._pending.setdefault("model", "diff")
+        return True
+
+    def autosave(self) -> dict[str, Any]:
+        """Save the model to ``STEM.autosave.ply`` and the strokes to ``STEM.autosave.json``."""
+        self._since_autosave = 0
+        ply = self.folder / (self.out_path.stem + ".autosave.ply")
+        self._save_model(ply)
+        atomic_write_json(self.folder / (self.out_path.stem + ".autosave.json"), self.session.strokes_json())
+        return {"type": "autosaved", "name": ply.name}
+
+    def shutdown(self) -> Path | None:
+        """Close an open stroke and save the model to the output file if it changed."""
+        if self._stroke is not None:
+            self._on_end({})
+        self.session.close()
+        self.palette.close()
+        if not self.changed_since_save:
+            return None
+        self._save_model(self.out_path)
+        atomic_write_json(self.folder / (self.out_path.stem + "_strokes.json"), self.session.strokes_json())
+        self.changed_since_save = False
+        return self.out_path
