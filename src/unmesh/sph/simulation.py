@@ -243,8 +243,6 @@ class SPHSimulation(Simulation):
     (True, {'fluid': 0, 'solid': 110})
     """
 
-    frame_patterns = ("frames/frame_*.ply", "surfaces/*.ply")
-
     def __init__(self, config: SPHConfig, materials: Mapping[str, Material], objects: Sequence[SPHObject],
                  planes: Sequence[Plane] = (), boundary: BoundaryParticles | None = None,
                  boundary_shapes: Sequence[tuple[Any, bool]] = (), heat_sources: Sequence[HeatSource] = (),
