@@ -32,3 +32,31 @@ def test_run_writes_index_and_records_failures(tmp_path):
     html = (tmp_path / "index.html").read_text()
     assert "A passing example" in html and "42" in html and "zz-test-ok/note.txt" in html
     assert "deliberate" in html and "This example failed" in html
+
+
+def test_timed_reports_the_warm_call():
+    import time
+
+    from unmesh.gallery.registry import timed
+
+    calls = []
+
+    def slow_first(x):
+        if not calls:
+            time.sleep(0.3)  # stands in for numba compilation
+        calls.append(x)
+        return 2 * x
+
+    assert timed(slow_first, 21)[0] == 42 and timed(slow_first, 1)[1] < 0.2
+    warmed = []
+    out, seconds = timed(lambda: 7, warm=lambda: warmed.append(1))
+    assert (out, warmed) == (7, [1]) and seconds < 0.2
+
+
+def test_index_html_has_the_umask_mode(tmp_path):
+    import os
+
+    run_examples(select("zz-test-ok"), tmp_path, quick=True, progress=False)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (tmp_path / "index.html").stat().st_mode & 0o777 == 0o666 & ~umask

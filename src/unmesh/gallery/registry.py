@@ -21,7 +21,7 @@ from typing import Any
 
 from unmesh.errors import InputError
 
-__all__ = ["Artifact", "Example", "ExampleContext", "example"]
+__all__ = ["Artifact", "Example", "ExampleContext", "example", "timed"]
 
 
 @dataclass
@@ -71,6 +71,11 @@ class ExampleContext:
         """Report a measured figure."""
         self.metrics.append((name, value, unit))
 
+    def timed(self, fn: Callable[..., Any], *args: Any, warm: Callable[[], Any] | None = None,
+              **kwargs: Any) -> tuple[Any, float]:
+        """:func:`timed`: ``fn(*args, **kwargs)`` and its warm wall time in seconds."""
+        return timed(fn, *args, warm=warm, **kwargs)
+
     def run_scene(self, scene: str, build: Callable[..., Any], overrides: dict[str, Any] | None = None,
                   duration: float | None = None) -> tuple[Path, dict[str, Any]]:
         """Run a shipped scene ``examples/<scene>.toml`` with the shared simulation runner.
@@ -110,6 +115,29 @@ class ExampleContext:
         summary = json.loads((out / "summary.json").read_text())
         self.file(out / "summary.json", f"{name}: summary.json")
         return out, summary
+
+
+def timed(fn: Callable[..., Any], *args: Any, warm: Callable[[], Any] | None = None,
+          **kwargs: Any) -> tuple[Any, float]:
+    """``fn(*args, **kwargs)`` and its warm wall time in seconds.
+
+    ``warm()`` runs first (default: the same call) so that what numba has not compiled
+    yet is compiled outside the timing: tables report warm figures (issue 23, item 14).
+    Pass a small version of the call as ``warm`` when the call itself is expensive.
+
+    Example
+    -------
+    ``cloud, seconds = ctx.timed(sample_mesh, mesh, d, warm=lambda: sample_mesh(mesh, 4 * d))``
+    """
+    import time
+
+    if warm is None:
+        fn(*args, **kwargs)
+    else:
+        warm()
+    t0 = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - t0
 
 
 @dataclass(frozen=True)
