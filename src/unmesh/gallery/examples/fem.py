@@ -78,6 +78,12 @@ def _render_run(ctx: ExampleContext, out: Path, summary: dict[str, Any], eye: An
     strip = np.concatenate([frame(min(k, n - 1)) for k in picks], axis=1)
     save_image(out / "frames.png", strip)
     ctx.image(out / "frames.png", f"{caption}: frames {', '.join(str(min(k, n - 1)) for k in picks)}")
+    # keep the shown frames only (the gallery's size); mesh.pvd lists what is left
+    from unmesh.fem.vtk_io import write_pvd
+
+    kept = ctx.keep_frames(out, [min(k, n - 1) for k in picks])
+    vtus = [(f, e["time"]) for e in kept for f in e["files"] if f.endswith(".vtu")]
+    write_pvd(out / "mesh.pvd", [f for f, _ in vtus], [t for _, t in vtus])
 
 
 def _per_frame(summary: dict[str, Any]) -> float:
