@@ -138,7 +138,7 @@ def dam_break_validation(resolution: int = 20) -> None:
 
     from unmesh.scene import load_scene
     from unmesh.scenes import path as scene_path
-    from unmesh.spatial import knn
+    from unmesh.sph.front import surge_front
     from unmesh.sph.scene import build_simulation
 
     a, g = 0.25, 9.81
@@ -155,9 +155,7 @@ def dam_break_validation(resolution: int = 20) -> None:
             reason = sim.check()
             if reason:
                 raise RuntimeError(f"dam break unstable at t = {sim.time}: {reason}")
-        x = sim.particles().positions
-        dist, _ = knn(x, 2)
-        z = float(x[dist[:, 1] < 1.5 * spacing, 0].max()) / a
+        z = surge_front(sim.particles().positions, spacing) / a
         err = (z - z_exp) / z_exp
         errors.append((big_t, err))
         print(f"  T = {big_t:.3f}: experiment Z = {z_exp:.3f}, unmesh Z = {z:.3f}, error {100 * err:+.1f} %")

@@ -142,3 +142,27 @@ def test_render_command_line_with_a_scheduler(tmp_path, client, capsys):
     assert main(["render", os.fspath(sim / "frames" / "frame_00000.ply"), "-o", os.fspath(tmp_path / "a.png"),
                  "--workers", "2"]) == 1
     assert "--workers/--scheduler: only for frame sequences" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("folder", ["src/unmesh/scenes/batch", "examples/batch"])
+def test_shipped_dam_break_sweep_plots_the_surge_front(tmp_path, folder):
+    """The sweep's plot line names the SPH summary's ``surge_front`` (final.surge_front in batch.csv)."""
+    import re
+    import shlex
+
+    from unmesh.batch.sweep import load_sweep
+
+    path = Path(__file__).resolve().parents[2] / folder / "dam_break_viscosity.toml"
+    sweep = load_sweep(path)
+    assert sweep.command == "sph" and sweep.duration == 0.3 and sweep.scene.is_file()
+    plot = shlex.split(re.search(r"# Plot: +(unmesh batch .*)", path.read_text()).group(1))
+    metric, against = plot[plot.index("--plot") + 1], plot[plot.index("--against") + 1]
+    out = _fake_batch(tmp_path)
+    for rec in load_manifest(out)["tasks"][:-1]:
+        f = out / rec["id"] / "summary.json"
+        summary = json.loads(f.read_text())
+        summary["frames"][-1]["surge_front"] = 1.0 - rec["parameters"]["materials.water.viscosity"]
+        f.write_text(json.dumps(summary))
+    mkey, key, lines = metric_table(out, metric, against)
+    assert (mkey, key) == ("final.surge_front", "materials.water.viscosity")
+    assert sorted(lines["spacing=0.02"]) == [(0.0, 1.0), (0.01, 0.99), (0.05, 0.95)]

@@ -32,3 +32,54 @@ def test_run_writes_index_and_records_failures(tmp_path):
     html = (tmp_path / "index.html").read_text()
     assert "A passing example" in html and "42" in html and "zz-test-ok/note.txt" in html
     assert "deliberate" in html and "This example failed" in html
+
+
+def test_timed_reports_the_warm_call():
+    import time
+
+    from unmesh.gallery.registry import timed
+
+    calls = []
+
+    def slow_first(x):
+        if not calls:
+            time.sleep(0.3)  # stands in for numba compilation
+        calls.append(x)
+        return 2 * x
+
+    assert timed(slow_first, 21)[0] == 42 and timed(slow_first, 1)[1] < 0.2
+    warmed = []
+    out, seconds = timed(lambda: 7, warm=lambda: warmed.append(1))
+    assert (out, warmed) == (7, [1]) and seconds < 0.2
+
+
+def test_index_html_has_the_umask_mode(tmp_path):
+    import os
+
+    run_examples(select("zz-test-ok"), tmp_path, quick=True, progress=False)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (tmp_path / "index.html").stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_keep_frames_thins_a_run_consistently(tmp_path):
+    import json
+
+    from unmesh.sim.runner import read_manifest
+
+    run = tmp_path / "ex" / "run"
+    (run / "frames").mkdir(parents=True)
+    entries = []
+    for k in range(5):
+        (run / "frames" / f"frame_{k:05d}.ply").write_text("x")
+        entries.append({"frame": k, "time": 0.1 * k, "files": [f"frames/frame_{k:05d}.ply"]})
+    (run / "boundary.ply").write_text("b")
+    (run / "checkpoint.npz").write_text("c")
+    (run / "frames.json").write_text(json.dumps({"frames": entries, "static": ["boundary.ply"], "fps": 10.0}))
+    ctx = ExampleContext(tmp_path / "ex", tmp_path)
+    kept = ctx.keep_frames(run, [0, 3])
+    assert [e["frame"] for e in kept] == [0, 3]
+    assert sorted(p.name for p in (run / "frames").iterdir()) == ["frame_00000.ply", "frame_00003.ply"]
+    assert (run / "boundary.ply").is_file() and not (run / "checkpoint.npz").exists()
+    m = read_manifest(run)
+    assert [e["frame"] for e in m["frames"]] == [0, 3] and m["static"] == ["boundary.ply"] and m["fps"] == 10.0

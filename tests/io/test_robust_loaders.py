@@ -179,3 +179,18 @@ def test_ascii_ply_with_a_huge_count_reports_where_the_file_ends(tmp_path, monke
     p.write_bytes(text)
     with pytest.raises(FormatError, match=r"huge\.ply: element 'vertex': file ends after 3 of 1000000000000 rows"):
         io.load(p)
+
+
+@pytest.mark.parametrize(("body", "message"), [
+    ("0 0 0\n1 0 0\n0 1 0\n3 0 1 1e999\n", r"element 'face': row 0: property 'vertex_indices': value '1e999' is not"),
+    ("0 0 0\n1 0 0\n0 1 0\n3 0 1 99999999999999999999\n", r"element 'face': row 0: property 'vertex_indices': value "
+                                                          r"'99999999999999999999' is not a valid int"),
+    ("1e999 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", r"element 'vertex': row 0: position is NaN or infinite"),
+])
+def test_ascii_ply_values_1e999_and_beyond_int64(tmp_path, body, message):
+    """Issue 24's OverflowError reproducers in ASCII PLY: face indices and coordinates."""
+    p = tmp_path / "big.ply"
+    p.write_text(TRI_PLY_HEAD.format(fmt="ascii") + "element face 1\nproperty list uchar int vertex_indices\n"
+                 "end_header\n" + body)
+    with pytest.raises(FormatError, match=r"big\.ply: " + message):
+        io.load(p)

@@ -7,20 +7,13 @@ import pytest
 
 from unmesh.scene import load_scene
 from unmesh.scenes import path as scene_path
-from unmesh.spatial import knn
+from unmesh.sph.front import surge_front
 from unmesh.sph.scene import build_simulation
 
 #: Martin & Moyce (1952), Phil. Trans. R. Soc. A 244, Fig. 3, n² = 2, a = 2.25 in: surge front
 #: Z = x/a over T = t·√(2g/a) (digitised values as distributed with PySPH, pysph/examples/db_exp_data.py).
 MARTIN_MOYCE_T = np.array([0.832, 1.219, 1.997, 2.547, 3.345])
 MARTIN_MOYCE_Z = np.array([1.217, 1.474, 2.292, 2.995, 4.134])
-
-
-def surge_front(positions: np.ndarray, spacing: float) -> float:
-    """Largest x of a particle that is not an isolated droplet (a neighbour within 1.5 spacings)."""
-    dist, _ = knn(positions, 2)
-    attached = dist[:, 1] < 1.5 * spacing
-    return float(positions[attached, 0].max())
 
 
 @pytest.mark.slow

@@ -66,7 +66,6 @@ class FemSimulation(Simulation):
     """
 
     name = "fem"
-    frame_patterns = ("mesh_*.vtu", "surface_*.ply", "mesh.pvd")
 
     def __init__(self, dynamics: Dynamics, dt: float, events: list[CutEvent] | None = None, *, snap: float = 0.02,
                  sliver_threshold: float = 0.0) -> None:

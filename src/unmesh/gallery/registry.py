@@ -14,14 +14,14 @@ Example
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from unmesh.errors import InputError
 
-__all__ = ["Artifact", "Example", "ExampleContext", "example"]
+__all__ = ["Artifact", "Example", "ExampleContext", "example", "timed"]
 
 
 @dataclass
@@ -71,6 +71,44 @@ class ExampleContext:
         """Report a measured figure."""
         self.metrics.append((name, value, unit))
 
+    def timed(self, fn: Callable[..., Any], *args: Any, warm: Callable[[], Any] | None = None,
+              **kwargs: Any) -> tuple[Any, float]:
+        """:func:`timed`: ``fn(*args, **kwargs)`` and its warm wall time in seconds."""
+        return timed(fn, *args, warm=warm, **kwargs)
+
+    def keep_frames(self, outdir: Path | str, frames: Iterable[int]) -> list[dict[str, Any]]:
+        """Thin a simulation run to what the page shows (issue 23, item 13: the gallery's size).
+
+        Deletes the files of every frame not in ``frames`` and the checkpoint, and rewrites
+        ``frames.json`` to list the kept frames only, so ``unmesh render OUTDIR`` still works
+        on what is left; ``summary.json`` keeps the diagnostics of every frame.
+
+        Returns
+        -------
+        list of dict
+            The kept entries of ``frames.json`` (``frame``, ``time``, ``files``).
+
+        Example
+        -------
+        ``ctx.keep_frames(out, [0, 12, last])`` after rendering the stills and the video.
+        """
+        from unmesh.io.atomic import atomic_write_json
+        from unmesh.sim.runner import MANIFEST, read_manifest
+
+        out = Path(outdir)
+        manifest = read_manifest(out)
+        if manifest is None:
+            return []
+        keep = {int(k) for k in frames}
+        kept = [e for e in manifest["frames"] if int(e["frame"]) in keep]
+        for entry in manifest["frames"]:
+            if int(entry["frame"]) not in keep:
+                for f in entry["files"]:
+                    (out / f).unlink(missing_ok=True)
+        (out / "checkpoint.npz").unlink(missing_ok=True)
+        atomic_write_json(out / MANIFEST, {**manifest, "frames": kept})
+        return kept
+
     def run_scene(self, scene: str, build: Callable[..., Any], overrides: dict[str, Any] | None = None,
                   duration: float | None = None) -> tuple[Path, dict[str, Any]]:
         """Run a shipped scene ``examples/<scene>.toml`` with the shared simulation runner.
@@ -110,6 +148,29 @@ class ExampleContext:
         summary = json.loads((out / "summary.json").read_text())
         self.file(out / "summary.json", f"{name}: summary.json")
         return out, summary
+
+
+def timed(fn: Callable[..., Any], *args: Any, warm: Callable[[], Any] | None = None,
+          **kwargs: Any) -> tuple[Any, float]:
+    """``fn(*args, **kwargs)`` and its warm wall time in seconds.
+
+    ``warm()`` runs first (default: the same call) so that what numba has not compiled
+    yet is compiled outside the timing: tables report warm figures (issue 23, item 14).
+    Pass a small version of the call as ``warm`` when the call itself is expensive.
+
+    Example
+    -------
+    ``cloud, seconds = ctx.timed(sample_mesh, mesh, d, warm=lambda: sample_mesh(mesh, 4 * d))``
+    """
+    import time
+
+    if warm is None:
+        fn(*args, **kwargs)
+    else:
+        warm()
+    t0 = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - t0
 
 
 @dataclass(frozen=True)

@@ -141,7 +141,6 @@ class ShellSimulation(Tearing, Simulation):
     name = "shell"
     #: Take the one-kernel step (:mod:`unmesh.shells.stepping`); False: :meth:`step_plain`.
     fused = True
-    frame_patterns = ("frames/frame_*.ply", "nodes/frame_*.ply", "fibers/frame_*.npz")
 
     def __init__(self, cloud: SurfelCloud, material: ShellMaterial, dt: float, *, nodes: int | None = None,
                  node_indices: Any = None, neighbors: int = DEFAULT_NEIGHBORS, min_angle: float = DEFAULT_MIN_ANGLE,

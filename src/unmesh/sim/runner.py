@@ -74,9 +74,6 @@ class Simulation(ABC):
 
     #: Shown in the progress bar and messages.
     name: str = "simulation"
-    #: No longer used by :func:`run` (which removes only files recorded in ``frames.json``);
-    #: kept so subclasses that set it keep working.
-    frame_patterns: tuple[str, ...] = ("frames/frame_*.ply",)
     time: float = 0.0
 
     @abstractmethod

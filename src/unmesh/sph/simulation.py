@@ -51,6 +51,7 @@ from unmesh.sph import _phase_kernels as PK
 from unmesh.sph import _slot_kernels as SK
 from unmesh.sph import materials as MT
 from unmesh.sph.boundary import BoundaryParticles, Plane, corner_pairs, corner_tables, wall_friction_tables, wall_tables
+from unmesh.sph.front import surge_front
 from unmesh.sph.materials import Material, material_table
 from unmesh.sph.phase import HeatSource
 from unmesh.sph.sampling import LATTICES, gradient_moment, lattice_basis, lattice_frame, lattice_points, lattice_slots
@@ -241,8 +242,6 @@ class SPHSimulation(Simulation):
     >>> sim.check() is None, sim.particles().phase_counts()
     (True, {'fluid': 0, 'solid': 110})
     """
-
-    frame_patterns = ("frames/frame_*.ply", "surfaces/*.ply")
 
     def __init__(self, config: SPHConfig, materials: Mapping[str, Material], objects: Sequence[SPHObject],
                  planes: Sequence[Plane] = (), boundary: BoundaryParticles | None = None,
@@ -719,7 +718,10 @@ class SPHSimulation(Simulation):
                 "objects": [o.name for o in self.objects], "h": self.h, "spacing": self.spacing}
 
     def frame_record(self) -> dict[str, Any]:
-        """Mass, momenta, kinetic energy, max density error, phase counts (see the scene docs).
+        """Mass, momenta, kinetic energy, max density error, phase counts, surge front (see the scene docs).
+
+        ``surge_front`` is the largest x of a particle with a neighbour within 1.5 spacings
+        (:func:`unmesh.sph.front.surge_front`: the dam break's front, Martin & Moyce 1952).
 
         ``max_density_error`` is the largest compression ``max(ρ/ρ0 − 1, 0)``: the density
         deficit of particles at a free surface (an incomplete kernel sum) is not counted.
@@ -736,6 +738,7 @@ class SPHSimulation(Simulation):
             "max_fluid_density_error": float(err[fluid_only].max()) if np.any(fluid_only) else 0.0,
             "phase_counts": {"fluid": int(np.count_nonzero(fluid_only)), "solid": int(np.count_nonzero(~fluid_only))},
             "dt": float(self.dt_last),
+            "surge_front": surge_front(self.x, self.spacing),
         }
 
     def write_static(self, outdir: Path) -> list[str]:

@@ -11,7 +11,6 @@ coloured by cluster.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
@@ -74,9 +73,8 @@ def shapes_example(ctx: ExampleContext) -> None:
     for name in SHAPES:
         shape = by_name(name, **params.get(name, {}))
         spacing = shape.size() / ((12 if ctx.quick else 30) * (2 if name == "blob" else 1))  # resolve the ears
-        t0 = time.perf_counter()
-        cloud = shape.surfels(spacing, color=(0.85, 0.72, 0.55))
-        dt = time.perf_counter() - t0
+        cloud, dt = ctx.timed(shape.surfels, spacing, color=(0.85, 0.72, 0.55),
+                              warm=lambda s=shape, h=spacing: s.surfels(4 * h))
         d, _ = knn(cloud.positions, 2)
         ctx.metric(f"{name}: surfels", len(cloud))
         ctx.metric(f"{name}: median neighbour distance / spacing", round(float(np.median(d[:, 1]) / spacing), 3))
@@ -105,9 +103,7 @@ def ldc_example(ctx: ExampleContext) -> None:
     blob = Blob()
     mesh = blob.mesh(0.02 if ctx.quick else 0.01)
     d = 0.04 if ctx.quick else 0.015
-    t0 = time.perf_counter()
-    cloud = sample_mesh(mesh, d)
-    dt = time.perf_counter() - t0
+    cloud, dt = ctx.timed(sample_mesh, mesh, d, warm=lambda: sample_mesh(mesh, 4 * d))
     on_lattice = np.abs(cloud.positions / d - 0.5 - np.round(cloud.positions / d - 0.5)) < 1e-9
     axis = np.argmin(on_lattice, axis=1)  # the coordinate that is not a lattice coordinate: ray direction
     bundle = np.eye(3)[axis] * 0.75 + 0.15
@@ -194,9 +190,7 @@ def normals_example(ctx: ExampleContext) -> None:
     rng = np.random.default_rng(1)
     sigma = 0.1 * spacing
     noisy = exact.positions + rng.normal(scale=sigma, size=exact.positions.shape)
-    t0 = time.perf_counter()
-    n = estimate_normals(noisy, k=16)
-    dt = time.perf_counter() - t0
+    n, dt = ctx.timed(estimate_normals, noisy, k=16, warm=lambda: estimate_normals(noisy[:2000], k=16))
     err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, exact.normals), -1.0, 1.0)))
     ctx.metric("points", len(noisy))
     ctx.metric("noise sigma / spacing", 0.1)
@@ -233,9 +227,9 @@ def clustering_example(ctx: ExampleContext) -> None:
     top, bottom = [], []
     ctx.metric("input surfels", len(dense))
     for target in targets:
-        t0 = time.perf_counter()
-        small, labels = simplify(dense, target=target, return_labels=True)
-        dt = time.perf_counter() - t0
+        (small, labels), dt = ctx.timed(simplify, dense, target=target, return_labels=True,
+                                        warm=lambda: simplify(dense.subset(np.arange(min(len(dense), 3000))),
+                                                              target=20, return_labels=True))
         counts = np.bincount(labels)
         ctx.metric(f"target {target}: clusters", len(small))
         ctx.metric(f"target {target}: points per cluster (min, median, max)",

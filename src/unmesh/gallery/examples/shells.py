@@ -78,10 +78,11 @@ def _nodes(outdir: Path, frame: int) -> Any:
 
 
 def _times(ctx: ExampleContext, s: dict[str, Any]) -> None:
+    # the median over the frames: warm figures (the first frames include numba compilation)
     fr = s["frames"][1:]
     for key in ("force_seconds", "fracture_seconds", "surface_seconds"):
-        ctx.metric(f"mean {key.replace('_seconds', '')} time per frame", round(float(1000 * np.mean([f[key] for f in fr])), 1),
-                   "ms")
+        ctx.metric(f"median {key.replace('_seconds', '')} time per frame",
+                   round(float(1000 * np.median([f[key] for f in fr])), 1), "ms")
     ctx.metric("nodes / surfels / fibers", f"{s['nodes']} / {s['surfels']} / {s['fibers_initial']}")
 
 
@@ -92,8 +93,8 @@ def hanging_sheet(ctx: ExampleContext) -> None:
                                                  "simulation.duration": 1.0})
     s = _summary(out)
     last = len(s["frames"]) - 1
-    stills, video = render_frames(out, [0, last // 4, last // 2, last], (0.5, 0.3, 1.0),
-                                  ctx.path("hanging_sheet.mp4"))
+    picks = [0, last // 4, last // 2, last]
+    stills, video = render_frames(out, picks, (0.5, 0.3, 1.0), ctx.path("hanging_sheet.mp4"))
     _strip(ctx, "hanging_sheet", stills, "frames 0, 1/4, 1/2 and the end")
     ctx.video(video, "the sheet sagging")
     x = _nodes(out, last).positions
@@ -101,6 +102,7 @@ def hanging_sheet(ctx: ExampleContext) -> None:
     ctx.metric("mirror asymmetry of the sag (z -> -z)", round(float(_asymmetry(x)), 4), "m")
     ctx.metric("final kinetic energy / max", f"{s['frames'][-1]['kinetic_energy'] / max(f['kinetic_energy'] for f in s['frames']):.2e}")
     _times(ctx, s)
+    ctx.keep_frames(out, picks)
 
 
 def _asymmetry(x: np.ndarray) -> float:
@@ -122,12 +124,14 @@ def elastic_drop(ctx: ExampleContext) -> None:
     last = len(s["frames"]) - 1
     g = [f["gravity_energy"] for f in s["frames"]]
     hit = int(np.argmin(g[: last // 2 + 1]))
-    stills, video = render_frames(out, [0, hit, hit + 5, last], (0.0, 0.35, 1.0), ctx.path("elastic_drop.mp4"))
+    picks = [0, hit, min(hit + 5, last), last]
+    stills, video = render_frames(out, picks, (0.0, 0.35, 1.0), ctx.path("elastic_drop.mp4"))
     _strip(ctx, "elastic_drop", stills, "before, at and after the impact, and the rest state")
     ctx.video(video, "the dome bouncing")
     ctx.metric("rise of the centre of mass after the impact (bounce)",
                round(float((max(g[hit:]) - g[hit]) / (s["mass"] * 1.0)), 3), "units")
     _times(ctx, s)
+    ctx.keep_frames(out, picks)
 
 
 @example("shell-plastic-drop", "A plastic bust dents (Fig. 7.5)", SECTION)
@@ -138,14 +142,15 @@ def plastic_drop(ctx: ExampleContext) -> None:
                                                 "simulation.duration": 2.5})
     s = _summary(out)
     last = len(s["frames"]) - 1
-    stills, video = render_frames(out, [0, last // 4, last // 2, last], (0.4, 0.3, 1.0),
-                                  ctx.path("plastic_drop.mp4"))
+    picks = [0, last // 4, last // 2, last]
+    stills, video = render_frames(out, picks, (0.4, 0.3, 1.0), ctx.path("plastic_drop.mp4"))
     _strip(ctx, "plastic_drop", stills, "the blob denting on impact; the dent stays")
     ctx.video(video, "plastic impact")
     h0 = np.ptp(_nodes(out, 0).positions[:, 1])
     h1 = np.ptp(_nodes(out, last).positions[:, 1])
     ctx.metric("height after / before", round(float(h1 / h0), 3))
     _times(ctx, s)
+    ctx.keep_frames(out, picks)
 
 
 @example("shell-tearing-poster", "A poster tears from a weak point (Fig. 7.8)", SECTION)
@@ -163,14 +168,15 @@ def tearing_poster(ctx: ExampleContext) -> None:
         note = f" The run stopped early: {exc}"
     s = _summary(out)
     last = len(s["frames"]) - 1
-    stills, video = render_frames(out, [0, last // 3, 2 * last // 3, last], (0.0, 0.0, 1.0),
-                                  ctx.path("tearing_poster.mp4"))
+    picks = [0, last // 3, 2 * last // 3, last]
+    stills, video = render_frames(out, picks, (0.0, 0.0, 1.0), ctx.path("tearing_poster.mp4"))
     _strip(ctx, "tearing_poster", stills, "the tear running down from the weak point")
     ctx.video(video, "tearing")
     ctx.text(f"Cracks: {s['frames'][-1]['cracks']}, pieces: {s['frames'][-1]['components']}.{note}")
     ctx.metric("cracks", s["frames"][-1]["cracks"])
     ctx.metric("pieces of the fiber graph", s["frames"][-1]["components"])
     _times(ctx, s)
+    ctx.keep_frames(out, picks)
 
 
 @example("shell-balloon", "A balloon inflated until it tears (Fig. 7.10)", SECTION)
@@ -183,8 +189,8 @@ def balloon(ctx: ExampleContext) -> None:
     s = _summary(out)
     last = len(s["frames"]) - 1
     cracked = next((f["frame"] for f in s["frames"] if f["cracks"] > 0), last)
-    stills, video = render_frames(out, [0, max(cracked - 1, 0), min(cracked + 3, last), last], (0.8, 0.7, 0.45),
-                                  ctx.path("balloon.mp4"))
+    picks = [0, max(cracked - 1, 0), min(cracked + 3, last), last]
+    stills, video = render_frames(out, picks, (0.8, 0.7, 0.45), ctx.path("balloon.mp4"))
     _strip(ctx, "balloon", stills, "at rest, inflated, tearing, relaxed")
     ctx.video(video, "inflation and tear")
     r0 = np.linalg.norm(_nodes(out, 0).positions, axis=1).mean()
@@ -192,3 +198,4 @@ def balloon(ctx: ExampleContext) -> None:
     ctx.metric("radius growth before the tear", f"{100 * (r1 / r0 - 1):.1f}", "%")
     ctx.metric("cracks", s["frames"][-1]["cracks"])
     _times(ctx, s)
+    ctx.keep_frames(out, picks)
