@@ -5,7 +5,7 @@ along the x axis and the third corner above it (Fig. 6.1 a), and splatted with t
 EWA splatter (:class:`unmesh.render.SplatRenderer`, visibility splatting included). Patch
 size follows level ``l``: ``2**l`` texels along the longest edge (texel spacing
 ``h_t = L_t / 2**l``) plus a one-texel border on every side. Starting at ``l = 0`` the level
-grows (slivers start at the level whose texel spacing is at most their height) until the
+grows (slivers start at the level whose texel spacing is at most twice their height) until the
 error (6.1)
 
     E_t = sum_s A_s e(C_s, T(x_s, y_s)) / sum_s A_s
@@ -224,9 +224,10 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         from tqdm.auto import tqdm
 
         bar = tqdm(total=nf, desc="texture patches", unit="tri", leave=False)
-    # slivers start finer: the texel spacing never exceeds the triangle's height, so the texels a
-    # lookup inside the triangle reads lie within one texel of it
-    start = np.clip(np.ceil(np.log2(frames.length / np.maximum(frames.apex[:, 1], 1e-300))), 0, max_level).astype(np.int64)
+    # slivers start finer: the texel spacing never exceeds twice the triangle's height, so the
+    # texels a lookup inside the triangle reads lie close to it
+    start = np.clip(np.ceil(np.log2(frames.length / np.maximum(2.0 * frames.apex[:, 1], 1e-300)) - 1e-9), 0,
+                    max_level).astype(np.int64)
     for lvl in range(max_level + 1):
         active = np.flatnonzero(~done & (start <= lvl))
         if not len(active):
