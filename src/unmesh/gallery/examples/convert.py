@@ -97,7 +97,7 @@ def resolutions_example(ctx: ExampleContext) -> None:
         ctx.metric(f"{faces} faces: atlas fill", round(100 * rep["atlas"]["fill_total"], 1), "%")
         ctx.metric(f"{faces} faces: conversion time", round(dt, 2), "s")
     blank = np.ones_like(top[0])
-    grid = _tile([blank] + top + [blank] + mid + bottom, len(counts) + 1)
+    grid = _tile([blank, *top, blank, *mid, *bottom], len(counts) + 1)
     path = ctx.path("resolutions.png")
     save_image(path, grid)
     ctx.image(path, f"Rows: with normal map, without, surfels and meshes; columns: {', '.join(map(str, counts))} "
@@ -116,13 +116,19 @@ def atlas_example(ctx: ExampleContext) -> None:
     faces = 600 if ctx.quick else 800
     res, _ = _converted(spacing, faces)
     pages = [p.texture for p in res.textured.parts]
-    edge = pages[0].shape[0]
-    for k, page in enumerate(pages[:4]):
-        img = np.kron(page, np.ones((max(1, 512 // edge), max(1, 512 // edge), 1)))  # nearest-neighbour zoom
-        path = ctx.path(f"atlas_page{k}.png")
-        save_image(path, img)
-        ctx.image(path, f"page {k}: {page.shape[1]} x {page.shape[0]} texels, "
-                        f"{100 * res.report['atlas']['fill'][k]:.0f} % used")
+    zoom = max(1, 1024 // sum(p.shape[1] + 4 for p in pages))
+    height = max(p.shape[0] for p in pages) * zoom
+    strip = [np.ones((height, 4 * zoom, 3))]
+    for page in pages:
+        img = np.kron(page, np.ones((zoom, zoom, 1)))  # nearest-neighbour zoom: texels stay visible
+        pad = np.ones((height, img.shape[1], 3))
+        pad[:img.shape[0]] = img
+        strip += [pad, np.ones((height, 4 * zoom, 3))]
+    path = ctx.path("atlas.png")
+    save_image(path, np.concatenate(strip, axis=1))
+    sizes = ", ".join(f"{p.shape[1]}" for p in pages)
+    fills = ", ".join(f"{100 * f:.0f} %" for f in res.report["atlas"]["fill"])
+    ctx.image(path, f"{len(pages)} colour pages at the same texel scale, edges {sizes} texels, used {fills}")
     ctx.metric("pages", len(pages))
     ctx.metric("fill (all pages)", round(100 * res.report["atlas"]["fill_total"], 1), "%")
     ctx.metric("triangles", res.report["patches"]["triangles"])
@@ -131,9 +137,9 @@ def atlas_example(ctx: ExampleContext) -> None:
 @example("convert-sampling", "Surfel sampling and triangle sampling (Fig. 6.4)", section=SECTION)
 def sampling_example(ctx: ExampleContext) -> None:
     """Left: the surfels, shrunk to 40 % to show the sampling. Right: the mesh, each triangle
-    coloured by the texel density of its colour patch (dark: few texels per area, bright:
-    many). The mesh resolution follows the geometry only; the spots and stripes make their
-    triangles' patches finer."""
+    coloured by the refinement level of its colour patch (dark: 1 texel along the longest
+    edge, bright: the most). The mesh resolution follows the geometry only; the patch
+    resolution follows the colour detail."""
     from unmesh.meshes import TriangleMesh
     from unmesh.render import map_colors, render, save_image
 
@@ -146,13 +152,12 @@ def sampling_example(ctx: ExampleContext) -> None:
     small = cloud.replace(radii=0.4 * cloud.radii)
     left = render(small, cam).color
     mesh = res.mesh
-    level = np.asarray(res.report["_levels"], dtype=float)
-    density = np.log2(4.0**level / np.maximum(mesh.face_areas(), 1e-30))
-    col = map_colors(density, float(density.min()), float(density.max()) + 1e-9, "viridis")
+    level = np.asarray(res.report["_color_levels"], dtype=float)
+    col = map_colors(level, 0.0, max(float(level.max()), 1.0), "viridis")
     split = TriangleMesh(mesh.vertices[mesh.faces].reshape(-1, 3), np.arange(3 * len(mesh.faces)).reshape(-1, 3),
                          vertex_colors=np.repeat(col, 3, axis=0))
     right = render(split, cam).color
     path = ctx.path("sampling.png")
     save_image(path, _tile([left, right], 2))
-    ctx.image(path, "Surfels (shrunk) and mesh triangles coloured by the texel density of their patches")
+    ctx.image(path, "Surfels (shrunk) and mesh triangles coloured by the refinement level of their colour patch")
     ctx.metric("patch levels (count per level)", str(np.bincount(level.astype(int)).tolist()))
