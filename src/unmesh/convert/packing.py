@@ -173,7 +173,7 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
     while left:
         need = area[left].sum()
         big = max(max(masks[i].shape) for i in left)
-        smallest = max(16, 1 << int(np.ceil(np.log2(4 * big))))  # pages much larger than their patches
+        smallest = max(16, 1 << int(np.ceil(np.log2(big))))
         up = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.97))))))
         down = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
         page = len(out.pages)
