@@ -81,7 +81,7 @@ def test_convert_command_rejects_other_outputs(tmp_path, capsys):
 def test_mip_levels_are_assembled_in_the_same_layout_and_written(pattern_cloud, tmp_path):
     from unmesh.convert import ConvertOptions, convert_cloud
 
-    res = convert_cloud(pattern_cloud.subset(np.arange(0, 8000, 2)), ConvertOptions(faces=150, mipmaps=True))
+    res = convert_cloud(pattern_cloud.subset(np.arange(0, 8000, 4)), ConvertOptions(faces=60, mipmaps=True))
     tm = res.textured
     assert len(tm.mip_levels) == len(tm.parts)
     for part, (half, quarter) in zip(tm.parts, tm.mip_levels, strict=True):
