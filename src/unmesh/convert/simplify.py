@@ -97,6 +97,9 @@ def simplify_to_error(mesh: TriangleMesh, cloud: SurfelCloud, bound: float, step
                       sample_size: int = 10000, strict: bool | None = None) -> tuple[TriangleMesh, dict[str, float | int | bool]]:
     """The coarsest QEM simplification within ``bound`` (absolute distance) of the surfels.
 
+    Bisection over the face count on a log scale; every try simplifies the finest mesh known
+    to be within the bound (so all tries after the first success are cheap).
+
     A candidate must be edge-manifold with the boundary edges of the input and, when
     ``strict`` (default: when the input is closed), the same Euler characteristic.
     Reconstructions with tiny holes (a few boundary edges where the MLS surface leaves the
@@ -127,7 +130,7 @@ def simplify_to_error(mesh: TriangleMesh, cloud: SurfelCloud, bound: float, step
         mid = round(np.sqrt(lo * hi))
         if mid >= hi * 0.97 or mid <= lo:
             break
-        cand = simplify_mesh(mesh, mid)
+        cand = simplify_mesh(best, mid)  # from the finest good mesh so far: later tries are cheap
         tries += 1
         good, _ = check(cand)
         if good:
