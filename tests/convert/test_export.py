@@ -76,3 +76,18 @@ def test_convert_command_rejects_other_outputs(tmp_path, capsys):
     rc = main(["convert", str(tmp_path / "x.ply"), "-o", str(tmp_path / "out.stl")])
     assert rc == 1
     assert "expected a .obj or .glb" in capsys.readouterr().err
+
+
+def test_mip_levels_are_assembled_in_the_same_layout_and_written(pattern_cloud, tmp_path):
+    from unmesh.convert import ConvertOptions, convert_cloud
+
+    res = convert_cloud(pattern_cloud.subset(np.arange(0, 8000, 4)), ConvertOptions(faces=60, mipmaps=True))
+    tm = res.textured
+    assert len(tm.mip_levels) == len(tm.parts)
+    for part, (half, quarter) in zip(tm.parts, tm.mip_levels, strict=True):
+        e = part.texture.shape[0]
+        assert half.shape == (e // 2, e // 2, 3) and quarter.shape == (e // 4, e // 4, 3)
+        # box filter of the full page where every texel of a block belongs to a patch
+        assert abs(half.mean() - part.texture.mean()) < 0.05
+    files = write_textured(tmp_path / "m.obj", tm)
+    assert any(f.name.endswith("_mip1.png") for f in files) and any(f.name.endswith("_mip2.png") for f in files)

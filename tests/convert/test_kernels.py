@@ -47,3 +47,24 @@ def test_bilinear_matches_reference():
     out1 = np.empty((1, 3))
     bilinear(img, np.array([3.5]), np.array([2.5]), out1)
     assert np.allclose(out1[0], img[2, 3])
+
+
+def test_candidate_pairs_and_pair_frames_match_references():
+    from unmesh.convert._patch_kernels import candidate_pairs, candidate_pairs_reference, pair_frames
+    from unmesh.shapes import Sphere
+
+    mesh = Sphere().mesh(0.5)
+    rng = np.random.default_rng(4)
+    pos = rng.normal(size=(300, 3))
+    nrm = rng.normal(size=(300, 3))
+    nearest = rng.integers(0, len(mesh.faces), 300)
+    fn = mesh.face_normals()
+    pt, ps = candidate_pairs(mesh.faces, len(mesh.vertices), nearest, nrm, fn)
+    assert sorted(zip(pt.tolist(), ps.tolist(), strict=True)) == candidate_pairs_reference(mesh.faces, len(mesh.vertices), nearest, nrm, fn)
+    rot = np.linalg.qr(rng.normal(size=(len(mesh.faces), 3, 3)))[0]
+    origin = rng.normal(size=(len(mesh.faces), 3))
+    loc = np.empty((len(pt), 3))
+    ln = np.empty((len(pt), 3))
+    pair_frames(pt, ps, origin, rot, pos, nrm, loc, ln)
+    assert np.allclose(loc, np.einsum("pij,pj->pi", rot[pt], pos[ps] - origin[pt]))
+    assert np.allclose(ln, np.einsum("pij,pj->pi", rot[pt], nrm[ps]))

@@ -40,7 +40,7 @@ def test_placements_are_disjoint_and_inside_the_pages():
     assert used == sum(int(m.sum()) for m in masks)
     fill = used / sum(e * e for e in pl.pages)
     assert np.isclose(fill, sum(f * e * e for f, e in zip(pl.fill, pl.pages, strict=True)) / sum(e * e for e in pl.pages))
-    assert fill > 0.75  # measured 0.8-0.85; the thesis reports 0.85-0.95
+    assert fill > 0.84  # measured 0.87; the thesis reports 0.85-0.95
 
 
 def test_every_second_patch_of_a_row_is_mirrored_vertically():

@@ -111,3 +111,94 @@ def bilinear_reference(image: np.ndarray, cols: np.ndarray, rows: np.ndarray) ->
     a = image[iy, ix] * (1 - fx) + image[iy, ix1] * fx
     b = image[iy1, ix] * (1 - fx) + image[iy1, ix1] * fx
     return a * (1 - fy) + b * fy
+
+
+@njit(cache=True)
+def _pairs_pass(faces, vf_off, vf_idx, fs_off, fs_idx, normals, fnormal, counts, pt, ps, fill):
+    nf = faces.shape[0]
+    mark = np.full(nf, -1, np.int64)
+    for t in range(nf):
+        k = counts[t] if fill else 0
+        base = k
+        n = 0
+        for c in range(3):
+            v = faces[t, c]
+            for a in range(vf_off[v], vf_off[v + 1]):
+                f = vf_idx[a]
+                if mark[f] == t:
+                    continue
+                mark[f] = t
+                for b in range(fs_off[f], fs_off[f + 1]):
+                    s = fs_idx[b]
+                    if normals[s, 0] * fnormal[t, 0] + normals[s, 1] * fnormal[t, 1] + normals[s, 2] * fnormal[t, 2] > 0.0:
+                        if fill:
+                            pt[base + n] = t
+                            ps[base + n] = s
+                        n += 1
+        if not fill:
+            counts[t] = n
+
+
+def candidate_pairs(faces, nv, nearest, normals, fnormal):
+    """(triangle, surfel) pairs: surfels whose nearest triangle shares a vertex with the triangle
+    and whose normal faces the triangle's side; sorted by triangle, then by adjacent face.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+    nv : int
+        Number of vertices.
+    nearest : (N,) int64
+        Nearest triangle of every surfel.
+    normals : (N, 3) float64
+    fnormal : (F, 3) float64
+
+    Returns
+    -------
+    pt, ps : (P,) int64
+    """
+    nf = len(faces)
+    order = np.argsort(faces.ravel(), kind="stable")
+    vf_idx = (order // 3).astype(np.int64)
+    vf_off = np.zeros(nv + 1, np.int64)
+    np.cumsum(np.bincount(faces.ravel(), minlength=nv), out=vf_off[1:])
+    fs_idx = np.argsort(nearest, kind="stable").astype(np.int64)
+    fs_off = np.zeros(nf + 1, np.int64)
+    np.cumsum(np.bincount(nearest, minlength=nf), out=fs_off[1:])
+    counts = np.zeros(nf, np.int64)
+    dummy = np.zeros(0, np.int64)
+    _pairs_pass(faces, vf_off, vf_idx, fs_off, fs_idx, normals, fnormal, counts, dummy, dummy, False)
+    starts = np.zeros(nf, np.int64)
+    np.cumsum(counts[:-1], out=starts[1:])
+    total = int(counts.sum())
+    pt = np.empty(total, np.int64)
+    ps = np.empty(total, np.int64)
+    _pairs_pass(faces, vf_off, vf_idx, fs_off, fs_idx, normals, fnormal, starts, pt, ps, True)
+    return pt, ps
+
+
+def candidate_pairs_reference(faces, nv, nearest, normals, fnormal):
+    """Numpy/python reference of :func:`candidate_pairs` (as sorted (t, s) pair sets)."""
+    out = []
+    for t in range(len(faces)):
+        adj = np.flatnonzero(np.isin(faces, faces[t]).any(axis=1))
+        s = np.flatnonzero(np.isin(nearest, adj))
+        s = s[normals[s] @ fnormal[t] > 0]
+        out += [(t, int(j)) for j in s]
+    return sorted(out)
+
+
+@njit(cache=True, parallel=True)
+def pair_frames(pt, ps, origin, rotation, positions, normals, loc, lnrm):
+    """Local coordinates ``R_t (x_s - o_t)`` and normals ``R_t n_s`` of every pair, into loc, lnrm (P, 3)."""
+    for p in prange(len(pt)):
+        t = pt[p]
+        s = ps[p]
+        for i in range(3):
+            a = 0.0
+            b = 0.0
+            for j in range(3):
+                a += rotation[t, i, j] * (positions[s, j] - origin[t, j])
+                b += rotation[t, i, j] * normals[s, j]
+            loc[p, i] = a
+            lnrm[p, i] = b

@@ -13,8 +13,8 @@ T = the direction of +u (±e_x of the patch frame), B = +v (±e_y), orthonormali
 Gram-Schmidt around N; a baked normal n is stored as ``((n.T, n.B, n.N) + 1) / 2``.
 
 Mip levels (6.5) reuse the placement: level k of a page averages each 2^k x 2^k block of
-the page over the patch texels that fall into it (a box filter in the same layout; texels
-outside every patch do not count). Blocks straddling two patches mix them, a simplification
+the page over the footprint texels that fall into it (a box filter in the same layout;
+texels outside every footprint do not count). Blocks straddling two patches mix them, a simplification
 of the thesis, which renders every patch again at half and quarter resolution.
 """
 
@@ -88,7 +88,8 @@ def assemble(mesh: TriangleMesh, frames: TriangleFrames, patches: Patches, place
             nmap[rr[sel], cc[sel]] = _tangent_normals(part, on, frames, patches, place, t[sel], r[sel], c[sel])
         parts.append(part.replace(texture=img, normal_map=nmap))
         if mipmaps:
-            mips.append(tuple(_mip(patches, place, corners, p, edge, k) for k in (1, 2)))
+            mips.append(tuple(_mip(rr[sel], cc[sel], np.clip(col_flat[sel], 0.0, 1.0), edge, k, img[0, 0])
+                              for k in (1, 2)))
     return TexturedMesh(tuple(parts), tuple(mips))
 
 
@@ -145,21 +146,14 @@ def _gather(images: list[np.ndarray], t: np.ndarray, r: np.ndarray, c: np.ndarra
     return flat[offs[t] + r * widths[t] + c]
 
 
-def _mip(patches: Patches, place: Placement, corners: np.ndarray, page: int, edge: int, k: int) -> np.ndarray:
-    """Colour page ``page`` at 2^-k resolution, assembled in the same layout (6.5)."""
+def _mip(rows: np.ndarray, cols: np.ndarray, colors: np.ndarray, edge: int, k: int, background: np.ndarray) -> np.ndarray:
+    """A colour page at 2^-k resolution from its footprint texels (same layout, 6.5): the mean
+    of the footprint texels in every 2^k x 2^k block, the page background elsewhere."""
     f = 1 << k
     e = max(1, edge // f)
     acc = np.zeros((e, e, 3))
     cnt = np.zeros((e, e))
-    for t in np.flatnonzero(place.page == page):
-        img = patches.color[t]
-        if place.flip_h[t]:
-            img = img[:, ::-1]
-        if place.flip_v[t]:
-            img = img[::-1]
-        rows = (place.y[t] + np.arange(img.shape[0])) // f
-        cols = (place.x[t] + np.arange(img.shape[1])) // f
-        np.add.at(acc, (rows[:, None], cols[None, :]), img)
-        np.add.at(cnt, (rows[:, None], cols[None, :]), 1.0)
-    out = np.where(cnt[..., None] > 0, acc / np.maximum(cnt[..., None], 1.0), 0.5)
+    np.add.at(acc, (rows // f, cols // f), colors)
+    np.add.at(cnt, (rows // f, cols // f), 1.0)
+    out = np.where(cnt[..., None] > 0, acc / np.maximum(cnt[..., None], 1.0), background)
     return np.clip(out, 0.0, 1.0)

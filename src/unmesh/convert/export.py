@@ -4,7 +4,9 @@ OBJ (:func:`write_textured_obj`): one OBJ with a ``usemtl pageK`` group per atla
 MTL with one material per page (``map_Kd`` colour page; the tangent-space normal page as both
 ``norm`` and ``map_Bump``, the two spellings tools read), and the PNGs. One page: ``NAME.png``
 and ``NAME_normal.png`` (as :func:`unmesh.io.obj.write_obj`); several: ``NAME_pK.png`` and
-``NAME_pK_normal.png``. The text comes from :func:`unmesh.io.obj.encode_obj`.
+``NAME_pK_normal.png``; with mip levels (6.5) also ``NAME[_pK]_mip1.png`` and ``_mip2.png``
+(half and quarter resolution, same layout; MTL has no statement for them). The text comes
+from :func:`unmesh.io.obj.encode_obj`.
 
 glTF (:func:`write_glb`, needs the ``convert`` extra: trimesh): one primitive per page with a
 PBR material, ``baseColorTexture`` and ``normalTexture`` (tangent-space, OpenGL convention as
@@ -90,6 +92,9 @@ def write_textured_obj(path: str | os.PathLike[str], tm: TexturedMesh) -> list[P
         if p.normal_map is not None:
             mtl += [f"norm {name}_normal.png", f"map_Bump {name}_normal.png"]
             files.append((target.with_name(f"{name}_normal.png"), p.normal_map))
+        if k < len(tm.mip_levels):
+            for j, mip in enumerate(tm.mip_levels[k], start=1):
+                files.append((target.with_name(f"{name}_mip{j}.png"), mip))
     files.insert(1, (target.with_name(f"{stem}.mtl"), "\n".join(mtl) + "\n"))
     _write_all(files)
     return [f for f, _ in files]

@@ -84,6 +84,7 @@ def _pack_page(items: list[int], masks: list[np.ndarray], angles: np.ndarray, ed
                out: Placement, page: int) -> list[int]:
     """Algorithm 6.1 on one page; returns the items that did not fit."""
     heights = np.array([masks[i].shape[0] for i in items], np.int64)
+    item_angles = angles[np.asarray(items, dtype=np.int64)]
     remaining = np.ones(len(items), bool)
     ymin = 0
     while remaining.any():
@@ -104,7 +105,7 @@ def _pack_page(items: list[int], masks: list[np.ndarray], angles: np.ndarray, ed
                     break
                 h2 = int(heights[remaining].max())
                 cand = np.flatnonzero(remaining & (heights > h2 - max(1, int(dh_frac * h2))))
-            al = angles[[items[c] for c in cand]]
+            al = item_angles[cand]
             dl = np.abs(al[:, 0] - beta)
             dr = np.abs(al[:, 1] - beta)
             best = int(np.argmin(np.minimum(dl, dr)))
@@ -141,7 +142,7 @@ def _copy(p: Placement) -> Placement:
 
 
 def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, target: float = 0.9,
-         dh_frac: float = 0.25) -> Placement:
+         dh_frac: float = 0.05) -> Placement:
     """Pack patch footprints (Algorithm 6.1) into power-of-two pages.
 
     Parameters

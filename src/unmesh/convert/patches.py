@@ -5,7 +5,8 @@ along the x axis and the third corner above it (Fig. 6.1 a), and splatted with t
 EWA splatter (:class:`unmesh.render.SplatRenderer`, visibility splatting included). Patch
 size follows level ``l``: ``2**l`` texels along the longest edge (texel spacing
 ``h_t = L_t / 2**l``) plus a one-texel border on every side. Starting at ``l = 0`` the level
-grows until the error (6.1)
+grows (slivers start at the level whose texel spacing is at most twice their height) until the
+error (6.1)
 
     E_t = sum_s A_s e(C_s, T(x_s, y_s)) / sum_s A_s
 
@@ -34,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from unmesh.convert._patch_kernels import bilinear
+from unmesh.convert._patch_kernels import bilinear, candidate_pairs, pair_frames
 from unmesh.meshes import TriangleMesh
 from unmesh.render import Camera, SplatRenderer
 from unmesh.render.splat import SurfelArrays
@@ -147,24 +148,6 @@ def patch_size(frames: TriangleFrames, level: np.ndarray) -> tuple[np.ndarray, n
     return (n.astype(np.int64) + 2, np.maximum(hy, 1) + 2)
 
 
-def _candidate_pairs(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFrames) -> tuple[np.ndarray, np.ndarray]:
-    """(triangle, surfel) pairs: surfels whose nearest triangle shares a vertex with the triangle."""
-    from scipy import sparse
-
-    nf = len(mesh.faces)
-    nv = len(mesh.vertices)
-    _, nearest, _, _ = TriangleBVH(mesh.vertices, mesh.faces).closest(cloud.positions)
-    ns = len(cloud)
-    fv = sparse.csr_matrix((np.ones(3 * nf), (np.repeat(np.arange(nf), 3), mesh.faces.ravel())), shape=(nf, nv))
-    adj = (fv @ fv.T).astype(bool).astype(np.float64)
-    fs = sparse.csr_matrix((np.ones(ns), (nearest, np.arange(ns))), shape=(nf, ns))
-    pairs = (adj @ fs).tocsr()
-    pairs.sort_indices()
-    counts = np.diff(pairs.indptr)
-    pt = np.repeat(np.arange(nf), counts)
-    return pt, pairs.indices.astype(np.int64)
-
-
 def _layout(widths: np.ndarray, heights: np.ndarray, gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shelf layout of rectangles on canvases of CANVAS x CANVAS: (canvas, x, y) per rectangle."""
     order = np.lexsort((-widths, -heights))
@@ -205,14 +188,12 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     """
     frames = triangle_frames(mesh)
     nf = len(mesh.faces)
-    pt, ps = _candidate_pairs(mesh, cloud, frames)
-    d = cloud.positions[ps] - frames.origin[pt]
-    rot = frames.rotation[pt]
-    loc = np.einsum("pij,pj->pi", rot, d)
-    lnrm = np.einsum("pij,pj->pi", rot, cloud.normals[ps])
-    front = lnrm[:, 2] > 0.0
-    pt, ps, loc, lnrm, rot = pt[front], ps[front], loc[front], lnrm[front], rot[front]
-    laxes = np.einsum("pij,pkj->pki", rot, cloud.axes[ps]) if cloud.is_elliptical else None
+    _, nearest, _, _ = TriangleBVH(mesh.vertices, mesh.faces).closest(cloud.positions)
+    pt, ps = candidate_pairs(mesh.faces, len(mesh.vertices), nearest, cloud.normals, frames.rotation[:, 2])
+    loc = np.empty((len(pt), 3))
+    lnrm = np.empty((len(pt), 3))
+    pair_frames(pt, ps, frames.origin, frames.rotation, cloud.positions, cloud.normals, loc, lnrm)
+    laxes = np.einsum("pij,pkj->pki", frames.rotation[pt], cloud.axes[ps]) if cloud.is_elliptical else None
     radii = np.asarray(cloud.radii)[ps]
     area = np.pi * (np.prod(np.linalg.norm(cloud.axes[ps], axis=2), axis=1) if cloud.is_elliptical else radii**2)
     colors = cloud.colors[ps]
@@ -243,42 +224,54 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         from tqdm.auto import tqdm
 
         bar = tqdm(total=nf, desc="texture patches", unit="tri", leave=False)
+    # slivers start finer: the texel spacing never exceeds twice the triangle's height, so the
+    # texels a lookup inside the triangle reads lie close to it
+    start = np.clip(np.ceil(np.log2(frames.length / np.maximum(2.0 * frames.apex[:, 1], 1e-300)) - 1e-9), 0,
+                    max_level).astype(np.int64)
     for lvl in range(max_level + 1):
-        active = np.flatnonzero(~done)
+        active = np.flatnonzero(~done & (start <= lvl))
         if not len(active):
-            break
+            if done.all():
+                break
+            continue
         level[active] = lvl
         width, height = patch_size(frames, level)
         scale = (2.0**lvl) / frames.length  # texels per unit
-        sel = ~done[pt]
-        s_p = scale[pt]
-        px = 1.0 + x * s_p
-        py = 1.0 + y * s_p
-        r_px = radii * s_p
-        sel &= (px > -r_px - 1) & (px < width[pt] + r_px + 1) & (py > -r_px - 1) & (py < height[pt] + r_px + 1)
-        gap = int(np.ceil(r_px[sel].max())) + 3 if sel.any() else 3
+        is_active = np.zeros(nf, bool)
+        is_active[active] = True
+        live = np.flatnonzero(is_active[pt])  # pairs of the triangles rendered at this level
+        s_l = scale[pt[live]]
+        px_l = 1.0 + x[live] * s_l
+        py_l = 1.0 + y[live] * s_l
+        r_l = radii[live] * s_l
+        w_l, h_l = width[pt[live]], height[pt[live]]
+        keep = (px_l > -r_l - 1) & (px_l < w_l + r_l + 1) & (py_l > -r_l - 1) & (py_l < h_l + r_l + 1)
+        sel = live[keep]
+        s_p, px_s, py_s, r_s = s_l[keep], px_l[keep], py_l[keep], r_l[keep]
+        gap = int(np.ceil(r_s.max())) + 3 if len(sel) else 3
         canvas, ox, oy = _layout(width[active], height[active], gap)
         slot_c = np.zeros(nf, np.int64)
         slot_x = np.zeros(nf, np.int64)
         slot_y = np.zeros(nf, np.int64)
         slot_c[active], slot_x[active], slot_y[active] = canvas, ox, oy
         sums = np.zeros((nf, 3))  # sum A, sum A e_color, sum A e_normal
+        pair_canvas = slot_c[pt[sel]]
         for c in range(int(canvas.max()) + 1):
             tri_c = active[canvas == c]
-            on = sel & (slot_c[pt] == c)
-            on &= np.isin(pt, tri_c)
-            idx = np.flatnonzero(on)
+            kk = np.flatnonzero(pair_canvas == c)
+            idx = sel[kk]
             t_i = pt[idx]
-            sc = s_p[idx]
-            col = slot_x[t_i] + px[idx]
-            row = slot_y[t_i] + height[t_i] - py[idx]
+            sc = s_p[kk]
+            r_c = r_s[kk]
+            col = slot_x[t_i] + px_s[kk]
+            row = slot_y[t_i] + height[t_i] - py_s[kk]
             z = loc[idx, 2] * sc
             zeye = float(z.max()) + 10.0 if len(z) else 10.0
             cw = int(min(CANVAS, (slot_x[tri_c] + width[tri_c]).max() + gap))
             ch = int(min(CANVAS, (slot_y[tri_c] + height[tri_c]).max() + gap))
             cam = Camera((cw / 2, -ch / 2, zeye), (cw / 2, -ch / 2, zeye - 1.0), width=cw, height=ch, ortho=float(ch))
             pos = np.ascontiguousarray(np.stack([col, -row, z], axis=1))
-            arr = SurfelArrays(pos, np.ascontiguousarray(lnrm[idx]), np.ascontiguousarray(r_px[idx]),
+            arr = SurfelArrays(pos, np.ascontiguousarray(lnrm[idx]), np.ascontiguousarray(r_c),
                                None if laxes is None else np.ascontiguousarray(laxes[idx] * sc[:, None, None]),
                                np.ascontiguousarray(colors[idx]))
             rend = SplatRenderer(cam)
@@ -289,7 +282,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
             ci = np.clip(col.astype(np.int64), 0, cw - 1)
             # visible: not behind the pixel's depth by more than the splatter's tolerance plus one
             # texel (a coarse pixel averages depths over a curved region of the triangle)
-            vis = ins & ((zeye - z) <= g.depth[ri, ci] + r_px[idx] * rend.options.depth_tolerance + 1.0)
+            vis = ins & ((zeye - z) <= g.depth[ri, ci] + r_c * rend.options.depth_tolerance + 1.0)
             q = np.flatnonzero(vis)
             if len(q):
                 tc = np.empty((len(q), 3))

@@ -167,6 +167,7 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
         "triangles_without_samples": int((patches.samples == 0).sum()),
     }
     report["_levels"] = patches.level.tolist()  # per triangle of ``mesh``, for tests and figures
+    report["_color_levels"] = patches.color_level.tolist()
     report["atlas"] = {"pages": list(place.pages), "fill": list(place.fill),
                        "fill_total": float(texels.sum() / sum(e * e for e in place.pages))}
     times["total"] = float(sum(times.values()))

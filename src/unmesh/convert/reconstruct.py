@@ -4,7 +4,7 @@ as intermediate representation").
 The MLS surface of :mod:`unmesh.mls` is turned into a triangle mesh:
 
 1. a regular grid of cell edge ``h = grid_factor * median radius`` covers the cloud; its
-   *narrow band* (nodes within ``max(h, 2 r)`` plus one cell of a surfel centre) is evaluated with the implicit
+   *narrow band* (nodes within about ``max(h, 2 r)`` of a surfel centre, counted in cells) is evaluated with the implicit
    function ``f(x) = n(x) . (x - a(x))`` of the MLS fit (``a``, ``n``: the kernel-weighted
    mean position and normal, eqs. 3.6 and 3.8, via :func:`unmesh.mls.interpolate`);
 2. every connected region of nodes outside the band takes the majority sign of the band
@@ -93,7 +93,7 @@ def reconstruct(cloud: SurfelCloud, grid_factor: float = 2.0, surface: MLSSurfac
         sel = reach == k
         mark[cell[sel, 0], cell[sel, 1], cell[sel, 2]] = True
         near |= ndimage.binary_dilation(mark, structure=cube, iterations=int(min(k, 64)))
-    band = ndimage.binary_dilation(near, structure=cube)
+    band = near.copy()
     # (cell corners: the dilated cells' lower corners; add the +1 corners)
     band[1:, :, :] |= band[:-1, :, :]
     band[:, 1:, :] |= band[:, :-1, :]
