@@ -39,7 +39,7 @@ from unmesh.errors import InputError
 from unmesh.render.splat import ClipTree, SurfelArrays
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "concatenate_frames", "prepare", "select"]
+__all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "centre_classified", "concatenate_frames", "prepare", "select"]
 
 #: Surfel classes of 4.1.2.
 SURFACE, EDGE, OUTSIDE = 0, 1, 2
@@ -133,6 +133,31 @@ def prepare(model: Node, method: str = "clipbuffer", rule: str = "two") -> CSGFr
     clip = ClipTree(*_partner_rows(flat, cloud, leaf, radii, offsets, partners, keep, classes, raw), flat.table(),
                     flat.leaf_node[leaf[keep]])
     return CSGFrame(flat, cloud, leaf, classes, offsets, partners, arrays, clip)
+
+
+def centre_classified(model: Node, rule: str = "two") -> SurfelCloud:
+    """The conventional CSG result of Fig. 4.3 (a): the surfels whose *centre* lies on the
+    result surface (Algorithm 4.2 with every patch classified as a whole, 4.4), normals flipped
+    at complemented leaves, unclipped. Splatting them shows holes along the edges.
+
+    Example
+    -------
+    >>> from unmesh.csg.model import Patch
+    >>> a = Patch.halfspace((0, 0, 0), (0, 0, 1), extent=2.0, spacing=0.5)
+    >>> b = Patch.halfspace((0, 0, 0), (1, 0, 0), extent=2.0, spacing=0.5)
+    >>> len(centre_classified(a & b))
+    16
+    """
+    flat = flatten(model)
+    clouds = [p.world_cloud() for p in flat.leaves]
+    cloud = SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]
+    leaf = np.repeat(np.arange(len(clouds)), [len(c) for c in clouds])
+    none = np.zeros((len(clouds), len(cloud)), dtype=bool)
+    on, _ = _classify(flat, clouds, cloud, leaf, none, np.ones(len(cloud), dtype=bool), rule)
+    flip = flat.invert[flat.leaf_node[leaf]].astype(bool)
+    nrm = cloud.normals.copy()
+    nrm[flip] *= -1.0
+    return cloud.replace(normals=nrm).subset(on)
 
 
 def _pieces(pos: np.ndarray, radii: np.ndarray, leaf: np.ndarray, edge: np.ndarray, nleaves: int) -> np.ndarray:
