@@ -48,7 +48,7 @@ def fragments(draw):
     return x, offsets, partners, table, leaf, flat
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(fragments())
 def test_kernel_matches_reference(case):
     x, offsets, partners, table, leaf, _ = case
@@ -94,7 +94,7 @@ def _inside_values(flat, x, partners):
     return vals
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(fragments())
 def test_appendix_a_invariant(case):
     """Algorithm A.1 (no early exit) keeps (A.3): on <=> x on the surface of the current node,

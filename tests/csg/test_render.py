@@ -132,3 +132,84 @@ def test_curved_edge_position_and_sharpness_when_magnified(zoom):
         plain = SplatRenderer(cam).render(kept).result(shading="none").color[..., 2]
         off = [abs(int(np.argmax(plain[r] > 0.5)) - int(np.argmax(exact[r]))) for r in range(size)]
         assert np.median(off) >= 8
+
+
+def icosahedron_prims():
+    phi = (1 + 5 ** 0.5) / 2
+    v = np.array([[-1, phi, 0], [1, phi, 0], [-1, -phi, 0], [1, -phi, 0], [0, -1, phi], [0, 1, phi], [0, -1, -phi],
+                  [0, 1, -phi], [phi, 0, -1], [phi, 0, 1], [-phi, 0, -1], [-phi, 0, 1]], float)
+    v /= np.linalg.norm(v[0])
+    edge = np.linalg.norm(v[0] - v[1])
+    from itertools import combinations
+
+    faces = [f for f in combinations(range(12), 3)
+             if all(abs(np.linalg.norm(v[a] - v[b]) - edge) < 1e-9 for a, b in combinations(f, 2))]
+    rng = np.random.default_rng(4)
+    out = []
+    for k, f in enumerate(faces):
+        c = v[list(f)].mean(axis=0)
+        out.append(Prim("H", c, c, f"f{k}", tuple(rng.integers(1, 16, 3) / 16)))  # exact in float32
+    return out, 2 * np.linalg.norm(v[faces[0][0]] - v[list(faces[0])].mean(axis=0)) * 1.02
+
+
+def test_icosahedron_of_20_halfspaces_one_surfel_each_fig_4_10():
+    prims, extent = icosahedron_prims()
+    assert len(prims) == 20
+    tree = cube_tree(prims)
+    model = evaluate(tree, lambda p: p.patch(10.0, extent=extent))
+    assert all(len(p.cloud) == 1 for p in model_patches(model))
+    cam = Camera((1.8, 1.3, 2.4), (0, 0, 0), width=128, height=128, fov=35)
+    res = render(model, cam, shading="none")
+    _, _, who = raycast(tree, cam)
+    interior = _distance_to_edges(who)
+    seen = 0
+    for k, p in enumerate(prims):
+        m = interior & (who == k)
+        if m.any():
+            seen += 1
+            # exactly up to rounding: the normalisation (w c) / w of one fragment may differ by an ulp
+            assert np.abs(res.color[m] - np.asarray(p.color)).max() <= 1e-15, k
+    assert seen >= 8
+    assert _iou(res.coverage, who >= 0) >= 0.98
+
+
+def model_patches(model):
+    from unmesh.csg.model import patches
+
+    return patches(model)
+
+
+def test_sampling_independence_fig_4_7():
+    """1 vs 900 surfels on neighbouring faces move the edges by less than a pixel."""
+    prims = cube_prims()
+    tree = cube_tree(prims)
+    cam = Camera(CAM["eye"], CAM["target"], width=160, height=160, fov=35)
+    fine = render(evaluate(tree, lambda p: p.patch(1 / 30 + 1e-4, extent=1.0 + 1e-9)), cam, shading="none")
+    mixed = render(evaluate(tree, lambda p: p.patch(2.0 if p.name in ("f0", "f2", "f4") else 1 / 30 + 1e-4,
+                                                   extent=1.0 + 1e-9)), cam, shading="none")
+
+    def label(img):
+        d = np.abs(img[..., None, :] - np.asarray(FACE_COLORS, float)[None, None]).sum(-1)
+        lab = np.argmin(d, axis=-1)
+        lab[d.min(-1) > 1e-6] = -1  # blended edge pixels and background
+        return lab
+
+    a, b = label(fine.color), label(mixed.color)
+    differ = (a != b) & (a >= 0) & (b >= 0)
+    assert not differ.any()  # no pixel changes face
+    # pixels labelled in one image only (blended or background) lie next to an edge of the other
+    only = (a >= 0) != (b >= 0)
+    edges_a = ~_distance_to_edges(a)  # within one pixel of a change of label in the all-900 image
+    assert not (only & ~edges_a).any()
+
+
+@pytest.mark.slow
+def test_full_size_512_iou_edges_and_depth():
+    tree, model = _carved_box()
+    cam = Camera(CAM["eye"], CAM["target"], width=512, height=512, fov=40)
+    res = render(model, cam, shading="none")
+    depth, _, who = raycast(tree, cam)
+    assert _iou(res.coverage, np.isfinite(depth)) >= 0.99
+    m = res.coverage & np.isfinite(depth) & _distance_to_edges(who)
+    err = np.abs(res.depth[m] - depth[m])
+    assert np.percentile(err, 99.5) < 0.005 * np.sqrt(3)

@@ -36,6 +36,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "unmesh.sph.cli",
     "unmesh.shells.cli",
     "unmesh.fem.cli",
+    "unmesh.csg.cli",
     "unmesh.batch.cli",
     "unmesh.paint.cli",
     "unmesh.convert.cli",

@@ -13,7 +13,7 @@ from typing import Any
 __all__ = ["register", "run"]
 
 #: Scene kind -> the sub-command that runs it.
-COMMANDS = {"sph": "sph", "shells": "shell", "fem": "fem", "batch": "batch"}
+COMMANDS = {"sph": "sph", "shells": "shell", "fem": "fem", "csg": "csg", "batch": "batch"}
 
 
 def register(sub: Any) -> None:

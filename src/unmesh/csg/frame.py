@@ -39,7 +39,7 @@ from unmesh.errors import InputError
 from unmesh.render.splat import ClipTree, SurfelArrays
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "concatenate_frames", "prepare", "select"]
+__all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "centre_classified", "concatenate_frames", "prepare", "select"]
 
 #: Surfel classes of 4.1.2.
 SURFACE, EDGE, OUTSIDE = 0, 1, 2
@@ -98,7 +98,6 @@ def prepare(model: Node, method: str = "clipbuffer", rule: str = "two") -> CSGFr
     cloud = SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]
     sizes = [len(c) for c in clouds]
     leaf = np.repeat(np.arange(len(clouds)), sizes)
-    starts = np.concatenate([[0], np.cumsum(sizes)])
     radii = np.asarray(cloud.radii, dtype=np.float64)
     offsets, partners = find_partners(cloud.positions, radii, leaf, cloud.normals, method)
     n = len(cloud)
@@ -106,23 +105,22 @@ def prepare(model: Node, method: str = "clipbuffer", rule: str = "two") -> CSGFr
     rows = np.repeat(np.arange(n), np.diff(offsets))
     meets = np.zeros((len(clouds), n), dtype=bool)
     meets[leaf[partners], rows] = True
-    values = np.full((len(clouds), n), -1, dtype=np.int8)
-    raw = np.full((len(clouds), n), -1, dtype=np.int8)
-    for j, c in enumerate(clouds):
-        ask = (leaf != j) & ~meets[j]
-        if ask.any():
-            v = inside_patch(c, cloud.positions[ask], rule)
-            raw[j, ask] = v
-            values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
-    # Kleene logic: a surfel is discarded only when its centre is off the surface whatever
-    # the patches it intersects say (the neutral unknown of 4.9/4.10 could discard surfels
-    # that are partly on the surface)
-    vals = tree_values(flat, values, logic="kleene")
-    on = np.empty(n, dtype=bool)
-    for j in range(len(clouds)):
-        sl = slice(starts[j], starts[j + 1])
-        on[sl] = maybe_on_surface(flat, vals[:, sl], j) != 0
     has = np.diff(offsets) > 0
+    # surfels between edges keep one class: classify the edge surfels and a few
+    # representatives of every connected piece of the other surfels of a patch, exactly
+    # (every member) where the representatives disagree
+    comp = _pieces(cloud.positions, radii, leaf, has, len(clouds))
+    rep = _representatives(comp)
+    on, raw = _classify(flat, clouds, cloud, leaf, meets, has | rep, rule)
+    mixed = _disagreeing(comp, rep, on)
+    if mixed.any():
+        on2, _ = _classify(flat, clouds, cloud, leaf, meets, mixed, rule)
+        on[mixed] = on2[mixed]
+    members = (comp >= 0) & ~rep & ~mixed
+    if members.any():
+        first = np.full(comp.max() + 1, -1)
+        first[comp[rep]] = np.flatnonzero(rep)
+        on[members] = on[first[comp[members]]]
     classes = np.where(~on, OUTSIDE, np.where(has, EDGE, SURFACE)).astype(np.int8)
     keep = np.flatnonzero(classes != OUTSIDE)
     # drawn surfels
@@ -135,6 +133,107 @@ def prepare(model: Node, method: str = "clipbuffer", rule: str = "two") -> CSGFr
     clip = ClipTree(*_partner_rows(flat, cloud, leaf, radii, offsets, partners, keep, classes, raw), flat.table(),
                     flat.leaf_node[leaf[keep]])
     return CSGFrame(flat, cloud, leaf, classes, offsets, partners, arrays, clip)
+
+
+def centre_classified(model: Node, rule: str = "two") -> SurfelCloud:
+    """The conventional CSG result of Fig. 4.3 (a): the surfels whose *centre* lies on the
+    result surface (Algorithm 4.2 with every patch classified as a whole, 4.4), normals flipped
+    at complemented leaves, unclipped. Splatting them shows holes along the edges.
+
+    Example
+    -------
+    >>> from unmesh.csg.model import Patch
+    >>> a = Patch.halfspace((0, 0, 0), (0, 0, 1), extent=2.0, spacing=0.5)
+    >>> b = Patch.halfspace((0, 0, 0), (1, 0, 0), extent=2.0, spacing=0.5)
+    >>> len(centre_classified(a & b))
+    16
+    """
+    flat = flatten(model)
+    clouds = [p.world_cloud() for p in flat.leaves]
+    cloud = SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]
+    leaf = np.repeat(np.arange(len(clouds)), [len(c) for c in clouds])
+    none = np.zeros((len(clouds), len(cloud)), dtype=bool)
+    on, _ = _classify(flat, clouds, cloud, leaf, none, np.ones(len(cloud), dtype=bool), rule)
+    flip = flat.invert[flat.leaf_node[leaf]].astype(bool)
+    nrm = cloud.normals.copy()
+    nrm[flip] *= -1.0
+    return cloud.replace(normals=nrm).subset(on)
+
+
+def _pieces(pos: np.ndarray, radii: np.ndarray, leaf: np.ndarray, edge: np.ndarray, nleaves: int) -> np.ndarray:
+    """(N,) int64 label of the connected piece (overlapping discs of one patch, edge surfels
+    removed) of every non-edge surfel; -1 for edge surfels."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from unmesh.spatial import KDTree
+
+    comp = np.full(len(pos), -1, dtype=np.int64)
+    base = 0
+    for j in range(nleaves):
+        idx = np.flatnonzero((leaf == j) & ~edge)
+        if len(idx) == 0:
+            continue
+        r = radii[idx]
+        pairs = KDTree(pos[idx]).radius_pairs(2.0 * float(r.max())) if len(idx) > 1 else np.zeros((0, 2), np.int64)
+        d2 = ((pos[idx[pairs[:, 0]]] - pos[idx[pairs[:, 1]]]) ** 2).sum(axis=1)
+        pairs = pairs[d2 < (r[pairs[:, 0]] + r[pairs[:, 1]]) ** 2]
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(idx), len(idx)))
+        k, labels = connected_components(graph, directed=False)
+        comp[idx] = labels + base
+        base += k
+    return comp
+
+
+def _representatives(comp: np.ndarray, per: int = 4) -> np.ndarray:
+    """(N,) bool: up to ``per`` surfels of every piece, spread over its members."""
+    rep = np.zeros(len(comp), dtype=bool)
+    idx = np.flatnonzero(comp >= 0)
+    if len(idx) == 0:
+        return rep
+    order = idx[np.argsort(comp[idx], kind="stable")]
+    labels = comp[order]
+    starts = np.flatnonzero(np.r_[True, labels[1:] != labels[:-1]])
+    sizes = np.diff(np.r_[starts, len(order)])
+    for q in range(per):
+        rep[order[starts + (q * sizes) // per]] = True
+    return rep
+
+
+def _disagreeing(comp: np.ndarray, rep: np.ndarray, on: np.ndarray) -> np.ndarray:
+    """(N,) bool: the members of pieces whose representatives were classified differently."""
+    if not rep.any():
+        return np.zeros(len(comp), dtype=bool)
+    m = comp.max() + 1
+    n_on = np.bincount(comp[rep], weights=on[rep].astype(float), minlength=m)
+    n_all = np.bincount(comp[rep], minlength=m)
+    bad = (n_on > 0) & (n_on < n_all)
+    return (comp >= 0) & bad[np.maximum(comp, 0)] & ~rep
+
+
+def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, leaf: np.ndarray, meets: np.ndarray,
+              which: np.ndarray, rule: str) -> tuple[np.ndarray, np.ndarray]:
+    """Centre classification of the surfels ``which``: (N,) on-surface flags (Kleene logic,
+    unknown for the patches a surfel intersects) and the raw insidePatch values (L, N) int8."""
+    n = len(cloud)
+    values = np.full((len(clouds), n), -1, dtype=np.int8)
+    raw = np.full((len(clouds), n), -1, dtype=np.int8)
+    for j, c in enumerate(clouds):
+        ask = which & (leaf != j) & ~meets[j]
+        if ask.any():
+            v = inside_patch(c, cloud.positions[ask], rule)
+            raw[j, ask] = v
+            values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
+    # Kleene logic: a surfel is discarded only when its centre is off the surface whatever
+    # the patches it intersects say (the neutral unknown of 4.9/4.10 could discard surfels
+    # that are partly on the surface)
+    vals = tree_values(flat, values, logic="kleene")
+    on = np.ones(n, dtype=bool)
+    for j in range(len(clouds)):
+        sl = np.flatnonzero(which & (leaf == j))
+        if len(sl):
+            on[sl] = maybe_on_surface(flat, vals[:, sl], j) != 0
+    return on, raw
 
 
 def _partner_rows(flat: FlatTree, cloud: SurfelCloud, leaf: np.ndarray, radii: np.ndarray, offsets: np.ndarray,

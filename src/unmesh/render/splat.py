@@ -16,14 +16,13 @@ of radius ``filter_radius`` pixels around the projected centre (Botsch et al. 20
 clipped Gaussian ``w = exp(-kappa rho^2)``, ``rho < 1``, is the reconstruction kernel. The depth
 tolerance of the extended depth test is ``eps_s = depth_tolerance * r_s`` per surfel (3.2.1).
 
-Clipping (chapter 4) comes in two forms that sit side by side: :class:`ClipPlanes`, per-surfel
-planes that the fragment kernel applies today (4.2.2), and :class:`ClipSurfels`, the
-discontinuity surfels of the drawn clouds (4.3, see :mod:`unmesh.surfels.cloud`), which the
-renderer separates from the surface samples and hands to the splatter. They are the hook of
-chapter 4's clipped splatting, which will derive the clip planes of each surfel from the
-discontinuity surfels it overlaps; until then they are kept by the renderer
-(:attr:`SplatRenderer.clip_surfels`) and produce no colour, as discontinuity surfels are
-invisible.
+Clipping (chapter 4) is done per fragment in the one fragment loop: :class:`ClipPlanes`
+(per-surfel planes) or :class:`ClipTree` (clipping partners and a CSG tree, Algorithm 4.2; built
+by :mod:`unmesh.csg`). :class:`ClipSurfels`, the discontinuity surfels of the drawn clouds (4.3,
+see :mod:`unmesh.surfels.cloud`), are invisible: the geometry ones become a :class:`ClipTree`
+(:func:`discontinuity_clip`) that cuts the surface surfels crossing them to a clean edge (the
+crack surfels of the thin shells); texture discontinuity surfels are kept
+(:attr:`SplatRenderer.clip_surfels`) without changing the image yet.
 
 Example
 -------
@@ -52,10 +51,11 @@ from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, tile_order
 from unmesh.render._splat_kernels import NPARAM, gather_rows, splat_resolve, splat_setup_bin, splat_tiles
 from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer, RenderResult, shade
+from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCONTINUITY
 
-__all__ = ["ClipPlanes", "ClipSurfels", "ClipTree", "SplatOptions", "SplatRenderer", "SurfelArrays", "surfel_arrays"]
+__all__ = ["DISCONTINUITY_MIN_ANGLE", "ClipPlanes", "ClipSurfels", "ClipTree", "SplatOptions", "SplatRenderer", "SurfelArrays", "discontinuity_clip", "surfel_arrays"]
 
 #: Per-thread work arrays of :meth:`SplatRenderer._run` (surfel parameters, boxes, groups, pair
 #: rows), shared by all renderers of a thread: their contents live only during one update, and
@@ -199,15 +199,65 @@ class ClipTree:
         return len(self.offsets) - 1
 
 
+#: A discontinuity surfel clips a surface surfel only when their planes meet at more than this
+#: angle (degrees): discontinuity surfels cut across the surface; nearly coplanar ones would
+#: make the front/back test (4.3) unreliable (4.5).
+DISCONTINUITY_MIN_ANGLE = 45.0
+
+
+def discontinuity_clip(arrays: SurfelArrays, clip_surfels: ClipSurfels, kind: int = GEOMETRY_DISCONTINUITY
+                       ) -> ClipTree | None:
+    """Clipping of surface surfels by discontinuity surfels (4.3) as a :class:`ClipTree`.
+
+    The tree is ``surface & D``, with ``D`` the discontinuity surfels of ``kind``: a surface
+    surfel ``s`` gets as partners the discontinuity surfels ``d`` that intersect it
+    (``|c_s - c_d| < r_s + r_d``), meet its plane at more than
+    :data:`DISCONTINUITY_MIN_ANGLE` and have ``s``'s centre behind them (each side of a crack
+    is clipped by the surfel facing away from it, 7.4); its fragments in front of them are
+    discarded by the two-surfel rule (4.4), leaving a clean edge. None when no surfel is clipped.
+
+    Example
+    -------
+    >>> a = surfel_arrays(SurfelCloud([[0, 0, 0]], [[0, 0, 1]], radii=[1.0]))
+    >>> d = ClipSurfels([[0.5, 0, 0]], [[1.0, 0, 0]], [[[0, 0.5, 0], [0, 0, 0.5]]], [1])
+    >>> t = discontinuity_clip(a, d)
+    >>> t.offsets.tolist(), t.partners[0, :6].tolist()
+    ([0, 1], [0.5, 0.0, 0.0, 1.0, 0.0, 0.0])
+    """
+    sel = np.flatnonzero(clip_surfels.kind == kind)
+    n = len(arrays)
+    if len(sel) == 0 or n == 0:
+        return None
+    dc = clip_surfels.positions[sel]
+    dn = clip_surfels.normals[sel]
+    dr = np.linalg.norm(clip_surfels.axes[sel], axis=2).max(axis=1)
+    off, idx = KDTree(dc).radius_neighbors(arrays.positions, float(arrays.radii.max() + dr.max()))
+    rows = np.repeat(np.arange(n), np.diff(off))
+    d = arrays.positions[rows] - dc[idx]
+    cos = np.abs(np.einsum("ij,ij->i", arrays.normals[rows], dn[idx]))
+    keep = ((d * d).sum(axis=1) < (arrays.radii[rows] + dr[idx]) ** 2) & \
+        (cos < np.cos(np.radians(DISCONTINUITY_MIN_ANGLE))) & (np.einsum("ij,ij->i", d, dn[idx]) < 0.0)
+    rows, idx = rows[keep], idx[keep]
+    if len(rows) == 0:
+        return None
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=n), out=offsets[1:])
+    partners = np.empty((len(rows), 7))
+    partners[:, :3] = dc[idx]
+    partners[:, 3:6] = dn[idx]
+    partners[:, 6] = 1.0
+    tree = np.array([[2, 2, 0, 0], [2, 2, 1, 0], [0, -1, 0, 0]], dtype=np.int32)
+    return ClipTree(offsets, partners, tree, np.zeros(n, dtype=np.int32))
+
+
 @dataclass(frozen=True, eq=False)
 class ClipSurfels:
     """Discontinuity surfels that clip the splats around them (chapter 4, 4.3).
 
-    Geometry discontinuity surfels (kind 1) clip their neighbours to a clean edge; texture
-    discontinuity surfels (kind 2) clip only their colour. Neither is drawn. This is the clip
-    information the renderer passes to :meth:`SplatRenderer.render` beside :class:`ClipPlanes`;
-    chapter 4's clipped splatting will turn it into per-surfel clip planes. Until that is built
-    the splatter keeps it (:attr:`SplatRenderer.clip_surfels`) without changing the image.
+    Geometry discontinuity surfels (kind 1) clip their neighbours to a clean edge
+    (:func:`discontinuity_clip`); texture discontinuity surfels (kind 2) are meant to clip only
+    their colour (not built yet: they are kept in :attr:`SplatRenderer.clip_surfels`). Neither
+    is drawn. This is the clip information the renderer passes to :meth:`SplatRenderer.render`.
 
     Parameters
     ----------
@@ -403,13 +453,18 @@ class SplatRenderer:
             Per-surfel clip planes, or clipping partners with a CSG tree (chapter 4), one entry
             per surfel of the concatenated clouds.
         clip_surfels : ClipSurfels, optional
-            Discontinuity surfels of the view (4.3), kept in :attr:`clip_surfels` for clipped
-            splatting (chapter 4); they produce no colour.
+            Discontinuity surfels of the view (4.3), kept in :attr:`clip_surfels`; without
+            ``clip`` the geometry ones clip the surfels crossing them (:func:`discontinuity_clip`).
+            They produce no colour.
         """
         if clip_surfels is not None and not isinstance(clip_surfels, ClipSurfels):
             raise InputError(f"clip_surfels: expected ClipSurfels, got {type(clip_surfels).__name__}")
         self.clear(opaque)
         self.clip_surfels = clip_surfels
+        if clip is None and clip_surfels is not None and len(clip_surfels):
+            arrays = clouds if isinstance(clouds, SurfelArrays) else surfel_arrays(clouds)
+            clip = discontinuity_clip(arrays, clip_surfels)
+            clouds = arrays
         self._run(clouds, clip, visibility=True, sign=1)
         return self
 

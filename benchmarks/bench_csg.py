@@ -1,0 +1,122 @@
+"""CSG rendering speed (thesis Table 4.1) and clipping-partner search (4.2.1).
+
+For the shipped scenes of Figs. 4.9 (spikes), 4.10 (icosahedron) and 4.8 (blob minus two
+spheres) at 512x512 and two zoom levels: frames per second of a full CSG frame (partners,
+classes, one splatting pass with the clipped edge surfels), the number of edge surfels and of
+pixels covered by them (edge pixels), the split of the frame, and the same surfels splatted
+without clipping. Then a fit of the clipped-splatting time against edge pixels, and the partner
+search for 100k edge surfels by both methods.
+
+Run: python benchmarks/bench_csg.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from unmesh import scenes
+from unmesh.csg import Patch, find_partners, prepare
+from unmesh.csg.draw import front_facing
+from unmesh.csg.frame import EDGE, select
+from unmesh.csg.scene import load
+from unmesh.render import Camera, SplatRenderer, scene_points
+from unmesh.surfels import SurfelCloud
+
+
+def _best(fn, repeat):
+    best = np.inf
+    out = None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t)
+    return best, out
+
+
+def frame_split(model, cam, repeat):
+    """Times of the stages of one CSG frame."""
+    t_all, _ = _best(lambda: prepare(model), repeat)
+    flat_frame = prepare(model)
+    cloud = flat_frame.cloud
+    t_part, _ = _best(lambda: find_partners(cloud.positions, cloud.radii, flat_frame.leaf, cloud.normals), repeat)
+    arrays, clip = select(flat_frame.arrays, flat_frame.clip,
+                          front_facing(flat_frame.arrays.positions, flat_frame.arrays.normals, cam))
+    r = SplatRenderer(cam)
+    r.render(arrays, clip=clip)
+    t_clip, _ = _best(lambda: r.render(arrays, clip=clip), repeat)
+    t_plain, _ = _best(lambda: r.render(arrays), repeat)
+    t_resolve, _ = _best(lambda: r.gbuffer(), repeat)
+    edge = np.asarray(clip.offsets[1:] > clip.offsets[:-1])
+    ea, ec = select(arrays, clip, edge)
+    cov = SplatRenderer(cam).render(ea, clip=ec).gbuffer().coverage
+    return {"partners": t_part, "classes": t_all - t_part, "splat CSG": t_clip, "splat plain": t_plain,
+            "resolve": t_resolve, "edge surfels": int((flat_frame.classes == EDGE).sum()),
+            "surfels": len(cloud), "edge pixels": int(cov.sum()), "total": t_all + t_clip + t_resolve}
+
+
+def partners_100k(quick):
+    n = 20000 if quick else 100000
+    rng = np.random.default_rng(0)
+    # two patches crossing along a line: every surfel is an edge surfel
+    h = 2.0 / np.sqrt(n / 2)
+    a = Patch.halfspace((0, 0, 0), (0, 0, 1), 2.0, h).cloud
+    b = Patch.halfspace((0, 0, 0), (1, 0, 0), 2.0, h).cloud
+    pos = np.concatenate([a.positions, b.positions])
+    nrm = np.concatenate([a.normals, b.normals])
+    pos[:, 0] *= 0.02  # squeeze across the crossing line: all surfels near it
+    pos[:, 2] *= 0.02
+    pos += rng.normal(scale=1e-4, size=pos.shape)
+    radii = np.concatenate([a.radii, b.radii]) * 0.05
+    leaf = np.repeat([0, 1], [len(a), len(b)])
+    off, _ = find_partners(pos, radii, leaf, nrm, method="range")
+    edge = int((np.diff(off) > 0).sum())
+    out = {}
+    for method in ("clipbuffer", "range"):
+        find_partners(pos[:100], radii[:100], leaf[:100], nrm[:100], method=method)
+        t, (o, i) = _best(lambda m=method: find_partners(pos, radii, leaf, nrm, method=m), 3)
+        out[method] = (t, len(i))
+    return len(pos), edge, out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    size = 256 if args.quick else 512
+    repeat = 2 if args.quick else 5
+    rows = []
+    for fig, name in (("4.9", "spikes"), ("4.10", "icosahedron"), ("4.8", "blob_minus_spheres")):
+        scene = load(scenes.path(f"csg/{name}.toml"))
+        model = scene.model
+        fr = prepare(model)
+        cam = Camera.fit(scene_points(SurfelCloud(fr.arrays.positions, fr.arrays.normals, radii=fr.arrays.radii)),
+                         size, size, fov=35)
+        for zoom in (1.0, 2.5):
+            c = cam.zoomed(zoom)
+            frame_split(model, c, 1)  # compile
+            s = frame_split(model, c, repeat)
+            rows.append((fig, name, zoom, s))
+    print(f"CSG frames at {size}x{size} (best of {repeat}; shared 2-core machine, other jobs running)")
+    hdr = ("fig", "zoom", "surfels", "edge surf", "edge px", "fps", "partners", "classes", "splat CSG",
+           "splat plain", "resolve", "CSG/plain")
+    print("  ".join(f"{h:>10}" for h in hdr))
+    for fig, _name, zoom, s in rows:
+        vals = (fig, f"{zoom:g}x", s["surfels"], s["edge surfels"], s["edge pixels"], f"{1 / s['total']:.1f}",
+                *(f"{1000 * s[k]:.1f}ms" for k in ("partners", "classes", "splat CSG", "splat plain", "resolve")),
+                f"{s['splat CSG'] / s['splat plain']:.2f}")
+        print("  ".join(f"{v:>10}" for v in vals))
+    ep = np.array([s["edge pixels"] for *_, s in rows], float)
+    extra = np.array([s["splat CSG"] - s["splat plain"] for *_, s in rows])
+    slope, icpt = np.polyfit(ep, extra, 1)
+    print(f"clipped-splatting overhead ~ {1e6 * slope:.3f} us per edge pixel + {1000 * icpt:.2f} ms "
+          f"(fit over {len(rows)} frames)")
+    n, edge, out = partners_100k(args.quick)
+    for method, (t, m) in out.items():
+        print(f"partners, {method:>10}: {1000 * t:.1f} ms for {n} surfels ({edge} edge surfels), {m // 2} pairs")
+
+
+if __name__ == "__main__":
+    main()
