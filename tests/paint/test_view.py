@@ -15,7 +15,7 @@ def _fresh(s, cam):
     v = PaintView(s.surface)
     s.surface.dirty.clear()
     r = v.update(cam, force_full=True)
-    return r, v.result(brush=None)
+    return r, v.result()
 
 
 def test_differential_equals_full_where_depth_unchanged():
