@@ -92,14 +92,14 @@ def test_sharp_edges_finer_than_the_sampling(plane_cloud):
     # a pencil line much narrower than the original spacing (0.04): colour across it falls
     # from painted to bare within a few paint-buffer pixels
     s = Session(plane_cloud, PaintOptions(haptics=False))
-    pencil = Brush("pencil", 0.008)
-    s.stroke([Sample(0.05 * i, (-0.2 + 0.02 * i, 0.0, 0.0), 1.0) for i in range(21)], brush=pencil,
+    pencil = Brush("pencil", 0.01)
+    s.stroke([Sample(0.05 * i, (-0.06 + 0.04 * i, 0.0, 0.0), 1.0) for i in range(4)], brush=pencil,
              paint=Paint("oil", (0.0, 0.0, 0.0), density=20.0))
     s.advance(200.0)  # dry: opaque
     rows = s.surface.visible_rows()
     p = s.surface.pos[rows]
     c = s.surface.colors(rows)
-    mid = np.abs(p[:, 0]) < 0.1
+    mid = np.abs(p[:, 0]) < 0.04
     dark = mid & (c.sum(axis=1) < 0.5)
     assert dark.sum() > 20
     width = p[dark, 2].max() - p[dark, 2].min()

@@ -51,7 +51,7 @@ BRUSH_TYPES: dict[str, float] = {"round": 0.35, "flat": 0.5, "pencil": 0.9}
 PAINT_TYPES: dict[str, dict[str, Any]] = {
     "oil": {"density": 2.0, "drying": 0.02, "transfer": 1.5, "back_transfer": 0.5, "diffusion": 0.0,
             "thickness": 0.002, "viscous": True, "reflectivity": 0.25, "shininess": 40.0, "metallic": 0.0},
-    "watercolor": {"density": 0.5, "drying": 0.15, "transfer": 2.0, "back_transfer": 1.0, "diffusion": 2e-4,
+    "watercolor": {"density": 0.5, "drying": 0.15, "transfer": 2.0, "back_transfer": 1.0, "diffusion": 5e-5,
                    "thickness": 0.001, "viscous": False, "reflectivity": 0.05, "shininess": 5.0, "metallic": 0.0},
     "metallic": {"density": 4.0, "drying": 0.05, "transfer": 1.5, "back_transfer": 0.5, "diffusion": 0.0,
                  "thickness": 0.002, "viscous": False, "reflectivity": 0.8, "shininess": 80.0, "metallic": 1.0},
@@ -287,12 +287,9 @@ def check_samples(samples: Any, where: str = "") -> list[Sample]:
     return out
 
 
-def stroke_dict(brush: Brush, paint: Paint, samples: list[Sample], advance: list[float] | None = None) -> dict[str, Any]:
+def stroke_dict(brush: Brush, paint: Paint, samples: list[Sample]) -> dict[str, Any]:
     """The stroke-file entry of one stroke."""
-    d: dict[str, Any] = {"brush": brush.to_dict(), "paint": paint.to_dict(), "samples": [s.to_dict() for s in samples]}
-    if advance:
-        d["advance"] = [float(a) for a in advance]
-    return d
+    return {"brush": brush.to_dict(), "paint": paint.to_dict(), "samples": [s.to_dict() for s in samples]}
 
 
 def parse_strokes(data: Any, source: str = "strokes") -> list[tuple[Brush, Paint, list[Sample], list[float]]]:
@@ -330,7 +327,7 @@ def parse_strokes(data: Any, source: str = "strokes") -> list[tuple[Brush, Paint
         adv = st.get("advance", [])
         if not isinstance(adv, list):
             raise InputError(f"{where}advance: expected a list of seconds, got {adv!r}")
-        advance = [_finite(a, f"{where}advance[{i}]", 0.0) for i, a in enumerate(adv)]
+        advance = [a if isinstance(a, dict) else _finite(a, f"{where}advance[{i}]", 0.0) for i, a in enumerate(adv)]
         out.append((brush, paint, samples, advance))
     return out
 

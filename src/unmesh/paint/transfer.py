@@ -47,12 +47,13 @@ CHILD_RADIUS = 1.5
 MAX_BUFFER = 192
 #: Impasto: relief height per unit paint thickness, hair-imprint amplitude (of the thickness)
 #: and wavelength (in brush spacings); beaten-gold patch size (pixels) and tilt (degrees).
-IMPASTO = 1.0
+IMPASTO = 0.3
 HAIR_AMPLITUDE = 0.6
 HAIR_WAVELENGTH = 2.0
 BEATEN_PATCH = 4
 BEATEN_TILT = 14.0
 
+_PROPS = ("rho", "kappa", "diff", "refl", "shin", "metal")
 _SPLAT = SplatOptions(filter_radius=0.0, precision="double", depth_tolerance=0.5)
 #: the brush's lower surface: the low-pass filter closes gaps between its rings of surfels
 _SPLAT_BRUSH = SplatOptions(filter_radius=1.0, precision="double", depth_tolerance=0.5)
@@ -160,6 +161,8 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     if len(rows) == 0:
         return empty
     ou = np.stack([rel[ok] @ t1, rel[ok] @ t2], axis=1)
+    # pixels about one brush surfel, but never coarser than the surface already is there
+    h = min(h, 0.7 * float(np.median(surface.rad[rows])))
     # the buffer: centred on the brush footprint, margin of 3 object radii
     lo = bu.min(axis=0) - 3.0 * rmax
     hi = bu.max(axis=0) + 3.0 * rmax
@@ -237,6 +240,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     vw = surface.vw[rq] * share
     vd = surface.vd[rq] * share
     dc = surface.dry[rq].copy()
+    props = {f: surface.__getattr__(f)[rq].copy() for f in _PROPS}
     orphans = rep_local[npix[rep_local] == 0]
     if len(orphans):
         qpos = np.full(W * H, -1, np.int64)
@@ -247,6 +251,10 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
                 is_rep[r] = False
                 continue
             row = rows[r]
+            a, b = vw[k] + vd[k], surface.vw[row] + surface.vd[row]
+            if a + b > 0:
+                for f in _PROPS:
+                    props[f][k] = (a * props[f][k] + b * surface.__getattr__(f)[row]) / (a + b)
             a, b = vw[k], surface.vw[row]
             cw[k] = (a * cw[k] + b * surface.wet[row]) / (a + b) if a + b > 0 else cw[k]
             vw[k] = a + b
@@ -276,7 +284,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     brush.vw[touched] = tot[touched]
     # new paint attributes blend by the fraction of brush paint in the pixel
     def blend(field: str, value: float) -> np.ndarray:
-        out = surface.__getattr__(field)[rq].copy()
+        out = props[field]
         out[P] = (1.0 - fb) * out[P] + fb * value
         return out
     rho = blend("rho", paint.density / paint.thickness)
