@@ -12,7 +12,7 @@ const paletteCtx = paletteCanvas.getContext("2d");
 const gauge = new Gauge($("gauge"));
 
 const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1], drying: 0.05, pressure: 0.6 };
-const stats = { frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], fps: 0, errors: [], replies: [] };
+const stats = { forces: 0, frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], fps: 0, errors: [], replies: [] };
 let server = { px_per_unit: 100, palette_px_per_unit: 173, presets: {}, width: 0, height: 0 };
 let stroke = null;          // {target, resampler, toImage, canvas}
 let cursor = null;          // {x, y, p, tilt, over}
@@ -40,7 +40,7 @@ function onMessage(msg) {
       $("outname").textContent = msg.out;
       $("strokes").textContent = msg.strokes;
       break;
-    case "force": gauge.set(msg.force); break;
+    case "force": stats.forces += 1; gauge.set(msg.force); break;
     case "color": setColor(msg.color); say(`picked ${hex(msg.color)} from the palette`); break;
     case "error": stats.errors.push(msg.message); say(msg.message, true); break;
     case "saved": say(`saved ${msg.name}`); break;
