@@ -245,13 +245,17 @@ class BrushState:
             f, _ = self._forces(self.x, h)
             xn = self.x + DAMPING * (self.x - self.x_prev) + f
             inside, d, n = collide(tree, positions, normals, xn)
+            prev = self.x.copy()
             if inside.any():
                 xn[inside] += d[inside, None] * n[inside]
                 # friction (5.7) on the tangential motion of the colliding masses
                 v = xn[inside] - self.x[inside]
                 vt = v - np.einsum("mi,mi->m", v, n[inside])[:, None] * n[inside]
                 xn[inside] -= eta * vt
-            self.x_prev = self.x
+                # inelastic contact: the projection leaves no normal velocity (Verlet keeps
+                # velocity as x - x_prev, so the projected jump must not carry on)
+                prev[inside] = xn[inside] - (1.0 - eta) * vt
+            self.x_prev = prev
             self.x = xn
             self.colliding = inside
             self.contact_normals = n

@@ -30,7 +30,7 @@ from unmesh.paint.haptic import HapticLoop, haptic_force
 from unmesh.paint.strokes import Brush, Paint, Sample, check_samples, parse_strokes, stroke_dict
 from unmesh.paint.surface import FIELDS, PaintSurface
 from unmesh.paint.transfer import paint_event
-from unmesh.paint.view import PaintView
+from unmesh.paint.view import PaintView, unproject
 from unmesh.render import Camera
 from unmesh.render.shading import RenderResult
 from unmesh.surfels import SurfelCloud
@@ -308,6 +308,7 @@ class Session:
         if not isinstance(camera, Camera):
             raise InputError(f"camera: expected a Camera, got {type(camera).__name__}")
         view = self._view_for(camera)
+        view.set_style(shading, background)
         view.update(camera, force_full=full)
         self.view_axes = (np.asarray(camera.right, float), np.asarray(camera.true_up, float))
         b = self._last_brush if brush else None
@@ -316,7 +317,7 @@ class Session:
             pos, nrm = b.surfels()
             col = np.where(b.vw[:, None] > 0, b.wet, _BRISTLE)
             extra = (pos, nrm, col)
-        return view.result(shading, background, extra)
+        return view.result(extra)
 
     @property
     def last_update(self) -> str:
@@ -334,9 +335,7 @@ class Session:
         if r.count[row, col] == 0:
             return None
         z = r.sum_depth[row, col] / r.sum_weight[row, col]
-        o, d = camera.rays()
-        t = z / float(np.dot(d[row, col], camera.forward))
-        return o[row, col] + t * d[row, col]
+        return unproject(camera, np.array([row]), np.array([col]), np.array([z]))[0]
 
     def force(self) -> np.ndarray:
         """Latest low-passed haptic force (5.4.2), (3,)."""

@@ -40,8 +40,9 @@ from unmesh.surfels import tangent_frame
 
 __all__ = ["TransferResult", "lsq_plane", "paint_event", "plane_frame"]
 
-#: Child radius in pixels (>= sqrt(2)/2 covers the grid; 1 overlaps like the originals).
-CHILD_RADIUS = 1.0
+#: Child radius in pixels (>= sqrt(2)/2 covers the grid; 1.5 also covers the staircase between
+#: the pixel cells and the unreplaced neighbours).
+CHILD_RADIUS = 1.5
 #: Largest paint buffer edge in pixels.
 MAX_BUFFER = 192
 #: Impasto: relief height per unit paint thickness, hair-imprint amplitude (of the thickness)
@@ -53,6 +54,8 @@ BEATEN_PATCH = 4
 BEATEN_TILT = 14.0
 
 _SPLAT = SplatOptions(filter_radius=0.0, precision="double", depth_tolerance=0.5)
+#: the brush's lower surface: the low-pass filter closes gaps between its rings of surfels
+_SPLAT_BRUSH = SplatOptions(filter_radius=1.0, precision="double", depth_tolerance=0.5)
 
 
 @dataclass(frozen=True)
@@ -91,11 +94,12 @@ def _hash01(a: np.ndarray, b: np.ndarray, salt: int) -> np.ndarray:
     return ((h ^ (h >> 16)) & 0xFFFFFF).astype(np.float64) / float(0x1000000)
 
 
-def _height_map(cam: Camera, pos: np.ndarray, nrm: np.ndarray, rad: np.ndarray, Z: float) -> tuple[np.ndarray, np.ndarray]:
+def _height_map(cam: Camera, pos: np.ndarray, nrm: np.ndarray, rad: np.ndarray, Z: float,
+                options: SplatOptions = _SPLAT) -> tuple[np.ndarray, np.ndarray]:
     """Heights along the camera's backward axis (``Z - depth``) and coverage, by splatting."""
     arr = SurfelArrays(np.ascontiguousarray(pos), np.ascontiguousarray(nrm), np.ascontiguousarray(rad), None,
                        np.zeros((len(pos), 3)))
-    g = SplatRenderer(cam, _SPLAT).render(arr).gbuffer()
+    g = SplatRenderer(cam, options).render(arr).gbuffer()
     return np.where(g.coverage, Z - g.depth, -np.inf), g.coverage
 
 
@@ -169,7 +173,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     above = Camera(centre + N * Z, centre, up=t2, width=W, height=H, ortho=H * h)
     below = Camera(centre - N * Z, centre, up=t2, width=W, height=H, ortho=H * h)
     ho, cov_o = _height_map(above, surface.pos[rows], surface.nrm[rows], surface.rad[rows], Z)
-    hb, cov_b = _height_map(below, bpos[sel], bnrm[sel], np.full(len(sel), 0.75 * brush.sk.spacing), Z)
+    hb, cov_b = _height_map(below, bpos[sel], bnrm[sel], np.full(len(sel), brush.sk.spacing), Z, _SPLAT_BRUSH)
     hb = -hb  # heights along +N of the brush's lowest surface
     if np.dot(below.right, above.right) < 0:
         hb, cov_b = hb[:, ::-1], cov_b[:, ::-1]
@@ -184,11 +188,22 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     U, V = np.meshgrid(cu, cv)
     pix = np.stack([U.ravel(), V.ravel()], axis=1)
     # ownership: nearest object surfel in the plane, within its radius
-    dist, own = KDTree(ou).knn(pix, 1)
-    dist, own = dist[:, 0], own[:, 0]
-    covered = cov_o.ravel() & (dist <= surface.rad[rows][own] * 1.05)
+    # ownership: among the nearest object surfels, the one covering the pixel best (smallest
+    # distance / radius), so cells of small children and large originals tile what they cover
+    kk = min(8, len(rows))
+    dist, cand = KDTree(ou).knn(pix, kk)
+    ratio = dist / surface.rad[rows][cand]
+    best = np.argmin(ratio, axis=1)
+    own = cand[np.arange(len(pix)), best]
+    covered = ratio[np.arange(len(pix)), best] <= 1.0
+    # the object's height: splatted, or (where the clipped kernels leave a pixel centre
+    # uncovered, e.g. at a corner of touching splats) the owner's plane
+    on = surface.nrm[rows][own]
+    foot = o + pix[:, :1] * t1 + pix[:, 1:] * t2
+    ho_plane = np.einsum("ij,ij->i", on, surface.pos[rows][own] - foot) / np.maximum(on @ N, 0.2)
+    ho = np.where(cov_o.ravel(), ho.ravel(), ho_plane)
     # penetration and brush ownership
-    depth = (ho - hb).ravel()
+    depth = ho - hb.ravel()
     pen = covered & cov_b.ravel() & (depth > 0)
     bdist, bown = KDTree(bu).knn(pix, 1)
     bdist, bown = bdist[:, 0], bown[:, 0]
@@ -198,7 +213,14 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer
     inner = (ou[:, 0] - 1.5 * surface.rad[rows] > lo[0]) & (ou[:, 0] + 1.5 * surface.rad[rows] < lo[0] + W * h)
     inner &= (ou[:, 1] - 1.5 * surface.rad[rows] > lo[1]) & (ou[:, 1] + 1.5 * surface.rad[rows] < lo[1] + H * h)
-    rep_local = np.unique(own[pen])
+    # ... and surfels whose centre lies on a penetrated pixel but own no pixel (denser than the
+    # buffer): their paint goes to the pixel under their centre
+    ci = np.floor((ou[:, 0] - lo[0]) / h).astype(np.int64)
+    cj = np.floor((lo[1] + H * h - ou[:, 1]) / h).astype(np.int64)
+    inside_buf = (ci >= 0) & (ci < W) & (cj >= 0) & (cj < H)
+    cpix = np.where(inside_buf, cj * W + ci, 0)
+    on_pen = inside_buf & pen[cpix]
+    rep_local = np.unique(np.concatenate([own[pen], np.flatnonzero(on_pen)]))
     rep_local = rep_local[inner[rep_local]]
     if len(rep_local) == 0:
         return empty
@@ -213,6 +235,25 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # surface pixel state (exact shares of the owners)
     cw = surface.wet[rq].copy()
     vw = surface.vw[rq] * share
+    vd = surface.vd[rq] * share
+    dc = surface.dry[rq].copy()
+    orphans = rep_local[npix[rep_local] == 0]
+    if len(orphans):
+        qpos = np.full(W * H, -1, np.int64)
+        qpos[Q] = np.arange(len(Q))
+        for r in orphans.tolist():
+            k = qpos[cpix[r]]
+            if k < 0:  # its pixel is not part of the resampled region: keep it
+                is_rep[r] = False
+                continue
+            row = rows[r]
+            a, b = vw[k], surface.vw[row]
+            cw[k] = (a * cw[k] + b * surface.wet[row]) / (a + b) if a + b > 0 else cw[k]
+            vw[k] = a + b
+            a, b = vd[k], surface.vd[row]
+            dc[k] = (a * dc[k] + b * surface.dry[row]) / (a + b) if a + b > 0 else dc[k]
+            vd[k] = a + b
+        rep_local = np.flatnonzero(is_rep)
     # brush pixel state on penetrated pixels
     bq = bown[Q][P]
     bsel = sel[bq]
@@ -257,7 +298,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     lift = owner_lift * 1.0
     nrm = onr.copy()
     if paint.relief == "hair" and P.any():
-        thick = (vw[P] + surface.vd[rq][P] * share[P]) / area[P]
+        thick = (vw[P] + vd[P]) / area[P]
         dirn = direction - np.dot(direction, N) * N
         ln = np.linalg.norm(dirn)
         across = np.cross(N, dirn / ln) if ln > 1e-12 else t1
@@ -276,8 +317,8 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     rad = CHILD_RADIUS * h / cosn
     new = {
         "pos": cpos, "nrm": nrm, "rad": rad, "father": fat, "active": np.ones(len(Q), bool),
-        "alive": np.ones(len(Q), bool), "base": surface.base[rq], "wet": cw, "dry": surface.dry[rq],
-        "vw": vw, "vd": surface.vd[rq] * share, "area": area, "rho": rho, "kappa": kap, "diff": dif,
+        "alive": np.ones(len(Q), bool), "base": surface.base[rq], "wet": cw, "dry": dc,
+        "vw": vw, "vd": vd, "area": area, "rho": rho, "kappa": kap, "diff": dif,
         "refl": refl, "shin": shin, "metal": met, "lift": lift, "updates": surface.updates[rq] + 1,
     }
     replaced = rows[rep_local]

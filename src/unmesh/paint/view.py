@@ -26,12 +26,16 @@ import numpy as np
 
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
-from unmesh.render.shading import RenderResult, shade
+from unmesh.render._kernels import shade_pixels
+from unmesh.render._splat_kernels import splat_resolve
+from unmesh.render.shading import GBuffer, RenderResult, as_shading, background_color
 from unmesh.render.splat import SurfelArrays
+from unmesh.spatial import KDTree
+from unmesh.surfels import tangent_frame
 
 __all__ = ["FULL_FRACTION", "MAX_PARTIAL", "PaintView", "environment", "same_camera"]
 
-FULL_FRACTION = 0.25
+FULL_FRACTION = 0.4
 MAX_PARTIAL = 64
 _SKY = np.array([0.75, 0.85, 1.0])
 _HORIZON = np.array([1.0, 0.97, 0.9])
@@ -106,6 +110,13 @@ class PaintView:
         self._partial = np.zeros(0, np.int64)
         self.last_update = "none"
         self.last_count = 0
+        self.max_partial = MAX_PARTIAL
+        self._mark = 0
+        self._g: GBuffer | None = None
+        self._color = np.zeros((0, 0, 3))
+        self.shading: Any = "phong"
+        self.background: Any = (1.0, 1.0, 1.0)
+        self._style = (repr(self.shading), repr(self.background))
 
     def _grow(self, n: int) -> None:
         if len(self._on) >= n:
@@ -144,7 +155,11 @@ class PaintView:
                 or len(dirty) > FULL_FRACTION * nvis)
         if not full and len(dirty):
             dirty = np.sort(dirty)
-            full = bool(self._partial[dirty].max() >= MAX_PARTIAL)
+            # the per-surfel update counter: rows updated in place, and resampled rows (whose
+            # counter is inherited from the surfels they replaced) since the last full update
+            cur = dirty[dirty < s.n]  # rows past s.n were removed by an undo
+            full = bool(self._partial[dirty].max() >= self.max_partial
+                        or (len(cur) and s.updates[cur].max() >= self._mark + self.max_partial))
         if full:
             self.camera = camera
             self.renderer = self.renderer if self.renderer is not None and same_camera(self.renderer.camera, camera) \
@@ -154,70 +169,205 @@ class PaintView:
             self.renderer.render(arr)
             self._on[:] = False
             self._partial[:] = 0
+            self._mark = int(s.updates[rows].max()) if len(rows) else 0
             self._store(rows, arr)
             self.last_update, self.last_count = "full", len(rows)
+            self._g = None
+            self._resolve(None)
             return self.renderer
-        dirty = dirty[dirty < len(self._on)]
         old = dirty[self._on[dirty]]
+        touched = []
         if len(old):
-            self.renderer.unsplat(self._arrays(old, True))
+            a_old = self._arrays(old, True)
+            touched.append(a_old)
+            self.renderer.unsplat(a_old)
             self._on[old] = False
-        vis = s.active[dirty] & s.alive[dirty] if len(dirty) else np.zeros(0, bool)
-        new = dirty[vis]
+        cur = dirty[dirty < s.n]
+        new = cur[s.active[cur] & s.alive[cur]]
         if len(new):
             arr = self._arrays(new, False)
+            touched.append(arr)
             self.renderer.splat(arr)
             self._store(new, arr)
+        win = self._window(touched) if touched else None
+        if win is not None:
+            self._resolve(win)
         self._partial[dirty] += 1
         self.last_update, self.last_count = "differential", int(len(old) + len(new))
         return self.renderer
 
-    def result(self, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0),
-               brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RenderResult:
-        """The shaded image; ``brush`` = (positions, normals, colours) is drawn with its shadow."""
-        assert self.renderer is not None and self.camera is not None
-        g = self.renderer.gbuffer()
+    def _window(self, arrays: list[SurfelArrays]) -> tuple[int, int, int, int] | None:
+        """Pixel rectangle (r0, r1, c0, c1) covering the splats of ``arrays`` (None: nothing)."""
+        cam = self.camera
+        assert cam is not None
+        pos = np.concatenate([a.positions for a in arrays if len(a)]) if any(len(a) for a in arrays) else None
+        if pos is None:
+            return None
+        rad = np.concatenate([a.radii for a in arrays if len(a)])
+        row, col, z = cam.project(pos)
+        ok = np.isfinite(row) & np.isfinite(col) & (z > 0)
+        if not ok.any():
+            return None
+        f = cam.pixels_per_unit
+        rpx = rad[ok] * (f if cam.is_ortho else f / z[ok]) + self.options.filter_radius + 2.0
+        h, w = cam.shape
+        r0 = int(max(0, np.floor((row[ok] - rpx).min())))
+        r1 = int(min(h, np.ceil((row[ok] + rpx).max()) + 1))
+        c0 = int(max(0, np.floor((col[ok] - rpx).min())))
+        c1 = int(min(w, np.ceil((col[ok] + rpx).max()) + 1))
+        if r0 >= r1 or c0 >= c1:
+            return None
+        return r0, r1, c0, c1
+
+    def _resolve(self, win: tuple[int, int, int, int] | None) -> None:
+        """Normalise (and shade) the whole image or only the window ``win`` of it."""
+        r = self.renderer
+        cam = self.camera
+        assert r is not None and cam is not None
+        h, w = cam.shape
+        if win is None or self._g is None:
+            self._g = GBuffer.empty(h, w)
+            win = (0, h, 0, w)
+            self._color = np.empty((h, w, 3))
+        r0, r1, c0, c1 = win
+        g = self._g
+        sl = (slice(r0, r1), slice(c0, c1))
+        g.albedo[sl] = 0.0
+        g.normal[sl] = 0.0
+        g.depth[sl] = np.inf
+        g.coverage[sl] = False
+        g.weight[sl] = 0.0
+        splat_resolve(r.sum_weight[sl], r.sum_color[sl], r.sum_normal[sl], r.sum_depth[sl], r.count[sl],
+                      cam.rotation, g.albedo[sl], g.normal[sl], g.depth[sl], g.coverage[sl], g.weight[sl])
+        self._shade(win)
+
+    def _shade(self, win: tuple[int, int, int, int]) -> None:
+        cam = self.camera
+        r0, r1, c0, c1 = win
+        sl = (slice(r0, r1), slice(c0, c1))
+        g = self._g
+        sh = as_shading(self.shading)
+        bg = background_color(self.background)
+        if sh.model == "none":
+            self._color[sl] = np.where(g.coverage[sl][..., None], np.clip(g.albedo[sl], 0.0, 1.0), bg)
+            return
+        dirs = np.array([light.world_direction(cam) for light in sh.lights]).reshape(-1, 3)
+        cols = np.array([light.color * light.intensity for light in sh.lights]).reshape(-1, 3)
+        f, cx, cy, ortho, _ = cam.kernel_params()
+        out = np.empty((r1 - r0, c1 - c0, 3))
+        shade_pixels(np.ascontiguousarray(g.albedo[sl]), np.ascontiguousarray(g.normal[sl]),
+                     np.ascontiguousarray(g.depth[sl]), np.ascontiguousarray(g.coverage[sl]), f, cx - c0, cy - r0,
+                     ortho, cam.rotation, np.ascontiguousarray(dirs), np.ascontiguousarray(cols), sh.ambient,
+                     sh.specular, sh.shininess, bg, out)
+        self._color[sl] = out
+
+    def set_style(self, shading: Any, background: Any) -> None:
+        """Shading and background of the image; a change re-shades the whole image."""
+        key = (repr(shading), repr(background))
+        if key != self._style:
+            self._style = key
+            self.shading, self.background = shading, background
+            if self._g is not None:
+                h, w = self.camera.shape
+                self._shade((0, h, 0, w))
+
+    def result(self, brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RenderResult:
+        """The shaded image (a copy); ``brush`` = (positions, normals, colours) is drawn with its shadow."""
+        assert self._g is not None and self.camera is not None
+        g = self._g
+        color = self._color.copy()
+        depth, normal, cov = g.depth.copy(), g.normal.copy(), g.coverage.copy()
+        albedo, weight = g.albedo.copy(), g.weight.copy()
         if brush is not None and len(brush[0]):
-            _draw_brush(g, self.camera, brush, self.options)
-        return RenderResult.from_gbuffer(g, self.camera, shade(g, self.camera, shading, background))
+            _draw_brush(GBuffer(albedo, normal, depth, cov, weight), color, self.camera, brush, self)
+        return RenderResult(color=color, depth=np.where(cov, depth, np.inf), normal=normal, coverage=cov,
+                            weight=weight, albedo=albedo, camera=self.camera)
 
 
-def _draw_brush(g: Any, camera: Camera, brush: tuple[np.ndarray, np.ndarray, np.ndarray], options: SplatOptions) -> None:
-    """Brush surfels over the object G-buffer (nearest wins) plus the shadow of the brush on the
-    object from a light straight above the brush (a shadow map along the brush's mean normal)."""
+def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """World points (N,3) at camera depth ``z`` seen through pixel centres ``(rows, cols)``."""
+    f, cx, cy, ortho, _ = cam.kernel_params()
+    X = (np.asarray(cols, float) + 0.5 - cx) / f
+    Y = -(np.asarray(rows, float) + 0.5 - cy) / f
+    if not ortho:
+        X, Y = X * z, Y * z
+    pc = np.stack([X, Y, np.asarray(z, float)], axis=-1)
+    return cam.eye + pc @ cam.rotation
+
+
+def _draw_brush(g: GBuffer, color: np.ndarray, camera: Camera, brush: tuple[np.ndarray, np.ndarray, np.ndarray],
+                view: PaintView) -> None:
+    """Brush surfels over the object (nearest wins) and the brush's shadow on the object, from a
+    light straight above the brush (a shadow map along the brush's mean normal), in the window
+    around the brush only; that window is re-shaded."""
     pos, nrm, col = brush
-    rad = np.full(len(pos), 0.0)
-    if len(pos) > 1:
-        ext = np.linalg.norm(pos.max(axis=0) - pos.min(axis=0))
-        rad[:] = max(ext / np.sqrt(len(pos)) * 1.2, 1e-6)
-    bg = SplatRenderer(camera, options).render(SurfelArrays(pos, nrm, rad, None, col)).gbuffer()
-    # shadow: object pixels whose point is below a brush point when seen from above the brush
-    cov = g.coverage
+    n = len(pos)
+    ext = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
+    rad = max(ext / np.sqrt(n) * 1.5, 1e-9)
+    row, cl, z = camera.project(pos)
+    ok = np.isfinite(row) & np.isfinite(cl) & (z > 0)
+    if not ok.any():
+        return
+    h, w = camera.shape
+    f = camera.pixels_per_unit
+    rpx = rad * (f if camera.is_ortho else f / z[ok])
+    span_r = row[ok].max() - row[ok].min()
+    span_c = cl[ok].max() - cl[ok].min()
+    pad = 0.5 * max(span_r, span_c) + rpx.max() + 2
+    r0, r1 = int(max(0, row[ok].min() - pad)), int(min(h, row[ok].max() + pad + 1))
+    c0, c1 = int(max(0, cl[ok].min() - pad)), int(min(w, cl[ok].max() + pad + 1))
+    if r0 >= r1 or c0 >= c1:
+        return
+    sl = (slice(r0, r1), slice(c0, c1))
+    cov = g.coverage[sl]
+    # shadow
     if cov.any():
-        o, d = camera.rays()
-        fwd = camera.forward
-        t = g.depth / np.maximum(np.einsum("hwi,i->hw", d, fwd), 1e-12)
-        world = o + d * np.where(cov, t, 0.0)[..., None]
+        rr, cc = np.nonzero(cov)
+        world = unproject(camera, rr + r0, cc + c0, g.depth[sl][cov])
         up = nrm.mean(axis=0)
         up = up / max(np.linalg.norm(up), 1e-12)
-        centre = pos.mean(axis=0)
-        from unmesh.surfels import tangent_frame
         t1, t2 = tangent_frame(up[None])
+        centre = pos.mean(axis=0)
         rel_b = pos - centre
         bu = np.stack([rel_b @ t1[0], rel_b @ t2[0]], axis=1)
         bh = rel_b @ up
-        rel = world[cov] - centre
+        rel = world - centre
         pu = np.stack([rel @ t1[0], rel @ t2[0]], axis=1)
-        ph = rel @ up
-        from unmesh.spatial import KDTree
         dist, idx = KDTree(bu).knn(pu, 1)
-        shadow = (dist[:, 0] < 2.0 * rad.max()) & (bh[idx[:, 0]] > ph + 1e-9)
-        alb = g.albedo[cov]
-        alb[shadow] *= 0.55
-        g.albedo[cov] = alb
-    front = bg.coverage & (bg.depth < g.depth)
-    for name in ("albedo", "normal", "depth", "weight"):
-        a = getattr(g, name)
-        b = getattr(bg, name)
-        a[front] = b[front]
-    g.coverage[front] = True
+        shadow = (dist[:, 0] < 2.0 * rad) & (bh[idx[:, 0]] > rel @ up + 1e-9)
+        alb = g.albedo[sl]
+        sub = alb[cov]
+        sub[shadow] *= 0.55
+        alb[cov] = sub
+    # brush surfels as small discs with a z-test
+    R = int(np.ceil(rpx.max()))
+    oy, ox = np.mgrid[-R:R + 1, -R:R + 1]
+    oy, ox = oy.ravel(), ox.ravel()
+    pr = np.floor(row[ok])[:, None].astype(np.int64) + oy[None]
+    pc = np.floor(cl[ok])[:, None].astype(np.int64) + ox[None]
+    inside = (oy[None] ** 2 + ox[None] ** 2 <= (rpx[:, None] + 0.5) ** 2) & (pr >= r0) & (pr < r1) & (pc >= c0) & (pc < c1)
+    src = np.broadcast_to(np.flatnonzero(ok)[:, None], pr.shape)[inside]
+    flat = (pr[inside] - r0) * (c1 - c0) + (pc[inside] - c0)
+    zz = z[src]
+    order = np.lexsort((zz, flat))  # nearest fragment first per pixel
+    flat, src, zz = flat[order], src[order], zz[order]
+    first = np.ones(len(flat), bool)
+    first[1:] = flat[1:] != flat[:-1]
+    flat, src, zz = flat[first], src[first], zz[first]
+    dsub = g.depth[sl].reshape(-1)
+    front = zz < dsub[flat]
+    flat, src, zz = flat[front], src[front], zz[front]
+    for name, vals in (("albedo", col[src]), ("normal", nrm[src]), ("depth", zz), ("weight", np.ones(len(zz)))):
+        a = getattr(g, name)[sl]
+        a.reshape(-1, *a.shape[2:])[flat] = vals
+        getattr(g, name)[sl] = a
+    cv = g.coverage[sl]
+    cv.reshape(-1)[flat] = True
+    g.coverage[sl] = cv
+    # re-shade the window
+    saved_g, saved_c = view._g, view._color
+    view._g, view._color = g, color
+    try:
+        view._shade((r0, r1, c0, c1))
+    finally:
+        view._g, view._color = saved_g, saved_c

@@ -1,0 +1,78 @@
+"""Rendering (5.7): differential updates equal full re-renders where the depth is unchanged."""
+
+import numpy as np
+
+from tests.paint.conftest import RED, ROUND, line
+from unmesh.paint import Brush, Paint, PaintOptions, Sample, Session
+from unmesh.paint.view import PaintView
+from unmesh.render import Camera
+from unmesh.shapes import by_name
+
+CAM = Camera((0.3, 1.2, 0.8), (0, 0, 0), width=160, height=120, fov=40)
+
+
+def _fresh(s, cam):
+    v = PaintView(s.surface)
+    s.surface.dirty.clear()
+    r = v.update(cam, force_full=True)
+    return r, v.result()
+
+
+def test_differential_equals_full_where_depth_unchanged():
+    s = Session(by_name("plane", size=1.0).surfels(0.02), PaintOptions(haptics=False))
+    s.render(CAM)
+    assert s.last_update == "full"
+    s.stroke(line(n=4), brush=ROUND, paint=Paint("oil", (0.9, 0.1, 0.1), relief="none"))
+    s.stroke(line(n=2, z=0.1), brush=Brush("flat", 0.03), paint=Paint("watercolor", (0.1, 0.2, 0.9)))
+    s.advance(0.5)
+    diff = s.render(CAM, brush=False)
+    assert s.last_update == "differential"
+    zd = s._view.renderer.zvis.copy()
+    full_r, full = _fresh(s, CAM)
+    same = (zd == full_r.zvis) & full.coverage
+    assert same.sum() > 0.8 * full.coverage.sum()
+    np.testing.assert_allclose(diff.albedo[same], full.albedo[same], atol=1e-6)
+    np.testing.assert_allclose(diff.color[same], full.color[same], atol=1e-6)
+    # undo is a differential update too
+    s.undo()
+    diff = s.render(CAM, brush=False)
+    full_r, full = _fresh(s, CAM)
+    same = (s._view.renderer.zvis == full_r.zvis) & full.coverage
+    np.testing.assert_allclose(diff.albedo[same], full.albedo[same], atol=1e-6)
+
+
+def test_full_update_when_view_moves_or_lists_grow(session):
+    s = session
+    s.render(CAM)
+    s.render(CAM)
+    assert s.last_update == "differential"
+    s.render(CAM.orbit(10))
+    assert s.last_update == "full"
+    # repainting the same region too often triggers a full update (the update counter)
+    s._view.max_partial = 4
+    kinds = []
+    for k in range(8):
+        s.stroke([Sample(0.0, (0.0, 0.0, 0.0), 0.3)], brush=Brush("pencil", 0.01), paint=RED)
+        s.render(CAM.orbit(10), brush=False)
+        kinds.append(s.last_update)
+        if k > 3 and kinds[-1] == "full":
+            break
+    assert "full" in kinds[1:]
+
+
+def test_pick_hits_the_surface(session):
+    cam = Camera((0, 2.0, 0), (0, 0, 0), up=(0, 0, -1), width=100, height=100, ortho=1.0)
+    p = session.pick(cam, 50.5, 50.5)
+    np.testing.assert_allclose(p, [0.005, 0.0, 0.005], atol=1e-9)
+    assert session.pick(cam, -3, 5) is None
+    far = Camera((0, 2.0, 0), (0, 0, 0), up=(0, 0, -1), width=100, height=100, ortho=4.0)
+    assert session.pick(far, 2, 2) is None  # background
+
+
+def test_brush_is_drawn(session):
+    sid = session.begin_stroke(ROUND, RED)
+    session.add_samples(sid, line(n=3))
+    with_brush = session.render(CAM)
+    without = session.render(CAM, brush=False)
+    session.end_stroke(sid)
+    assert np.abs(with_brush.color - without.color).max() > 0.1
