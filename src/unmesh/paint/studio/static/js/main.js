@@ -125,7 +125,7 @@ function imageMapper(canvas) {
 
 function beginStroke(ev, target, canvas) {
   const pxPerUnit = target === "model" ? server.px_per_unit : server.palette_px_per_unit;
-  const spacing = Math.max(1, 0.2 * tools.size * pxPerUnit);
+  const spacing = Math.max(1, 0.4 * tools.size * pxPerUnit);  // two fifths of the brush radius on screen
   stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas) };
   conn.send({ type: "begin", target, brush: { type: tools.brush, size: tools.size },
               paint: { type: tools.paint, color: tools.color, drying: tools.drying } });
