@@ -190,6 +190,8 @@ def main() -> None:
               f"differential render {1000 * tr:.1f} ms")
 
         if args.screenshot:
+            for _ in range(args.strokes + 1):  # a clean blob for the design: undo the measured strokes
+                page.evaluate("window.studio.send({type: 'undo'})")
             paint_design(page, studio, args.rate)
             Path(args.screenshot).parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=args.screenshot)
