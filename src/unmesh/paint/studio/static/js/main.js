@@ -49,8 +49,8 @@ function onMessage(msg) {
     case "exported": say(`exported ${msg.name}`, false, msg.name); break;
     case "recorded": say(`recorded ${msg.name}`, false, msg.name); break;
     case "replayed": say(`replayed ${msg.strokes} strokes from ${msg.name}`); break;
-    case "undone": if (!msg.ok) say("nothing to undo"); break;
-    case "redone": if (!msg.ok) say("nothing to redo"); break;
+    case "undone": bump(msg.ok ? -1 : 0); if (!msg.ok) say("nothing to undo"); break;
+    case "redone": bump(msg.ok ? 1 : 0); if (!msg.ok) say("nothing to redo"); break;
     case "synced": {
       const done = syncWaiters.get(msg.id);
       if (done) { syncWaiters.delete(msg.id); drawing.then(done); }
@@ -58,6 +58,8 @@ function onMessage(msg) {
     }
   }
 }
+
+function bump(k) { $("strokes").textContent = String(Math.max(0, Number($("strokes").textContent) + k)); }
 
 async function drawFrame(head, blobs) {
   const model = head.target === "model";
@@ -141,7 +143,7 @@ function addSamples(ev) {
 function endStroke() {
   if (!stroke) return;
   conn.send({ type: "end" });
-  if (stroke.target === "model") $("strokes").textContent = String(Number($("strokes").textContent) + 1);
+  if (stroke.target === "model") bump(1);
   stroke = null;
 }
 
