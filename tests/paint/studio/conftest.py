@@ -17,7 +17,7 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-backg
                  "--disable-component-update", "--no-first-run"]
 #: Surfel spacing of the test model (a coarse blob: fast, still a few thousand surfels).
 SPACING = 0.035
-VIEWPORT = {"width": 960, "height": 600}
+VIEWPORT = {"width": 840, "height": 540}
 
 
 def model_cloud(spacing: float = SPACING):
@@ -127,13 +127,17 @@ def model_pixel(page, studio, point) -> tuple[float, float]:
 
 def pen_stroke(page, points, pressures, tilts=None, pointer="pen", steps=1):
     """Draw through the DevTools protocol: pressed, moved along ``points``, released."""
+    import time
+
     cdp = page.context.new_cdp_session(page)
     tilts = tilts or [(0, 0)] * len(points)
+    t0 = time.time()  # events 10 ms apart whatever the load: the sample times (and so the paint) are reproducible
 
     def event(kind, i, buttons):
         x, y = points[i]
         params = {"type": kind, "x": x, "y": y, "button": "left", "buttons": buttons, "pointerType": pointer,
-                  "force": pressures[i], "tiltX": tilts[i][0], "tiltY": tilts[i][1], "clickCount": 1 if buttons else 0}
+                  "force": pressures[i], "tiltX": tilts[i][0], "tiltY": tilts[i][1], "clickCount": 1 if buttons else 0,
+                  "timestamp": t0 + 0.01 * i}
         if pointer == "mouse":
             for k in ("force", "tiltX", "tiltY"):
                 params.pop(k)

@@ -49,6 +49,7 @@ def test_pen_stroke_with_rising_pressure(page, studio):
     pts = [image_to_page(page, studio, x0 + (x1 - x0) * i / (n - 1), row) for i in range(n)]
     pressures = [0.12 + 0.85 * i / (n - 1) for i in range(n)]
     before, shot_before = cloud_state(studio), canvas_pixels(page)
+    forces = page.evaluate("window.studio.stats.forces")
     pen_stroke(page, pts, pressures, tilts=[(8, -4)] * n)
     after, shot_after = cloud_state(studio), canvas_pixels(page)
     # server state: new red surfels, all along the stroke and only near it
@@ -65,7 +66,7 @@ def test_pen_stroke_with_rising_pressure(page, studio):
     lo, hi = r[u < 1 / 3], r[u > 2 / 3]
     assert len(lo) and len(hi)
     width = [np.percentile(v, 95) - np.percentile(v, 5) for v in (lo, hi)]
-    assert width[1] > 1.2 * width[0]
+    assert width[1] > 1.2 * width[0], (width, [np.ptp(r[(u >= a) & (u < a + 0.1)]) for a in np.arange(0, 1, 0.1) if ((u >= a) & (u < a + 0.1)).sum() > 1])
     # the canvas shows it: red pixels appeared along the stroke, in a wider band at the end
     red = _red_pixels(shot_after) & ~_red_pixels(shot_before)
     scale = shot_after.shape[1] / cam.width
@@ -76,6 +77,8 @@ def test_pen_stroke_with_rising_pressure(page, studio):
     third = (xb - xa) // 3
     assert cols[xb - third:xb].mean() > 1.2 * cols[xa:xa + third].mean()
     assert page.evaluate("window.studio.stats.errors.length") == 0
+    # the force gauge received the brush's haptic signal while painting
+    assert page.evaluate("window.studio.stats.forces") > forces
 
 
 def test_mouse_stroke_paints_with_slider_pressure(page, studio):
@@ -101,6 +104,7 @@ def test_touch_stroke_paints(page, studio):
     assert len(painted) > 10
 
 
+@pytest.mark.slow
 def test_palette_mixing_and_pick(page, studio):
     box = page.locator("#palette").bounding_box()
     yellow = [0.98, 0.86, 0.12]

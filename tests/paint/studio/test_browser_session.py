@@ -72,6 +72,18 @@ def test_rotate_paint_undo_save_replay(page, studio, tmp_path):
     reloaded = Session.load(saved)
     c = reloaded.cloud()
     assert _equal((c.positions, c.colors), s2)
+    # export a PNG of the view; load the saved model back into the studio
+    page.click("#export")
+    page.evaluate("window.studio.sync()")
+    from PIL import Image
+
+    cam = studio.run_in_worker(lambda ws: ws.camera())
+    with Image.open(folder / (saved.stem + ".png")) as im:
+        assert im.size == (cam.width, cam.height)
+    page.evaluate(f"window.studio.send({{type: 'load', name: '{saved.name}'}})")
+    page.evaluate("window.studio.sync()")
+    assert "loaded" in page.evaluate("window.studio.stats.replies")
+    assert _equal(cloud_state(studio), s2)
     # replay the recording without a browser: ``unmesh paint blob --replay`` (in this process)
     from unmesh.cli import main
 

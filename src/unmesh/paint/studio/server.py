@@ -54,6 +54,8 @@ STATIC = Path(__file__).resolve().parent / "static"
 MAX_UPLOAD = 256 << 20
 _RAW_REFUSED = ("..", "%2e", "%2f", "%5c", "%25", "%00", "\\", "//")
 _FORCE_PERIOD = 0.05
+#: Seconds of message handling after which the worker renders a frame before going on.
+FRAME_BUDGET = 0.04
 
 
 class Studio:
@@ -188,9 +190,18 @@ class Studio:
         return ws
 
     # -- work -----------------------------------------------------------------------------
-    def _process(self, batch: list[tuple[Any, str]]) -> tuple[list[tuple[Any, dict[str, Any]]], list[bytes]]:
+    def _process(self, batch: list[tuple[Any, str]]) -> tuple[list[tuple[Any, dict[str, Any]]], list[bytes], int]:
+        """Handle messages of ``batch`` for at most :data:`FRAME_BUDGET` seconds, then render once.
+
+        Returns the replies, the frames and how many messages were handled (the rest wait for
+        the next round, so the page sees frames while a long stroke is still being painted)."""
         replies: list[tuple[Any, dict[str, Any]]] = []
+        start = time.perf_counter()
+        done = 0
         for ws, text in batch:
+            if done and time.perf_counter() - start > FRAME_BUDGET:
+                break
+            done += 1
             try:
                 msg = parse_message(text)
                 replies.extend((ws, r) for r in self.workspace.handle(msg))
@@ -207,7 +218,7 @@ class Studio:
             traceback.print_exc(file=sys.stderr)
             frames = []
             replies.append((None, {"type": "error", "message": f"render failed: {type(exc).__name__}: {exc}"}))
-        return replies, frames
+        return replies, frames, done
 
     async def _worker(self) -> None:
         loop = asyncio.get_running_loop()
@@ -218,7 +229,10 @@ class Studio:
             batch, self._queue = self._queue, []
             if not batch:
                 continue
-            replies, frames = await loop.run_in_executor(self.pool, self._process, batch)
+            replies, frames, done = await loop.run_in_executor(self.pool, self._process, batch)
+            if done < len(batch):  # the rest first, before anything that arrived meanwhile
+                self._queue = batch[done:] + self._queue
+                self._wake.set()
             # frames first: a reply (e.g. "synced") tells the page that the frames before it arrived
             for frame in frames:
                 for client in list(self.clients):

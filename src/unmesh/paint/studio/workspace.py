@@ -287,7 +287,7 @@ class Workspace:
         if not (isinstance(x, int | float) and isinstance(y, int | float) and 0 <= x < pw and 0 <= y < ph):
             raise InputError(f"x, y: expected a palette pixel within {pw}x{ph}, got {x!r}, {y!r}")
         if self._palette_albedo is None:
-            self._palette_albedo = np.asarray(self.palette.render(self.palette_camera, shading="none").albedo)
+            self._palette_albedo = np.asarray(self.palette.render(self.palette_camera, shading="none", brush=False).albedo)
         rgb = np.clip(self._palette_albedo[int(y), int(x)], 0.0, 1.0)
         return [{"type": "color", "color": [round(float(c), 4) for c in rgb]}]
 
@@ -305,7 +305,7 @@ class Workspace:
                     cam = cam.resized(max(8, self.width // 2), max(8, self.height // 2))
                 img = to_uint8(self.session.render(cam).color)
             else:
-                res = self.palette.render(self.palette_camera, shading="none")
+                res = self.palette.render(self.palette_camera, shading="none", brush=False)
                 self._palette_albedo = np.asarray(res.albedo)
                 img, scale = to_uint8(res.color), 1
             extra = {"ts": self._last_ts} if self._last_ts is not None else None

@@ -12,7 +12,7 @@ const paletteCtx = paletteCanvas.getContext("2d");
 const gauge = new Gauge($("gauge"));
 
 const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1], drying: 0.05, pressure: 0.6 };
-const stats = { frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], fps: 0, errors: [], replies: [] };
+const stats = { forces: 0, frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], fps: 0, errors: [], replies: [] };
 let server = { px_per_unit: 100, palette_px_per_unit: 173, presets: {}, width: 0, height: 0 };
 let stroke = null;          // {target, resampler, toImage, canvas}
 let cursor = null;          // {x, y, p, tilt, over}
@@ -40,7 +40,7 @@ function onMessage(msg) {
       $("outname").textContent = msg.out;
       $("strokes").textContent = msg.strokes;
       break;
-    case "force": gauge.set(msg.force); break;
+    case "force": stats.forces += 1; gauge.set(msg.force); break;
     case "color": setColor(msg.color); say(`picked ${hex(msg.color)} from the palette`); break;
     case "error": stats.errors.push(msg.message); say(msg.message, true); break;
     case "saved": say(`saved ${msg.name}`); break;
@@ -49,8 +49,8 @@ function onMessage(msg) {
     case "exported": say(`exported ${msg.name}`, false, msg.name); break;
     case "recorded": say(`recorded ${msg.name}`, false, msg.name); break;
     case "replayed": say(`replayed ${msg.strokes} strokes from ${msg.name}`); break;
-    case "undone": if (!msg.ok) say("nothing to undo"); break;
-    case "redone": if (!msg.ok) say("nothing to redo"); break;
+    case "undone": bump(msg.ok ? -1 : 0); if (!msg.ok) say("nothing to undo"); break;
+    case "redone": bump(msg.ok ? 1 : 0); if (!msg.ok) say("nothing to redo"); break;
     case "synced": {
       const done = syncWaiters.get(msg.id);
       if (done) { syncWaiters.delete(msg.id); drawing.then(done); }
@@ -58,6 +58,8 @@ function onMessage(msg) {
     }
   }
 }
+
+function bump(k) { $("strokes").textContent = String(Math.max(0, Number($("strokes").textContent) + k)); }
 
 async function drawFrame(head, blobs) {
   const model = head.target === "model";
@@ -125,7 +127,7 @@ function imageMapper(canvas) {
 
 function beginStroke(ev, target, canvas) {
   const pxPerUnit = target === "model" ? server.px_per_unit : server.palette_px_per_unit;
-  const spacing = Math.max(1, 0.2 * tools.size * pxPerUnit);
+  const spacing = Math.max(1, 0.4 * tools.size * pxPerUnit);  // two fifths of the brush radius on screen
   stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas) };
   conn.send({ type: "begin", target, brush: { type: tools.brush, size: tools.size },
               paint: { type: tools.paint, color: tools.color, drying: tools.drying } });
@@ -141,7 +143,7 @@ function addSamples(ev) {
 function endStroke() {
   if (!stroke) return;
   conn.send({ type: "end" });
-  if (stroke.target === "model") $("strokes").textContent = String(Number($("strokes").textContent) + 1);
+  if (stroke.target === "model") bump(1);
   stroke = null;
 }
 

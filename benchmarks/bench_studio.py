@@ -1,0 +1,226 @@
+"""Benchmark of the painting studio in a real browser (issue 19): input-to-screen latency and
+frame rates, measured by the page itself.
+
+A studio serves a blob sampled at ``--spacing`` (``--surfels N`` picks the spacing for about N
+surfels) to headless Debian Chromium at ``--size``; scripted pen strokes (DevTools
+``Input.dispatchMouseEvent`` with ``pointerType: pen``) arrive at ``--rate`` events per second.
+It prints:
+
+* **input-to-screen latency** of paint events: from the pointer event's ``timeStamp`` to the
+  moment the frame that contains it is drawn on the canvas (median, 90th percentile, max);
+* **frames per second while painting** (model frames drawn per second of stroke) and the tiles
+  and bytes per frame (differential updates);
+* **frames per second while dragging the view** (low-resolution previews) and the time of the
+  full-quality frame after release;
+* the engine's share: median ``add_samples`` + ``render`` time of one paint event in process.
+
+``--screenshot PATH`` paints a multi-colour design (object and palette) and saves the studio as
+PNG (the image in ``docs/images/studio.png``). Figures depend on the machine and its load.
+
+Usage::
+
+    python benchmarks/bench_studio.py [--spacing 0.035 | --surfels 500000] [--size 1280x800]
+                                      [--strokes 4] [--rate 120] [--screenshot docs/images/studio.png]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "paint" / "studio"))
+CHROMIUM = "/usr/bin/chromium"
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+        "--disable-component-update", "--no-first-run"]
+
+
+def stroke(page, pts, pressures, rate, color=None, tilt=(0, 0)):
+    if color is not None:
+        page.evaluate(f"window.studio.setColor({list(color)})")
+    cdp = page.context.new_cdp_session(page)
+    period = 1.0 / rate
+
+    def ev(kind, i, buttons):
+        cdp.send("Input.dispatchMouseEvent", {"type": kind, "x": pts[i][0], "y": pts[i][1], "button": "left",
+                                              "buttons": buttons, "pointerType": "pen", "force": pressures[i],
+                                              "tiltX": tilt[0], "tiltY": tilt[1], "clickCount": 1 if buttons else 0})
+
+    ev("mouseMoved", 0, 0)
+    ev("mousePressed", 0, 1)
+    t0 = time.perf_counter()
+    for i in range(1, len(pts)):
+        ev("mouseMoved", i, 1)
+        wait = t0 + i * period - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+    ev("mouseReleased", len(pts) - 1, 0)
+    cdp.detach()
+    page.evaluate("window.studio.sync()")
+    return time.perf_counter() - t0
+
+
+def arc(page, studio, cx, cy, rx, ry, a0, a1, n):
+    from conftest import image_to_page
+
+    return [image_to_page(page, studio, cx + rx * math.cos(a0 + (a1 - a0) * i / (n - 1)),
+                          cy + ry * math.sin(a0 + (a1 - a0) * i / (n - 1))) for i in range(n)]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--spacing", type=float, default=0.035)
+    ap.add_argument("--surfels", type=int, help="pick the spacing for about this many surfels")
+    ap.add_argument("--size", default="1280x800", help="browser viewport WxH")
+    ap.add_argument("--strokes", type=int, default=4)
+    ap.add_argument("--rate", type=float, default=120.0, help="pen events per second")
+    ap.add_argument("--screenshot", help="paint a design and save the studio to this PNG")
+    args = ap.parse_args()
+
+    from playwright.sync_api import sync_playwright
+
+    from conftest import covered_segment, image_to_page
+    from unmesh.paint.session import Session
+    from unmesh.paint.strokes import Brush, Paint, Sample
+    from unmesh.paint.studio.server import BackgroundStudio
+    from unmesh.paint.studio.workspace import Workspace
+    from unmesh.shapes import Blob
+
+    spacing = args.spacing
+    if args.surfels:
+        n0 = len(Blob().surfels(spacing=0.05))
+        spacing = 0.05 * math.sqrt(n0 / args.surfels)
+    t = time.perf_counter()
+    cloud = Blob().surfels(spacing=spacing)
+    print(f"model: blob, spacing {spacing:.4g}, {len(cloud)} surfels (sampled in {time.perf_counter() - t:.1f} s)")
+    w, h = (int(v) for v in args.size.split("x"))
+    out = Path(tempfile.mkdtemp()) / "blob_painted.ply"
+    with BackgroundStudio(Workspace(Session(cloud), out, advance_every=None)) as studio:
+        pw = sync_playwright().start()
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        page = browser.new_context(viewport={"width": w, "height": h}, bypass_csp=True).new_page()
+        t = time.perf_counter()
+        page.goto(studio.url)
+        page.wait_for_function("window.studio && window.studio.connected && window.studio.stats.modelFrames > 0",
+                               timeout=300000)
+        page.evaluate("window.studio.sync()")
+        cam = studio.run_in_worker(lambda ws: ws.camera())
+        print(f"page open with first frame: {time.perf_counter() - t:.2f} s; model image {cam.width}x{cam.height}")
+
+        # warm-up stroke (first paint event compiles nothing but fills caches)
+        row, x0, x1 = covered_segment(studio)
+        stroke(page, [image_to_page(page, studio, x0 + (x1 - x0) * i / 9, row) for i in range(10)], [0.6] * 10,
+               args.rate, color=(0.8, 0.1, 0.1))
+        page.evaluate("window.studio.stats.latencies.length = 0")
+        lat, fps, tiles, kb = [], [], [], []
+        for k in range(args.strokes):
+            row, x0, x1 = covered_segment(studio, row_frac=(0.35 + 0.08 * k, 0.45 + 0.08 * k), length_frac=0.6)
+            n = 60
+            pts = [image_to_page(page, studio, x0 + (x1 - x0) * i / (n - 1), row) for i in range(n)]
+            before = page.evaluate("({f: window.studio.stats.modelFrames, t: window.studio.stats.tiles, "
+                                   "b: window.studio.stats.bytes})")
+            page.evaluate("window.studio.stats.latencies.length = 0")
+            dur = stroke(page, pts, [0.3 + 0.6 * i / (n - 1) for i in range(n)], args.rate, color=(0.14, 0.18, 0.62))
+            after = page.evaluate("({f: window.studio.stats.modelFrames, t: window.studio.stats.tiles, "
+                                  "b: window.studio.stats.bytes, l: window.studio.stats.latencies})")
+            frames = after["f"] - before["f"]
+            lat += after["l"]
+            fps.append(frames / dur)
+            tiles.append((after["t"] - before["t"]) / max(frames, 1))
+            kb.append((after["b"] - before["b"]) / max(frames, 1) / 1024)
+        q = np.percentile(lat, [50, 90, 100]) if lat else [float("nan")] * 3
+        print(f"paint: {len(lat)} frames over {args.strokes} strokes of 60 pen events at {args.rate:.0f}/s")
+        print(f"  input-to-screen latency: median {q[0]:.0f} ms, p90 {q[1]:.0f} ms, max {q[2]:.0f} ms")
+        print(f"  frames per second while painting: {statistics.median(fps):.1f} (median over strokes)")
+        print(f"  per frame: {statistics.median(tiles):.1f} tiles, {statistics.median(kb):.1f} KiB")
+
+        # view drag: previews while dragging, full frame on release
+        box = page.locator("#overlay").bounding_box()
+        cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        f0 = page.evaluate("window.studio.stats.modelFrames")
+        page.mouse.move(cx, cy)
+        page.mouse.down(button="right")
+        t = time.perf_counter()
+        for i in range(1, 41):
+            page.mouse.move(cx - 6 * i, cy + 2 * i)
+            time.sleep(max(0.0, t + i / 60 - time.perf_counter()))
+        drag = time.perf_counter() - t
+        f1 = page.evaluate("window.studio.stats.modelFrames")
+        page.mouse.up(button="right")
+        t = time.perf_counter()
+        page.evaluate("window.studio.sync()")
+        print(f"view drag: {(f1 - f0) / drag:.1f} preview frames per second over {drag:.2f} s; "
+              f"full frame after release {1000 * (time.perf_counter() - t):.0f} ms")
+
+        # the engine alone, in process (one paint event + its differential render)
+        row, x0, x1 = covered_segment(studio)
+
+        def engine_event(ws):
+            s, camera = ws.session, ws.camera()
+            s.render(camera)
+            pts = [s.pick(camera, x0 + (x1 - x0) * i / 19, row) for i in range(20)]
+            times, rtimes, ptimes = [], [], []
+            sid = s.begin_stroke(Brush("round", 0.05), Paint("oil", (0.9, 0.8, 0.1)))
+            for i, p in enumerate(pts):
+                if p is None:
+                    continue
+                t0 = time.perf_counter()
+                s.pick(camera, x0 + (x1 - x0) * i / 19, row)
+                t1 = time.perf_counter()
+                s.add_samples(sid, [Sample(0.02 * i, tuple(p), 0.7)])
+                t2 = time.perf_counter()
+                s.render(camera)
+                t3 = time.perf_counter()
+                ptimes.append(t1 - t0)
+                times.append(t2 - t1)
+                rtimes.append(t3 - t2)
+            s.end_stroke(sid)
+            s.undo()
+            return statistics.median(ptimes), statistics.median(times), statistics.median(rtimes)
+
+        tp, te, tr = studio.run_in_worker(engine_event)
+        print(f"engine, one paint event in process: pick {1000 * tp:.1f} ms, add_samples {1000 * te:.1f} ms, "
+              f"differential render {1000 * tr:.1f} ms")
+
+        if args.screenshot:
+            for _ in range(args.strokes + 1):  # a clean blob for the design: undo the measured strokes
+                page.evaluate("window.studio.send({type: 'undo'})")
+            paint_design(page, studio, args.rate)
+            Path(args.screenshot).parent.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=args.screenshot)
+            print(f"wrote {args.screenshot}")
+        browser.close()
+        pw.stop()
+
+
+def paint_design(page, studio, rate):
+    """A few colourful strokes on the palette and the blob, the view turned to show them."""
+    page.evaluate("window.studio.nav.preset('home', window.studio.server.presets)")
+    page.evaluate("window.studio.sync()")
+    box = page.locator("#palette").bounding_box()
+    colors = [(0.98, 0.86, 0.12), (0.8, 0.1, 0.1), (0.16, 0.52, 0.8), (0.05, 0.5, 0.38), (0.55, 0.05, 0.2)]
+    for k, c in enumerate(colors):
+        y = box["y"] + box["height"] * (0.2 + 0.15 * k)
+        pts = [(box["x"] + box["width"] * (0.1 + 0.35 * i / 24 + 0.1 * k), y + 6 * math.sin(i / 3)) for i in range(25)]
+        stroke(page, pts, [0.85] * 25, rate, color=c)
+    cam = studio.run_in_worker(lambda ws: ws.camera())
+    cx, cy = cam.width * 0.5, cam.height * 0.5
+    page.evaluate("window.studio.choose('brush', 'round')")
+    for k, (c, dy) in enumerate(zip(colors[:4], (-0.02, 0.05, 0.12, 0.19), strict=True)):
+        pts = arc(page, studio, cx - 0.08 * cam.width, cy + dy * cam.height, 0.1 * cam.width, 0.03 * cam.height,
+                  math.pi * 0.9, math.pi * 0.1, 30)
+        stroke(page, pts, [0.4 + 0.5 * math.sin(math.pi * i / 29) for i in range(30)], rate, color=c,
+               tilt=(10 * (k - 1), 0))
+    page.evaluate("window.studio.setColor([0.98, 0.86, 0.12])")
+    page.mouse.move(cx + 0.05 * cam.width, cy)
+
+
+if __name__ == "__main__":
+    main()
