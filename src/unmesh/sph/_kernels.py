@@ -355,7 +355,7 @@ PAIR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 @njit(cache=True, fastmath=PAIR_FASTMATH, error_model="numpy")
 def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, mats, h, dim, gravity, nbr, nnbr,
                  bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-                 plane_noslip, wall_visc, bnoslip, grad_scale, elastic, fel, fown, pk, acc, xsph, dtemp):
+                 plane_noslip, wall_visc, bnoslip, grad_scale, tensile, tensile_inv, elastic, fel, fown, pk, acc, xsph, dtemp):
     """Particles ``r0 .. r1 - 1`` of :func:`force_pass` (one block, serial): the first ``ncol`` columns
     of the neighbours' ``pk`` rows are gathered, the others are the constants of material ``mat0``
     and object ``obj0``."""
@@ -439,9 +439,17 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
             vx = vij0 * d0 + vij1 * d1 + vij2 * d2
             ire = 1.0 / (r2 + eh2)
             rsum = 2.0 / (rhoi + buf[PK_RHO, t])
+            t6 = h2 - r2
+            # Monaghan's (2000) tensile correction, closer than d/2 only: negative pressures repel at short
+            # range, ε (|p_i⁻|/ρ_i² + |p_j⁻|/ρ_j²) ((W(r)/W(d/2))⁴ − 1)₊, so they cannot pull particles onto
+            # each other (pairing); pairs at least d/2 apart (a fluid at rest) are not affected
+            fw = t6 * tensile_inv
+            fw3 = fw * fw * fw
+            fw6 = fw3 * fw3
+            rt = tensile * (max(-pi_, 0.0) + max(-buf[PK_PR, t], 0.0)) * max(fw6 * fw6 - 1.0, 0.0)
             # pressure (8.17) + viscosity (8.18) + Monaghan's artificial viscosity (approaching pairs
             # only: min(v_ij·x_ij, 0)), all along x_ij
-            bracket = (-(pi_ + buf[PK_PR, t])
+            bracket = (-(pi_ + buf[PK_PR, t] + rt)
                        + visc_c * (0.5 * (mui + buf[PK_VISC, t])) * rinv_i * buf[PK_RINV, t] * vx * ire
                        + (0.5 * (alphai + buf[PK_ALPHA, t])) * (0.5 * (ci + buf[PK_SOUND, t])) * h
                        * min(vx, 0.0) * ire * rsum)
@@ -449,7 +457,6 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
             # penalty collision between objects (8.37): repulsive part only; XSPH (8.19) within one body
             other = oi != buf[PK_OBJ, t] and si + buf[PK_SOLID, t] > 0.0
             coef = max(coef, 0.0) if other else coef
-            t6 = h2 - r2
             wx = 0.0 if other else xii * mj * rsum * (c6 * t6 * t6 * t6)
             xs0 -= wx * vij0
             xs1 -= wx * vij1
@@ -551,7 +558,8 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
 @njit(cache=True, parallel=True, error_model="numpy")
 def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
                bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-               plane_noslip, wall_visc, bnoslip, grad_scale, elastic, fel, fown, pk, acc, xsph, dtemp):
+               plane_noslip, wall_visc, bnoslip, grad_scale, tensile, tensile_inv, elastic, fel, fown, pk, acc, xsph,
+               dtemp):
     """Accelerations, XSPH corrections and temperature rates of every particle.
 
     See the module docstring for the terms. ``elastic`` (bool) adds the lattice forces
@@ -611,8 +619,8 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     for blk in prange(nblk):
         _force_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid,
                      mats, h, dim, gravity, nbr, nnbr, bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners,
-                     corner_grad, wall_mirror, plane_noslip, wall_visc, bnoslip, grad_scale, elastic, fel, fown, pk,
-                     acc, xsph, dtemp)
+                     corner_grad, wall_mirror, plane_noslip, wall_visc, bnoslip, grad_scale, tensile, tensile_inv, elastic,
+                     fel, fown, pk, acc, xsph, dtemp)
 
 
 @njit(cache=True, parallel=True)

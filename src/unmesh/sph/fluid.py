@@ -5,7 +5,10 @@ Brute-force (all pairs within ``h``) versions of what the numba passes in
 
 - density (8.4): ``ρ_i = Σ_j m_j W_ij`` (poly6, self included);
 - pressure (8.15) with the negative-pressure scale (8.16);
-- pressure acceleration (8.17): ``−Σ_j m_j (p_i/ρ_i² + p_j/ρ_j²) ∇W_ij`` (spiky);
+- pressure acceleration (8.17): ``−Σ_j m_j (p_i/ρ_i² + p_j/ρ_j² + R_ij (f_ij⁴ − 1)₊) ∇W_ij``
+  (spiky), with Monaghan's (2000) tensile correction ``R_ij = ε (|p_i⁻|/ρ_i² + |p_j⁻|/ρ_j²)``
+  (negative parts only) and ``f_ij = W(r_ij)/W(d/2)`` (poly6), here only for pairs closer than
+  ``d/2``: it keeps tension from pulling particles onto each other (pairing);
 - viscosity (8.18): ``μ∇²v/ρ`` in Monaghan's form
   ``2(n+2) Σ_j m_j μ̄/(ρ_iρ_j) (v_ij·x_ij)/(r² + 0.01h²) ∇W_ij`` — the kernel
   Laplacian of (8.12) is not sign-definite for poly6 or spiky (NOTES.md gives the
@@ -73,12 +76,14 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
 
 
 def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h: float, dim: int,
-                           objects: Any = None, phases: Any = None) -> np.ndarray:
+                           objects: Any = None, phases: Any = None, tensile: float = 0.0,
+                           spacing: float | None = None) -> np.ndarray:
     """Pressure (8.17) + viscosity (8.18) accelerations by brute force, shape (N, 3).
 
     ``mu`` (N,) per-particle dynamic viscosity (pairs use the mean). With
     ``objects``/``phases`` the pair force between particles of different objects
-    (one of them solid) is reduced to its repulsive part (8.37).
+    (one of them solid) is reduced to its repulsive part (8.37). ``tensile`` is ε of the tensile
+    correction with the reference distance ``spacing`` (``d``).
 
     Example
     -------
@@ -99,7 +104,12 @@ def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h:
         grad = np.hstack([grad, np.zeros((len(grad), 1))])
     vx = np.einsum("ij,ij->i", vv[i] - vv[j], xij)
     mubar = 0.5 * (uu[i] + uu[j])
-    bracket = -(pp[i] / rr[i] ** 2 + pp[j] / rr[j] ** 2) + 2.0 * (dim + 2) * mubar / (rr[i] * rr[j]) * vx / (r2 + 0.01 * h * h)
+    pr = pp / rr ** 2
+    rt = np.zeros(len(i))
+    if tensile:
+        f = np.asarray(poly6(np.sqrt(r2), h, dim)) / float(poly6(0.5 * spacing, h, dim))
+        rt = tensile * (np.maximum(-pr[i], 0) + np.maximum(-pr[j], 0)) * np.maximum(f ** 4 - 1, 0)
+    bracket = -(pr[i] + pr[j] + rt) + 2.0 * (dim + 2) * mubar / (rr[i] * rr[j]) * vx / (r2 + 0.01 * h * h)
     f = (mm[j] * bracket)[:, None] * grad
     if objects is not None:
         ob = np.asarray(objects)

@@ -265,7 +265,7 @@ def plane_spacings(dim: int, frame: Any = None) -> np.ndarray:
 
 
 def closest_packing(lower: Any, upper: Any, spacing: float, dim: int = 3,
-                    frame: Any = None) -> np.ndarray:
+                    frame: Any = None, centered: bool = False) -> np.ndarray:
     """Closest-packing lattice points filling the box ``[lower, upper]``.
 
     Along each axis the lattice planes perpendicular to it (spacing ``s_a``,
@@ -283,6 +283,11 @@ def closest_packing(lower: Any, upper: Any, spacing: float, dim: int = 3,
         2 (hexagonal lattice) or 3 (CCP, eq. 8.20).
     frame : array_like, shape (3, 3), optional
         World rotation of the lattice frame; default :func:`lattice_frame`.
+    centered : bool
+        Put a lattice point on the box's vertical centre line (x, and z in 3D, at the centre),
+        so that the points are mirror-symmetric about the vertical plane ``x = centre`` (with the
+        default frame). The box then holds its volume's worth of particles only up to one row,
+        but a body dropped flat has no lopsided first row: solids are sampled this way.
 
     Returns
     -------
@@ -290,6 +295,9 @@ def closest_packing(lower: Any, upper: Any, spacing: float, dim: int = 3,
 
     Example
     -------
+    >>> p = closest_packing([-0.5, 0, 0], [0.5, 1, 0], 0.1, dim=2, centered=True)
+    >>> bool(np.allclose(np.sort(p[:, 0]), np.sort(-p[:, 0])))
+    True
     >>> p = closest_packing([0, 0, 0], [1, 1, 1], 0.1, dim=3)
     >>> d = np.linalg.norm(p[:, None] - p[None], axis=2) + np.eye(len(p))
     >>> round(float(d.min()), 12)
@@ -306,6 +314,9 @@ def closest_packing(lower: Any, upper: Any, spacing: float, dim: int = 3,
     rot = lattice_frame(n) if frame is None else as_array(frame, "frame", (3, 3))
     margin = 0.5 * d * plane_spacings(n, rot)
     anchor = lo + margin
+    if centered:
+        anchor[0] = 0.5 * (lo[0] + hi[0])
+        anchor[2] = 0.5 * (lo[2] + hi[2])
     if n == 2:
         anchor[2] = 0.0
     m = rot @ lattice_basis(n) * d  # world vectors of the integer coordinates
@@ -375,7 +386,8 @@ def cubic_grid(lower: Any, upper: Any, spacing: float, dim: int = 3) -> np.ndarr
     return np.ascontiguousarray(out[order])
 
 
-def sample_shape(shape: Any, spacing: float, dim: int = 3, frame: Any = None, lattice: str = "closest") -> np.ndarray:
+def sample_shape(shape: Any, spacing: float, dim: int = 3, frame: Any = None, lattice: str = "closest",
+                 centered: bool = False) -> np.ndarray:
     """Particles on a closest packing (or the cubic grid) inside a shape (``shape.contains``).
 
     Parameters
@@ -391,6 +403,8 @@ def sample_shape(shape: Any, spacing: float, dim: int = 3, frame: Any = None, la
         Lattice frame rotation (default :func:`lattice_frame`; closest packing only).
     lattice : {"closest", "cubic"}
         :func:`closest_packing` or :func:`cubic_grid` (axis-aligned).
+    centered : bool
+        Closest packing centred on the bounds (see :func:`closest_packing`).
 
     Returns
     -------
@@ -407,7 +421,7 @@ def sample_shape(shape: Any, spacing: float, dim: int = 3, frame: Any = None, la
     if _lattice(lattice) == "cubic":
         pts = cubic_grid(bounds[0], bounds[1], spacing, dim)
     else:
-        pts = closest_packing(bounds[0], bounds[1], spacing, dim, frame)
+        pts = closest_packing(bounds[0], bounds[1], spacing, dim, frame, centered)
     if len(pts) == 0:
         return pts
     return np.ascontiguousarray(pts[np.asarray(shape.contains(pts), dtype=bool)])

@@ -72,14 +72,14 @@ def _material(name: str, t: Table) -> Material:
 _SAMPLE_BYTES = 128
 
 
-def _sample(obj: Table, shape: Any, spacing: float, dim: int, lattice: str) -> np.ndarray:
+def _sample(obj: Table, shape: Any, spacing: float, dim: int, lattice: str, centered: bool) -> np.ndarray:
     with obj.guard("shape"):
         lo, hi = np.asarray(shape.bounds(), dtype=np.float64)
     extent = np.maximum(hi - lo, spacing)[:dim]
     points = float(np.prod(extent / spacing + 1.0))
     obj.check_budget("shape", points * _SAMPLE_BYTES, f"sampling this shape at spacing {spacing:g} "
                                                        f"(about {points:.3g} lattice points)")
-    return obj.call("shape", sample_shape, shape, spacing, dim, lattice=lattice)
+    return obj.call("shape", sample_shape, shape, spacing, dim, lattice=lattice, centered=centered)
 
 
 def _boundaries(scene: Table, dim: int, spacing: float, h: float) -> tuple[list[Plane], BoundaryParticles | None,
@@ -160,8 +160,10 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
     wall_pressure = sim_t.number("wall_pressure", default=2.0, positive=True)
     name = sim_t.string("name", default=scene.file.stem)
     lattice = sim_t.string("lattice", default="closest", choices=LATTICES)
+    tensile = sim_t.number("tensile_correction", default=4.0, nonnegative=True)
     config = sim_t.call(None, SPHConfig, dim=dim, spacing=spacing, dt=dt, smoothing=smoothing, cfl=cfl,
-                        gravity=gravity, seed=seed, wall_pressure=wall_pressure, lattice=lattice)
+                        gravity=gravity, seed=seed, wall_pressure=wall_pressure, lattice=lattice,
+                        tensile_correction=tensile)
     out_t = scene.table("output", required=False)
     surfaces = "none"
     resolution = 0.5
@@ -179,7 +181,9 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
         oname = o.string("name", default=f"object{k}")
         mat = o.string("material", choices=tuple(materials))
         shape = o.shape("shape")
-        pos = _sample(o, shape, spacing, dim, lattice)
+        phase = o.string("phase", default="fluid", choices=("fluid", "solid"))
+        # solids: mirror-symmetric sampling, so that a body dropped flat gets no spin from its lattice
+        pos = _sample(o, shape, spacing, dim, lattice, centered=phase == "solid")
         shapes.append(shape)
         if len(pos) == 0:
             raise o.error("shape", f"samples no particles at spacing {spacing}"
@@ -192,7 +196,7 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
                 oname, pos, mat, velocity=o.vector("velocity", 3, default=(0.0, 0.0, 0.0)),
                 angular_velocity=o.vector("angular_velocity", 3, default=(0.0, 0.0, 0.0)),
                 temperature=o.number("temperature", default=0.0),
-                phase=o.string("phase", default="fluid", choices=("fluid", "solid")),
+                phase=phase,
                 fixed=o.boolean("fixed", default=False), anchor=o.shape("anchor", default=None), surface=surface))
     if not objects:
         raise scene.error(None, "the scene has no objects: add at least one [[objects]] table")
