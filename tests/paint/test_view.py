@@ -22,8 +22,8 @@ def test_differential_equals_full_where_depth_unchanged():
     s = Session(by_name("plane", size=1.0).surfels(0.02), PaintOptions(haptics=False))
     s.render(CAM)
     assert s.last_update == "full"
-    s.stroke(line(n=4), brush=ROUND, paint=Paint("oil", (0.9, 0.1, 0.1), relief="none"))
-    s.stroke(line(n=2, z=0.1), brush=Brush("flat", 0.03), paint=Paint("watercolor", (0.1, 0.2, 0.9)))
+    s.stroke(line(n=2, x0=-0.05, x1=0.05), brush=ROUND, paint=Paint("oil", (0.9, 0.1, 0.1), relief="none"))
+    s.stroke(line(n=1, z=0.1), brush=Brush("flat", 0.03), paint=Paint("watercolor", (0.1, 0.2, 0.9)))
     s.advance(0.5)
     diff = s.render(CAM, brush=False)
     assert s.last_update == "differential"

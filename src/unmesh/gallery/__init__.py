@@ -34,6 +34,7 @@ EXAMPLE_MODULES: tuple[str, ...] = (
     "unmesh.gallery.examples.shells",
     "unmesh.gallery.examples.sph",
     "unmesh.gallery.examples.fem",
+    "unmesh.gallery.examples.paint",
 )
 
 

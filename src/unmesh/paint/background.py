@@ -131,41 +131,68 @@ def downsample(surface: PaintSurface, color_variance: float, normal_variance: fl
     """Merge the children of fathers whose children's colour and normal variance are below the
     thresholds back into the father (5.5.2); paint volumes are summed (conserved), colours mixed
     by volume. Checks ``budget`` fathers from ``cursor`` on (all when None); returns the next cursor."""
-    fathers = np.array(sorted(surface.children), np.int64)
-    if len(fathers) == 0:
+    n, no = surface.n, surface.n_original
+    kids = np.arange(no, n)
+    kids = kids[surface.alive[no:n]]
+    if len(kids) == 0:
         return 0
+    fa = surface.father[kids]
+    fathers = np.unique(fa)
     if budget is not None:
         start = int(np.searchsorted(fathers, cursor))
-        order = np.concatenate([fathers[start:], fathers[:start]])[:budget]
+        fathers = np.concatenate([fathers[start:], fathers[:start]])[:budget]
+        nxt = int(fathers[-1]) + 1 if len(fathers) else 0
+        sel = np.isin(fa, fathers)
+        kids, fa = kids[sel], fa[sel]
     else:
-        order = fathers
-    nxt = 0
-    for f in order.tolist():
-        kids = np.asarray(surface.children.get(f, []), np.int64)
-        nxt = f + 1
-        if len(kids) == 0:
-            continue
-        col = surface.colors(kids)
-        cvar = float(col.var(axis=0).sum())
-        mn = surface.nrm[kids].mean(axis=0)
-        nvar = 1.0 - float(np.linalg.norm(mn))
-        if cvar > color_variance or nvar > normal_variance:
-            continue
-        vw = surface.vw[kids]
-        vd = surface.vd[kids]
-        a = surface.area[kids]
-        twv, tdv = float(vw.sum()), float(vd.sum())
-        wet = (vw[:, None] * surface.wet[kids]).sum(axis=0) / twv if twv > 0 else surface.wet[kids].mean(axis=0)
-        dryc = (vd[:, None] * surface.dry[kids]).sum(axis=0) / tdv if tdv > 0 else surface.dry[kids].mean(axis=0)
-        fa = np.array([f])
-        surface.set("wet", fa, np.clip(wet, 0, 1)[None])
-        surface.set("dry", fa, np.clip(dryc, 0, 1)[None])
-        surface.set("vw", fa, [twv])
-        surface.set("vd", fa, [tdv])
-        for p in PROPS:
-            surface.set(p, fa, [float((a * getattr(surface, p)[kids]).sum() / a.sum())])
-        # the father stands for the children's area (visible colour 5.8 stays the same)
-        surface.set("area", fa, [float(a.sum())])
-        surface.set("active", fa, True)
-        surface.delete(kids)
+        nxt = 0
+    if len(kids) == 0:
+        return nxt
+    # per-father statistics by grouping (bincount over a compact father index)
+    uf, g = np.unique(fa, return_inverse=True)
+    m = len(uf)
+    cnt = np.bincount(g, minlength=m).astype(np.float64)
+    col = surface.colors(kids)
+    mean = np.stack([np.bincount(g, col[:, c], m) for c in range(3)], axis=1) / cnt[:, None]
+    sq = np.stack([np.bincount(g, col[:, c] ** 2, m) for c in range(3)], axis=1) / cnt[:, None]
+    cvar = np.maximum(sq - mean ** 2, 0.0).sum(axis=1)
+    nm = np.stack([np.bincount(g, surface.nrm[kids, c], m) for c in range(3)], axis=1) / cnt[:, None]
+    nvar = 1.0 - np.linalg.norm(nm, axis=1)
+    ok = (cvar <= color_variance) & (nvar <= normal_variance)
+    if not ok.any():
+        return nxt
+    take = ok[g]
+    kids, g = kids[take], g[take]
+    remap = np.cumsum(ok) - 1
+    g = remap[g]
+    f = uf[ok]
+    k = len(f)
+
+    def gsum(v: np.ndarray) -> np.ndarray:
+        return np.bincount(g, v, k)
+
+    vw, vd, a = surface.vw[kids], surface.vd[kids], surface.area[kids]
+    twv, tdv, ta = gsum(vw), gsum(vd), gsum(a)
+    cnt = gsum(np.ones(len(kids)))
+    wet = np.stack([gsum(vw * surface.wet[kids, c]) for c in range(3)], axis=1)
+    wet_mean = np.stack([gsum(surface.wet[kids, c]) for c in range(3)], axis=1) / cnt[:, None]
+    wet = np.where(twv[:, None] > 0, wet / np.where(twv > 0, twv, 1.0)[:, None], wet_mean)
+    dryc = np.stack([gsum(vd * surface.dry[kids, c]) for c in range(3)], axis=1)
+    dry_mean = np.stack([gsum(surface.dry[kids, c]) for c in range(3)], axis=1) / cnt[:, None]
+    dryc = np.where(tdv[:, None] > 0, dryc / np.where(tdv > 0, tdv, 1.0)[:, None], dry_mean)
+    surface.set("wet", f, np.clip(wet, 0, 1))
+    surface.set("dry", f, np.clip(dryc, 0, 1))
+    surface.set("vw", f, twv)
+    surface.set("vd", f, tdv)
+    for p in PROPS:
+        surface.set(p, f, gsum(a * getattr(surface, p)[kids]) / ta)
+    # the father stands for the children's area (the visible colour 5.8 stays the same) and
+    # covers the region they covered
+    surface.set("area", f, ta)
+    reach = np.linalg.norm(surface.pos[kids] - surface.pos[f][g], axis=1) + 0.7 * surface.rad[kids]
+    cover = np.zeros(k)
+    np.maximum.at(cover, g, reach)
+    surface.set("rad", f, np.maximum(surface.rad[f], cover))
+    surface.set("active", f, True)
+    surface.delete(kids)
     return nxt

@@ -182,7 +182,7 @@ class Session:
                 raise InputError(f"samples[{base + i}].point: misses the model (distance {dist[i, 0]:.4g} from the "
                                  f"surface, at most {limit:.4g})")
         a0, r0, p0 = st.added, st.removed, st.pixels
-        for smp in samples:
+        for smp in _subdivide(st.last, samples, 0.5 * st.brush.size):
             p = np.array(smp.point)
             d, N = force_shading(s.tree, s.pos[:no], s.nrm[:no], p[None])
             n = N[0]
@@ -212,7 +212,8 @@ class Session:
                     st.pixels += r.pixels
             self._haptic.publish(b.handle_depth, b.handle_normal, b.handle_velocity, st.brush.friction,
                                  b.spring_reaction)
-            st.samples.append(smp)
+            if not getattr(smp, "_between", False):
+                st.samples.append(smp)
             st.last = smp
             st.last_point = p
         self._last_brush = st.state
@@ -273,11 +274,13 @@ class Session:
         return True
 
     # -- background work ----------------------------------------------------------------------------
-    def advance(self, dt: float, budget: int | None = None) -> None:
+    def advance(self, dt: float, budget: int | None = None, downsample: bool = True) -> None:
         """Drying (5.12/5.13), diffusion (5.15) and downsampling (5.5.2) over ``dt`` seconds.
 
         ``budget`` limits downsampling to that many fathers per call (round robin), so an
-        interactive caller never waits long; ``None`` checks all. Deterministic.
+        interactive caller never waits long; ``None`` checks all; ``downsample=False`` skips it.
+        Deterministic; recorded in the stroke file (``"advance"``: seconds, or
+        ``{"dt", "budget", "downsample"}`` for a limited step) so that a replay repeats it.
         """
         try:
             dt = float(dt)
@@ -290,10 +293,12 @@ class Session:
         km = self.options.mixing == "km"
         background.dry(self.surface, dt, km)
         background.diffuse(self.surface, dt, km)
-        self._cursor = background.downsample(self.surface, self.options.color_variance, self.options.normal_variance,
-                                             budget, self._cursor)
+        if downsample:
+            self._cursor = background.downsample(self.surface, self.options.color_variance,
+                                                 self.options.normal_variance, budget, self._cursor)
         self.time += dt
-        (self._strokes[-1].setdefault("advance", []) if self._strokes else self._pre_advance).append(dt)
+        step: Any = dt if downsample and budget is None else {"dt": dt, "budget": budget, "downsample": downsample}
+        (self._strokes[-1].setdefault("advance", []) if self._strokes else self._pre_advance).append(step)
 
     # -- output ------------------------------------------------------------------------------------
     def _view_for(self, camera: Camera) -> PaintView:
@@ -426,7 +431,7 @@ class Session:
         """Paint a stroke-file dict (with its recorded background steps); returns the strokes painted."""
         strokes = parse_strokes(data, source)
         for i, a in enumerate(data.get("advance", [])):
-            self.advance(_num(a, f"{source}: advance[{i}]"))
+            self._step(a, f"{source}: advance[{i}]")
         for k, (brush, paint, samples, advance) in enumerate(strokes):
             view = data["strokes"][k].get("view")
             if view is not None:
@@ -438,9 +443,41 @@ class Session:
                 self.stroke(samples, brush=brush, paint=paint)
             except InputError as exc:
                 raise InputError(f"{source}: strokes[{k}].{exc}") from None
-            for a in advance:
-                self.advance(a)
+            for i, a in enumerate(advance):
+                self._step(a, f"{source}: strokes[{k}].advance[{i}]")
         return len(strokes)
+
+    def _step(self, a: Any, key: str) -> None:
+        if isinstance(a, dict):
+            budget = a.get("budget")
+            if budget is not None and (not isinstance(budget, int) or isinstance(budget, bool) or budget < 0):
+                raise InputError(f"{key}.budget: expected a non-negative integer or null, got {budget!r}")
+            self.advance(_num(a.get("dt"), f"{key}.dt"), budget, bool(a.get("downsample", True)))
+        else:
+            self.advance(_num(a, key))
+
+
+def _subdivide(last: Sample | None, samples: list[Sample], step: float) -> list[Sample]:
+    """The samples with intermediate paint events wherever the pen moved more than ``step``
+    since the previous one (linear in point, time, pressure and tilt), so that a stroke stays
+    continuous however sparsely it was sampled. Intermediate samples are marked ``_between``."""
+    out: list[Sample] = []
+    prev = last
+    for smp in samples:
+        if prev is not None:
+            d = float(np.linalg.norm(np.subtract(smp.point, prev.point)))
+            k = int(np.ceil(d / step)) if d > step else 1
+            for j in range(1, k):
+                a = j / k
+                mid = Sample(prev.t + a * (smp.t - prev.t),
+                             tuple(float(v) for v in (1 - a) * np.asarray(prev.point) + a * np.asarray(smp.point)),
+                             prev.pressure + a * (smp.pressure - prev.pressure),
+                             tuple(float(v) for v in (1 - a) * np.asarray(prev.tilt) + a * np.asarray(smp.tilt)))
+                object.__setattr__(mid, "_between", True)
+                out.append(mid)
+        out.append(smp)
+        prev = smp
+    return out
 
 
 def _num(v: Any, key: str) -> float:

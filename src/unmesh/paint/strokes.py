@@ -287,12 +287,9 @@ def check_samples(samples: Any, where: str = "") -> list[Sample]:
     return out
 
 
-def stroke_dict(brush: Brush, paint: Paint, samples: list[Sample], advance: list[float] | None = None) -> dict[str, Any]:
+def stroke_dict(brush: Brush, paint: Paint, samples: list[Sample]) -> dict[str, Any]:
     """The stroke-file entry of one stroke."""
-    d: dict[str, Any] = {"brush": brush.to_dict(), "paint": paint.to_dict(), "samples": [s.to_dict() for s in samples]}
-    if advance:
-        d["advance"] = [float(a) for a in advance]
-    return d
+    return {"brush": brush.to_dict(), "paint": paint.to_dict(), "samples": [s.to_dict() for s in samples]}
 
 
 def parse_strokes(data: Any, source: str = "strokes") -> list[tuple[Brush, Paint, list[Sample], list[float]]]:
@@ -330,7 +327,7 @@ def parse_strokes(data: Any, source: str = "strokes") -> list[tuple[Brush, Paint
         adv = st.get("advance", [])
         if not isinstance(adv, list):
             raise InputError(f"{where}advance: expected a list of seconds, got {adv!r}")
-        advance = [_finite(a, f"{where}advance[{i}]", 0.0) for i, a in enumerate(adv)]
+        advance = [a if isinstance(a, dict) else _finite(a, f"{where}advance[{i}]", 0.0) for i, a in enumerate(adv)]
         out.append((brush, paint, samples, advance))
     return out
 

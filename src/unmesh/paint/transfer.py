@@ -47,12 +47,13 @@ CHILD_RADIUS = 1.5
 MAX_BUFFER = 192
 #: Impasto: relief height per unit paint thickness, hair-imprint amplitude (of the thickness)
 #: and wavelength (in brush spacings); beaten-gold patch size (pixels) and tilt (degrees).
-IMPASTO = 1.0
+IMPASTO = 0.3
 HAIR_AMPLITUDE = 0.6
 HAIR_WAVELENGTH = 2.0
 BEATEN_PATCH = 4
 BEATEN_TILT = 14.0
 
+_PROPS = ("rho", "kappa", "diff", "refl", "shin", "metal")
 _SPLAT = SplatOptions(filter_radius=0.0, precision="double", depth_tolerance=0.5)
 #: the brush's lower surface: the low-pass filter closes gaps between its rings of surfels
 _SPLAT_BRUSH = SplatOptions(filter_radius=1.0, precision="double", depth_tolerance=0.5)
@@ -160,6 +161,8 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     if len(rows) == 0:
         return empty
     ou = np.stack([rel[ok] @ t1, rel[ok] @ t2], axis=1)
+    # pixels about one brush surfel, but never coarser than the surface already is there
+    h = min(h, 0.7 * float(np.median(surface.rad[rows])))
     # the buffer: centred on the brush footprint, margin of 3 object radii
     lo = bu.min(axis=0) - 3.0 * rmax
     hi = bu.max(axis=0) + 3.0 * rmax
@@ -237,6 +240,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     vw = surface.vw[rq] * share
     vd = surface.vd[rq] * share
     dc = surface.dry[rq].copy()
+    props = {f: surface.__getattr__(f)[rq].copy() for f in _PROPS}
     orphans = rep_local[npix[rep_local] == 0]
     if len(orphans):
         qpos = np.full(W * H, -1, np.int64)
@@ -247,6 +251,10 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
                 is_rep[r] = False
                 continue
             row = rows[r]
+            a, b = vw[k] + vd[k], surface.vw[row] + surface.vd[row]
+            if a + b > 0:
+                for f in _PROPS:
+                    props[f][k] = (a * props[f][k] + b * surface.__getattr__(f)[row]) / (a + b)
             a, b = vw[k], surface.vw[row]
             cw[k] = (a * cw[k] + b * surface.wet[row]) / (a + b) if a + b > 0 else cw[k]
             vw[k] = a + b
@@ -276,7 +284,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     brush.vw[touched] = tot[touched]
     # new paint attributes blend by the fraction of brush paint in the pixel
     def blend(field: str, value: float) -> np.ndarray:
-        out = surface.__getattr__(field)[rq].copy()
+        out = props[field]
         out[P] = (1.0 - fb) * out[P] + fb * value
         return out
     rho = blend("rho", paint.density / paint.thickness)
@@ -289,10 +297,13 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     pu = pix[Q]
     base_pt = o + pu[:, :1] * t1 + pu[:, 1:] * t2
     onr = surface.nrm[rq]
-    cosn = np.maximum(onr @ N, 0.2)
+    # geometry and relief are relative to the original surface: the father's normal (so relief
+    # tilts never accumulate); the owner's plane is its father-surface point with that normal
+    fnr = surface.nrm[surface.father[rq]]
+    cosn = np.maximum(fnr @ N, 0.2)
     owner_lift = surface.lift[rq]
-    opl = surface.pos[rq] - owner_lift[:, None] * onr  # owner's father-surface point
-    s = np.einsum("ij,ij->i", onr, opl - base_pt) / cosn
+    opl = surface.pos[rq] - owner_lift[:, None] * fnr
+    s = np.einsum("ij,ij->i", fnr, opl - base_pt) / cosn
     cpos = base_pt + s[:, None] * N
     area = np.full(len(Q), h * h) / cosn
     lift = owner_lift * 1.0
@@ -304,15 +315,23 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         across = np.cross(N, dirn / ln) if ln > 1e-12 else t1
         coord = (pu[P] @ np.array([across @ t1, across @ t2]))
         lam = HAIR_WAVELENGTH * brush.sk.spacing
-        lift[P] = IMPASTO * thick * (1.0 + HAIR_AMPLITUDE * np.sin(2 * np.pi * coord / lam))
+        phase = 2 * np.pi * coord / lam
+        lift[P] = IMPASTO * thick * (1.0 + HAIR_AMPLITUDE * np.sin(phase))
+        # the normal of the offset surface: tilted against the slope of the imprints
+        slope = np.clip(IMPASTO * thick * HAIR_AMPLITUDE * (2 * np.pi / lam) * np.cos(phase), -0.35, 0.35)
+        a3 = across - np.einsum("ij,j->i", fnr[P], across)[:, None] * fnr[P]
+        nn = fnr[P] - slope[:, None] * a3
+        nrm[P] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
     elif paint.relief == "beaten" and P.any():
         gi = np.floor(pu[P] / (BEATEN_PATCH * h)).astype(np.int64)
         a = np.radians(BEATEN_TILT) * _hash01(gi[:, 0], gi[:, 1], 1)
         phi = 2 * np.pi * _hash01(gi[:, 0], gi[:, 1], 2)
         tilt_dir = np.cos(phi)[:, None] * t1 + np.sin(phi)[:, None] * t2
-        nn = np.cos(a)[:, None] * onr[P] + np.sin(a)[:, None] * tilt_dir
+        tilt_dir = tilt_dir - np.einsum("ij,ij->i", tilt_dir, fnr[P])[:, None] * fnr[P]
+        tilt_dir /= np.maximum(np.linalg.norm(tilt_dir, axis=1, keepdims=True), 1e-300)
+        nn = np.cos(a)[:, None] * fnr[P] + np.sin(a)[:, None] * tilt_dir
         nrm[P] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
-    cpos = cpos + lift[:, None] * onr
+    cpos = cpos + lift[:, None] * fnr
     fat = surface.father[rq]
     rad = CHILD_RADIUS * h / cosn
     new = {
