@@ -47,14 +47,14 @@ def test_incremental_equals_whole_stroke(plane_cloud):
 
 
 def test_save_load_continues_exactly(session, tmp_path):
-    session.stroke(line(), brush=ROUND, paint=RED)
+    session.stroke(line(n=4), brush=ROUND, paint=RED)
     session.advance(0.3)
     p = tmp_path / "painted.ply"
     session.save(p)
     loaded = Session.load(p, PaintOptions(haptics=False))
     _same(_state(loaded), _state(session))
     assert loaded.strokes_json() == session.strokes_json()
-    more = line(z=0.1, t0=1.0)
+    more = line(n=3, z=0.1, t0=1.0)
     session.stroke(more, brush=Brush("flat", 0.03), paint=BLUE)
     loaded.stroke(more, brush=Brush("flat", 0.03), paint=BLUE)
     session.advance(0.7)
@@ -63,9 +63,9 @@ def test_save_load_continues_exactly(session, tmp_path):
 
 
 def test_replay_is_deterministic(session, plane_cloud):
-    session.stroke(line(), brush=ROUND, paint=RED)
+    session.stroke(line(n=4), brush=ROUND, paint=RED)
     session.advance(0.2)
-    session.stroke(line(z=0.08), brush=Brush("flat", 0.03), paint=BLUE)
+    session.stroke(line(n=3, z=0.08), brush=Brush("flat", 0.03), paint=BLUE)
     session.advance(0.4)
     data = session.strokes_json()
     a = Session(plane_cloud, PaintOptions(haptics=False))

@@ -117,7 +117,7 @@ def diffusion_coefficient(xij: np.ndarray, D: np.ndarray, dt: float) -> np.ndarr
 
     Example
     -------
-    >>> float(diffusion_coefficient(np.array([[1.0, 0, 0]]), np.eye(3), 1.0)[0]) == np.exp(-1.0)
+    >>> bool(diffusion_coefficient(np.array([[1.0, 0, 0]]), np.eye(3), 1.0)[0] == np.exp(-1.0))
     True
     """
     if dt <= 0:

@@ -51,7 +51,7 @@ BRUSH_TYPES: dict[str, float] = {"round": 0.35, "flat": 0.5, "pencil": 0.9}
 PAINT_TYPES: dict[str, dict[str, Any]] = {
     "oil": {"density": 2.0, "drying": 0.02, "transfer": 1.5, "back_transfer": 0.5, "diffusion": 0.0,
             "thickness": 0.002, "viscous": True, "reflectivity": 0.25, "shininess": 40.0, "metallic": 0.0},
-    "watercolor": {"density": 0.5, "drying": 0.15, "transfer": 2.0, "back_transfer": 1.0, "diffusion": 5e-5,
+    "watercolor": {"density": 0.5, "drying": 0.15, "transfer": 2.0, "back_transfer": 1.0, "diffusion": 2e-4,
                    "thickness": 0.001, "viscous": False, "reflectivity": 0.05, "shininess": 5.0, "metallic": 0.0},
     "metallic": {"density": 4.0, "drying": 0.05, "transfer": 1.5, "back_transfer": 0.5, "diffusion": 0.0,
                  "thickness": 0.002, "viscous": False, "reflectivity": 0.8, "shininess": 80.0, "metallic": 1.0},

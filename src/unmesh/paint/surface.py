@@ -55,13 +55,20 @@ VISUAL_FIELDS = frozenset({"pos", "nrm", "rad", "active", "alive", "base", "wet"
 AREA_FACTOR = 0.5
 
 
-def visible_colors(wet: np.ndarray, dry: np.ndarray, vw: np.ndarray, rho: np.ndarray, area: np.ndarray) -> np.ndarray:
+def visible_colors(wet: np.ndarray, dry: np.ndarray, vw: np.ndarray, rho: np.ndarray, area: np.ndarray,
+                   vd: np.ndarray | None = None, base: np.ndarray | None = None) -> np.ndarray:
     """Visible colour (5.8): ``C = alpha C_w + (1 - alpha) C_d``, ``alpha = min(rho V_w / area, 1)``.
+
+    Dry paint is opaque once it forms a layer: with ``vd`` and ``base`` given, ``C_d`` is the dry
+    colour over the bare surface colour ``base`` with coverage ``beta = min(rho V_d / area, 1)``
+    (so a trace of paint spread by diffusion does not colour a surfel completely).
 
     Parameters
     ----------
     wet, dry : (N, 3) float64
     vw, rho, area : (N,) float64
+    vd : (N,) float64, optional
+    base : (N, 3) float64, optional
 
     Example
     -------
@@ -70,6 +77,9 @@ def visible_colors(wet: np.ndarray, dry: np.ndarray, vw: np.ndarray, rho: np.nda
     [[0.5, 0.0, 0.5]]
     """
     alpha = np.minimum(rho * vw / area, 1.0)[:, None]
+    if vd is not None and base is not None:
+        beta = np.minimum(rho * vd / area, 1.0)[:, None]
+        dry = beta * dry + (1.0 - beta) * base
     return np.clip(alpha * wet + (1.0 - alpha) * dry, 0.0, 1.0)
 
 
@@ -276,7 +286,8 @@ class PaintSurface:
         """Visible colour (5.8) of rows ``idx`` (default all rows), (K, 3)."""
         d = self._data
         idx = np.arange(self.n) if idx is None else idx
-        return visible_colors(d["wet"][idx], d["dry"][idx], d["vw"][idx], d["rho"][idx], d["area"][idx])
+        return visible_colors(d["wet"][idx], d["dry"][idx], d["vw"][idx], d["rho"][idx], d["area"][idx],
+                              d["vd"][idx], d["base"][idx])
 
     def total_volume(self) -> float:
         """Wet + dry paint volume on the visible surface."""

@@ -297,10 +297,13 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     pu = pix[Q]
     base_pt = o + pu[:, :1] * t1 + pu[:, 1:] * t2
     onr = surface.nrm[rq]
-    cosn = np.maximum(onr @ N, 0.2)
+    # geometry and relief are relative to the original surface: the father's normal (so relief
+    # tilts never accumulate); the owner's plane is its father-surface point with that normal
+    fnr = surface.nrm[surface.father[rq]]
+    cosn = np.maximum(fnr @ N, 0.2)
     owner_lift = surface.lift[rq]
-    opl = surface.pos[rq] - owner_lift[:, None] * onr  # owner's father-surface point
-    s = np.einsum("ij,ij->i", onr, opl - base_pt) / cosn
+    opl = surface.pos[rq] - owner_lift[:, None] * fnr
+    s = np.einsum("ij,ij->i", fnr, opl - base_pt) / cosn
     cpos = base_pt + s[:, None] * N
     area = np.full(len(Q), h * h) / cosn
     lift = owner_lift * 1.0
@@ -312,15 +315,23 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         across = np.cross(N, dirn / ln) if ln > 1e-12 else t1
         coord = (pu[P] @ np.array([across @ t1, across @ t2]))
         lam = HAIR_WAVELENGTH * brush.sk.spacing
-        lift[P] = IMPASTO * thick * (1.0 + HAIR_AMPLITUDE * np.sin(2 * np.pi * coord / lam))
+        phase = 2 * np.pi * coord / lam
+        lift[P] = IMPASTO * thick * (1.0 + HAIR_AMPLITUDE * np.sin(phase))
+        # the normal of the offset surface: tilted against the slope of the imprints
+        slope = np.clip(IMPASTO * thick * HAIR_AMPLITUDE * (2 * np.pi / lam) * np.cos(phase), -0.35, 0.35)
+        a3 = across - np.einsum("ij,j->i", fnr[P], across)[:, None] * fnr[P]
+        nn = fnr[P] - slope[:, None] * a3
+        nrm[P] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
     elif paint.relief == "beaten" and P.any():
         gi = np.floor(pu[P] / (BEATEN_PATCH * h)).astype(np.int64)
         a = np.radians(BEATEN_TILT) * _hash01(gi[:, 0], gi[:, 1], 1)
         phi = 2 * np.pi * _hash01(gi[:, 0], gi[:, 1], 2)
         tilt_dir = np.cos(phi)[:, None] * t1 + np.sin(phi)[:, None] * t2
-        nn = np.cos(a)[:, None] * onr[P] + np.sin(a)[:, None] * tilt_dir
+        tilt_dir = tilt_dir - np.einsum("ij,ij->i", tilt_dir, fnr[P])[:, None] * fnr[P]
+        tilt_dir /= np.maximum(np.linalg.norm(tilt_dir, axis=1, keepdims=True), 1e-300)
+        nn = np.cos(a)[:, None] * fnr[P] + np.sin(a)[:, None] * tilt_dir
         nrm[P] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
-    cpos = cpos + lift[:, None] * onr
+    cpos = cpos + lift[:, None] * fnr
     fat = surface.father[rq]
     rad = CHILD_RADIUS * h / cosn
     new = {

@@ -241,7 +241,8 @@ class PaintView:
                       cam.rotation, g.albedo[sl], g.normal[sl], g.depth[sl], g.coverage[sl], g.weight[sl])
         self._shade(win)
 
-    def _shade(self, win: tuple[int, int, int, int]) -> None:
+    def _shade(self, win: tuple[int, int, int, int], origin: tuple[int, int] = (0, 0)) -> None:
+        """Shade the window ``win`` of the G-buffer; ``origin`` is the buffer's offset in the image."""
         cam = self.camera
         r0, r1, c0, c1 = win
         sl = (slice(r0, r1), slice(c0, c1))
@@ -256,7 +257,8 @@ class PaintView:
         f, cx, cy, ortho, _ = cam.kernel_params()
         out = np.empty((r1 - r0, c1 - c0, 3))
         shade_pixels(np.ascontiguousarray(g.albedo[sl]), np.ascontiguousarray(g.normal[sl]),
-                     np.ascontiguousarray(g.depth[sl]), np.ascontiguousarray(g.coverage[sl]), f, cx - c0, cy - r0,
+                     np.ascontiguousarray(g.depth[sl]), np.ascontiguousarray(g.coverage[sl]), f,
+                     cx - c0 - origin[1], cy - r0 - origin[0],
                      ortho, cam.rotation, np.ascontiguousarray(dirs), np.ascontiguousarray(cols), sh.ambient,
                      sh.specular, sh.shininess, bg, out)
         self._color[sl] = out
@@ -272,16 +274,25 @@ class PaintView:
                 self._shade((0, h, 0, w))
 
     def result(self, brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RenderResult:
-        """The shaded image (a copy); ``brush`` = (positions, normals, colours) is drawn with its shadow."""
+        """The shaded image; ``brush`` = (positions, normals, colours) is drawn with its shadow.
+
+        ``color``, ``depth`` and ``coverage`` are copies (with the brush); ``normal``, ``albedo``
+        and ``weight`` are read-only views of the object's G-buffer, valid until the next update
+        (copying them would cost more than a differential update)."""
         assert self._g is not None and self.camera is not None
         g = self._g
         color = self._color.copy()
-        depth, normal, cov = g.depth.copy(), g.normal.copy(), g.coverage.copy()
-        albedo, weight = g.albedo.copy(), g.weight.copy()
+        depth, cov = g.depth.copy(), g.coverage.copy()
         if brush is not None and len(brush[0]):
-            _draw_brush(GBuffer(albedo, normal, depth, cov, weight), color, self.camera, brush, self)
-        return RenderResult(color=color, depth=np.where(cov, depth, np.inf), normal=normal, coverage=cov,
-                            weight=weight, albedo=albedo, camera=self.camera)
+            _draw_brush(g, color, depth, cov, self.camera, brush, self)
+        views = []
+        for a in (g.normal, g.albedo, g.weight):
+            v = a.view()
+            v.flags.writeable = False
+            views.append(v)
+        np.copyto(depth, np.inf, where=~cov)
+        return RenderResult(color=color, depth=depth, normal=views[0], coverage=cov, weight=views[2],
+                            albedo=views[1], camera=self.camera)
 
 
 def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -295,11 +306,12 @@ def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) ->
     return cam.eye + pc @ cam.rotation
 
 
-def _draw_brush(g: GBuffer, color: np.ndarray, camera: Camera, brush: tuple[np.ndarray, np.ndarray, np.ndarray],
-                view: PaintView) -> None:
+def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.ndarray, camera: Camera,
+                brush: tuple[np.ndarray, np.ndarray, np.ndarray], view: PaintView) -> None:
     """Brush surfels over the object (nearest wins) and the brush's shadow on the object, from a
     light straight above the brush (a shadow map along the brush's mean normal), in the window
-    around the brush only; that window is re-shaded."""
+    around the brush only; that window of ``color``, ``depth``, ``coverage`` is rewritten (the
+    object G-buffer ``g`` is not changed)."""
     pos, nrm, col = brush
     n = len(pos)
     ext = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
@@ -319,11 +331,13 @@ def _draw_brush(g: GBuffer, color: np.ndarray, camera: Camera, brush: tuple[np.n
     if r0 >= r1 or c0 >= c1:
         return
     sl = (slice(r0, r1), slice(c0, c1))
-    cov = g.coverage[sl]
+    win = GBuffer(g.albedo[sl].copy(), g.normal[sl].copy(), g.depth[sl].copy(), g.coverage[sl].copy(),
+                  g.weight[sl].copy())
+    cov = win.coverage
     # shadow
     if cov.any():
         rr, cc = np.nonzero(cov)
-        world = unproject(camera, rr + r0, cc + c0, g.depth[sl][cov])
+        world = unproject(camera, rr + r0, cc + c0, win.depth[cov])
         up = nrm.mean(axis=0)
         up = up / max(np.linalg.norm(up), 1e-12)
         t1, t2 = tangent_frame(up[None])
@@ -333,12 +347,14 @@ def _draw_brush(g: GBuffer, color: np.ndarray, camera: Camera, brush: tuple[np.n
         bh = rel_b @ up
         rel = world - centre
         pu = np.stack([rel @ t1[0], rel @ t2[0]], axis=1)
-        dist, idx = KDTree(bu).knn(pu, 1)
-        shadow = (dist[:, 0] < 2.0 * rad) & (bh[idx[:, 0]] > rel @ up + 1e-9)
-        alb = g.albedo[sl]
-        sub = alb[cov]
-        sub[shadow] *= 0.55
-        alb[cov] = sub
+        near = np.abs(pu).max(axis=1) < np.abs(bu).max() + 2 * rad
+        if near.any():
+            dist, idx = KDTree(bu).knn(pu[near], 1)
+            shadow = np.zeros(len(pu), bool)
+            shadow[near] = (dist[:, 0] < 2.0 * rad) & (bh[idx[:, 0]] > (rel[near] @ up) + 1e-9)
+            sub = win.albedo[cov]
+            sub[shadow] *= 0.55
+            win.albedo[cov] = sub
     # brush surfels as small discs with a z-test
     R = int(np.ceil(rpx.max()))
     oy, ox = np.mgrid[-R:R + 1, -R:R + 1]
@@ -354,20 +370,20 @@ def _draw_brush(g: GBuffer, color: np.ndarray, camera: Camera, brush: tuple[np.n
     first = np.ones(len(flat), bool)
     first[1:] = flat[1:] != flat[:-1]
     flat, src, zz = flat[first], src[first], zz[first]
-    dsub = g.depth[sl].reshape(-1)
-    front = zz < dsub[flat]
+    front = zz < win.depth.reshape(-1)[flat]
     flat, src, zz = flat[front], src[front], zz[front]
-    for name, vals in (("albedo", col[src]), ("normal", nrm[src]), ("depth", zz), ("weight", np.ones(len(zz)))):
-        a = getattr(g, name)[sl]
-        a.reshape(-1, *a.shape[2:])[flat] = vals
-        getattr(g, name)[sl] = a
-    cv = g.coverage[sl]
-    cv.reshape(-1)[flat] = True
-    g.coverage[sl] = cv
-    # re-shade the window
+    win.albedo.reshape(-1, 3)[flat] = col[src]
+    win.normal.reshape(-1, 3)[flat] = nrm[src]
+    win.depth.reshape(-1)[flat] = zz
+    win.coverage.reshape(-1)[flat] = True
+    # shade the window
+    out = np.empty((r1 - r0, c1 - c0, 3))
     saved_g, saved_c = view._g, view._color
-    view._g, view._color = g, color
+    view._g, view._color = win, out
     try:
-        view._shade((r0, r1, c0, c1))
+        view._shade((0, r1 - r0, 0, c1 - c0), origin=(r0, c0))
     finally:
         view._g, view._color = saved_g, saved_c
+    color[sl] = out
+    depth[sl] = win.depth
+    coverage[sl] = win.coverage

@@ -159,8 +159,8 @@ def paint_relief(ctx: ExampleContext) -> None:
     s = _replay(cloud, data, strokes=None)
     size = (480, 200) if ctx.quick else (900, 360)
     cam = Camera((0.02, 0.9, 0.55), (0.02, 0.0, 0.0), up=(0, 1, 0), width=size[0], height=size[1], fov=26)
-    grazing = Shading(lights=(Light((-0.8, 0.6, -0.4), intensity=0.85), Light((0.3, 0.3, -1.0), intensity=0.35)),
-                      ambient=0.25, specular=0.4, shininess=30.0)
+    grazing = Shading(lights=(Light((-0.8, 0.6, -0.4), intensity=0.6), Light((0.3, 0.3, -1.0), intensity=0.2)),
+                      ambient=0.2, specular=0.3, shininess=30.0)
     img = s.render(cam, shading=grazing, brush=False).color
     path = ctx.path("relief.png")
     save_image(path, img)
