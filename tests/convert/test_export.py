@@ -91,3 +91,14 @@ def test_mip_levels_are_assembled_in_the_same_layout_and_written(pattern_cloud, 
         assert abs(half.mean() - part.texture.mean()) < 0.05
     files = write_textured(tmp_path / "m.obj", tm)
     assert any(f.name.endswith("_mip1.png") for f in files) and any(f.name.endswith("_mip2.png") for f in files)
+
+
+def test_report_has_no_per_triangle_arrays(pattern_cloud, tmp_path):
+    src = tmp_path / "in.ply"
+    save(src, pattern_cloud.subset(np.arange(0, 8000, 4)))
+    assert main(["convert", str(src), "-o", str(tmp_path / "o.glb"), "--faces", "60", "--report",
+                 str(tmp_path / "r.json"), "--no-progress", "--no-normal-map"]) == 0
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert not [k for k in rep if k.startswith("_")]
+    assert rep["options"]["normal_map"] is False
+    assert (tmp_path / "o.glb").stat().st_size > 1000

@@ -78,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         res.report["input"] = os.fspath(src)
         res.report["output"] = os.fspath(out)
-        extra.append((Path(args.report), json.dumps(_clean(res.report), indent=1) + "\n"))
+        public = {k: v for k, v in res.report.items() if not k.startswith("_")}  # per-triangle arrays stay in memory
+        extra.append((Path(args.report), json.dumps(_clean(public), indent=1) + "\n"))
     files = write_textured(out, res.textured, extra)
     r = res.report
     print(f"{r['points']} points -> {r['patches']['triangles']} triangles, "

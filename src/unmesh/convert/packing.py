@@ -10,7 +10,8 @@ down, aligned with the top of the row), and pushed as far left as the row's per-
 profile allows (``insert``). A patch that does not fit is left for a later row. When the
 candidates are used up and the row still has room, it goes on with the tallest remaining
 patches (an extension: Algorithm 6.1 would start a new row, which wastes most of the rows when
-few patches share a height).
+few patches share a height); when the tallest remaining patch no longer fits below the last
+row, the rows go on with the patches that do.
 
 Pages: when the remaining footprints fill the smallest power-of-two page that could hold them
 to at least ``target - 0.1`` and they all fit, that page ends the atlas; otherwise a page of the
@@ -88,11 +89,12 @@ def _pack_page(items: list[int], masks: list[np.ndarray], angles: np.ndarray, ed
     remaining = np.ones(len(items), bool)
     ymin = 0
     while remaining.any():
-        hbar = int(heights[remaining].max())
-        if ymin + hbar > edge:
+        fits = remaining & (heights <= edge - ymin)  # at the bottom of the page: the lower patches
+        if not fits.any():
             break
+        hbar = int(heights[fits].max())
         dh = max(1, int(dh_frac * hbar))
-        cand = np.flatnonzero(remaining & (heights > hbar - dh))
+        cand = np.flatnonzero(fits & (heights > hbar - dh))
         right_prof = np.zeros(hbar, np.int64)  # first free column per scanline of the row
         beta = np.pi / 2
         mirror = False
@@ -101,10 +103,11 @@ def _pack_page(items: list[int], masks: list[np.ndarray], angles: np.ndarray, ed
             if not len(cand):
                 # the row still has room: go on with the tallest remaining patches (an extension
                 # of Algorithm 6.1, which would leave the rest of the row empty)
-                if not remaining.any():
+                lower = remaining & (heights <= hbar)
+                if not lower.any():
                     break
-                h2 = int(heights[remaining].max())
-                cand = np.flatnonzero(remaining & (heights > h2 - max(1, int(dh_frac * h2))))
+                h2 = int(heights[lower].max())
+                cand = np.flatnonzero(lower & (heights > h2 - max(1, int(dh_frac * h2))))
             al = item_angles[cand]
             dl = np.abs(al[:, 0] - beta)
             dr = np.abs(al[:, 1] - beta)
