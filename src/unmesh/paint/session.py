@@ -15,8 +15,10 @@ True
 
 from __future__ import annotations
 
+import functools
 import json
 import os
+import threading
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -84,6 +86,17 @@ class StrokeResult:
     events: int
 
 
+def _locked(method: Any) -> Any:
+    """Run a session method under the session's lock (a studio may paint, render and save from
+    different threads)."""
+
+    @functools.wraps(method)
+    def wrapper(self: Session, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+    return wrapper
+
+
 class _Open:
     def __init__(self, brush: Brush, paint: Paint) -> None:
         self.brush = brush
@@ -111,6 +124,7 @@ class Session:
         self.options = options if options is not None else PaintOptions()
         if not isinstance(self.options, PaintOptions):
             raise InputError(f"options: expected PaintOptions, got {type(self.options).__name__}")
+        self._lock = threading.RLock()
         self.surface = _surface if _surface is not None else PaintSurface(cloud)
         self.time = 0.0
         self.view_axes = (np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
@@ -136,6 +150,7 @@ class Session:
             self._undo[-1][0].append(rec)
             self._tail = False
 
+    @_locked
     def begin_stroke(self, brush: Brush, paint: Paint) -> int:
         """Start a stroke; returns its id for :meth:`add_samples` / :meth:`end_stroke`."""
         if not isinstance(brush, Brush):
@@ -162,6 +177,7 @@ class Session:
             raise InputError(f"stroke: no open stroke with id {sid!r}")
         return st
 
+    @_locked
     def add_samples(self, sid: int, samples: Any) -> StrokeResult:
         """Paint the samples of an open stroke (one paint event each)."""
         st = self._get(sid)
@@ -220,6 +236,7 @@ class Session:
         return StrokeResult(st.added - a0 + st.removed - r0, st.added - a0, st.removed - r0, st.pixels - p0,
                             len(samples))
 
+    @_locked
     def end_stroke(self, sid: int) -> StrokeResult:
         """Finish a stroke (one undo step); returns its totals."""
         st = self._get(sid)
@@ -235,6 +252,7 @@ class Session:
         self._last_brush = None
         return StrokeResult(st.added + st.removed, st.added, st.removed, st.pixels, len(st.samples))
 
+    @_locked
     def stroke(self, samples: Any, brush: Brush | None = None, paint: Paint | None = None) -> StrokeResult:
         """Paint a whole stroke (validated completely before anything is painted)."""
         samples = check_samples(samples)
@@ -251,6 +269,7 @@ class Session:
         return self.end_stroke(sid)
 
     # -- undo / redo ------------------------------------------------------------------------------
+    @_locked
     def undo(self) -> bool:
         """Undo the last stroke (and the background work after it); False when there is none."""
         if self._open or not self._undo:
@@ -262,6 +281,7 @@ class Session:
         self._redo.append((red, d))
         return True
 
+    @_locked
     def redo(self) -> bool:
         """Redo the last undone stroke; False when there is none."""
         if self._open or not self._redo:
@@ -274,6 +294,7 @@ class Session:
         return True
 
     # -- background work ----------------------------------------------------------------------------
+    @_locked
     def advance(self, dt: float, budget: int | None = None, downsample: bool = True) -> None:
         """Drying (5.12/5.13), diffusion (5.15) and downsampling (5.5.2) over ``dt`` seconds.
 
@@ -306,6 +327,7 @@ class Session:
             self._view = PaintView(self.surface)
         return self._view
 
+    @_locked
     def render(self, camera: Camera, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0),
                brush: bool = True, full: bool = False) -> RenderResult:
         """Image of the painted model: differential update when only paint changed, full when the
@@ -329,6 +351,7 @@ class Session:
         """``"full"`` or ``"differential"``: the kind of the last render's update."""
         return self._view.last_update if self._view is not None else "none"
 
+    @_locked
     def pick(self, camera: Camera, x_px: float, y_px: float) -> np.ndarray | None:
         """The surface point seen at pixel column ``x_px``, row ``y_px`` (None: background)."""
         view = self._view_for(camera)
@@ -360,10 +383,12 @@ class Session:
         """Stop the haptic thread."""
         self._haptic.stop()
 
+    @_locked
     def cloud(self) -> SurfelCloud:
         """Current visible surfels with their visible colours."""
         return self.surface.cloud()
 
+    @_locked
     def strokes_json(self) -> dict[str, Any]:
         """The stroke-file dict of everything painted so far (see ``docs/paint.md``)."""
         out: dict[str, Any] = {"version": 1, "strokes": json.loads(json.dumps(self._strokes))}
@@ -372,6 +397,7 @@ class Session:
         return out
 
     # -- files ------------------------------------------------------------------------------------
+    @_locked
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write every row with every paint attribute (PLY, atomic); :meth:`load` continues exactly."""
         from unmesh.io.atomic import atomic_write_bytes
@@ -427,6 +453,7 @@ class Session:
         return s
 
     # -- replay ----------------------------------------------------------------------------------
+    @_locked
     def replay(self, data: dict[str, Any], source: str = "strokes") -> int:
         """Paint a stroke-file dict (with its recorded background steps); returns the strokes painted."""
         strokes = parse_strokes(data, source)
