@@ -397,14 +397,26 @@ class Session:
         return out
 
     # -- files ------------------------------------------------------------------------------------
+    def _record_with_open(self) -> dict[str, Any]:
+        """The stroke record, with an open stroke's samples so far as a finished stroke (a save in
+        the middle of a stroke reloads to the state at that moment)."""
+        rec = self.strokes_json()
+        for st in self._open.values():
+            if st.samples:
+                d = stroke_dict(st.brush, st.paint, st.samples)
+                d["view"] = [self.view_axes[0].tolist(), self.view_axes[1].tolist()]
+                rec["strokes"].append(d)
+        return rec
+
     @_locked
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write every row with every paint attribute (PLY, atomic); :meth:`load` continues exactly."""
+        """Write every row with every paint attribute (PLY, atomic); :meth:`load` continues exactly.
+
+        May be called in the middle of a stroke: the samples painted so far are recorded as a
+        stroke of their own."""
         from unmesh.io.atomic import atomic_write_bytes
         from unmesh.io.ply import encode_surfels
 
-        if self._open:
-            raise InputError("save: a stroke is open (end_stroke it first)")
         s = self.surface
         attrs = {}
         for name in FIELDS:
@@ -414,7 +426,7 @@ class Session:
             attrs["p_" + name] = a.astype(np.uint8) if a.dtype == np.bool_ else a
         cloud = SurfelCloud(s.pos, s.nrm, radii=s.rad, colors=s.colors(), attributes=attrs)
         meta = {"version": 1, "time": self.time, "cursor": self._cursor, "options": asdict(self.options),
-                "strokes": self.strokes_json()}
+                "strokes": self._record_with_open()}
         data = encode_surfels(cloud)
         line = (_META + json.dumps(meta, separators=(",", ":"))).encode("utf-8")
         i = data.index(b"\n", data.index(b"format")) + 1
