@@ -28,7 +28,7 @@ from unmesh.errors import FormatError, InputError
 from unmesh.paint import background
 from unmesh.paint.brush import K_PENALTY, BrushState
 from unmesh.paint.collide import force_shading
-from unmesh.paint.haptic import HapticLoop, haptic_force
+from unmesh.paint.haptic import HapticLoop, HapticProcess, haptic_force
 from unmesh.paint.strokes import Brush, Paint, Sample, check_samples, parse_strokes, stroke_dict
 from unmesh.paint.surface import FIELDS, PaintSurface
 from unmesh.paint.transfer import paint_event
@@ -55,8 +55,10 @@ class PaintOptions:
         RGB mixing by volume (5.11) or Kubelka-Munk.
     steps : int
         Verlet steps of the brush per paint event.
-    haptics : bool
-        Start the 1 kHz haptic thread at the first :meth:`Session.begin_stroke`.
+    haptics : bool or {"thread", "process"}
+        Start the 1 kHz haptic loop at the first :meth:`Session.begin_stroke`: in a thread
+        (``True`` or ``"thread"``) or in its own process (``"process"``: lower jitter while
+        painting, as it never waits for the painting loop's interpreter lock).
     color_variance, normal_variance : float
         Downsampling thresholds (5.5.2): children merge into their father when the variance of
         their visible colours (sum over RGB) and ``1 - |mean normal|`` are below these.
@@ -64,13 +66,15 @@ class PaintOptions:
 
     mixing: str = "rgb"
     steps: int = 12
-    haptics: bool = True
+    haptics: bool | str = True
     color_variance: float = 2e-4
     normal_variance: float = 2e-3
 
     def __post_init__(self) -> None:
         if self.mixing not in ("rgb", "km"):
             raise InputError(f"options.mixing: expected 'rgb' or 'km', got {self.mixing!r}")
+        if self.haptics not in (True, False, "thread", "process"):
+            raise InputError(f"options.haptics: expected True, False, 'thread' or 'process', got {self.haptics!r}")
         if int(self.steps) != self.steps or self.steps < 1:
             raise InputError(f"options.steps: expected a positive integer, got {self.steps!r}")
 
@@ -139,7 +143,7 @@ class Session:
         self._views: dict[tuple[int, int], PaintView] = {}
         self._view: PaintView | None = None
         self._last_brush: BrushState | None = None
-        self._haptic = HapticLoop(K_PENALTY)
+        self._haptic = HapticProcess(K_PENALTY) if self.options.haptics == "process" else HapticLoop(K_PENALTY)
         b = self.surface.pos[:self.surface.n_original]
         self._diag = float(np.linalg.norm(b.max(axis=0) - b.min(axis=0)))
 
