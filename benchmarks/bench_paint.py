@@ -13,7 +13,7 @@ they are not trustworthy; the script prints the load average.
 
 Usage::
 
-    python benchmarks/bench_paint.py [--surfels 500000] [--events 60] [--size 1024x768]
+    python benchmarks/bench_paint.py [--surfels 500000] [--events 60] [--size 1024x768] [--haptics process]
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ def main() -> None:
     ap.add_argument("--surfels", type=int, default=500_000)
     ap.add_argument("--events", type=int, default=60)
     ap.add_argument("--size", default="1024x768")
+    ap.add_argument("--haptics", choices=("thread", "process"), default="process",
+                    help="haptic loop in a thread or in its own process (default)")
     ap.add_argument("--cache", default=os.path.join(tempfile.gettempdir(), "unmesh_bench_paint_{n}.ply"),
                     help="sampled model cache (sampling 500k surfels takes minutes)")
     args = ap.parse_args()
@@ -56,7 +58,7 @@ def main() -> None:
         save(cache, cloud)
     print(f"model: blob, {len(cloud)} surfels (spacing {spacing:.4g}), sampled or loaded in "
           f"{time.perf_counter() - t:.1f} s")
-    s = Session(cloud, PaintOptions(haptics=True))
+    s = Session(cloud, PaintOptions(haptics=args.haptics))
     b = cloud.bounds()
     cam = Camera.framing(b, w, h, direction=(0.0, 0.15, 1.0))
 
@@ -118,7 +120,7 @@ def main() -> None:
     print(f"  normalising the {w}x{h} G-buffer after it: {1e3 * (time.perf_counter() - t):.1f} ms")
     print(f"full update: {np.median(t_full):.3f} s median of {len(t_full)} ({len(s.surface.visible_rows())} surfels)")
     st = s.haptic_stats()
-    print(f"haptic loop while painting: {st['rate']:.0f} Hz, jitter (std of the period) {1e3 * st['jitter']:.3f} ms, "
+    print(f"haptic loop ({args.haptics}) while painting: {st['rate']:.0f} Hz, jitter (std of the period) {1e3 * st['jitter']:.3f} ms, "
           f"largest period error {1e3 * st['max_error']:.2f} ms over {int(st['samples'])} periods")
     s.close()
 

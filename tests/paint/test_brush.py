@@ -166,3 +166,19 @@ def test_force_shading_weights_interpolate_normals():
     tree, pos, nrm = roof(90.0)
     _d, n = force_shading(tree, pos, nrm, np.array([[0.0, -0.01, 0.0]]))
     np.testing.assert_allclose(n[0], [0, 1, 0], atol=1e-9)  # symmetric at the ridge
+
+
+def test_haptic_process_publishes_the_force():
+    from unmesh.paint.haptic import HapticProcess
+
+    loop = HapticProcess(K_PENALTY).start()
+    try:
+        loop.publish(np.array([0.002]), np.array([[0, 1.0, 0]]), np.zeros(3), 0.5, np.zeros(3))
+        deadline = time.time() + 20.0
+        while time.time() < deadline and not np.allclose(loop.force, [0, K_PENALTY * 0.002, 0], rtol=1e-12):
+            time.sleep(0.05)
+        np.testing.assert_allclose(loop.force, [0, K_PENALTY * 0.002, 0], rtol=1e-12)
+        assert loop.stats()["samples"] > 0
+    finally:
+        loop.stop()
+    assert not loop.running

@@ -123,3 +123,33 @@ def test_stroke_files(tmp_path):
 def test_fields_cover_paint_attributes():
     for k in ("wet", "dry", "vw", "vd", "rho", "refl", "shin", "metal"):
         assert k in FIELDS
+
+
+def test_save_in_the_middle_of_a_stroke(session, tmp_path, plane_cloud):
+    sid = session.begin_stroke(ROUND, RED)
+    session.add_samples(sid, line(n=3))
+    p = tmp_path / "mid.ply"
+    session.save(p)
+    loaded = Session.load(p, PaintOptions(haptics=False))
+    _same(_state(loaded), _state(session))
+    session.end_stroke(sid)
+    # replaying the record of the saved file gives the same state too
+    again = Session(plane_cloud, PaintOptions(haptics=False))
+    again.replay(loaded.strokes_json())
+    _same(_state(again), _state(loaded))
+
+
+def test_kubelka_munk_session_conserves_volume(plane_cloud):
+    s = Session(plane_cloud, PaintOptions(haptics=False, mixing="km"))
+    s.stroke(line(n=3), brush=ROUND, paint=Paint("oil", (0.9, 0.9, 0.1)))
+    sid = s.begin_stroke(ROUND, Paint("watercolor", (0.1, 0.1, 0.9)))
+    v0 = s.surface.total_volume() + s._open[sid].state.volume()
+    s.add_samples(sid, line(n=3, z=0.02))
+    v1 = s.surface.total_volume() + s._open[sid].state.volume()
+    assert abs(v1 - v0) <= 1e-12 * v0
+    s.end_stroke(sid)
+    v2 = s.surface.total_volume()
+    s.advance(1.0)  # drying and diffusion with Kubelka-Munk mixing
+    assert abs(s.surface.total_volume() - v2) <= 1e-12 * v2
+    with pytest.raises(InputError, match=r"options\.mixing"):
+        PaintOptions(mixing="cmyk")

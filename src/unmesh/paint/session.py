@@ -15,8 +15,10 @@ True
 
 from __future__ import annotations
 
+import functools
 import json
 import os
+import threading
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -26,7 +28,7 @@ from unmesh.errors import FormatError, InputError
 from unmesh.paint import background
 from unmesh.paint.brush import K_PENALTY, BrushState
 from unmesh.paint.collide import force_shading
-from unmesh.paint.haptic import HapticLoop, haptic_force
+from unmesh.paint.haptic import HapticLoop, HapticProcess, haptic_force
 from unmesh.paint.strokes import Brush, Paint, Sample, check_samples, parse_strokes, stroke_dict
 from unmesh.paint.surface import FIELDS, PaintSurface
 from unmesh.paint.transfer import paint_event
@@ -53,8 +55,10 @@ class PaintOptions:
         RGB mixing by volume (5.11) or Kubelka-Munk.
     steps : int
         Verlet steps of the brush per paint event.
-    haptics : bool
-        Start the 1 kHz haptic thread at the first :meth:`Session.begin_stroke`.
+    haptics : bool or {"thread", "process"}
+        Start the 1 kHz haptic loop at the first :meth:`Session.begin_stroke`: in a thread
+        (``True`` or ``"thread"``) or in its own process (``"process"``: lower jitter while
+        painting, as it never waits for the painting loop's interpreter lock).
     color_variance, normal_variance : float
         Downsampling thresholds (5.5.2): children merge into their father when the variance of
         their visible colours (sum over RGB) and ``1 - |mean normal|`` are below these.
@@ -62,13 +66,15 @@ class PaintOptions:
 
     mixing: str = "rgb"
     steps: int = 12
-    haptics: bool = True
+    haptics: bool | str = True
     color_variance: float = 2e-4
     normal_variance: float = 2e-3
 
     def __post_init__(self) -> None:
         if self.mixing not in ("rgb", "km"):
             raise InputError(f"options.mixing: expected 'rgb' or 'km', got {self.mixing!r}")
+        if self.haptics not in (True, False, "thread", "process"):
+            raise InputError(f"options.haptics: expected True, False, 'thread' or 'process', got {self.haptics!r}")
         if int(self.steps) != self.steps or self.steps < 1:
             raise InputError(f"options.steps: expected a positive integer, got {self.steps!r}")
 
@@ -82,6 +88,17 @@ class StrokeResult:
     removed: int
     pixels: int
     events: int
+
+
+def _locked(method: Any) -> Any:
+    """Run a session method under the session's lock (a studio may paint, render and save from
+    different threads)."""
+
+    @functools.wraps(method)
+    def wrapper(self: Session, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+    return wrapper
 
 
 class _Open:
@@ -111,6 +128,7 @@ class Session:
         self.options = options if options is not None else PaintOptions()
         if not isinstance(self.options, PaintOptions):
             raise InputError(f"options: expected PaintOptions, got {type(self.options).__name__}")
+        self._lock = threading.RLock()
         self.surface = _surface if _surface is not None else PaintSurface(cloud)
         self.time = 0.0
         self.view_axes = (np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
@@ -125,7 +143,7 @@ class Session:
         self._views: dict[tuple[int, int], PaintView] = {}
         self._view: PaintView | None = None
         self._last_brush: BrushState | None = None
-        self._haptic = HapticLoop(K_PENALTY)
+        self._haptic = HapticProcess(K_PENALTY) if self.options.haptics == "process" else HapticLoop(K_PENALTY)
         b = self.surface.pos[:self.surface.n_original]
         self._diag = float(np.linalg.norm(b.max(axis=0) - b.min(axis=0)))
 
@@ -136,6 +154,7 @@ class Session:
             self._undo[-1][0].append(rec)
             self._tail = False
 
+    @_locked
     def begin_stroke(self, brush: Brush, paint: Paint) -> int:
         """Start a stroke; returns its id for :meth:`add_samples` / :meth:`end_stroke`."""
         if not isinstance(brush, Brush):
@@ -162,6 +181,7 @@ class Session:
             raise InputError(f"stroke: no open stroke with id {sid!r}")
         return st
 
+    @_locked
     def add_samples(self, sid: int, samples: Any) -> StrokeResult:
         """Paint the samples of an open stroke (one paint event each)."""
         st = self._get(sid)
@@ -220,6 +240,7 @@ class Session:
         return StrokeResult(st.added - a0 + st.removed - r0, st.added - a0, st.removed - r0, st.pixels - p0,
                             len(samples))
 
+    @_locked
     def end_stroke(self, sid: int) -> StrokeResult:
         """Finish a stroke (one undo step); returns its totals."""
         st = self._get(sid)
@@ -235,6 +256,7 @@ class Session:
         self._last_brush = None
         return StrokeResult(st.added + st.removed, st.added, st.removed, st.pixels, len(st.samples))
 
+    @_locked
     def stroke(self, samples: Any, brush: Brush | None = None, paint: Paint | None = None) -> StrokeResult:
         """Paint a whole stroke (validated completely before anything is painted)."""
         samples = check_samples(samples)
@@ -251,6 +273,7 @@ class Session:
         return self.end_stroke(sid)
 
     # -- undo / redo ------------------------------------------------------------------------------
+    @_locked
     def undo(self) -> bool:
         """Undo the last stroke (and the background work after it); False when there is none."""
         if self._open or not self._undo:
@@ -262,6 +285,7 @@ class Session:
         self._redo.append((red, d))
         return True
 
+    @_locked
     def redo(self) -> bool:
         """Redo the last undone stroke; False when there is none."""
         if self._open or not self._redo:
@@ -274,6 +298,7 @@ class Session:
         return True
 
     # -- background work ----------------------------------------------------------------------------
+    @_locked
     def advance(self, dt: float, budget: int | None = None, downsample: bool = True) -> None:
         """Drying (5.12/5.13), diffusion (5.15) and downsampling (5.5.2) over ``dt`` seconds.
 
@@ -306,6 +331,7 @@ class Session:
             self._view = PaintView(self.surface)
         return self._view
 
+    @_locked
     def render(self, camera: Camera, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0),
                brush: bool = True, full: bool = False) -> RenderResult:
         """Image of the painted model: differential update when only paint changed, full when the
@@ -329,6 +355,7 @@ class Session:
         """``"full"`` or ``"differential"``: the kind of the last render's update."""
         return self._view.last_update if self._view is not None else "none"
 
+    @_locked
     def pick(self, camera: Camera, x_px: float, y_px: float) -> np.ndarray | None:
         """The surface point seen at pixel column ``x_px``, row ``y_px`` (None: background)."""
         view = self._view_for(camera)
@@ -360,10 +387,12 @@ class Session:
         """Stop the haptic thread."""
         self._haptic.stop()
 
+    @_locked
     def cloud(self) -> SurfelCloud:
         """Current visible surfels with their visible colours."""
         return self.surface.cloud()
 
+    @_locked
     def strokes_json(self) -> dict[str, Any]:
         """The stroke-file dict of everything painted so far (see ``docs/paint.md``)."""
         out: dict[str, Any] = {"version": 1, "strokes": json.loads(json.dumps(self._strokes))}
@@ -372,13 +401,26 @@ class Session:
         return out
 
     # -- files ------------------------------------------------------------------------------------
+    def _record_with_open(self) -> dict[str, Any]:
+        """The stroke record, with an open stroke's samples so far as a finished stroke (a save in
+        the middle of a stroke reloads to the state at that moment)."""
+        rec = self.strokes_json()
+        for st in self._open.values():
+            if st.samples:
+                d = stroke_dict(st.brush, st.paint, st.samples)
+                d["view"] = [self.view_axes[0].tolist(), self.view_axes[1].tolist()]
+                rec["strokes"].append(d)
+        return rec
+
+    @_locked
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write every row with every paint attribute (PLY, atomic); :meth:`load` continues exactly."""
+        """Write every row with every paint attribute (PLY, atomic); :meth:`load` continues exactly.
+
+        May be called in the middle of a stroke: the samples painted so far are recorded as a
+        stroke of their own."""
         from unmesh.io.atomic import atomic_write_bytes
         from unmesh.io.ply import encode_surfels
 
-        if self._open:
-            raise InputError("save: a stroke is open (end_stroke it first)")
         s = self.surface
         attrs = {}
         for name in FIELDS:
@@ -388,7 +430,7 @@ class Session:
             attrs["p_" + name] = a.astype(np.uint8) if a.dtype == np.bool_ else a
         cloud = SurfelCloud(s.pos, s.nrm, radii=s.rad, colors=s.colors(), attributes=attrs)
         meta = {"version": 1, "time": self.time, "cursor": self._cursor, "options": asdict(self.options),
-                "strokes": self.strokes_json()}
+                "strokes": self._record_with_open()}
         data = encode_surfels(cloud)
         line = (_META + json.dumps(meta, separators=(",", ":"))).encode("utf-8")
         i = data.index(b"\n", data.index(b"format")) + 1
@@ -427,6 +469,7 @@ class Session:
         return s
 
     # -- replay ----------------------------------------------------------------------------------
+    @_locked
     def replay(self, data: dict[str, Any], source: str = "strokes") -> int:
         """Paint a stroke-file dict (with its recorded background steps); returns the strokes painted."""
         strokes = parse_strokes(data, source)

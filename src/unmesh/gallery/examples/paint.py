@@ -216,9 +216,9 @@ def paint_art(ctx: ExampleContext) -> None:
     data = shipped_strokes("art")
     cloud = model_for(data)
     t = time.perf_counter()
-    s = _replay(cloud, data, strokes=3 if ctx.quick else None)
+    s = _replay(cloud, data, strokes=2 if ctx.quick else None)
     elapsed = time.perf_counter() - t
-    events = sum(len(st["samples"]) for st in data["strokes"][:3 if ctx.quick else None])
+    events = sum(len(st["samples"]) for st in data["strokes"][:2 if ctx.quick else None])
     size = (300, 225) if ctx.quick else (480, 360)
     cams = [Camera.framing(cloud.bounds(), *size, direction=d) for d in ((0.0, 0.15, 1.0), (0.8, 0.3, 0.7))]
     views = [s.render(c, brush=False).color for c in cams]
