@@ -30,7 +30,7 @@ def register(sub: Any) -> None:
     p.add_argument("--render", metavar="OUT.png", help="also render the painted model to an image")
     p.add_argument("--size", default="800x600", metavar="WxH", help="--render image size (default 800x600)")
     p.add_argument("--spacing", type=float, metavar="D", help="sample spacing of a built-in shape")
-    p.add_argument("--port", type=int, default=8765, metavar="N", help="studio port (default 8765)")
+    p.add_argument("--port", type=int, default=0, metavar="N", help="studio port (default: a free port)")
     p.add_argument("--no-browser", action="store_true", help="do not open a browser for the studio")
     p.set_defaults(func=run)
 

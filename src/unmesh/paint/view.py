@@ -322,7 +322,7 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
         return
     h, w = camera.shape
     f = camera.pixels_per_unit
-    rpx = rad * (f if camera.is_ortho else f / z[ok])
+    rpx = rad * (np.full(int(ok.sum()), f) if camera.is_ortho else f / z[ok])
     span_r = row[ok].max() - row[ok].min()
     span_c = cl[ok].max() - cl[ok].min()
     pad = 0.5 * max(span_r, span_c) + rpx.max() + 2
