@@ -449,7 +449,7 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
 def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, work):
     """Per-fragment clip test of surfel ``s`` at depth ``z`` (chapter 4).
 
-    With an empty ``clip_tree``: surfel ``s`` owns planes
+    With ``clip_tree`` None: surfel ``s`` owns planes
     ``clip_planes[clip_offsets[s]:clip_offsets[s+1]]`` (rows ``(nx, ny, nz, d)`` in world
     space); plane ``j`` keeps points with ``n.x + d <= 0``. ``clip_mode[s] == 0`` keeps a
     fragment kept by *all* planes (convex corner), ``1`` by *any* plane (concave corner).
@@ -469,7 +469,7 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
     wx = eye[0] + px * frame[0, 0] + py * frame[1, 0] + z * frame[2, 0]
     wy = eye[1] + px * frame[0, 1] + py * frame[1, 1] + z * frame[2, 1]
     wz = eye[2] + px * frame[0, 2] + py * frame[1, 2] + z * frame[2, 2]
-    if clip_tree.shape[0] > 0:
+    if clip_tree is not None:  # None (plain splatting) prunes this branch at compile time
         return keep_tree(s, wx, wy, wz, clip_offsets, clip_planes, clip_tree, clip_leaf, work)
     anymode = clip_mode[s] != 0
     for j in range(a, b):
@@ -622,7 +622,10 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
         ln = np.zeros((m, 3))
         ld = np.zeros(m)
         lcount = np.zeros(m, dtype=np.int32)
-        work = np.empty((max(clip_tree.shape[0], 1), 5))
+        if clip_tree is None:
+            work = np.empty((1, 5))
+        else:
+            work = np.empty((max(clip_tree.shape[0], 1), 5))
         if visibility:
             cap = 0
             for k in range(a, b):

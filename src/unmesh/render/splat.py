@@ -61,9 +61,8 @@ __all__ = ["DISCONTINUITY_MIN_ANGLE", "ClipPlanes", "ClipSurfels", "ClipTree", "
 #: rows), shared by all renderers of a thread: their contents live only during one update, and
 #: reusing them spares every ``render()`` call the page faults of ~200 MB per 10^6 surfels.
 _SCRATCH = threading.local()
-#: Placeholders of the CSG clip arrays when splatting without a :class:`ClipTree`.
-_NO_TREE = np.zeros((0, 4), dtype=np.int32)
-_NO_LEAF = np.zeros(0, dtype=np.int32)
+#: Placeholder of the clip mode when splatting with a :class:`ClipTree` (without one the tree
+#: arguments of the kernels are None, which compiles the plain kernels without the tree code).
 _NO_MODE = np.zeros(1, dtype=np.int8)
 
 
@@ -507,7 +506,7 @@ class SplatRenderer:
                                                      params, box, group, tile, ntx, nty, 8)
             pt = self._scratch("pairs", (len(items), NPARAM), self.param_dtype)
             gather_rows(params, items, pt)
-        ctree, cleaf = _NO_TREE, _NO_LEAF
+        ctree, cleaf = None, None
         if clip is None:
             coff, cpl, cmode, has_clip = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8), False
         elif isinstance(clip, ClipTree):
