@@ -361,10 +361,27 @@ def _tri_or(a, b):
     return 1 if (a > 0 or b > 0) else 0
 
 
+#: Fragments closer than this (relative to the coordinates' magnitude) to a partner's plane are
+#: on it: coplanar patches (4.5) then break the tie by leaf order, so that exactly one of two
+#: coincident surfaces is drawn instead of none.
+COPLANAR_EPS = 1e-6
+
+
 @njit(cache=True)
 def _clips(P, j, x0, x1, x2):
     """Whether partner row ``j`` (centre ``P[j, 0:3]``, normal ``P[j, 3:6]``) clips ``x`` (4.3)."""
     return (x0 - P[j, 0]) * P[j, 3] + (x1 - P[j, 1]) * P[j, 4] + (x2 - P[j, 2]) * P[j, 5] >= 0.0
+
+
+@njit(cache=True)
+def _clips_fragment(P, j, x0, x1, x2, own):
+    """:func:`_clips` for a fragment of leaf ``own``; on the plane (within :data:`COPLANAR_EPS`)
+    the fragment counts as inside the partner's patch when ``own`` is the lower leaf."""
+    d = (x0 - P[j, 0]) * P[j, 3] + (x1 - P[j, 1]) * P[j, 4] + (x2 - P[j, 2]) * P[j, 5]
+    tol = COPLANAR_EPS * (1.0 + abs(x0) + abs(x1) + abs(x2))
+    if abs(d) <= tol:
+        return own > P[j, 6]
+    return d >= 0.0
 
 
 @njit(cache=True)
@@ -377,7 +394,8 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     1 union, 2 leaf; the sub-tree of node k is ``first[k] .. k``; ``invert`` complements a leaf,
     4.3); ``leaf[s]`` is the leaf node of ``s``. ``work`` (K, 5) float64 scratch.
 
-    insidePatch (Algorithm 4.4) uses the two partners of the patch closest to ``x``: none gives
+    insidePatch (Algorithm 4.4) uses the two partners of the patch closest to ``x`` (a fragment
+    on a partner's plane, coplanar patches 4.5, is inside the lower leaf's patch): none gives
     unknown, one the closest-surfel test (4.3), two the concave/convex rule (4.4); insideTree
     (Algorithm 4.3) combines them with the three-valued logic (4.9, 4.10), evaluated for every
     node in post order; then the walk from ``leaf[s]`` to the root applies (4.5)/(4.6).
@@ -410,11 +428,12 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
                 val = -1
             else:
                 i2 = int(work[k, 3])
-                c1 = _clips(partners, i1, x0, x1, x2)
+                own = leaf[s]
+                c1 = _clips_fragment(partners, i1, x0, x1, x2, own)
                 if i2 < 0:
                     inside = not c1
                 else:
-                    c2 = _clips(partners, i2, x0, x1, x2)
+                    c2 = _clips_fragment(partners, i2, x0, x1, x2, own)
                     concave = (_clips(partners, i1, partners[i2, 0], partners[i2, 1], partners[i2, 2])
                                and _clips(partners, i2, partners[i1, 0], partners[i1, 1], partners[i1, 2]))
                     if concave:
