@@ -21,8 +21,8 @@ Clipping (chapter 4) is done per fragment in the one fragment loop: :class:`Clip
 by :mod:`unmesh.csg`). :class:`ClipSurfels`, the discontinuity surfels of the drawn clouds (4.3,
 see :mod:`unmesh.surfels.cloud`), are invisible: the geometry ones become a :class:`ClipTree`
 (:func:`discontinuity_clip`) that cuts the surface surfels crossing them to a clean edge (the
-crack surfels of the thin shells); texture discontinuity surfels are kept
-(:attr:`SplatRenderer.clip_surfels`) without changing the image yet.
+crack surfels of the thin shells); texture discontinuity surfels clip the colour only, by a
+second pass of :func:`unmesh.render.render` (see :mod:`unmesh.render.pipeline`).
 
 Example
 -------
@@ -254,9 +254,9 @@ class ClipSurfels:
     """Discontinuity surfels that clip the splats around them (chapter 4, 4.3).
 
     Geometry discontinuity surfels (kind 1) clip their neighbours to a clean edge
-    (:func:`discontinuity_clip`); texture discontinuity surfels (kind 2) are meant to clip only
-    their colour (not built yet: they are kept in :attr:`SplatRenderer.clip_surfels`). Neither
-    is drawn. This is the clip information the renderer passes to :meth:`SplatRenderer.render`.
+    (:func:`discontinuity_clip`); texture discontinuity surfels (kind 2) clip only their colour
+    (:func:`unmesh.render.render` splats a second pass clipped by them and takes its albedo).
+    Neither is drawn. This is the clip information the renderer passes to :meth:`SplatRenderer.render`.
 
     Parameters
     ----------
