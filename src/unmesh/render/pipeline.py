@@ -315,9 +315,12 @@ def _draw_surfels(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], context: Draw
         if texture is None:
             renderer = SplatRenderer(context.camera, opts.splat)
             return renderer._render_in_place(arrays, gbuffer, clip_surfels=clip)
-        coloured = SplatRenderer(context.camera, opts.splat).render(arrays, opaque=gbuffer, clip=texture).gbuffer()
-        out = SplatRenderer(context.camera, opts.splat)._render_in_place(arrays, gbuffer, clip_surfels=clip)
-        both = coloured.coverage & (coloured.weight > 0) & out.coverage & (out.weight > 0)
+        renderer = SplatRenderer(context.camera, opts.splat)
+        out = renderer._render_in_place(arrays, gbuffer, clip_surfels=clip)
+        colour = SplatRenderer(context.camera, opts.splat)
+        colour.zvis = renderer.zvis  # the same visible fragments, read only (a partial update, 5.7)
+        coloured = colour.splat(arrays, clip=texture).gbuffer()
+        both = coloured.coverage & (coloured.weight > 0) & out.coverage
         out.albedo[both] = coloured.albedo[both]
         return out
     from unmesh.render.raycast import draw_mls
