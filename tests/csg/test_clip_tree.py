@@ -8,7 +8,7 @@ from unmesh import SurfelCloud
 from unmesh.csg import Patch, flatten
 from unmesh.csg.classify import on_surface_reference
 from unmesh.csg.model import INTERSECTION, LEAF
-from unmesh.render._splat_kernels import keep_tree
+from unmesh.render._splat_kernels import COPLANAR_EPS, keep_tree
 
 
 def _tree(draw, nleaves):
@@ -57,8 +57,9 @@ def test_kernel_matches_reference(case):
     assert keep_tree(0, x[0], x[1], x[2], offsets, partners, table, leaf, work) == ref
 
 
-def _inside_values(flat, x, partners):
-    """insideTree (three-valued) of every node for the fragment, from the partners."""
+def _inside_values(flat, x, partners, own):
+    """insideTree (three-valued) of every node for the fragment of leaf ``own``, from the
+    partners (a fragment on a partner's plane is inside the lower leaf's patch, 4.5)."""
     table = flat.table()
     vals = {}
     for k in range(len(table)):
@@ -73,12 +74,18 @@ def _inside_values(flat, x, partners):
             def clips(r, p):
                 return float(np.dot(p - r[:3], r[3:6])) >= 0
 
-            c1 = clips(mine[o[0]], x)
+            def clips_x(r):
+                d = float(np.dot(x - r[:3], r[3:6]))
+                if abs(d) <= COPLANAR_EPS * (1 + np.abs(x).sum()):
+                    return own > r[6]
+                return d >= 0
+
+            c1 = clips_x(mine[o[0]])
             if len(mine) == 1:
                 v = not c1
             else:
                 a, b = mine[o[0]], mine[o[1]]
-                c2 = clips(b, x)
+                c2 = clips_x(b)
                 v = (not c1 or not c2) if (clips(a, b[:3]) and clips(b, a[:3])) else (not c1 and not c2)
             vals[k] = v != bool(table[k, 3])
         else:
@@ -101,7 +108,7 @@ def test_appendix_a_invariant(case):
     where surface membership follows (A.1)/(A.2) and an unknown sibling leaves it unchanged;
     Algorithm 4.2 (early exit, the kernel) returns the same as A.1."""
     x, offsets, partners, table, leaf, flat = case
-    vals = _inside_values(flat, x, partners)
+    vals = _inside_values(flat, x, partners, int(leaf[0]))
 
     def on_surface(k, start):
         """x in S_k, for x on the leaf ``start`` (and on no other leaf)."""

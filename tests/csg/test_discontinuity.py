@@ -52,3 +52,39 @@ def test_coplanar_discontinuity_surfels_do_not_clip():
     assert discontinuity_clip(a, across) is not None
     behind = ClipSurfels([[-0.2, 0, 0.0]], [[1.0, 0, 0]], [[[0, 0.5, 0], [0, 0, 0.5]]], [1])
     assert discontinuity_clip(a, behind) is None  # the surfel's centre is in front: the other side's surfel
+
+
+def _painted_sheet(h=0.05, with_discs=True):
+    """A plane z = 0, red for x < 0 and blue for x > 0 (the boundary between samples), with a
+    pair of texture discontinuity surfels along x = 0 (facing either way)."""
+    g = np.arange(-1 + h / 2, 1, h)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    pos = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    col = np.where(pos[:, :1] < 0, [1.0, 0, 0], [0, 0, 1.0])
+    sheet = SurfelCloud(pos, np.tile([0, 0, 1.0], (len(pos), 1)), radii=np.full(len(pos), 0.75 * h), colors=col,
+                        attributes={"discontinuity": np.zeros(len(pos))})
+    if not with_discs:
+        return sheet
+    ys = np.arange(-1, 1 + h, h)
+    p = np.stack([np.zeros_like(ys), ys, np.zeros_like(ys)], 1)
+    dpos = np.concatenate([p, p])
+    dnrm = np.concatenate([np.tile([1.0, 0, 0], (len(ys), 1)), np.tile([-1.0, 0, 0], (len(ys), 1))])
+    axes = np.tile([[[0, h, 0], [0, 0, h]]], (len(dpos), 1, 1))
+    discs = SurfelCloud(dpos, dnrm, axes=axes, attributes={"discontinuity": np.full(len(dpos), 2)})
+    return [sheet, discs]
+
+
+def test_texture_discontinuity_surfels_clip_colour_only_fig_4_6():
+    cam = Camera((0, 0, 3), (0, 0, 0), width=96, height=48, ortho=0.15)
+    sharp = render(_painted_sheet(), cam, shading="none")
+    soft = render(_painted_sheet(with_discs=False), cam, shading="none")
+    # colour: a jump within one pixel column (blurred over several without the surfels)
+    red = sharp.color[..., 0]
+    mixed = ((red > 1e-9) & (red < 1 - 1e-9)).sum(axis=1)
+    assert mixed.max() <= 1
+    soft_mixed = ((soft.color[..., 0] > 1e-9) & (soft.color[..., 0] < 1 - 1e-9)).sum(axis=1)
+    assert np.median(soft_mixed) >= 4
+    # geometry blends across the texture edge as without the surfels
+    np.testing.assert_array_equal(sharp.depth, soft.depth)
+    np.testing.assert_array_equal(sharp.normal, soft.normal)
+    assert sharp.coverage.all()

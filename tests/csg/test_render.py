@@ -213,3 +213,25 @@ def test_full_size_512_iou_edges_and_depth():
     m = res.coverage & np.isfinite(depth) & _distance_to_edges(who)
     err = np.abs(res.depth[m] - depth[m])
     assert np.percentile(err, 99.5) < 0.005 * np.sqrt(3)
+
+
+def test_hard_but_valid_input_renders_without_crash():
+    """Coplanar patches (4.5), a camera inside the model, an empty result, a model mixed with a
+    plain surfel cloud: images, no exceptions."""
+    from unmesh.csg import Patch
+    from unmesh.shapes import Sphere
+
+    a = Patch.halfspace((0, 0, 0), (0, 0, 1), 2.0, 0.1, color=(1, 0, 0))
+    b = Patch.halfspace((0, 0, 0), (0, 0, 1), 2.0, 0.13, color=(0, 0, 1))  # coplanar with a
+    cam = Camera((0.3, 0.2, 2.0), (0, 0, 0), width=48, height=48, fov=40)
+    res = render(a & b, cam, shading="none")
+    assert res.coverage.mean() > 0.5
+    ball = Patch(Sphere(radius=0.5).surfels(0.1))
+    empty = render(ball - ball, cam)
+    assert not np.isnan(empty.color).any()
+    inside_cam = Camera((0, 0, 0.0), (0, 0, 1), width=32, height=32, fov=60)
+    assert render(a - ball, inside_cam).color.shape == (32, 32, 3)
+    mixed = render([a - ball, Sphere(radius=0.2, center=(0, 0, 0.8)).surfels(0.05, color=(0, 1, 0))], cam,
+                   shading="none")
+    assert (np.abs(mixed.color - [0, 1, 0]).max(-1) < 1e-9).sum() > 20  # the plain cloud in front
+    assert (np.abs(mixed.color - [1, 0, 0]).max(-1) < 1e-9).sum() > 200

@@ -28,6 +28,7 @@ import numpy as np
 from unmesh._validate import as_points
 from unmesh.csg.model import INTERSECTION, LEAF, FlatTree, Node, flatten
 from unmesh.errors import InputError
+from unmesh.render._splat_kernels import COPLANAR_EPS
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 
@@ -180,6 +181,14 @@ def on_surface_reference(x: Any, s: int, offsets: np.ndarray, partners: np.ndarr
     def clips(row: np.ndarray, p: np.ndarray) -> bool:
         return float(np.dot(p - row[:3], row[3:6])) >= 0.0
 
+    own = int(leaf[s])
+
+    def clips_x(row: np.ndarray) -> bool:  # with the tie-break of coplanar patches (4.5)
+        d = (x[0] - row[0]) * row[3] + (x[1] - row[1]) * row[4] + (x[2] - row[2]) * row[5]
+        if abs(d) <= COPLANAR_EPS * (1.0 + abs(x[0]) + abs(x[1]) + abs(x[2])):
+            return own > row[6]
+        return d >= 0.0
+
     for k in range(k_nodes):
         op = tree[k, 0]
         if op == LEAF:
@@ -188,12 +197,12 @@ def on_surface_reference(x: Any, s: int, offsets: np.ndarray, partners: np.ndarr
                 continue
             d = ((mine[:, :3] - x) ** 2).sum(axis=1)
             order = np.argsort(d, kind="stable")
-            c1 = clips(mine[order[0]], x)
+            c1 = clips_x(mine[order[0]])
             if len(mine) == 1:
                 ins = not c1
             else:
                 a, b = mine[order[0]], mine[order[1]]
-                c2 = clips(b, x)
+                c2 = clips_x(b)
                 ins = (not c1 or not c2) if (clips(a, b[:3]) and clips(b, a[:3])) else (not c1 and not c2)
             vals[k] = int(ins != bool(tree[k, 3]))
         else:

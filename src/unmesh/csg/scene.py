@@ -34,7 +34,7 @@ Example
 ... tree = "a - ~~b"
 ... ''')
 >>> str(load(f).model)
-'(a & ~~b)'
+'(a & ~~~b)'
 """
 
 from __future__ import annotations

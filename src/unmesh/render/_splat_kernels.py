@@ -361,10 +361,27 @@ def _tri_or(a, b):
     return 1 if (a > 0 or b > 0) else 0
 
 
+#: Fragments closer than this (relative to the coordinates' magnitude) to a partner's plane are
+#: on it: coplanar patches (4.5) then break the tie by leaf order, so that exactly one of two
+#: coincident surfaces is drawn instead of none.
+COPLANAR_EPS = 1e-6
+
+
 @njit(cache=True)
 def _clips(P, j, x0, x1, x2):
     """Whether partner row ``j`` (centre ``P[j, 0:3]``, normal ``P[j, 3:6]``) clips ``x`` (4.3)."""
     return (x0 - P[j, 0]) * P[j, 3] + (x1 - P[j, 1]) * P[j, 4] + (x2 - P[j, 2]) * P[j, 5] >= 0.0
+
+
+@njit(cache=True)
+def _clips_fragment(P, j, x0, x1, x2, own):
+    """:func:`_clips` for a fragment of leaf ``own``; on the plane (within :data:`COPLANAR_EPS`)
+    the fragment counts as inside the partner's patch when ``own`` is the lower leaf."""
+    d = (x0 - P[j, 0]) * P[j, 3] + (x1 - P[j, 1]) * P[j, 4] + (x2 - P[j, 2]) * P[j, 5]
+    tol = COPLANAR_EPS * (1.0 + abs(x0) + abs(x1) + abs(x2))
+    if abs(d) <= tol:
+        return own > P[j, 6]
+    return d >= 0.0
 
 
 @njit(cache=True)
@@ -377,7 +394,8 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     1 union, 2 leaf; the sub-tree of node k is ``first[k] .. k``; ``invert`` complements a leaf,
     4.3); ``leaf[s]`` is the leaf node of ``s``. ``work`` (K, 5) float64 scratch.
 
-    insidePatch (Algorithm 4.4) uses the two partners of the patch closest to ``x``: none gives
+    insidePatch (Algorithm 4.4) uses the two partners of the patch closest to ``x`` (a fragment
+    on a partner's plane, coplanar patches 4.5, is inside the lower leaf's patch): none gives
     unknown, one the closest-surfel test (4.3), two the concave/convex rule (4.4); insideTree
     (Algorithm 4.3) combines them with the three-valued logic (4.9, 4.10), evaluated for every
     node in post order; then the walk from ``leaf[s]`` to the root applies (4.5)/(4.6).
@@ -410,11 +428,12 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
                 val = -1
             else:
                 i2 = int(work[k, 3])
-                c1 = _clips(partners, i1, x0, x1, x2)
+                own = leaf[s]
+                c1 = _clips_fragment(partners, i1, x0, x1, x2, own)
                 if i2 < 0:
                     inside = not c1
                 else:
-                    c2 = _clips(partners, i2, x0, x1, x2)
+                    c2 = _clips_fragment(partners, i2, x0, x1, x2, own)
                     concave = (_clips(partners, i1, partners[i2, 0], partners[i2, 1], partners[i2, 2])
                                and _clips(partners, i2, partners[i1, 0], partners[i1, 1], partners[i1, 2]))
                     if concave:
@@ -449,7 +468,7 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
 def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, work):
     """Per-fragment clip test of surfel ``s`` at depth ``z`` (chapter 4).
 
-    With an empty ``clip_tree``: surfel ``s`` owns planes
+    With ``clip_tree`` None: surfel ``s`` owns planes
     ``clip_planes[clip_offsets[s]:clip_offsets[s+1]]`` (rows ``(nx, ny, nz, d)`` in world
     space); plane ``j`` keeps points with ``n.x + d <= 0``. ``clip_mode[s] == 0`` keeps a
     fragment kept by *all* planes (convex corner), ``1`` by *any* plane (concave corner).
@@ -469,7 +488,7 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
     wx = eye[0] + px * frame[0, 0] + py * frame[1, 0] + z * frame[2, 0]
     wy = eye[1] + px * frame[0, 1] + py * frame[1, 1] + z * frame[2, 1]
     wz = eye[2] + px * frame[0, 2] + py * frame[1, 2] + z * frame[2, 2]
-    if clip_tree.shape[0] > 0:
+    if clip_tree is not None:  # None (plain splatting) prunes this branch at compile time
         return keep_tree(s, wx, wy, wz, clip_offsets, clip_planes, clip_tree, clip_leaf, work)
     anymode = clip_mode[s] != 0
     for j in range(a, b):
@@ -622,7 +641,10 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
         ln = np.zeros((m, 3))
         ld = np.zeros(m)
         lcount = np.zeros(m, dtype=np.int32)
-        work = np.empty((max(clip_tree.shape[0], 1), 5))
+        if clip_tree is None:
+            work = np.empty((1, 5))
+        else:
+            work = np.empty((max(clip_tree.shape[0], 1), 5))
         if visibility:
             cap = 0
             for k in range(a, b):

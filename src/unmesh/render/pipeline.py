@@ -12,7 +12,9 @@ Discontinuity surfels (attribute ``discontinuity`` != 0, thesis 4.3, see
 :mod:`unmesh.surfels.cloud`) are not surface samples: :func:`collect` separates them from their
 clouds into :attr:`DrawList.clip`, and the splatter receives them as
 :class:`~unmesh.render.splat.ClipSurfels` beside :class:`~unmesh.render.splat.ClipPlanes`, the
-hook of chapter 4's clipped splatting. Until that is built they produce no colour.
+splatter's clipped splatting: geometry discontinuity surfels cut clean edges, texture ones
+clip the colour only (a second splatting pass whose albedo replaces the first's). They are
+never drawn.
 
 Example
 -------
@@ -45,9 +47,9 @@ from unmesh.render.options import DEFAULT_BACKGROUND, METHODS, RenderOptions
 from unmesh.render.particles import draw_particles
 from unmesh.render.raster import draw_meshes
 from unmesh.render.shading import GBuffer, Light, RenderResult, Shading, shade
-from unmesh.render.splat import ClipSurfels, SplatOptions, SplatRenderer, surfel_arrays
+from unmesh.render.splat import ClipSurfels, SplatOptions, SplatRenderer, discontinuity_clip, surfel_arrays
 from unmesh.surfels import SurfelCloud
-from unmesh.surfels.cloud import DISCONTINUITY_ATTRIBUTE, SURFACE
+from unmesh.surfels.cloud import DISCONTINUITY_ATTRIBUTE, SURFACE, TEXTURE_DISCONTINUITY
 
 __all__ = ["METHODS", "DrawList", "RenderResult", "collect", "render", "scene_bounds", "scene_points"]
 
@@ -303,8 +305,24 @@ def _draw_surfels(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], context: Draw
         colors = np.concatenate([context.colors.get(id(c), np.asarray(c.colors)) for c in clouds])
     opts = context.options
     if opts.method == "splat":
+        arrays = surfel_arrays(clouds, colors)
+        clip = context.clip_surfels
+        texture = None
+        if clip is not None and (clip.kind == TEXTURE_DISCONTINUITY).any():
+            # texture discontinuities (4.3, Fig. 4.6) clip the colour only: the colour is the
+            # normalised sum over the fragments they keep, normals and depth blend over all
+            texture = discontinuity_clip(arrays, clip, TEXTURE_DISCONTINUITY)
+        if texture is None:
+            renderer = SplatRenderer(context.camera, opts.splat)
+            return renderer._render_in_place(arrays, gbuffer, clip_surfels=clip)
         renderer = SplatRenderer(context.camera, opts.splat)
-        return renderer._render_in_place(surfel_arrays(clouds, colors), gbuffer, clip_surfels=context.clip_surfels)
+        out = renderer._render_in_place(arrays, gbuffer, clip_surfels=clip)
+        colour = SplatRenderer(context.camera, opts.splat)
+        colour.zvis = renderer.zvis  # the same visible fragments, read only (a partial update, 5.7)
+        coloured = colour.splat(arrays, clip=texture).gbuffer()
+        both = coloured.coverage & (coloured.weight > 0) & out.coverage
+        out.albedo[both] = coloured.albedo[both]
+        return out
     from unmesh.render.raycast import draw_mls
 
     draw_mls(gbuffer, clouds, context.camera, colors=colors, mls_options=opts.mls, progress=opts.progress)

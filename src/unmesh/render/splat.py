@@ -21,8 +21,8 @@ Clipping (chapter 4) is done per fragment in the one fragment loop: :class:`Clip
 by :mod:`unmesh.csg`). :class:`ClipSurfels`, the discontinuity surfels of the drawn clouds (4.3,
 see :mod:`unmesh.surfels.cloud`), are invisible: the geometry ones become a :class:`ClipTree`
 (:func:`discontinuity_clip`) that cuts the surface surfels crossing them to a clean edge (the
-crack surfels of the thin shells); texture discontinuity surfels are kept
-(:attr:`SplatRenderer.clip_surfels`) without changing the image yet.
+crack surfels of the thin shells); texture discontinuity surfels clip the colour only, by a
+second pass of :func:`unmesh.render.render` (see :mod:`unmesh.render.pipeline`).
 
 Example
 -------
@@ -61,9 +61,8 @@ __all__ = ["DISCONTINUITY_MIN_ANGLE", "ClipPlanes", "ClipSurfels", "ClipTree", "
 #: rows), shared by all renderers of a thread: their contents live only during one update, and
 #: reusing them spares every ``render()`` call the page faults of ~200 MB per 10^6 surfels.
 _SCRATCH = threading.local()
-#: Placeholders of the CSG clip arrays when splatting without a :class:`ClipTree`.
-_NO_TREE = np.zeros((0, 4), dtype=np.int32)
-_NO_LEAF = np.zeros(0, dtype=np.int32)
+#: Placeholder of the clip mode when splatting with a :class:`ClipTree` (without one the tree
+#: arguments of the kernels are None, which compiles the plain kernels without the tree code).
 _NO_MODE = np.zeros(1, dtype=np.int8)
 
 
@@ -255,9 +254,9 @@ class ClipSurfels:
     """Discontinuity surfels that clip the splats around them (chapter 4, 4.3).
 
     Geometry discontinuity surfels (kind 1) clip their neighbours to a clean edge
-    (:func:`discontinuity_clip`); texture discontinuity surfels (kind 2) are meant to clip only
-    their colour (not built yet: they are kept in :attr:`SplatRenderer.clip_surfels`). Neither
-    is drawn. This is the clip information the renderer passes to :meth:`SplatRenderer.render`.
+    (:func:`discontinuity_clip`); texture discontinuity surfels (kind 2) clip only their colour
+    (:func:`unmesh.render.render` splats a second pass clipped by them and takes its albedo).
+    Neither is drawn. This is the clip information the renderer passes to :meth:`SplatRenderer.render`.
 
     Parameters
     ----------
@@ -507,7 +506,7 @@ class SplatRenderer:
                                                      params, box, group, tile, ntx, nty, 8)
             pt = self._scratch("pairs", (len(items), NPARAM), self.param_dtype)
             gather_rows(params, items, pt)
-        ctree, cleaf = _NO_TREE, _NO_LEAF
+        ctree, cleaf = None, None
         if clip is None:
             coff, cpl, cmode, has_clip = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8), False
         elif isinstance(clip, ClipTree):
