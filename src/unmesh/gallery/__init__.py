@@ -35,8 +35,8 @@ EXAMPLE_MODULES: tuple[str, ...] = (
     "unmesh.gallery.examples.sph",
     "unmesh.gallery.examples.fem",
     "unmesh.gallery.examples.csg",
-    "unmesh.gallery.examples.convert",
     "unmesh.gallery.examples.paint",
+    "unmesh.gallery.examples.convert",
 )
 
 
