@@ -297,8 +297,6 @@ class SPHSimulation(Simulation):
             self.grad_scale = 1.0 / gradient_moment(self.dim, config.smoothing, config.lattice)
         else:
             self.grad_scale = 1.0
-        # 1/(h² − (d/2)²): W(r)/W(d/2) = ((h² − r²)/(h² − d²/4))³ for the poly6 kernel
-        self._tensile_inv = 1.0 / (self.h * self.h - 0.25 * self.spacing * self.spacing)
         self.elastic = any(m.is_elastic for m in self.materials)
         if config.lattice != "closest":
             self._check_fluid_lattice()
@@ -536,7 +534,7 @@ class SPHSimulation(Simulation):
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
                      self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.bnoslip,
-                     self.grad_scale, self.config.tensile_correction, self._tensile_inv, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
+                     self.grad_scale, self.config.tensile_correction, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
         if self.elastic:
             # the new lattice state (in the new order) becomes the previous one of the next step
             self.amat, s["amat_out"] = s["amat_out"], self.amat

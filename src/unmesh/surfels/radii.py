@@ -33,6 +33,19 @@ splat reaches about one and a half sample spacings beyond the last sample
 (enough to reach the corner of a face sampled on a square lattice). For strongly
 non-uniform clouds this cap can leave small gaps where a dense region borders a
 much sparser one.
+
+**Bound.** Finally every radius (before ``margin``) is capped at ``MAX_FACTOR``
+(1.25) times the distance to the k-th nearest neighbour of any orientation, the
+local sample density. Without it, samples at thin features (the blob's ear tips,
+where the other side's samples are ignored and the cell stays open up to the clip
+disc) got splats up to 2x that distance, sticking out past the silhouette (LDC
+radii up to 5.7x their mean). Where the sampling is dense enough the Voronoi radius
+is well below the cap (median about 0.55 for LDC and Poisson-disk samplings), so
+the cap only trims those outliers. A sampling with a known covering distance
+(every surface point within ``D`` of a sample, e.g. LDC with ``D = sqrt(3) d``)
+can also pass ``max_radius=D``: the nearest sample's disc then still contains
+each surface point's tangential offset (at most its 3-D distance), so the
+surface stays hole-free (``tests/surfels/test_radii_bound.py``).
 """
 
 from __future__ import annotations
@@ -52,9 +65,12 @@ MIN_DOT = 0.25
 OPEN_CLIP = 2.0
 #: Boundary cells are closed at this multiple of the 4th valid neighbour distance.
 BOUNDARY_FACTOR = 1.0
+#: Radii (before margin) are capped at this multiple of the k-th nearest neighbour distance.
+MAX_FACTOR = 1.25
 
 
-def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: float = 1.05) -> np.ndarray:
+def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: float = 1.05,
+                   max_radius: float | None = None) -> np.ndarray:
     """Splat radii (N,) from the tangent-plane Voronoi rule of the module docstring.
 
     Parameters
@@ -69,6 +85,9 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
         retried with ``4k``).
     margin : float
         Factor (>= 1) applied to the Voronoi radius for curvature.
+    max_radius : float, optional
+        Upper bound of every radius (after ``margin``): the sampling's covering
+        distance when it is known (module docstring, "Bound").
 
     Returns
     -------
@@ -94,6 +113,7 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
     m = positive_scalar(margin, "margin")
     if m < 1.0:
         raise InputError(f"margin: expected a factor >= 1, got {m}")
+    cap = np.inf if max_radius is None else positive_scalar(max_radius, "max_radius")
     if n == 0:
         return np.zeros(0)
     if n == 1:
@@ -131,11 +151,12 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
         valid3 = _valid(nrm, still, dist3, nbrs3, oriented)
         close = np.minimum(BOUNDARY_FACTOR * _valid_scale(dist3, valid3, 4), clip[still])
         radii[still] = _subset_radii(pts, nrm, still, np.where(valid3, nbrs3, -1), close, oriented)[0]
+    np.minimum(radii, MAX_FACTOR * clip / OPEN_CLIP, out=radii)  # bound by the local sample density
     radii *= m
     bad = ~(radii > 0)
     if bad.any():  # fully coincident points: fall back to the neighbour distance scale
         radii[bad] = clip[bad] / OPEN_CLIP
-    return radii
+    return np.minimum(radii, cap)
 
 
 def _positive_scale(dist: np.ndarray) -> np.ndarray:

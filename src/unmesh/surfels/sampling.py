@@ -132,7 +132,8 @@ def sample_mesh(mesh: TriangleMesh, spacing: float, *, progress: bool = False, k
         Colours: interpolated vertex colours, else the bilinear texture colour at
         the interpolated uv, else the default grey. Radii: the tangent-plane
         Voronoi rule of :mod:`unmesh.surfels.radii` (neighbouring splats overlap
-        so that they cover the surface).
+        so that they cover the surface), bounded by the covering distance
+        ``sqrt(3) d`` (which alone already covers the surface).
 
     Raises
     ------
@@ -183,7 +184,7 @@ def sample_mesh(mesh: TriangleMesh, spacing: float, *, progress: bool = False, k
     elif mesh.texture is not None and mesh.uv is not None:
         uv = np.einsum("nk,nki->ni", bary, mesh.uv[fv])
         colors = _texture_lookup(mesh.texture, uv)
-    radii = estimate_radii(pos, nrm, k=k)
+    radii = estimate_radii(pos, nrm, k=k, max_radius=np.sqrt(3.0) * d)
     return SurfelCloud(pos, nrm, radii=radii, colors=colors)
 
 

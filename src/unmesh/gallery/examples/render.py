@@ -100,11 +100,13 @@ def surfels_example(ctx: ExampleContext) -> None:
     ctx.metric("holes in close-up", hole_fraction(rc.coverage))
 
 
-@example("render-zoom", "Minified, normal and magnified: no aliasing, no holes", section="Rendering")
+@example("render-zoom", "Minified, normal and magnified: prefiltered colours, no holes", section="Rendering")
 def zoom_example(ctx: ExampleContext) -> None:
     """The bunny-like blob at three zoom levels. Minified (many surfels per pixel), the EWA
     screen-space prefilter averages the surfels that fall into a pixel; without it (point
-    sampling of the reconstruction kernels) the image aliases. Errors are RMS colour differences
+    sampling of the reconstruction kernels) the colours alias. The prefilter does not anti-alias
+    the silhouette (each pixel is covered or not); the fourth panel adds 2x2 supersampling, which
+    does. Errors are RMS colour differences
     against an 8x supersampled reference over the pixels it covers fully. Magnified 8x, the surfels' reconstruction kernels still cover the
     surface without holes."""
     from unmesh.render import Camera, SplatOptions, render, save_image, scene_points
@@ -121,6 +123,7 @@ def zoom_example(ctx: ExampleContext) -> None:
     ref, frac = supersampled(blob, small, 8 if not ctx.quick else 4, shading="none")
     ewa = render(blob, small, shading="none")
     point = render(blob, small, shading="none", splat=SplatOptions(filter_radius=0.0))
+    smooth_edge = render(blob, small, shading="none", supersample=2)
     interior = frac == 1.0  # compare colours where the reference pixel is fully covered
     err_ewa = float(np.sqrt(np.mean((ewa.color - ref)[interior] ** 2)))
     err_point = float(np.sqrt(np.mean((point.color - ref)[interior] ** 2)))
@@ -128,9 +131,12 @@ def zoom_example(ctx: ExampleContext) -> None:
     def big(img: np.ndarray, k: int = 6) -> np.ndarray:
         return np.repeat(np.repeat(img, k, axis=0), k, axis=1)
 
-    strip = np.concatenate([big(ref), np.ones((240, 6, 3)), big(ewa.color), np.ones((240, 6, 3)), big(point.color)], axis=1)
+    gap = np.ones((240, 6, 3))
+    strip = np.concatenate([big(ref), gap, big(ewa.color), gap, big(point.color), gap, big(smooth_edge.color)], axis=1)
     path = save_image(ctx.path("minified.png"), strip)
-    ctx.image(path, "minified to 48x40 (shown 6x): supersampled reference | EWA prefilter | no prefilter")
+    ctx.image(path, "minified to 48x40 (shown 6x): supersampled reference | EWA prefilter (colours averaged, "
+                    "silhouette stair-stepped) | no prefilter (colours alias) | EWA prefilter + 2x2 supersampling "
+                    "(silhouette anti-aliased too)")
     smooth = _rainbow(blob, 5.0)
     normal = render(smooth, base)
     path = save_image(ctx.path("normal.png"), normal.color)

@@ -50,9 +50,11 @@ def _tile(images: list[np.ndarray], columns: int, pad: int = 4) -> np.ndarray:
 
 
 def _view(objects: Any, bounds: np.ndarray, size: tuple[int, int], **options: Any) -> np.ndarray:
+    """A still (H,W,3), anti-aliased by 2x2 supersampling unless ``supersample`` is given."""
     from unmesh.render import Camera, render
 
     cam = Camera.framing(bounds, *size, fov=30)
+    options.setdefault("supersample", 2)
     return render(objects, cam, **options).color
 
 
