@@ -126,7 +126,9 @@ def test_registered_kinds_follow_their_order():
     register_drawable("overlay", Overlay, draw_overlay, order=-1)
     register_drawable("cards", Card, draw_cards, order=5)
     try:
-        assert [k.name for k in draw_order()][:4] == ["overlay", "meshes", "cards", "particles"]
+        # other capabilities (convert, csg) may have registered kinds of their own in this process
+        mine = {"overlay", "meshes", "cards", "particles"}
+        assert [k.name for k in draw_order() if k.name in mine] == ["overlay", "meshes", "cards", "particles"]
         res = render([a, overlay], CAM, shading="none")
         assert np.all(res.color == [1.0, 0.0, 0.0]) and np.all(res.depth == 3.0)  # cards drew last, nearer
         register_drawable("overlay", Overlay, draw_overlay, order=10, replace=True)
