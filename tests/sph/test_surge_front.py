@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
@@ -54,6 +55,6 @@ def test_dam_break_summary_records_the_front(tmp_path):
     frames = json.loads((tmp_path / "summary.json").read_text())["frames"]
     fronts = [f["surge_front"] for f in frames]
     assert len(fronts) == 4 and fronts[0] == pytest.approx(0.25, abs=spacing)  # the column's face, x = a
-    assert all(b > a for a, b in zip(fronts, fronts[1:], strict=False))
+    assert all(b > a for a, b in itertools.pairwise(fronts))
     last = io.load(tmp_path / "frames" / "frame_00003.ply").positions
     assert fronts[-1] == pytest.approx(surge_front(last, spacing), abs=1e-6)  # frames are float32
