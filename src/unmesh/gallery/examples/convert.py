@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from unmesh.gallery.figures import tile
 from unmesh.gallery.registry import ExampleContext, example
 
 __all__: list[str] = []
@@ -69,15 +70,6 @@ def _camera(bounds: np.ndarray, size: int) -> Any:
     return Camera.framing(bounds, size, size, fov=30)
 
 
-def _tile(images: list[np.ndarray], columns: int, pad: int = 4) -> np.ndarray:
-    h, w = images[0].shape[:2]
-    rows = -(-len(images) // columns)
-    out = np.ones((rows * h + (rows + 1) * pad, columns * w + (columns + 1) * pad, 3))
-    for k, img in enumerate(images):
-        r, c = divmod(k, columns)
-        out[pad + r * (h + pad):pad + r * (h + pad) + h, pad + c * (w + pad):pad + c * (w + pad) + w] = img
-    return out
-
 
 @example("convert-resolutions", "Converted blob at several mesh resolutions (Fig. 6.6)", section=SECTION)
 def resolutions_example(ctx: ExampleContext) -> None:
@@ -107,7 +99,7 @@ def resolutions_example(ctx: ExampleContext) -> None:
         ctx.metric(f"{faces} faces: texels", rep["patches"]["texels_total"])
         ctx.metric(f"{faces} faces: atlas fill", round(100 * rep["atlas"]["fill_total"], 1), "%")
         ctx.metric(f"{faces} faces: conversion time", round(dt, 2), "s")
-    grid = _tile([*top, *mid, *bottom], len(counts) + 1)
+    grid = tile([*top, *mid, *bottom], len(counts) + 1)
     path = ctx.path("resolutions.png")
     save_image(path, grid)
     ctx.image(path, "First column: the surfels with their carved normals, with smooth normals, shrunk to 40 %; "
@@ -169,6 +161,6 @@ def sampling_example(ctx: ExampleContext) -> None:
                          vertex_colors=np.repeat(col, 3, axis=0))
     right = render(split, cam).color
     path = ctx.path("sampling.png")
-    save_image(path, _tile([left, right], 2))
+    save_image(path, tile([left, right], 2))
     ctx.image(path, "Surfels (shrunk) and mesh triangles coloured by the refinement level of their colour patch")
     ctx.metric("patch levels (count per level)", str(np.bincount(level.astype(int)).tolist()))

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from unmesh.gallery.figures import tile
 from unmesh.gallery.registry import ExampleContext, example
 
 __all__: list[str] = []
@@ -37,16 +38,6 @@ def _label_colors(labels: np.ndarray, seed: int = 3) -> np.ndarray:
                                                 (val, p, q))])
     return table[labels]
 
-
-def _tile(images: list[np.ndarray], columns: int, pad: int = 4) -> np.ndarray:
-    """Images (H,W,3) of equal size on a white grid."""
-    h, w = images[0].shape[:2]
-    rows = -(-len(images) // columns)
-    out = np.ones((rows * h + (rows + 1) * pad, columns * w + (columns + 1) * pad, 3))
-    for k, img in enumerate(images):
-        r, c = divmod(k, columns)
-        out[pad + r * (h + pad):pad + r * (h + pad) + h, pad + c * (w + pad):pad + c * (w + pad) + w] = img
-    return out
 
 
 def _view(objects: Any, bounds: np.ndarray, size: tuple[int, int], **options: Any) -> np.ndarray:
@@ -86,7 +77,7 @@ def shapes_example(ctx: ExampleContext) -> None:
         shrunk.append(_view(cloud.replace(radii=0.4 * cloud.radii), bounds, size))
         full.append(_view(cloud, bounds, size))
     path = ctx.path("shapes.png")
-    save_image(path, _tile([img for pair in zip(shrunk, full, strict=True) for img in pair], columns=4))
+    save_image(path, tile([img for pair in zip(shrunk, full, strict=True) for img in pair], columns=4))
     ctx.image(path, "Each shape: splats at 40 % radius (sampling pattern) and full splats (closed surface).")
 
 
@@ -137,7 +128,7 @@ def ldc_example(ctx: ExampleContext) -> None:
     left = _view(cloud.replace(colors=bundle, radii=0.35 * cloud.radii), bounds, size, shading="none")
     right = _view(cloud.replace(colors=np.tile([0.85, 0.72, 0.55], (len(cloud), 1))), bounds, size)
     path = ctx.path("ldc.png")
-    save_image(path, _tile([left, right], 2))
+    save_image(path, tile([left, right], 2))
     ctx.image(path, "Left: LDC samples by ray bundle (x red, y green, z blue). Right: splatted surfels.")
     hist_path = ctx.path("distance_histogram.png")
     save_image(hist_path, _histogram(dist / d, np.sqrt(3.0), size=(size[0], size[1] // 2)))
@@ -207,7 +198,7 @@ def normals_example(ctx: ExampleContext) -> None:
     left = _view(cloud, bounds, size, shading="none")
     right = _view(cloud, bounds, size, color_by="angle_error", colormap="viridis", color_range=(0.0, 20.0))
     path = ctx.path("normals.png")
-    save_image(path, _tile([left, right], 2))
+    save_image(path, tile([left, right], 2))
     ctx.image(path, "Estimated normals (RGB = 0.5 + 0.5 n) and their angle error in degrees.")
 
 
@@ -241,6 +232,6 @@ def clustering_example(ctx: ExampleContext) -> None:
         top.append(_view(dense.replace(colors=col), bounds, size))
         bottom.append(_view(small.replace(colors=_label_colors(np.arange(len(small)))), bounds, size))
     path = ctx.path("clustering.png")
-    save_image(path, _tile(top + bottom, len(targets)))
+    save_image(path, tile(top + bottom, len(targets)))
     ctx.image(path, "Columns: " + ", ".join(f"{t} clusters" for t in targets)
               + ". Top: input coloured by cluster; bottom: the simplified surfels.")
