@@ -72,9 +72,9 @@ def _size(text: str) -> tuple[int, int]:
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
-    import json
 
-    from unmesh.errors import FormatError, InputError
+    from unmesh.errors import InputError
+    from unmesh.paint.strokes import read_stroke_json
 
     session, stem = load_model(str(args.model), args.spacing)
     out = Path(args.output) if args.output else Path.cwd() / f"{stem}_painted.ply"
@@ -89,16 +89,7 @@ def run(args: argparse.Namespace) -> int:
         run_studio(session, out, port=args.port, open_browser=not args.no_browser)
         return 0
     name = str(args.replay)
-    try:
-        text = Path(name).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"--replay: cannot read {name!r} ({exc.strerror})") from None
-    if not text.strip():
-        raise FormatError(f"{name}: the stroke file is empty")
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FormatError(f"{name}: line {exc.lineno}: not valid JSON ({exc.msg})") from None
+    data = read_stroke_json(name)
     session.options = dataclasses.replace(session.options, haptics=False)
     n = session.replay(data, name)
     session.save(out)

@@ -38,6 +38,7 @@ __all__ = [
     "Sample",
     "load_strokes",
     "parse_strokes",
+    "read_stroke_json",
     "stroke_dict",
 ]
 
@@ -332,11 +333,13 @@ def parse_strokes(data: Any, source: str = "strokes") -> list[tuple[Brush, Paint
     return out
 
 
-def load_strokes(path: str | os.PathLike[str]) -> list[tuple[Brush, Paint, list[Sample], list[float]]]:
-    """Read and validate a stroke file (see :func:`parse_strokes`).
+def read_stroke_json(path: str | os.PathLike[str]) -> Any:
+    """The JSON document of a stroke file, not yet validated (see :func:`parse_strokes`).
 
     Raises
     ------
+    InputError
+        The file cannot be read.
     FormatError
         The file is empty or not JSON (message names the file and line).
     """
@@ -352,4 +355,15 @@ def load_strokes(path: str | os.PathLike[str]) -> list[tuple[Brush, Paint, list[
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise FormatError(f"{name}: line {exc.lineno}: not valid JSON ({exc.msg})") from None
-    return parse_strokes(data, name)
+    return data
+
+
+def load_strokes(path: str | os.PathLike[str]) -> list[tuple[Brush, Paint, list[Sample], list[float]]]:
+    """Read and validate a stroke file (see :func:`parse_strokes`).
+
+    Raises
+    ------
+    FormatError
+        The file is empty or not JSON (message names the file and line).
+    """
+    return parse_strokes(read_stroke_json(path), os.fspath(path))
