@@ -21,6 +21,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from unmesh.render.cli import add_camera_arguments
+
 __all__ = ["CLASS_COLORS", "register", "run"]
 
 #: Colours of the surfel classes in ``--classify`` (Fig. 4.4): surface, edge, outside.
@@ -34,13 +36,7 @@ def register(sub: Any) -> None:
                    help="CSG scene file (docs/csg_scene.md) or a shipped one by name (unmesh scenes csg)")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="output image (.png ...), or .mp4/.gif with --turntable or an animated scene")
-    p.add_argument("--size", default="800x600", metavar="WxH", help="image size in pixels (default 800x600)")
-    p.add_argument("--eye", metavar="X,Y,Z", help="camera position (default: frames the patches)")
-    p.add_argument("--target", metavar="X,Y,Z", help="point looked at (default: centre)")
-    p.add_argument("--up", default="0,1,0", metavar="X,Y,Z", help="up direction (default 0,1,0)")
-    view = p.add_mutually_exclusive_group()
-    view.add_argument("--fov", type=float, metavar="DEG", help="vertical field of view in degrees (default 40)")
-    view.add_argument("--ortho", type=float, metavar="HEIGHT", help="orthographic camera with this world height")
+    add_camera_arguments(p, "the patches", "centre")
     p.add_argument("--shading", choices=("phong", "none"), default="phong", help="lighting (default phong)")
     p.add_argument("--background", default="1,1,1", metavar="R,G,B", help="background colour (0-1 or #rrggbb)")
     p.add_argument("--buffers", metavar="DIR", help="also write depth/normal/coverage/weight .npy files (stills)")

@@ -25,7 +25,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-__all__ = ["register", "run"]
+__all__ = ["add_camera_arguments", "register", "run"]
 
 
 def register(sub: Any) -> None:
@@ -35,13 +35,7 @@ def register(sub: Any) -> None:
                    help="PLY/OBJ/OFF files (surfels, particles, meshes), or a simulation output directory")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="output .png (still), .mp4/.gif (turntable or frame sequence) or a directory (PNG frames)")
-    p.add_argument("--size", default="800x600", metavar="WxH", help="image size in pixels (default 800x600)")
-    p.add_argument("--eye", metavar="X,Y,Z", help="camera position (default: frames the bounding box)")
-    p.add_argument("--target", metavar="X,Y,Z", help="point looked at (default: bounding-box centre)")
-    p.add_argument("--up", default="0,1,0", metavar="X,Y,Z", help="up direction (default 0,1,0)")
-    view = p.add_mutually_exclusive_group()
-    view.add_argument("--fov", type=float, metavar="DEG", help="vertical field of view in degrees (default 40)")
-    view.add_argument("--ortho", type=float, metavar="HEIGHT", help="orthographic camera with this world height")
+    add_camera_arguments(p, "the bounding box", "bounding-box centre")
     p.add_argument("--method", choices=("splat", "raycast"), default="splat",
                    help="surfels by EWA splatting (default) or MLS ray casting")
     p.add_argument("--shading", choices=("phong", "none"), default="phong", help="lighting (default phong)")
@@ -67,6 +61,18 @@ def register(sub: Any) -> None:
                        help="render a simulation's frames on an existing Dask cluster (tcp://host:8786)")
     p.set_defaults(func=run)
 
+
+
+def add_camera_arguments(p: Any, framed: str, centre: str) -> None:
+    """The camera options shared by ``unmesh render`` and the commands that render like it
+    (``--size --eye --target --up --fov|--ortho``); ``framed``/``centre`` name the defaults."""
+    p.add_argument("--size", default="800x600", metavar="WxH", help="image size in pixels (default 800x600)")
+    p.add_argument("--eye", metavar="X,Y,Z", help=f"camera position (default: frames {framed})")
+    p.add_argument("--target", metavar="X,Y,Z", help=f"point looked at (default: {centre})")
+    p.add_argument("--up", default="0,1,0", metavar="X,Y,Z", help="up direction (default 0,1,0)")
+    view = p.add_mutually_exclusive_group()
+    view.add_argument("--fov", type=float, metavar="DEG", help="vertical field of view in degrees (default 40)")
+    view.add_argument("--ortho", type=float, metavar="HEIGHT", help="orthographic camera with this world height")
 
 def _vector(text: str | None, name: str) -> Any:
     from unmesh.errors import InputError
