@@ -229,8 +229,10 @@ def test_render_result_has_one_home_and_no_import_cycle():
 
 
 def test_discontinuity_surfels_reach_the_splatter_as_clip_surfels(monkeypatch):
-    """Discontinuity surfels (4.3) are separated from the surface samples, handed to the
-    splatter as ClipSurfels, and produce no colour (until chapter 4's clipped splatting)."""
+    """Discontinuity surfels (4.3) are separated from the surface samples and handed to the
+    splatter as ClipSurfels; they draw no colour of their own. Lying on the sphere and facing
+    outwards (and the marker off the surface), they cut nothing away here, so the image equals
+    the render of the surface samples alone (clipping by them: tests/csg)."""
     import unmesh.render.pipeline as pipeline
 
     sphere = fibonacci_sphere(2000)
