@@ -5,7 +5,7 @@ import pytest
 from unmesh.gallery import all_examples
 from unmesh.gallery.page import run_examples
 
-EXAMPLES = [e for e in all_examples() if not e.name.startswith("zz-test-")]
+EXAMPLES = [e for e in all_examples() if not e.name.startswith("zz-")]  # zz-: the tests own examples
 
 
 @pytest.mark.slow

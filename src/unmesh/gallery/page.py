@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from unmesh.gallery.registry import Example, ExampleContext
+from unmesh.gallery.timing import expected_seconds, record
 from unmesh.io.atomic import atomic_write_text
 
 __all__ = ["ExampleResult", "run_examples", "write_index"]
@@ -29,15 +30,20 @@ class ExampleResult:
 def run_examples(examples: list[Example], outdir: Path, quick: bool = False, progress: bool = True) -> list[ExampleResult]:
     """Run ``examples`` into ``outdir/<name>/`` and write ``outdir/index.html``.
 
-    A failing example is recorded (with its traceback) and the others still run.
+    A failing example is recorded (with its traceback) and the others still run. The progress
+    bar counts the examples' expected seconds (:func:`unmesh.gallery.timing.expected_seconds`);
+    each successful example's time is recorded in ``outdir/timings.json`` for the next run.
     """
     from tqdm import tqdm
 
     outdir.mkdir(parents=True, exist_ok=True)
     results: list[ExampleResult] = []
-    bar = tqdm(examples, desc="gallery", unit="example", disable=not progress, leave=True)
-    for ex in bar:
-        bar.set_postfix_str(ex.name)
+    weights = expected_seconds(examples, outdir, quick)
+    # the bar counts expected seconds, so its estimate of the time left weighs each example by its cost
+    bar = tqdm(total=round(sum(weights), 1), desc="gallery", unit="s", disable=not progress, leave=True,
+               bar_format="{l_bar}{bar}| {postfix} [{elapsed}<{remaining}]")
+    for k, (ex, weight) in enumerate(zip(examples, weights, strict=True)):
+        bar.set_postfix_str(f"{k}/{len(examples)} examples, {ex.name}")
         exdir = outdir / ex.name
         if exdir.exists():
             shutil.rmtree(exdir)
@@ -53,6 +59,11 @@ def run_examples(examples: list[Example], outdir: Path, quick: bool = False, pro
             error = f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}"
         results.append(ExampleResult(ex, ctx, time.perf_counter() - t0, error))
         write_index(results, outdir, quick)
+        if error is None:
+            record(outdir, quick, {ex.name: results[-1].seconds})
+        bar.update(weight)
+    bar.set_postfix_str(f"{len(examples)}/{len(examples)} examples")
+    bar.close()
     return results
 
 
