@@ -38,12 +38,12 @@ def run_examples(examples: list[Example], outdir: Path, quick: bool = False, pro
 
     outdir.mkdir(parents=True, exist_ok=True)
     results: list[ExampleResult] = []
-    weights = expected_seconds(examples, outdir, quick)
+    weights = [round(w, 1) for w in expected_seconds(examples, outdir, quick)]
     # the bar counts expected seconds, so its estimate of the time left weighs each example by its cost
-    bar = tqdm(total=round(sum(weights), 1), desc="gallery", unit="s", disable=not progress, leave=True,
-               bar_format="{l_bar}{bar}| {postfix} [{elapsed}<{remaining}]")
+    bar = tqdm(total=sum(weights), disable=not progress, leave=True,
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]")
     for k, (ex, weight) in enumerate(zip(examples, weights, strict=True)):
-        bar.set_postfix_str(f"{k}/{len(examples)} examples, {ex.name}")
+        bar.set_description_str(f"gallery {k}/{len(examples)} {ex.name}")
         exdir = outdir / ex.name
         if exdir.exists():
             shutil.rmtree(exdir)
@@ -62,7 +62,7 @@ def run_examples(examples: list[Example], outdir: Path, quick: bool = False, pro
         if error is None:
             record(outdir, quick, {ex.name: results[-1].seconds})
         bar.update(weight)
-    bar.set_postfix_str(f"{len(examples)}/{len(examples)} examples")
+    bar.set_description_str(f"gallery {len(examples)}/{len(examples)}")
     bar.close()
     return results
 
