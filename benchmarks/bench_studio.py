@@ -7,7 +7,13 @@ surfels) to headless Debian Chromium at ``--size``; scripted pen strokes (DevToo
 It prints:
 
 * **input-to-screen latency** of paint events: from the pointer event's ``timeStamp`` to the
-  moment the frame that contains it is drawn on the canvas (median, 90th percentile, max);
+  moment the page's dab preview of it is drawn (client side, one animation frame), and to the
+  moment the server's frame that contains it is drawn on the canvas (median, 90th percentile,
+  max), with the split of the latter into stages (medians): ``input`` (event -> samples sent,
+  batching per animation frame), ``queue`` / ``paint`` (ray casts + ``add_samples``) /
+  ``render`` / ``encode`` (the server's timings in the frame header), ``transport`` (sent ->
+  frame received, minus those server stages: WebSocket, event loop, thread hand-over) and
+  ``client`` (received -> decoded and drawn);
 * **frames per second while painting** (model frames drawn per second of stroke) and the tiles
   and bytes per frame (differential updates);
 * **frames per second while dragging the view** (low-resolution previews) and the time of the
@@ -119,25 +125,32 @@ def main() -> None:
         stroke(page, [image_to_page(page, studio, x0 + (x1 - x0) * i / 9, row) for i in range(10)], [0.6] * 10,
                args.rate, color=(0.8, 0.1, 0.1))
         page.evaluate("window.studio.stats.latencies.length = 0")
-        lat, fps, tiles, kb = [], [], [], []
+        lat, fps, tiles, kb, prev, stages = [], [], [], [], [], []
         for k in range(args.strokes):
             row, x0, x1 = covered_segment(studio, row_frac=(0.35 + 0.08 * k, 0.45 + 0.08 * k), length_frac=0.6)
             n = 60
             pts = [image_to_page(page, studio, x0 + (x1 - x0) * i / (n - 1), row) for i in range(n)]
             before = page.evaluate("({f: window.studio.stats.modelFrames, t: window.studio.stats.tiles, "
                                    "b: window.studio.stats.bytes})")
-            page.evaluate("window.studio.stats.latencies.length = 0")
+            page.evaluate("window.studio.stats.latencies.length = 0; window.studio.stats.stages.length = 0; "
+                          "window.studio.stats.previewLatencies.length = 0")
             dur = stroke(page, pts, [0.3 + 0.6 * i / (n - 1) for i in range(n)], args.rate, color=(0.14, 0.18, 0.62))
             after = page.evaluate("({f: window.studio.stats.modelFrames, t: window.studio.stats.tiles, "
-                                  "b: window.studio.stats.bytes, l: window.studio.stats.latencies})")
+                                  "b: window.studio.stats.bytes, l: window.studio.stats.latencies, "
+                                  "p: window.studio.stats.previewLatencies, s: window.studio.stats.stages})")
             frames = after["f"] - before["f"]
             lat += after["l"]
+            prev += after["p"]
+            stages += after["s"]
             fps.append(frames / dur)
             tiles.append((after["t"] - before["t"]) / max(frames, 1))
             kb.append((after["b"] - before["b"]) / max(frames, 1) / 1024)
         q = np.percentile(lat, [50, 90, 100]) if lat else [float("nan")] * 3
         print(f"paint: {len(lat)} frames over {args.strokes} strokes of 60 pen events at {args.rate:.0f}/s")
-        print(f"  input-to-screen latency: median {q[0]:.0f} ms, p90 {q[1]:.0f} ms, max {q[2]:.0f} ms")
+        qp = np.percentile(prev, [50, 90, 100]) if prev else [float("nan")] * 3
+        print(f"  input-to-screen latency, dab preview: median {qp[0]:.0f} ms, p90 {qp[1]:.0f} ms, max {qp[2]:.0f} ms")
+        print(f"  input-to-screen latency, server frame: median {q[0]:.0f} ms, p90 {q[1]:.0f} ms, max {q[2]:.0f} ms")
+        print("  server frame latency split (medians, ms): " + stage_split(stages))
         print(f"  frames per second while painting: {statistics.median(fps):.1f} (median over strokes)")
         print(f"  per frame: {statistics.median(tiles):.1f} tiles, {statistics.median(kb):.1f} KiB")
 
@@ -156,7 +169,9 @@ def main() -> None:
         page.mouse.up(button="right")
         t = time.perf_counter()
         page.evaluate("window.studio.sync()")
-        print(f"view drag: {(f1 - f0) / drag:.1f} preview frames per second over {drag:.2f} s; "
+        scale = studio.run_in_worker(lambda ws: ws.preview_scale)
+        print(f"view drag: {(f1 - f0) / drag:.1f} preview frames per second over {drag:.2f} s "
+              f"(preview at 1/{scale} resolution, {page.evaluate('window.studio.stats.dropped')} stale frames skipped); "
               f"full frame after release {1000 * (time.perf_counter() - t):.0f} ms")
 
         # the engine alone, in process (one paint event + its differential render)
@@ -198,6 +213,20 @@ def main() -> None:
             print(f"wrote {args.screenshot}")
         browser.close()
         pw.stop()
+
+
+def stage_split(stages):
+    """Medians of the latency stages of the page's ``stats.stages`` records."""
+    def med(values):
+        values = [v for v in values if v is not None]
+        return statistics.median(values) if values else float("nan")
+
+    srv = {k: med([s["srv"].get(k) for s in stages]) for k in ("queue", "paint", "render", "encode")}
+    transport = med([s["wire"] - sum(s["srv"].get(k, 0) for k in ("queue", "paint", "render", "encode"))
+                     for s in stages if s["wire"] is not None])
+    parts = {"input": med([s["input"] for s in stages]), **srv, "transport": transport,
+             "client": med([s["client"] for s in stages])}
+    return ", ".join(f"{k} {v:.1f}" for k, v in parts.items())
 
 
 def paint_design(page, studio, rate):
