@@ -225,4 +225,7 @@ def test_dab_preview_at_once_then_server_tiles(page, studio):
     assert stages, "painted frames carry the pen event's time stamp"
     s = stages[-1]
     assert {"queue", "paint", "render", "encode"} <= set(s["srv"]) and s["total"] >= s["client"] >= 0
-    assert s["wire"] >= s["srv"]["paint"] + s["srv"]["render"]
+    # the stages are disjoint parts of the time from sending the samples to receiving the frame
+    parts = [s["up"], s["srv"]["queue"], s["srv"]["paint"], s["srv"]["render"], s["srv"]["encode"], s["down"]]
+    assert min(parts) >= -2 and sum(parts) <= s["wire"] + 3, s
+    assert s["srv"]["queue"] >= 50  # the worker was held busy while the pen moved

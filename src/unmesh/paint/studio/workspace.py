@@ -16,8 +16,9 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
   every ``samples`` message queued while the engine was busy cost one ``add_samples`` and one
   render, so the server catches up with a fast pen instead of falling further behind.
 * Every frame's header carries the server's timings in milliseconds (``srv``: ``queue`` wait of
-  the newest pen message, ``paint`` = ray casts + ``add_samples``, ``render``, ``encode``) next
-  to the time stamp ``ts`` of the newest pen event it shows, for the page's latency split.
+  the newest pen message, ``paint`` = ray casts + ``add_samples``, ``render``; wall-clock
+  ``received`` and ``done``) and the encoder's ``enc``, next to the time stamp ``ts`` of the
+  newest pen event it shows, for the page's latency split.
 * Files are plain names inside the output file's folder (:func:`security.output_path`); all
   writes are atomic; the model is autosaved every ``autosave_every`` strokes (to
   ``STEM.autosave.ply``) and by :meth:`Workspace.shutdown` (to the output file).
@@ -319,9 +320,14 @@ class Workspace:
         return [{"type": "color", "color": [round(float(c), 4) for c in rgb]}]
 
     # -- output -------------------------------------------------------------------------
-    def frames(self, queue_ms: float | None = None) -> list[bytes]:
+    def frames(self, queue_ms: float | None = None, received_at: float | None = None) -> list[bytes]:
         """Paint pending samples (:meth:`flush`), then render and encode every target that
-        changed since the last call. ``queue_ms``: the server's queue wait, put in the headers."""
+        changed since the last call.
+
+        ``queue_ms`` (the server's queue wait of the newest pen message) and ``received_at`` (the
+        wall-clock time in ms at which the server received it) go into the headers' ``srv``, with
+        ``done``, the wall-clock time at which the image was rendered (the page, on the same
+        machine, splits its latency with them)."""
         self.flush()
         out = []
         pending, self._pending = self._pending, {}
@@ -343,6 +349,9 @@ class Workspace:
             srv = {"paint": round(1000 * self._paint_time, 2), "render": round(1000 * (time.perf_counter() - t0), 2)}
             if queue_ms is not None:
                 srv["queue"] = round(queue_ms, 2)
+            if received_at is not None:
+                srv["received"] = round(received_at, 2)
+            srv["done"] = round(1000 * time.time(), 2)
             extra: dict[str, Any] = {"srv": srv}
             if self._last_ts is not None:
                 extra["ts"] = self._last_ts

@@ -75,9 +75,10 @@ function bump(k) { $("strokes").textContent = String(Math.max(0, Number($("strok
 
 // Draws a frame; a frame older than the newest whole frame of its target is skipped (stale).
 // Latency split of a frame that shows pen events (ts = the newest event's time stamp):
-// input = event -> samples sent (batching per animation frame), wire = sent -> frame received
-// (network, server queue, paint, render, encode, event loop), srv = the server's own timings,
-// client = received -> decoded and drawn.
+// input = event -> samples sent (batching per animation frame), wire = sent -> frame received,
+// made of up (sent -> the server's event loop received it), the server's srv timings (queue,
+// paint, render, encode) and down (encoded -> the page received the frame; server and page share
+// the wall clock), and client = received -> decoded and drawn.
 async function drawFrame(head, blobs, recv) {
   const model = head.target === "model";
   if (head.seq < (latestFull[head.target] || 0)) { stats.dropped += 1; return; }
@@ -96,11 +97,15 @@ async function drawFrame(head, blobs, recv) {
   stats.bytes += head.rects.reduce((a, r) => a + r[4], 0);
   if (model) stats.modelFrames += 1;
   if (head.ts !== undefined && head.ts !== null) {
-    const drawn = performance.now(), sent = sentAt.get(head.ts);
+    const drawn = performance.now(), sent = sentAt.get(head.ts), srv = head.srv || {};
+    const wall = (t) => performance.timeOrigin + t;
+    const known = (v) => v !== undefined && v !== null;
     stats.latencies.push(drawn - head.ts);
-    stats.stages.push({ total: drawn - head.ts, input: sent === undefined ? null : sent - head.ts,
-                        wire: sent === undefined ? null : recv - sent, client: drawn - recv,
-                        srv: { ...(head.srv || {}), encode: head.enc } });
+    stats.stages.push({ total: drawn - head.ts, input: known(sent) ? sent - head.ts : null,
+                        wire: known(sent) ? recv - sent : null,
+                        up: known(sent) && known(srv.received) ? srv.received - wall(sent) : null,
+                        down: known(srv.done) ? wall(recv) - srv.done - (head.enc || 0) : null,
+                        client: drawn - recv, srv: { ...srv, encode: head.enc } });
     for (const k of sentAt.keys()) if (k <= head.ts) sentAt.delete(k);
     for (const a of [stats.latencies, stats.stages]) if (a.length > 2000) a.shift();
     if (model) dropDabs((d) => d.t <= head.ts);
