@@ -9,7 +9,7 @@ It prints:
 * **input-to-screen latency** of paint events: from the pointer event's ``timeStamp`` to the
   moment the page's dab preview of it is drawn (client side, one animation frame), and to the
   moment the server's frame that contains it is drawn on the canvas (median, 90th percentile,
-  max), with the split of the latter into stages (medians): ``input`` (event -> samples sent,
+  max), with the split of the latter into stages (means, which add up to the mean total): ``input`` (event -> samples sent,
   batching per animation frame), ``queue`` / ``paint`` (ray casts + ``add_samples``) /
   ``render`` / ``encode`` (the server's timings in the frame header), ``up`` (sent -> received
   by the server's event loop) and ``down`` (encoded -> received by the page: event loop,
@@ -123,7 +123,7 @@ def main() -> None:
         qp = np.percentile(prev, [50, 90, 100]) if prev else [float("nan")] * 3
         print(f"  input-to-screen latency, dab preview: median {qp[0]:.0f} ms, p90 {qp[1]:.0f} ms, max {qp[2]:.0f} ms")
         print(f"  input-to-screen latency, server frame: median {q[0]:.0f} ms, p90 {q[1]:.0f} ms, max {q[2]:.0f} ms")
-        print("  server frame latency split (medians, ms): " + stage_split(stages))
+        print("  server frame latency split (means, ms): " + stage_split(stages))
         print(f"  frames per second while painting: {statistics.median(fps):.1f} (median over strokes)")
         print(f"  per frame: {statistics.median(tiles):.1f} tiles, {statistics.median(kb):.1f} KiB")
 
@@ -189,16 +189,22 @@ def main() -> None:
 
 
 def stage_split(stages):
-    """Medians of the latency stages of the page's ``stats.stages`` records."""
-    def med(values):
-        values = [v for v in values if v is not None]
-        return statistics.median(values) if values else float("nan")
+    """Means of the latency stages of the page's ``stats.stages`` records (means add up: ``other``
+    is the total minus the stages, i.e. the gaps between them)."""
+    keys = ("input", "up", "queue", "paint", "render", "encode", "down", "client")
 
-    srv = {k: med([s["srv"].get(k) for s in stages]) for k in ("queue", "paint", "render", "encode")}
-    parts = {"input": med([s["input"] for s in stages]), "up": med([s["up"] for s in stages]), **srv,
-             "down": med([s["down"] for s in stages]), "client": med([s["client"] for s in stages]),
-             "(total": med([s["total"] for s in stages])}
-    return ", ".join(f"{k} {v:.1f}" for k, v in parts.items()) + ")"
+    def parts(s):
+        return {"input": s["input"], "up": s["up"], **{k: s["srv"].get(k) for k in ("queue", "paint", "render")},
+                "encode": s["srv"].get("encode"), "down": s["down"], "client": s["client"]}
+
+    rows = [parts(s) for s in stages]
+    full = [(r, s["total"]) for r, s in zip(rows, stages, strict=True) if all(r[k] is not None for k in keys)]
+    if not full:
+        return "no complete records"
+    mean = {k: statistics.fmean(r[k] for r, _ in full) for k in keys}
+    total = statistics.fmean(t for _, t in full)
+    mean["other"] = total - sum(mean.values())
+    return ", ".join(f"{k} {v:.1f}" for k, v in mean.items()) + f" (= total {total:.1f}, {len(full)} frames)"
 
 
 if __name__ == "__main__":

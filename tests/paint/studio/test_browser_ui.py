@@ -69,6 +69,7 @@ def test_replay_button_uploads_and_paints_a_stroke_file(page, studio, tmp_path):
     assert pos.shape == c.positions.shape
     assert np.allclose(pos, c.positions, atol=1e-12) and np.allclose(col, c.colors, atol=1e-12)
     assert page.locator("#message").inner_text().startswith("replayed 1 strokes from my_design.json")
+    assert page.locator("#strokes").inner_text() == "1"
     # and the canvas shows it
     after = canvas_pixels(page)
     assert _near(after, VIRIDIAN).sum() > _near(before, VIRIDIAN).sum() + 200
@@ -172,6 +173,8 @@ def test_keyboard_shortcuts(page, studio):
         page.evaluate("window.studio.sync()")
         got = cloud_state(studio)
         assert got[0].shape == want[0].shape and np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), key
+        shown = int(page.locator("#strokes").inner_text())
+        assert shown == studio.run_in_worker(lambda ws: ws.strokes), key  # page and server count alike
     out = studio.workspace.out_path
     assert not out.exists()
     page.keyboard.press("Control+s")

@@ -244,6 +244,7 @@ class Workspace:
             self._on_end({})
         done = bool(self.session.undo())
         if done:
+            self.strokes = max(0, self.strokes - 1)  # strokes in the model (what the page shows)
             self.changed_since_save = True
             self._pending.setdefault("model", "diff")
         return [{"type": "undone", "ok": done}]
@@ -251,6 +252,7 @@ class Workspace:
     def _on_redo(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         done = bool(self.session.redo())
         if done:
+            self.strokes += 1
             self.changed_since_save = True
             self._pending.setdefault("model", "diff")
         return [{"type": "redone", "ok": done}]

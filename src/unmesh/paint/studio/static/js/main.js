@@ -60,7 +60,7 @@ function onMessage(msg) {
     case "loaded": say(`loaded ${msg.name}`); break;
     case "exported": say(`exported ${msg.name}`, false, msg.name); break;
     case "recorded": say(`recorded ${msg.name}`, false, msg.name); break;
-    case "replayed": say(`replayed ${msg.strokes} strokes from ${msg.name}`); break;
+    case "replayed": bump(msg.strokes); say(`replayed ${msg.strokes} strokes from ${msg.name}`); break;
     case "undone": bump(msg.ok ? -1 : 0); if (!msg.ok) say("nothing to undo"); break;
     case "redone": bump(msg.ok ? 1 : 0); if (!msg.ok) say("nothing to redo"); break;
     case "synced": {
