@@ -221,7 +221,9 @@ def test_dab_preview_at_once_then_server_tiles(page, studio):
         release.set()
     assert pre["n"] > 300, pre  # a band of dabs along the stroke ...
     assert np.allclose(pre["rgb"], [0.14 * 255, 0.18 * 255, 0.62 * 255], atol=3), pre  # ... in the brush colour
-    assert x0 - 30 < pre["x0"] < x0 + 5 and x1 - 5 < pre["x1"] < x1 + 30  # image pixels = canvas pixels
+    # from the first sample to the last, a footprint radius beyond (image pixels = canvas pixels)
+    r = 1.6 * page.evaluate("window.studio.tools.size * window.studio.server.px_per_unit")
+    assert x0 - r - 2 <= pre["x0"] <= x0 and x1 <= pre["x1"] <= x1 + r + 2, (pre, x0, x1, r)
     page.evaluate("window.studio.sync()")
     assert page.evaluate(_PREVIEW)["n"] == 0  # replaced by the server's frame
     stages = page.evaluate("window.studio.stats.stages")

@@ -206,7 +206,8 @@ function addSamples(ev) {
   if (stroke.target === "model") {
     for (const r of rows) {
       if (onSurface(r[1], r[2])) {
-        dabs.push({ k: stroke.k, t: r[0], x: r[1], y: r[2], r: Math.max(1.5, stroke.radius * (0.55 + 0.45 * r[3])),
+        // the footprint of the pressed brush: about 1.1 to 1.6 brush radii (what the engine paints)
+        dabs.push({ k: stroke.k, t: r[0], x: r[1], y: r[2], r: Math.max(1.5, stroke.radius * (1.1 + 0.5 * r[3])),
                     color: stroke.color });
       }
     }
