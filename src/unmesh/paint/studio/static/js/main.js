@@ -29,7 +29,17 @@ let syncId = 0;
 const syncWaiters = new Map();
 
 // ---- connection ---------------------------------------------------------------------------
-const nav = new Navigator((view, preview) => conn.send({ type: "view", view, preview }));
+// While dragging, the newest view is sent once per animation frame (previews); a final view at once.
+let pendingView = null;
+function sendPendingView() {
+  if (pendingView) conn.send({ type: "view", view: pendingView, preview: true });
+  pendingView = null;
+}
+const nav = new Navigator((view, preview) => {
+  if (!preview) { pendingView = null; conn.send({ type: "view", view, preview: false }); return; }
+  if (pendingView === null) { requestAnimationFrame(sendPendingView); setTimeout(sendPendingView, 34); }
+  pendingView = view;
+});
 const conn = new Connection(token, {
   onOpen: () => { sizeCanvas(); conn.send({ type: "hello", width: viewCanvas.width, height: viewCanvas.height, view: nav.view }); say("connected"); },
   onClose: (ev) => say(ev.code === 1009 ? "message too large: refused by the server" : "connection lost, reconnecting…", true),
