@@ -30,7 +30,7 @@ def test_studio_example_screenshot(tmp_path):
     ex.func(ctx)
     shot = tmp_path / "studio.png"
     with Image.open(shot) as im:
-        assert im.size == (960, 600)
+        assert im.size == (1200, 720)
         img = np.asarray(im.convert("RGB")).astype(float)
     # the design's colours are on screen (the palette and the model): red, blue-ish and yellow pixels
     for rgb in ((0.8, 0.1, 0.1), (0.98, 0.86, 0.12)):

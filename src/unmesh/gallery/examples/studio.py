@@ -120,7 +120,7 @@ def paint_studio(ctx: ExampleContext) -> None:
     from unmesh.paint.studio.workspace import Workspace
     from unmesh.shapes import Blob
 
-    spacing, viewport, strokes = (0.035, (960, 600), 2) if ctx.quick else (0.02, (1280, 800), 4)
+    spacing, viewport, strokes = (0.028, (1200, 720), 2) if ctx.quick else (0.02, (1280, 800), 4)
     cloud = Blob().surfels(spacing=spacing)
     out = ctx.path("blob_painted.ply")
     with BackgroundStudio(Workspace(Session(cloud), out, advance_every=None)) as studio:
