@@ -7,7 +7,14 @@ surfels) to headless Debian Chromium at ``--size``; scripted pen strokes (DevToo
 It prints:
 
 * **input-to-screen latency** of paint events: from the pointer event's ``timeStamp`` to the
-  moment the frame that contains it is drawn on the canvas (median, 90th percentile, max);
+  moment the page's dab preview of it is drawn (client side, one animation frame), and to the
+  moment the server's frame that contains it is drawn on the canvas (median, 90th percentile,
+  max), with the split of the latter into stages (means, which add up to the mean total): ``input`` (event -> samples sent,
+  batching per animation frame), ``queue`` / ``paint`` (ray casts + ``add_samples``) /
+  ``render`` / ``encode`` (the server's timings in the frame header), ``up`` (sent -> received
+  by the server's event loop) and ``down`` (encoded -> received by the page: event loop,
+  WebSocket, the page's main thread), both from the shared wall clock, and ``client``
+  (received -> decoded and drawn);
 * **frames per second while painting** (model frames drawn per second of stroke) and the tiles
   and bytes per frame (differential updates);
 * **frames per second while dragging the view** (low-resolution previews) and the time of the
@@ -20,7 +27,8 @@ PNG (the image in ``docs/images/studio.png``). Figures depend on the machine and
 Usage::
 
     python benchmarks/bench_studio.py [--spacing 0.035 | --surfels 500000] [--size 1280x800]
-                                      [--strokes 4] [--rate 120] [--screenshot docs/images/studio.png]
+                                      [--strokes 4] [--rate 120] [--haptics thread|process|off]
+                                      [--screenshot docs/images/studio.png]
 """
 
 from __future__ import annotations
@@ -37,41 +45,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "paint" / "studio"))
-CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--no-first-run"]
-
-
-def stroke(page, pts, pressures, rate, color=None, tilt=(0, 0)):
-    if color is not None:
-        page.evaluate(f"window.studio.setColor({list(color)})")
-    cdp = page.context.new_cdp_session(page)
-    period = 1.0 / rate
-
-    def ev(kind, i, buttons):
-        cdp.send("Input.dispatchMouseEvent", {"type": kind, "x": pts[i][0], "y": pts[i][1], "button": "left",
-                                              "buttons": buttons, "pointerType": "pen", "force": pressures[i],
-                                              "tiltX": tilt[0], "tiltY": tilt[1], "clickCount": 1 if buttons else 0})
-
-    ev("mouseMoved", 0, 0)
-    ev("mousePressed", 0, 1)
-    t0 = time.perf_counter()
-    for i in range(1, len(pts)):
-        ev("mouseMoved", i, 1)
-        wait = t0 + i * period - time.perf_counter()
-        if wait > 0:
-            time.sleep(wait)
-    ev("mouseReleased", len(pts) - 1, 0)
-    cdp.detach()
-    page.evaluate("window.studio.sync()")
-    return time.perf_counter() - t0
-
-
-def arc(page, studio, cx, cy, rx, ry, a0, a1, n):
-    from conftest import image_to_page
-
-    return [image_to_page(page, studio, cx + rx * math.cos(a0 + (a1 - a0) * i / (n - 1)),
-                          cy + ry * math.sin(a0 + (a1 - a0) * i / (n - 1))) for i in range(n)]
 
 
 def main() -> None:
@@ -81,13 +54,17 @@ def main() -> None:
     ap.add_argument("--size", default="1280x800", help="browser viewport WxH")
     ap.add_argument("--strokes", type=int, default=4)
     ap.add_argument("--rate", type=float, default=120.0, help="pen events per second")
+    ap.add_argument("--haptics", choices=("thread", "process", "off"), default="thread",
+                    help="the engine's 1 kHz haptic loop: in a thread (default), a process, or off")
     ap.add_argument("--screenshot", help="paint a design and save the studio to this PNG")
     args = ap.parse_args()
 
     from playwright.sync_api import sync_playwright
 
     from conftest import covered_segment, image_to_page
-    from unmesh.paint.session import Session
+    from unmesh.gallery.examples.studio import CHROMIUM_ARGS, chromium_path, paint_design
+    from unmesh.gallery.examples.studio import pen_stroke as stroke
+    from unmesh.paint.session import PaintOptions, Session
     from unmesh.paint.strokes import Brush, Paint, Sample
     from unmesh.paint.studio.server import BackgroundStudio
     from unmesh.paint.studio.workspace import Workspace
@@ -101,10 +78,12 @@ def main() -> None:
     cloud = Blob().surfels(spacing=spacing)
     print(f"model: blob, spacing {spacing:.4g}, {len(cloud)} surfels (sampled in {time.perf_counter() - t:.1f} s)")
     w, h = (int(v) for v in args.size.split("x"))
+    haptics = {"thread": "thread", "process": "process", "off": False}[args.haptics]
+    print(f"haptic loop: {args.haptics}")
     out = Path(tempfile.mkdtemp()) / "blob_painted.ply"
-    with BackgroundStudio(Workspace(Session(cloud), out, advance_every=None)) as studio:
+    with BackgroundStudio(Workspace(Session(cloud, PaintOptions(haptics=haptics)), out, advance_every=None)) as studio:
         pw = sync_playwright().start()
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        browser = pw.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
         page = browser.new_context(viewport={"width": w, "height": h}, bypass_csp=True).new_page()
         t = time.perf_counter()
         page.goto(studio.url)
@@ -119,25 +98,32 @@ def main() -> None:
         stroke(page, [image_to_page(page, studio, x0 + (x1 - x0) * i / 9, row) for i in range(10)], [0.6] * 10,
                args.rate, color=(0.8, 0.1, 0.1))
         page.evaluate("window.studio.stats.latencies.length = 0")
-        lat, fps, tiles, kb = [], [], [], []
+        lat, fps, tiles, kb, prev, stages = [], [], [], [], [], []
         for k in range(args.strokes):
             row, x0, x1 = covered_segment(studio, row_frac=(0.35 + 0.08 * k, 0.45 + 0.08 * k), length_frac=0.6)
             n = 60
             pts = [image_to_page(page, studio, x0 + (x1 - x0) * i / (n - 1), row) for i in range(n)]
             before = page.evaluate("({f: window.studio.stats.modelFrames, t: window.studio.stats.tiles, "
                                    "b: window.studio.stats.bytes})")
-            page.evaluate("window.studio.stats.latencies.length = 0")
+            page.evaluate("window.studio.stats.latencies.length = 0; window.studio.stats.stages.length = 0; "
+                          "window.studio.stats.previewLatencies.length = 0")
             dur = stroke(page, pts, [0.3 + 0.6 * i / (n - 1) for i in range(n)], args.rate, color=(0.14, 0.18, 0.62))
             after = page.evaluate("({f: window.studio.stats.modelFrames, t: window.studio.stats.tiles, "
-                                  "b: window.studio.stats.bytes, l: window.studio.stats.latencies})")
+                                  "b: window.studio.stats.bytes, l: window.studio.stats.latencies, "
+                                  "p: window.studio.stats.previewLatencies, s: window.studio.stats.stages})")
             frames = after["f"] - before["f"]
             lat += after["l"]
+            prev += after["p"]
+            stages += after["s"]
             fps.append(frames / dur)
             tiles.append((after["t"] - before["t"]) / max(frames, 1))
             kb.append((after["b"] - before["b"]) / max(frames, 1) / 1024)
         q = np.percentile(lat, [50, 90, 100]) if lat else [float("nan")] * 3
         print(f"paint: {len(lat)} frames over {args.strokes} strokes of 60 pen events at {args.rate:.0f}/s")
-        print(f"  input-to-screen latency: median {q[0]:.0f} ms, p90 {q[1]:.0f} ms, max {q[2]:.0f} ms")
+        qp = np.percentile(prev, [50, 90, 100]) if prev else [float("nan")] * 3
+        print(f"  input-to-screen latency, dab preview: median {qp[0]:.0f} ms, p90 {qp[1]:.0f} ms, max {qp[2]:.0f} ms")
+        print(f"  input-to-screen latency, server frame: median {q[0]:.0f} ms, p90 {q[1]:.0f} ms, max {q[2]:.0f} ms")
+        print("  server frame latency split (means, ms): " + stage_split(stages))
         print(f"  frames per second while painting: {statistics.median(fps):.1f} (median over strokes)")
         print(f"  per frame: {statistics.median(tiles):.1f} tiles, {statistics.median(kb):.1f} KiB")
 
@@ -156,7 +142,9 @@ def main() -> None:
         page.mouse.up(button="right")
         t = time.perf_counter()
         page.evaluate("window.studio.sync()")
-        print(f"view drag: {(f1 - f0) / drag:.1f} preview frames per second over {drag:.2f} s; "
+        scale = studio.run_in_worker(lambda ws: ws.preview_scale)
+        print(f"view drag: {(f1 - f0) / drag:.1f} preview frames per second over {drag:.2f} s "
+              f"(preview at 1/{scale} resolution, {page.evaluate('window.studio.stats.dropped')} stale frames skipped); "
               f"full frame after release {1000 * (time.perf_counter() - t):.0f} ms")
 
         # the engine alone, in process (one paint event + its differential render)
@@ -192,7 +180,7 @@ def main() -> None:
         if args.screenshot:
             for _ in range(args.strokes + 1):  # a clean blob for the design: undo the measured strokes
                 page.evaluate("window.studio.send({type: 'undo'})")
-            paint_design(page, studio, args.rate)
+            paint_design(page, studio, args.rate)  # the gallery example's design (paint-studio)
             Path(args.screenshot).parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=args.screenshot)
             print(f"wrote {args.screenshot}")
@@ -200,26 +188,23 @@ def main() -> None:
         pw.stop()
 
 
-def paint_design(page, studio, rate):
-    """A few colourful strokes on the palette and the blob, the view turned to show them."""
-    page.evaluate("window.studio.nav.preset('home', window.studio.server.presets)")
-    page.evaluate("window.studio.sync()")
-    box = page.locator("#palette").bounding_box()
-    colors = [(0.98, 0.86, 0.12), (0.8, 0.1, 0.1), (0.16, 0.52, 0.8), (0.05, 0.5, 0.38), (0.55, 0.05, 0.2)]
-    for k, c in enumerate(colors):
-        y = box["y"] + box["height"] * (0.2 + 0.15 * k)
-        pts = [(box["x"] + box["width"] * (0.1 + 0.35 * i / 24 + 0.1 * k), y + 6 * math.sin(i / 3)) for i in range(25)]
-        stroke(page, pts, [0.85] * 25, rate, color=c)
-    cam = studio.run_in_worker(lambda ws: ws.camera())
-    cx, cy = cam.width * 0.5, cam.height * 0.5
-    page.evaluate("window.studio.choose('brush', 'round')")
-    for k, (c, dy) in enumerate(zip(colors[:4], (-0.02, 0.05, 0.12, 0.19), strict=True)):
-        pts = arc(page, studio, cx - 0.08 * cam.width, cy + dy * cam.height, 0.1 * cam.width, 0.03 * cam.height,
-                  math.pi * 0.9, math.pi * 0.1, 30)
-        stroke(page, pts, [0.4 + 0.5 * math.sin(math.pi * i / 29) for i in range(30)], rate, color=c,
-               tilt=(10 * (k - 1), 0))
-    page.evaluate("window.studio.setColor([0.98, 0.86, 0.12])")
-    page.mouse.move(cx + 0.05 * cam.width, cy)
+def stage_split(stages):
+    """Means of the latency stages of the page's ``stats.stages`` records (means add up: ``other``
+    is the total minus the stages, i.e. the gaps between them)."""
+    keys = ("input", "up", "queue", "paint", "render", "encode", "down", "client")
+
+    def parts(s):
+        return {"input": s["input"], "up": s["up"], **{k: s["srv"].get(k) for k in ("queue", "paint", "render")},
+                "encode": s["srv"].get("encode"), "down": s["down"], "client": s["client"]}
+
+    rows = [parts(s) for s in stages]
+    full = [(r, s["total"]) for r, s in zip(rows, stages, strict=True) if all(r[k] is not None for k in keys)]
+    if not full:
+        return "no complete records"
+    mean = {k: statistics.fmean(r[k] for r, _ in full) for k in keys}
+    total = statistics.fmean(t for _, t in full)
+    mean["other"] = total - sum(mean.values())
+    return ", ".join(f"{k} {v:.1f}" for k, v in mean.items()) + f" (= total {total:.1f}, {len(full)} frames)"
 
 
 if __name__ == "__main__":

@@ -36,6 +36,7 @@ EXAMPLE_MODULES: tuple[str, ...] = (
     "unmesh.gallery.examples.fem",
     "unmesh.gallery.examples.csg",
     "unmesh.gallery.examples.paint",
+    "unmesh.gallery.examples.studio",
     "unmesh.gallery.examples.convert",
 )
 

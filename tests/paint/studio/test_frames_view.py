@@ -50,6 +50,9 @@ def test_large_change_sends_a_full_frame_and_previews_are_not_a_base():
     assert head["scale"] == 2 and head["w"] == 32 and head["full"]
     head, _ = decode(enc.encode("m", img))
     assert head["full"]  # after a preview the next frame is whole
+    head, blobs = decode(enc.encode("m", img[:11, :10], scale=3, size=(32, 32)))
+    assert (head["w"], head["h"], head["scale"]) == (32, 32, 3) and head["rects"][0][:4] == [0, 0, 10, 11]
+    assert head["enc"] >= 0 and len(blobs) == 1
 
 
 def test_view_cameras_look_at_the_framed_centre():

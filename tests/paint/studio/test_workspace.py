@@ -36,3 +36,65 @@ def test_tick_advances_between_strokes_and_replays(tmp_path):
     a, b = ws.session.cloud(), again.cloud()
     assert np.array_equal(a.positions, b.positions) and np.allclose(a.colors, b.colors, atol=1e-12)
     assert ws.shutdown() == tmp_path / "p.ply" and (tmp_path / "p_strokes.json").is_file()
+
+
+def _stroke_rows(n=12):
+    return [[10 * i, 40 + 3 * i, 45, 0.5 + 0.03 * i, 0, 0] for i in range(n)]
+
+
+def _begin(ws):
+    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 0, "zoom": 1, "pan": [0, 0]}})
+    ws.frames()
+    ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.08},
+               "paint": {"type": "oil", "color": [0.8, 0.1, 0.1], "drying": 0.1}})
+
+
+def test_queued_samples_are_painted_in_one_engine_call_with_the_same_samples(tmp_path):
+    """Three ``samples`` messages handled before a frame cost one ``add_samples``, which gets the
+    same samples as from a single message with all the rows (times relative to the stroke's start)."""
+    rows = _stroke_rows()
+    got = []
+    for split in ([rows], [rows[:3], rows[3:7], rows[7:]]):
+        ws = Workspace(_session(), tmp_path / f"p{len(split)}.ply", advance_every=None)
+        calls = []
+        add = ws.session.add_samples
+        ws.session.add_samples = lambda sid, samples, add=add, calls=calls: calls.append(list(samples)) or add(sid, samples)
+        _begin(ws)
+        for part in split:
+            ws.handle({"type": "samples", "samples": part, "ts": 1.0})
+        assert calls == []  # checked, not painted yet
+        frames = ws.frames(queue_ms=1.0, received_at=2.0)
+        assert len(calls) == 1 and len(calls[0]) == len(rows) and frames
+        t0 = calls[0][0].t
+        got.append([(round(s.t - t0, 9), s.point, s.pressure, s.tilt) for s in calls[0]])
+        ws.handle({"type": "end"})
+        assert ws.strokes == 1
+        ws.shutdown()
+    assert got[0] == got[1]
+
+
+def test_malformed_samples_are_refused_when_they_arrive(tmp_path):
+    import pytest
+
+    from unmesh.errors import InputError
+
+    ws = Workspace(_session(), tmp_path / "p.ply", advance_every=None)
+    _begin(ws)
+    with pytest.raises(InputError, match=r"samples\[1\].pressure"):
+        ws.handle({"type": "samples", "samples": [[0, 40, 45, 0.5, 0, 0], [1, 41, 45, 2.0, 0, 0]]})
+    ws.handle({"type": "end"})
+    assert ws.strokes == 0  # nothing of the refused message was painted
+    ws.shutdown()
+
+
+def test_preview_resolution_follows_the_render_time(tmp_path):
+    from unmesh.paint.studio.workspace import PREVIEW_FAST, PREVIEW_SCALES, PREVIEW_SLOW
+
+    ws = Workspace(_session(), tmp_path / "p.ply", advance_every=None)
+    seen = [ws.preview_scale]
+    for t in (2 * PREVIEW_SLOW, 2 * PREVIEW_SLOW, 2 * PREVIEW_SLOW, PREVIEW_FAST / 2, PREVIEW_FAST / 2,
+              PREVIEW_FAST / 2, (PREVIEW_FAST + PREVIEW_SLOW) / 2):
+        ws._adapt_preview(t)
+        seen.append(ws.preview_scale)
+    assert seen == [2, 3, 4, 4, 3, 2, 2, 2] and PREVIEW_SCALES == (2, 3, 4)
+    ws.shutdown()

@@ -31,6 +31,7 @@ from __future__ import annotations
 import io
 import json
 import struct
+import time
 from typing import Any
 
 import numpy as np
@@ -114,10 +115,12 @@ class FrameEncoder:
         return rects
 
     def encode(self, target: str, image: np.ndarray, *, full: bool = False, scale: int = 1,
-               extra: dict[str, Any] | None = None) -> bytes | None:
+               size: tuple[int, int] | None = None, extra: dict[str, Any] | None = None) -> bytes | None:
         """The frame message for ``image`` (H,W,3) uint8; None when nothing changed.
 
-        ``scale`` > 1 marks a low-resolution preview (never used as the base of tiles).
+        ``scale`` > 1 marks a low-resolution preview (never used as the base of tiles) of an
+        image of ``size`` = (width, height) full-resolution pixels (default: ``scale`` times the
+        image's). The header's ``enc`` is the JPEG encoding time in milliseconds.
         """
         img = np.ascontiguousarray(image, dtype=np.uint8)
         h, w = img.shape[:2]
@@ -138,10 +141,13 @@ class FrameEncoder:
                 rects, full = [(0, 0, w, h)], True
         if scale == 1:
             self._last[target] = img.copy()
+        t0 = time.perf_counter()
         blobs = [_jpeg(img[y:y + rh, x:x + rw], self.quality) for x, y, rw, rh in rects]
+        enc = round(1000 * (time.perf_counter() - t0), 2)
         self._seq += 1
-        head = {"type": "frame", "target": target, "seq": self._seq, "w": w * scale, "h": h * scale,
-                "full": bool(full), "scale": int(scale), "fmt": "jpeg",
+        fw, fh = size if size is not None else (w * scale, h * scale)
+        head = {"type": "frame", "target": target, "seq": self._seq, "w": int(fw), "h": int(fh),
+                "full": bool(full), "scale": int(scale), "fmt": "jpeg", "enc": enc,
                 "rects": [[x, y, rw, rh, len(b)] for (x, y, rw, rh), b in zip(rects, blobs, strict=True)]}
         if extra:
             head.update(extra)

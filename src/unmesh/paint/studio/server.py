@@ -14,8 +14,10 @@ Routes (all on ``127.0.0.1`` only; every response checks the ``Host`` header):
     Downloads a ``.ply``, ``.json`` or ``.png`` of the output folder (token).
 
 Messages are handled one batch at a time on a single worker thread (the engine is never called
-from two threads), and a batch renders once, so a burst of pen samples costs one frame. A
-malformed message gets an ``{"type": "error"}`` reply; the session goes on.
+from two threads; the event loop only moves bytes, so it keeps receiving pen messages while the
+engine paints), and a batch paints its pen samples in one engine call and renders once, so a
+burst of pen samples costs one frame. A malformed message gets an ``{"type": "error"}`` reply;
+the session goes on.
 
 Example
 -------
@@ -82,7 +84,7 @@ class Studio:
         self.max_upload = int(max_upload)
         self.pool = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="unmesh-studio")
         self.clients: set[web.WebSocketResponse] = set()
-        self._queue: list[tuple[web.WebSocketResponse, str]] = []
+        self._queue: list[tuple[web.WebSocketResponse, str, float, float]] = []
         self._wake: asyncio.Event | None = None
         self._tasks: list[asyncio.Task[Any]] = []
         self.errors = 0
@@ -178,7 +180,7 @@ class Studio:
         try:
             async for msg in ws:
                 if msg.type == WSMsgType.TEXT:
-                    self._queue.append((ws, msg.data))
+                    self._queue.append((ws, msg.data, time.perf_counter(), time.time()))
                     assert self._wake is not None
                     self._wake.set()
                 elif msg.type == WSMsgType.BINARY:
@@ -190,7 +192,7 @@ class Studio:
         return ws
 
     # -- work -----------------------------------------------------------------------------
-    def _process(self, batch: list[tuple[Any, str]]) -> tuple[list[tuple[Any, dict[str, Any]]], list[bytes], int]:
+    def _process(self, batch: list[tuple[Any, str, float, float]]) -> tuple[list[tuple[Any, dict[str, Any]]], list[bytes], int]:
         """Handle messages of ``batch`` for at most :data:`FRAME_BUDGET` seconds, then render once.
 
         Returns the replies, the frames and how many messages were handled (the rest wait for
@@ -198,10 +200,13 @@ class Studio:
         replies: list[tuple[Any, dict[str, Any]]] = []
         start = time.perf_counter()
         done = 0
-        for ws, text in batch:
+        queue_ms = received_at = None
+        for ws, text, received, wall in batch:
             if done and time.perf_counter() - start > FRAME_BUDGET:
                 break
             done += 1
+            if queue_ms is None or '"samples"' in text:  # the wait of the newest pen message
+                queue_ms, received_at = 1000 * (time.perf_counter() - received), 1000 * wall
             try:
                 msg = parse_message(text)
                 replies.extend((ws, r) for r in self.workspace.handle(msg))
@@ -213,7 +218,7 @@ class Studio:
                 traceback.print_exc(file=sys.stderr)
                 replies.append((ws, {"type": "error", "message": f"internal error: {type(exc).__name__}: {exc}"}))
         try:
-            frames = self.workspace.frames()
+            frames = self.workspace.frames(queue_ms, received_at)
         except Exception as exc:
             traceback.print_exc(file=sys.stderr)
             frames = []

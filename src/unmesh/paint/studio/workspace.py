@@ -11,6 +11,14 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
   ``Session.pick``; samples that miss the surface are dropped. Sample times are the page's
   clock mapped to seconds since the studio started, so drying follows real time and a
   recorded session replays exactly.
+* Pen samples are checked when their message arrives but painted in one engine call per frame
+  (:meth:`Workspace.flush`, run before any other message and before rendering): the samples of
+  every ``samples`` message queued while the engine was busy cost one ``add_samples`` and one
+  render, so the server catches up with a fast pen instead of falling further behind.
+* Every frame's header carries the server's timings in milliseconds (``srv``: ``queue`` wait of
+  the newest pen message, ``paint`` = ray casts + ``add_samples``, ``render``; wall-clock
+  ``received`` and ``done``) and the encoder's ``enc``, next to the time stamp ``ts`` of the
+  newest pen event it shows, for the page's latency split.
 * Files are plain names inside the output file's folder (:func:`security.output_path`); all
   writes are atomic; the model is autosaved every ``autosave_every`` strokes (to
   ``STEM.autosave.ply``) and by :meth:`Workspace.shutdown` (to the output file).
@@ -44,6 +52,10 @@ __all__ = ["PALETTE_SIZE", "Workspace", "palette_cloud"]
 PALETTE_SIZE = (300, 180)
 #: Largest model image (pixels per side).
 MAX_SIDE = 2048
+#: Preview (view drag) resolution divisors: the studio picks one from the last preview's render time.
+PREVIEW_SCALES = (2, 3, 4)
+#: Render time (s) of a preview above which the next preview uses a coarser image, and below which a finer one.
+PREVIEW_SLOW, PREVIEW_FAST = 0.05, 0.015
 
 
 def palette_cloud(width: float = 1.76, height: float = 1.06, spacing: float = 0.02) -> SurfelCloud:
@@ -96,6 +108,9 @@ class Workspace:
         self._pending: dict[str, str] = {"model": "full", "palette": "full"}
         self._palette_albedo: np.ndarray | None = None
         self._last_ts: float | None = None
+        self._rows: list[tuple[float, float, float, float, float, float]] = []
+        self._paint_time = 0.0
+        self.preview_scale = PREVIEW_SCALES[0]
 
     # -- cameras ------------------------------------------------------------------------
     def camera(self) -> Camera:
@@ -121,6 +136,8 @@ class Workspace:
         """Apply one parsed message; returns the JSON replies (frames come from :meth:`frames`)."""
         kind = msg["type"]
         method = getattr(self, "_on_" + kind)
+        if kind != "samples":
+            self.flush()
         return method(msg) or []
 
     def _on_hello(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
@@ -169,7 +186,6 @@ class Workspace:
         return [{"type": "begun", "target": target}]
 
     def _on_samples(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
-        _, _, Sample, _ = _engine()
         st = self._stroke
         if st is None:
             raise InputError("samples: no stroke begun (send 'begin' first)")
@@ -178,6 +194,18 @@ class Workspace:
         ts = msg.get("ts")
         if isinstance(ts, int | float) and not isinstance(ts, bool) and math.isfinite(ts):
             self._last_ts = float(ts)
+        self._rows.extend(rows)
+        return []
+
+    def flush(self) -> None:
+        """Paint the pen samples received since the last flush: ray-cast each onto the surface
+        and give them to the engine in one ``add_samples`` call."""
+        _, _, Sample, _ = _engine()
+        st, rows, self._rows = self._stroke, self._rows, []
+        if st is None or not rows:
+            return
+        t0 = time.perf_counter()
+        cam = st["camera"]
         samples = []
         for t_ms, x, y, pressure, tilt_x, tilt_y in rows:
             if st["t_client"] is None:
@@ -194,7 +222,7 @@ class Workspace:
             st["session"].add_samples(st["sid"], samples)
             st["n"] += len(samples)
             self._pending.setdefault(st["target"], "diff")
-        return []
+        self._paint_time += time.perf_counter() - t0
 
     def _on_end(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         st, self._stroke = self._stroke, None
@@ -216,6 +244,7 @@ class Workspace:
             self._on_end({})
         done = bool(self.session.undo())
         if done:
+            self.strokes = max(0, self.strokes - 1)  # strokes in the model (what the page shows)
             self.changed_since_save = True
             self._pending.setdefault("model", "diff")
         return [{"type": "undone", "ok": done}]
@@ -223,6 +252,7 @@ class Workspace:
     def _on_redo(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         done = bool(self.session.redo())
         if done:
+            self.strokes += 1
             self.changed_since_save = True
             self._pending.setdefault("model", "diff")
         return [{"type": "redone", "ok": done}]
@@ -292,28 +322,57 @@ class Workspace:
         return [{"type": "color", "color": [round(float(c), 4) for c in rgb]}]
 
     # -- output -------------------------------------------------------------------------
-    def frames(self) -> list[bytes]:
-        """Render and encode every target that changed since the last call."""
+    def frames(self, queue_ms: float | None = None, received_at: float | None = None) -> list[bytes]:
+        """Paint pending samples (:meth:`flush`), then render and encode every target that
+        changed since the last call.
+
+        ``queue_ms`` (the server's queue wait of the newest pen message) and ``received_at`` (the
+        wall-clock time in ms at which the server received it) go into the headers' ``srv``, with
+        ``done``, the wall-clock time at which the image was rendered (the page, on the same
+        machine, splits its latency with them)."""
+        self.flush()
         out = []
         pending, self._pending = self._pending, {}
         for target, mode in pending.items():
+            t0 = time.perf_counter()
             if target == "model":
                 cam = self.camera()
                 scale = 1
                 if mode == "preview":
-                    scale = 2
-                    cam = cam.resized(max(8, self.width // 2), max(8, self.height // 2))
+                    scale = self.preview_scale
+                    cam = cam.resized(max(8, self.width // scale), max(8, self.height // scale))
                 img = to_uint8(self.session.render(cam).color)
+                if mode == "preview":
+                    self._adapt_preview(time.perf_counter() - t0)
             else:
                 res = self.palette.render(self.palette_camera, shading="none", brush=False)
                 self._palette_albedo = np.asarray(res.albedo)
                 img, scale = to_uint8(res.color), 1
-            extra = {"ts": self._last_ts} if self._last_ts is not None else None
-            msg = self.encoder.encode(target, img, full=mode in ("full", "preview"), scale=scale, extra=extra)
+            srv = {"paint": round(1000 * self._paint_time, 2), "render": round(1000 * (time.perf_counter() - t0), 2)}
+            if queue_ms is not None:
+                srv["queue"] = round(queue_ms, 2)
+            if received_at is not None:
+                srv["received"] = round(received_at, 2)
+            srv["done"] = round(1000 * time.time(), 2)
+            extra: dict[str, Any] = {"srv": srv}
+            if self._last_ts is not None:
+                extra["ts"] = self._last_ts
+            size = (self.width, self.height) if target == "model" else None
+            msg = self.encoder.encode(target, img, full=mode in ("full", "preview"), scale=scale, size=size,
+                                      extra=extra)
             if msg is not None:
                 out.append(msg)
         self._last_ts = None
+        self._paint_time = 0.0
         return out
+
+    def _adapt_preview(self, seconds: float) -> None:
+        """Coarser previews when the last one rendered slowly, finer ones when fast."""
+        i = PREVIEW_SCALES.index(self.preview_scale)
+        if seconds > PREVIEW_SLOW and i + 1 < len(PREVIEW_SCALES):
+            self.preview_scale = PREVIEW_SCALES[i + 1]
+        elif seconds < PREVIEW_FAST and i > 0:
+            self.preview_scale = PREVIEW_SCALES[i - 1]
 
     def force(self) -> list[float]:
         """The brush's current penalty force (3,) from the engine's haptic signal."""

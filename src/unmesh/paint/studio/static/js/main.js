@@ -6,27 +6,48 @@ import { Resampler, inputPoints, pressureOf, tiltOf } from "./pen.js";
 
 const $ = (id) => document.getElementById(id);
 const token = new URLSearchParams(location.search).get("token") || "";
-const viewCanvas = $("view"), overlay = $("overlay"), paletteCanvas = $("palette");
-const viewCtx = viewCanvas.getContext("2d"), overlayCtx = overlay.getContext("2d");
+const viewCanvas = $("view"), previewCanvas = $("preview"), overlay = $("overlay"), paletteCanvas = $("palette");
+const viewCtx = viewCanvas.getContext("2d", { willReadFrequently: true }), overlayCtx = overlay.getContext("2d");
+const previewCtx = previewCanvas.getContext("2d");
 const paletteCtx = paletteCanvas.getContext("2d");
 const gauge = new Gauge($("gauge"));
 
 const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1], drying: 0.05, pressure: 0.6 };
-const stats = { forces: 0, frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], fps: 0, errors: [], replies: [] };
+// latencies: pointer event -> server frame drawn (ms); previewLatencies: pointer event -> dab preview
+// drawn; stages: the split of each server frame's latency (see drawFrame); dropped: stale frames skipped.
+const stats = { forces: 0, frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], previewLatencies: [],
+                stages: [], dropped: 0, fps: 0, errors: [], replies: [] };
 let server = { px_per_unit: 100, palette_px_per_unit: 173, presets: {}, width: 0, height: 0 };
-let stroke = null;          // {target, resampler, toImage, canvas}
+let stroke = null;          // {target, resampler, toImage, rows, ts, k, radius, color}
 let cursor = null;          // {x, y, p, tilt, over}
 let drawing = Promise.resolve();
+let strokeNo = 0, endedNo = 0;  // strokes begun and acknowledged ("ended"): their dab previews go then
+const dabs = [];                // dab previews {k, t, x, y, r, color} in image pixels, until the server's frame shows them
+const sentAt = new Map();       // pen event time stamp -> when its samples were sent
+const latestFull = {};          // target -> seq of the newest whole frame received (older frames are stale)
 let syncId = 0;
 const syncWaiters = new Map();
 
 // ---- connection ---------------------------------------------------------------------------
-const nav = new Navigator((view, preview) => conn.send({ type: "view", view, preview }));
+// While dragging, the newest view is sent once per animation frame (previews); a final view at once.
+let pendingView = null;
+function sendPendingView() {
+  if (pendingView) conn.send({ type: "view", view: pendingView, preview: true });
+  pendingView = null;
+}
+const nav = new Navigator((view, preview) => {
+  if (!preview) { pendingView = null; conn.send({ type: "view", view, preview: false }); return; }
+  if (pendingView === null) { requestAnimationFrame(sendPendingView); setTimeout(sendPendingView, 34); }
+  pendingView = view;
+});
 const conn = new Connection(token, {
   onOpen: () => { sizeCanvas(); conn.send({ type: "hello", width: viewCanvas.width, height: viewCanvas.height, view: nav.view }); say("connected"); },
   onClose: (ev) => say(ev.code === 1009 ? "message too large: refused by the server" : "connection lost, reconnecting…", true),
   onMessage: onMessage,
-  onFrame: (head, blobs) => { drawing = drawing.then(() => drawFrame(head, blobs)).catch((e) => say(String(e), true)); },
+  onFrame: (head, blobs, recv) => {
+    if (head.full) latestFull[head.target] = Math.max(latestFull[head.target] || 0, head.seq);
+    drawing = drawing.then(() => drawFrame(head, blobs, recv)).catch((e) => say(String(e), true));
+  },
 });
 
 function onMessage(msg) {
@@ -43,12 +64,13 @@ function onMessage(msg) {
     case "force": stats.forces += 1; gauge.set(msg.force); break;
     case "color": setColor(msg.color); say(`picked ${hex(msg.color)} from the palette`); break;
     case "error": stats.errors.push(msg.message); say(msg.message, true); break;
+    case "ended": endedNo += 1; dropDabs((d) => d.k <= endedNo); break;
     case "saved": say(`saved ${msg.name}`); break;
     case "autosaved": say(`autosaved ${msg.name}`); break;
     case "loaded": say(`loaded ${msg.name}`); break;
     case "exported": say(`exported ${msg.name}`, false, msg.name); break;
     case "recorded": say(`recorded ${msg.name}`, false, msg.name); break;
-    case "replayed": say(`replayed ${msg.strokes} strokes from ${msg.name}`); break;
+    case "replayed": bump(msg.strokes); say(`replayed ${msg.strokes} strokes from ${msg.name}`); break;
     case "undone": bump(msg.ok ? -1 : 0); if (!msg.ok) say("nothing to undo"); break;
     case "redone": bump(msg.ok ? 1 : 0); if (!msg.ok) say("nothing to redo"); break;
     case "synced": {
@@ -61,8 +83,15 @@ function onMessage(msg) {
 
 function bump(k) { $("strokes").textContent = String(Math.max(0, Number($("strokes").textContent) + k)); }
 
-async function drawFrame(head, blobs) {
+// Draws a frame; a frame older than the newest whole frame of its target is skipped (stale).
+// Latency split of a frame that shows pen events (ts = the newest event's time stamp):
+// input = event -> samples sent (batching per animation frame), wire = sent -> frame received,
+// made of up (sent -> the server's event loop received it), the server's srv timings (queue,
+// paint, render, encode) and down (encoded -> the page received the frame; server and page share
+// the wall clock), and client = received -> decoded and drawn.
+async function drawFrame(head, blobs, recv) {
   const model = head.target === "model";
+  if (head.seq < (latestFull[head.target] || 0)) { stats.dropped += 1; return; }
   const canvas = model ? viewCanvas : paletteCanvas;
   const ctx = model ? viewCtx : paletteCtx;
   if (!head.full && (canvas.width !== head.w || canvas.height !== head.h)) return;
@@ -78,10 +107,50 @@ async function drawFrame(head, blobs) {
   stats.bytes += head.rects.reduce((a, r) => a + r[4], 0);
   if (model) stats.modelFrames += 1;
   if (head.ts !== undefined && head.ts !== null) {
-    stats.latencies.push(performance.now() - head.ts);
-    if (stats.latencies.length > 2000) stats.latencies.shift();
-    $("latency").textContent = `${stats.latencies[stats.latencies.length - 1].toFixed(0)} ms`;
+    const drawn = performance.now(), sent = sentAt.get(head.ts), srv = head.srv || {};
+    const wall = (t) => performance.timeOrigin + t;
+    const known = (v) => v !== undefined && v !== null;
+    stats.latencies.push(drawn - head.ts);
+    stats.stages.push({ total: drawn - head.ts, input: known(sent) ? sent - head.ts : null,
+                        wire: known(sent) ? recv - sent : null,
+                        up: known(sent) && known(srv.received) ? srv.received - wall(sent) : null,
+                        down: known(srv.done) ? wall(recv) - srv.done - (head.enc || 0) : null,
+                        client: drawn - recv, srv: { ...srv, encode: head.enc } });
+    for (const k of sentAt.keys()) if (k <= head.ts) sentAt.delete(k);
+    for (const a of [stats.latencies, stats.stages]) if (a.length > 2000) a.shift();
+    if (model) dropDabs((d) => d.t <= head.ts);
+    showLatency();
   }
+}
+
+function showLatency() {
+  const last = (a) => (a.length ? `${a[a.length - 1].toFixed(0)}` : "–");
+  $("latency").textContent = `${last(stats.previewLatencies)} / ${last(stats.latencies)} ms`;
+}
+
+// ---- dab previews: the brush's footprint drawn at once, replaced by the server's painted tiles --------
+function dropDabs(gone) {
+  let n = 0;
+  for (const d of dabs) if (!gone(d)) dabs[n++] = d;
+  if (n === dabs.length) return;
+  dabs.length = n;
+  drawDabs();
+}
+
+function drawDabs() {
+  const ctx = previewCtx;
+  ctx.clearRect(0, 0, previewCanvas.width, previewCanvas.height);
+  for (const d of dabs) {
+    ctx.fillStyle = d.color;
+    ctx.beginPath(); ctx.arc(d.x, d.y, d.r, 0, 2 * Math.PI); ctx.fill();
+  }
+}
+
+function onSurface(x, y) {  // the model image is not background (white) under the pen
+  const xi = Math.floor(x), yi = Math.floor(y);
+  if (xi < 0 || yi < 0 || xi >= viewCanvas.width || yi >= viewCanvas.height) return false;
+  const px = viewCtx.getImageData(xi, yi, 1, 1).data;
+  return !(px[0] >= 250 && px[1] >= 250 && px[2] >= 250);
 }
 
 let fpsCount = 0;
@@ -110,7 +179,7 @@ function sizeCanvas() {
   const w = Math.max(16, Math.min(2048, Math.round(stage.clientWidth)));
   const h = Math.max(16, Math.min(2048, Math.round(stage.clientHeight)));
   const changed = viewCanvas.width !== w || viewCanvas.height !== h;
-  for (const c of [viewCanvas, overlay]) { c.width = w; c.height = h; }
+  for (const c of [viewCanvas, previewCanvas, overlay]) { c.width = w; c.height = h; }
   return changed;
 }
 let resizeTimer = null;
@@ -128,20 +197,61 @@ function imageMapper(canvas) {
 function beginStroke(ev, target, canvas) {
   const pxPerUnit = target === "model" ? server.px_per_unit : server.palette_px_per_unit;
   const spacing = Math.max(1, 0.4 * tools.size * pxPerUnit);  // two fifths of the brush radius on screen
-  stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas) };
+  strokeNo += 1;
+  stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas), rows: [], ts: null,
+             k: strokeNo, radius: tools.size * pxPerUnit, color: hex(tools.color) };
   conn.send({ type: "begin", target, brush: { type: tools.brush, size: tools.size },
               paint: { type: tools.paint, color: tools.color, drying: tools.drying } });
   addSamples(ev);
 }
 
+// Samples are collected per animation frame and sent as one message (with the newest event's
+// time stamp); the model's dab previews are drawn in the same frame.
 function addSamples(ev) {
   const rows = [];
   for (const pt of inputPoints(ev, stroke.toImage, tools.pressure)) rows.push(...stroke.resampler.push(pt));
-  if (rows.length) conn.send({ type: "samples", samples: rows, ts: ev.timeStamp });
+  if (!rows.length) return;
+  stroke.rows.push(...rows);
+  stroke.ts = ev.timeStamp;
+  if (stroke.target === "model") {
+    for (const r of rows) {
+      if (onSurface(r[1], r[2])) {
+        // the footprint of the pressed brush: about 1.1 to 1.6 brush radii (what the engine paints)
+        dabs.push({ k: stroke.k, t: r[0], x: r[1], y: r[2], r: Math.max(1.5, stroke.radius * (1.1 + 0.5 * r[3])),
+                    color: stroke.color });
+      }
+    }
+  }
+  scheduleFlush();
+}
+
+let flushPending = false;
+function scheduleFlush() {
+  if (flushPending) return;
+  flushPending = true;
+  requestAnimationFrame(flushSamples);
+  setTimeout(flushSamples, 34);  // when animation frames are throttled (hidden page)
+}
+
+function flushSamples() {
+  if (!flushPending) return;
+  flushPending = false;
+  if (!stroke || !stroke.rows.length) return;
+  const rows = stroke.rows, ts = stroke.ts;
+  stroke.rows = [];
+  conn.send({ type: "samples", samples: rows, ts });
+  sentAt.set(ts, performance.now());
+  if (stroke.target === "model") {
+    drawDabs();
+    stats.previewLatencies.push(performance.now() - ts);
+    if (stats.previewLatencies.length > 2000) stats.previewLatencies.shift();
+  }
 }
 
 function endStroke() {
   if (!stroke) return;
+  flushPending = true;
+  flushSamples();
   conn.send({ type: "end" });
   if (stroke.target === "model") bump(1);
   stroke = null;
@@ -281,8 +391,11 @@ async function upload(file) {
   return name;
 }
 
+// keys a focused slider uses itself (they do not turn the view then)
+const SLIDER_KEYS = new Set(["ArrowLeft", "ArrowRight", "ArrowUp", "ArrowDown", "Home", "End", "PageUp", "PageDown"]);
 window.addEventListener("keydown", (ev) => {
   if (ev.target instanceof HTMLInputElement && ev.target.type !== "range") return;
+  if (ev.target instanceof HTMLInputElement && SLIDER_KEYS.has(ev.key)) return;
   const ctrl = ev.ctrlKey || ev.metaKey;
   if (ctrl && ev.key.toLowerCase() === "z") { conn.send({ type: ev.shiftKey ? "redo" : "undo" }); ev.preventDefault(); return; }
   if (ctrl && ev.key.toLowerCase() === "y") { conn.send({ type: "redo" }); ev.preventDefault(); return; }

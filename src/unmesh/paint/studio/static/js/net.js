@@ -18,7 +18,7 @@ export function decodeFrame(buffer) {
 export class Connection {
   constructor(token, handlers) {
     this.token = token;
-    this.handlers = handlers;   // {onFrame(head, blobs), onMessage(msg), onOpen(), onClose()}
+    this.handlers = handlers;   // {onFrame(head, blobs, receivedAt), onMessage(msg), onOpen(), onClose()}
     this.ws = null;
     this.retry = 250;
     this.connect();
@@ -35,8 +35,9 @@ export class Connection {
         try { msg = JSON.parse(ev.data); } catch { return; }
         this.handlers.onMessage?.(msg);
       } else {
+        const recv = performance.now();
         const { head, blobs } = decodeFrame(ev.data);
-        this.handlers.onFrame?.(head, blobs);
+        this.handlers.onFrame?.(head, blobs, recv);
       }
     };
     ws.onclose = (ev) => {
