@@ -464,8 +464,9 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     return True
 
 
-#: Columns of the per-tile ``work`` array of the clip tree (rows ``0..K-1`` per tree node, row
-#: ``K`` the fragment cache, rows ``K+1+r`` the partner lists): see :func:`keep_tree_cached`.
+#: Columns of the per-tile ``work`` array of the clip tree (rows ``0..K-1`` per tree node, rows
+#: ``K, K+1`` the two fragment-cache slots, rows ``K+2+r`` the partner lists): see
+#: :func:`keep_tree_cached`.
 WORK_COLUMNS = 8
 
 
@@ -480,12 +481,13 @@ def max_rows(clip_offsets):
 
 @njit(cache=True)
 def clip_work(tree_rows, rmax):
-    """Fresh per-tile scratch of :func:`keep_tree_cached`: (K + 1 + rmax, 8) float64 with
-    ``rmax`` the largest number of partners of a surfel (:func:`max_rows`), the cache row
+    """Fresh per-tile scratch of :func:`keep_tree_cached`: (K + 2 + rmax, 8) float64 with
+    ``rmax`` the largest number of partners of a surfel (:func:`max_rows`), the cache rows
     marked empty."""
-    work = np.empty((tree_rows + 1 + rmax, WORK_COLUMNS))
+    work = np.empty((tree_rows + 2 + rmax, WORK_COLUMNS))
     for c in range(WORK_COLUMNS):
         work[tree_rows, c] = -1.0
+        work[tree_rows + 1, c] = -1.0
     return work
 
 
@@ -579,6 +581,17 @@ def _subtree_value(lo, hi, s, x0, x1, x2, partners, tree, leaf, work, base, marg
 
 
 @njit(cache=True)
+def _cache_hit(work, row, s, x0, x1, x2):
+    """Whether cache slot ``row`` holds a result of surfel ``s`` valid at ``x``."""
+    if work[row, 0] != s:
+        return False
+    dx = x0 - work[row, 1]
+    dy = x1 - work[row, 2]
+    dz = x2 - work[row, 3]
+    return dx * dx + dy * dy + dz * dz < work[row, 4]
+
+
+@njit(cache=True)
 def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     """:func:`keep_tree` with the traversal short-circuited and its result reused between
     neighbouring fragments (4.2.3: "past results of the traversal are cached and reused").
@@ -588,30 +601,29 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     the result, the distance ``margin`` that ``x`` may move without changing any value used is
     kept (the distance to the nearest plane tested, and half the gap between the second and
     third closest partner of every leaf evaluated); a later fragment of the same surfel
-    within ``margin`` of the cached one gets the cached result, exactly the one a new
-    traversal would give.
+    within ``margin`` of a cached one gets the cached result, exactly the one a new traversal
+    would give. Two slots: the last result and the one before (the start of the previous
+    pixel row, typically).
 
     ``work`` from :func:`clip_work`: column 0 of node rows holds insideTree values, column 1
-    the first partner of each leaf node; row ``K`` caches ``(s of the lists, s of the result,
-    x, margin^2, result)``; rows ``K + 1 + r`` link the partners of ``s`` per leaf, in order.
+    the first partner of each leaf node; rows ``K`` and ``K+1`` are the cache slots
+    ``(s, x, margin^2, result)`` and ``work[K, 6]`` the surfel whose partner lists rows
+    ``K + 2 + r`` link per leaf, in order.
     """
     K = tree.shape[0]
-    base = K + 1 - clip_offsets[s]
-    if work[K, 0] != s:  # partner lists of the leaves, each in ascending row order
+    base = K + 2 - clip_offsets[s]
+    if work[K, 6] != s:  # partner lists of the leaves, each in ascending row order
         for k in range(K):
             work[k, 1] = -1.0
         for j in range(clip_offsets[s + 1] - 1, clip_offsets[s] - 1, -1):
             node = int(partners[j, 6])
             work[base + j, 0] = work[node, 1]
             work[node, 1] = j
-        work[K, 0] = s
-        work[K, 1] = -1.0
-    elif work[K, 1] == s:
-        dx = x0 - work[K, 2]
-        dy = x1 - work[K, 3]
-        dz = x2 - work[K, 4]
-        if dx * dx + dy * dy + dz * dz < work[K, 5]:
-            return work[K, 6] > 0.0
+        work[K, 6] = s
+    elif _cache_hit(work, K, s, x0, x1, x2):
+        return work[K, 5] > 0.0
+    elif _cache_hit(work, K + 1, s, x0, x1, x2):
+        return work[K + 1, 5] > 0.0
     margin = np.inf
     keep = True
     node = leaf[s]
@@ -624,12 +636,14 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
             keep = False
             break
         node = p
-    work[K, 1] = s
-    work[K, 2] = x0
-    work[K, 3] = x1
-    work[K, 4] = x2
-    work[K, 5] = margin * margin
-    work[K, 6] = 1.0 if keep else 0.0
+    for c in range(6):  # the last result moves to the second slot
+        work[K + 1, c] = work[K, c]
+    work[K, 0] = s
+    work[K, 1] = x0
+    work[K, 2] = x1
+    work[K, 3] = x2
+    work[K, 4] = margin * margin
+    work[K, 5] = 1.0 if keep else 0.0
     return keep
 
 
