@@ -4,7 +4,7 @@
 ``csg-fig43``: discarding surfels by their centre (holes) vs the three surfel classes.
 ``csg-fig47``: a cube of six half-spaces sampled with 1, 25 and 900 surfels per face.
 ``csg-fig48``: the blob minus two spheres, with a corner of three surfaces magnified 16x.
-``csg-fig49``: thin fins left by four spheres cut from a ball.
+``csg-fig49``: thin spikes left by four large spheres cut from a ball.
 ``csg-fig410``: an icosahedron as the intersection of 20 half-spaces, one surfel per face.
 ``csg-dynamic``: dynamic CSG videos, a sphere carved through a box and a rotating union.
 """
@@ -171,10 +171,11 @@ def fig48_example(ctx: ExampleContext) -> None:
                     "at the corner where the three surfaces meet")
 
 
-@example("csg-fig49", "Thin fins from sphere differences (Fig. 4.9)", section="CSG")
+@example("csg-fig49", "Thin spikes from sphere differences (Fig. 4.9)", section="CSG")
 def fig49_example(ctx: ExampleContext) -> None:
-    """A ball minus four spheres that almost touch; each surfel can be clipped by several
-    others, so the thin fins between the cuts render without holes."""
+    """A ball minus four large spheres around it (tetrahedral setup): four spikes remain that
+    taper to points on the ball; each surfel of a spike wall is clipped by the other cuts from
+    several sides, so the thin spikes render without holes or fins."""
     from unmesh.render import Camera, render, save_image
 
     model = _scene("spikes").model
@@ -183,7 +184,8 @@ def fig49_example(ctx: ExampleContext) -> None:
     a = render(model, cam).color
     b = render(model, cam.replace(eye=(-2.6, 1.2, 1.8))).color
     path = save_image(ctx.path("fig49.png"), side_by_side(a, b))
-    ctx.image(path, "a ball minus four spheres, from two sides")
+    ctx.image(path, "a ball minus four large spheres: four spikes with tiny caps of the ball at their tips, "
+                    "from two sides")
 
 
 @example("csg-fig410", "An icosahedron of 20 half-spaces, one surfel each (Fig. 4.10)", section="CSG")
