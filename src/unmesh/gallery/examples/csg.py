@@ -6,6 +6,7 @@
 ``csg-fig48``: the blob minus two spheres, with a corner of three surfaces magnified 16x.
 ``csg-fig49``: thin spikes left by four large spheres cut from a ball.
 ``csg-fig410``: an icosahedron as the intersection of 20 half-spaces, one surfel per face.
+``csg-limits``: the known limit of 4.5, nearly coplanar clipping surfels (jagged, bleeding edges).
 ``csg-dynamic``: dynamic CSG videos, a sphere carved through a box and a rotating union.
 """
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from unmesh.gallery.registry import ExampleContext, example
 
-__all__ = ["side_by_side"]
+__all__ = ["coplanar_limits", "side_by_side"]
 
 
 def side_by_side(*images: np.ndarray, gap: int = 6) -> np.ndarray:
@@ -205,6 +206,44 @@ def fig410_example(ctx: ExampleContext) -> None:
     c = _sampling(model, cam)
     path = save_image(ctx.path("fig410.png"), side_by_side(a, b, c))
     ctx.image(path, "left: unlit; middle: shaded; right: the 20 surfels")
+
+
+#: Offsets of the second sphere in :func:`coplanar_limits`: crossing angles of about 17, 6, 1.7
+#: and 0.6 degrees.
+LIMIT_OFFSETS = (0.3, 0.1, 0.03, 0.01)
+
+
+def coplanar_limits(size: int = 200) -> np.ndarray:
+    """The union of two unit spheres (red spacing 0.05, blue 0.06) whose centres are ``d`` apart
+    (:data:`LIMIT_OFFSETS`), unlit, seen along the crossing circle from outside: four panels
+    (size, size) joined left to right. The smaller ``d``, the more nearly coplanar the
+    clipping surfels at the crossing; the front/back test (4.3) against surfel planes becomes
+    unreliable where the surfaces are closer than the surfels' deviation from the sphere (4.5)."""
+    from unmesh.csg.model import Patch
+    from unmesh.render import Camera, render
+    from unmesh.shapes import Sphere
+
+    panels = []
+    for d in LIMIT_OFFSETS:
+        a = Patch.from_shape(Sphere(radius=1.0), 0.05, color=(0.85, 0.25, 0.2), name="a")
+        b = Patch.from_shape(Sphere(radius=1.0, center=(d, 0, 0)), 0.06, color=(0.2, 0.35, 0.85), name="b")
+        x = d / 2
+        z = float(np.sqrt(1 - x * x))
+        cam = Camera((x, 0, z + 3), (x, 0, z), up=(0, 1, 0), width=size, height=size, ortho=0.25)
+        panels.append(render(a | b, cam, shading="none").color)
+    return side_by_side(*panels)
+
+
+@example("csg-limits", "Known limit: nearly coplanar clipping surfels (4.5)", section="CSG")
+def limits_example(ctx: ExampleContext) -> None:
+    """Two spheres united, crossing at shrinking angles: the edge is nearly straight at 17 degrees, wavy at 6,
+    and jagged with colour bleeding across it at 1.7 and 0.6 degrees (4.5)."""
+    from unmesh.render import save_image
+
+    path = save_image(ctx.path("limits.png"), coplanar_limits(100 if ctx.quick else 200))
+    ctx.image(path, "a red and a blue sphere united, seen along their crossing, unlit; centres 0.3, 0.1, 0.03 "
+                    "and 0.01 apart (left to right): the edge between the colours is nearly straight, then wavy, "
+                    "then jagged with colour bleeding across it as the spheres cross more shallowly")
 
 
 @example("csg-dynamic", "Dynamic CSG: a sphere carving a box, a rotating union", section="CSG")
