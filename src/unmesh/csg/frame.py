@@ -234,31 +234,49 @@ def _disagreeing(comp: np.ndarray, rep: np.ndarray, on: np.ndarray) -> np.ndarra
 def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, leaf: np.ndarray, meets: np.ndarray,
               which: np.ndarray, rule: str) -> tuple[np.ndarray, np.ndarray]:
     """Centre classification of the surfels ``which``: (N,) on-surface flags (Kleene logic,
-    unknown for the patches a surfel intersects) and the raw insidePatch values (L, N) int8."""
+    unknown for the patches a surfel intersects) and the raw insidePatch values (L, N) int8
+    (-1 where not asked).
+
+    Patches are asked one after the other, and a surfel whose centre is already off the
+    surface whatever the patches not asked yet say is not asked again (Kleene logic is
+    monotone: more known values never turn *off* into *on* or *unknown*)."""
     n = len(cloud)
-    values = np.full((len(clouds), n), -1, dtype=np.int8)
+    idx = np.flatnonzero(which)
+    lw = leaf[idx]
+    values = np.full((len(clouds), len(idx)), -1, dtype=np.int8)
     raw = np.full((len(clouds), n), -1, dtype=np.int8)
+    open_ = np.ones(len(idx), dtype=bool)
     for j, c in enumerate(clouds):
-        ask = which & (leaf != j) & ~meets[j]
-        if ask.any():
-            patch = flat.leaves[j]
-            x = local_points(patch.transform, cloud.positions[ask])
-            if x is None:  # not a similarity: in world space
-                v = inside_patch(c, cloud.positions[ask], rule)
-            else:
-                v = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
-            raw[j, ask] = v
-            values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
-    # Kleene logic: a surfel is discarded only when its centre is off the surface whatever
-    # the patches it intersects say (the neutral unknown of 4.9/4.10 could discard surfels
-    # that are partly on the surface)
-    vals = tree_values(flat, values, logic="kleene")
+        ask = open_ & (lw != j) & ~meets[j, idx]
+        if not ask.any():
+            continue
+        patch = flat.leaves[j]
+        pts = cloud.positions[idx[ask]]
+        x = local_points(patch.transform, pts)
+        if x is None:  # not a similarity: in world space
+            v = inside_patch(c, pts, rule)
+        else:
+            v = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
+        raw[j, idx[ask]] = v
+        values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
+        open_ &= _maybe_on(flat, values, lw) != 0
     on = np.ones(n, dtype=bool)
-    for j in range(len(clouds)):
-        sl = np.flatnonzero(which & (leaf == j))
-        if len(sl):
-            on[sl] = maybe_on_surface(flat, vals[:, sl], j) != 0
+    on[idx] = _maybe_on(flat, values, lw) != 0
     return on, raw
+
+
+def _maybe_on(flat: FlatTree, values: np.ndarray, lw: np.ndarray) -> np.ndarray:
+    """Algorithm 4.2 at surfel centres of leaves ``lw`` (M,) with leaf values (L, M) in Kleene
+    logic: a surfel is discarded only when its centre is off the surface whatever the patches
+    it intersects (unknown) say (the neutral unknown of 4.9/4.10 could discard surfels that are
+    partly on the surface). (M,) int8: 0 off, 1 on, -1 depends on unknowns."""
+    vals = tree_values(flat, values, logic="kleene")
+    on = np.ones(len(lw), dtype=np.int8)
+    for j in range(len(flat.leaves)):
+        sl = np.flatnonzero(lw == j)
+        if len(sl):
+            on[sl] = maybe_on_surface(flat, vals[:, sl], j)
+    return on
 
 
 def _partner_rows(flat: FlatTree, cloud: SurfelCloud, leaf: np.ndarray, radii: np.ndarray, offsets: np.ndarray,
