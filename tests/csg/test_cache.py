@@ -53,3 +53,21 @@ def test_overlap_pairs_equal_brute_force_and_local_points_invert_the_transform()
     shear = np.eye(4)
     shear[0, 1] = 0.5
     assert local_points(shear, world) is None
+
+
+def test_dropping_decided_surfels_between_patches_keeps_the_classes(monkeypatch):
+    """Asking the patches one after the other and dropping surfels already off the surface
+    gives the classes and partner rows of asking every patch for every surfel."""
+    import unmesh.csg.frame as frame
+
+    ball = Patch.from_shape(Sphere(radius=1.0), 0.08)
+    cuts = [Patch.from_shape(Sphere(radius=1.0, center=c), 0.1) for c in ((0.9, 0.9, 0.0), (-0.9, 0.0, 0.9))]
+    model = ball - cuts[0] - cuts[1]
+    monkeypatch.setattr(frame, "_DECIDE_EARLY", 0)
+    early = prepare(model, reuse=False)
+    monkeypatch.setattr(frame, "_DECIDE_EARLY", 10**9)
+    late = prepare(model, reuse=False)
+    assert np.array_equal(early.classes, late.classes)
+    assert np.array_equal(early.clip.offsets, late.clip.offsets)
+    assert np.array_equal(early.clip.partners, late.clip.partners)
+    assert (early.classes == 2).sum() > 100 and (early.classes == 1).sum() > 50

@@ -46,6 +46,10 @@ __all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "centre_classified", "conca
 #: Surfel classes of 4.1.2.
 SURFACE, EDGE, OUTSIDE = 0, 1, 2
 
+#: Surfels to classify from which those already decided are dropped after each patch (for
+#: fewer the tree evaluation costs more than the queries it saves).
+_DECIDE_EARLY = 2048
+
 #: Frames of the models evaluated so far (held weakly), per (method, rule).
 _FRAMES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -259,7 +263,8 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
             v = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
         raw[j, idx[ask]] = v
         values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
-        open_ &= _maybe_on(flat, values, lw) != 0
+        if len(idx) >= _DECIDE_EARLY:
+            open_ &= _maybe_on(flat, values, lw) != 0
     on = np.ones(n, dtype=bool)
     on[idx] = _maybe_on(flat, values, lw) != 0
     return on, raw
