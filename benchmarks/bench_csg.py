@@ -13,6 +13,7 @@ Run: python benchmarks/bench_csg.py [--quick]
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -25,20 +26,25 @@ from unmesh.csg.scene import load
 from unmesh.render import Camera, SplatRenderer, scene_points
 from unmesh.surfels import SurfelCloud
 
+#: "wall" (time.perf_counter) or "cpu" (time.process_time: CPU time of this process, which
+#: on a shared machine with NUMBA_NUM_THREADS=1 is the single-threaded cost)
+CLOCK = {"wall": time.perf_counter, "cpu": time.process_time}
+_clock = CLOCK["wall"]
+
 
 def _best(fn, repeat):
     best = np.inf
     out = None
     for _ in range(repeat):
-        t = time.perf_counter()
+        t = _clock()
         out = fn()
-        best = min(best, time.perf_counter() - t)
+        best = min(best, _clock() - t)
     return best, out
 
 
 def frame_split(model, cam, repeat):
-    """Times of the stages of one CSG frame."""
-    t_all, _ = _best(lambda: prepare(model), repeat)
+    """Times of the stages of one CSG frame (patches moved: nothing reused but per-patch data)."""
+    t_all, _ = _best(lambda: prepare(model, reuse=False), repeat)
     flat_frame = prepare(model)
     cloud = flat_frame.cloud
     t_part, _ = _best(lambda: find_partners(cloud.positions, cloud.radii, flat_frame.leaf, cloud.normals), repeat)
@@ -80,11 +86,18 @@ def partners_100k(quick):
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--clock", choices=sorted(CLOCK), default="wall",
+                    help="cpu: process CPU time (run with NUMBA_NUM_THREADS=1 for single-threaded costs)")
+    ap.add_argument("--scenes", default="spikes,icosahedron,blob_minus_spheres")
     args = ap.parse_args()
+    global _clock
+    _clock = CLOCK[args.clock]
+    figs = {"spikes": "4.9", "icosahedron": "4.10", "blob_minus_spheres": "4.8"}
     size = 256 if args.quick else 512
     repeat = 2 if args.quick else 5
     rows = []
-    for fig, name in (("4.9", "spikes"), ("4.10", "icosahedron"), ("4.8", "blob_minus_spheres")):
+    for name in args.scenes.split(","):
+        fig = figs[name]
         scene = load(scenes.path(f"csg/{name}.toml"))
         model = scene.model
         fr = prepare(model)
@@ -95,20 +108,25 @@ def main() -> None:
             frame_split(model, c, 1)  # compile
             s = frame_split(model, c, repeat)
             rows.append((fig, name, zoom, s))
-    print(f"CSG frames at {size}x{size} (best of {repeat}; shared 2-core machine, other jobs running)")
-    hdr = ("fig", "zoom", "surfels", "edge surf", "edge px", "fps", "partners", "classes", "splat CSG",
+    print(f"CSG frames at {size}x{size} (best of {repeat}, {args.clock} clock, {os.environ.get('NUMBA_NUM_THREADS', 'all')} "
+          f"numba threads; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
+    print("fps: patches moved (partners, classes and splatting every frame); fps static: camera moved only "
+          "(the frame of the unchanged model is reused)")
+    hdr = ("fig", "zoom", "surfels", "edge surf", "edge px", "fps", "fps static", "partners", "classes", "splat CSG",
            "splat plain", "resolve", "CSG/plain")
     print("  ".join(f"{h:>10}" for h in hdr))
     for fig, _name, zoom, s in rows:
         vals = (fig, f"{zoom:g}x", s["surfels"], s["edge surfels"], s["edge pixels"], f"{1 / s['total']:.1f}",
+                f"{1 / (s['splat CSG'] + s['resolve']):.1f}",
                 *(f"{1000 * s[k]:.1f}ms" for k in ("partners", "classes", "splat CSG", "splat plain", "resolve")),
                 f"{s['splat CSG'] / s['splat plain']:.2f}")
         print("  ".join(f"{v:>10}" for v in vals))
     ep = np.array([s["edge pixels"] for *_, s in rows], float)
     extra = np.array([s["splat CSG"] - s["splat plain"] for *_, s in rows])
-    slope, icpt = np.polyfit(ep, extra, 1)
-    print(f"clipped-splatting overhead ~ {1e6 * slope:.3f} us per edge pixel + {1000 * icpt:.2f} ms "
-          f"(fit over {len(rows)} frames)")
+    if len(rows) >= 2:
+        slope, icpt = np.polyfit(ep, extra, 1)
+        print(f"clipped-splatting overhead ~ {1e6 * slope:.3f} us per edge pixel + {1000 * icpt:.2f} ms "
+              f"(fit over {len(rows)} frames)")
     n, edge, out = partners_100k(args.quick)
     for method, (t, m) in out.items():
         print(f"partners, {method:>10}: {1000 * t:.1f} ms for {n} surfels ({edge} edge surfels), {m // 2} pairs")

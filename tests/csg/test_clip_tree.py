@@ -144,3 +144,29 @@ def test_appendix_a_invariant(case):
         assert on == on_surface(node, int(leaf[0]))  # (A.3) after every iteration
     work = np.empty((len(table), 5))
     assert keep_tree(0, x[0], x[1], x[2], offsets, partners, table, leaf, work) == on
+
+
+@settings(max_examples=150, deadline=None)
+@given(fragments(), st.integers(0, 2**31 - 1))
+def test_cached_short_circuit_traversal_equals_full_traversal(case, seed):
+    """keep_tree_cached (short-circuited, results reused between neighbouring fragments, 4.2.3)
+    gives exactly keep_tree's answer on a walk of nearby fragments (pixel-sized steps, some
+    landing on partner planes and on ties between partners)."""
+    from unmesh.render._splat_kernels import clip_work, keep_tree_cached, max_rows
+
+    x, offsets, partners, table, leaf, _ = case
+    full = np.empty((len(table), 5))
+    work = clip_work(len(table), max_rows(offsets))
+    rng = np.random.default_rng(seed)
+    p = x.copy()
+    for step in range(60):
+        if step % 7 == 3 and len(partners):  # onto a partner's plane (coplanar tie band)
+            r = partners[rng.integers(len(partners))]
+            p = p - np.dot(p - r[:3], r[3:6]) * r[3:6]
+        elif step % 11 == 5 and len(partners) > 1:  # equidistant from two partners
+            a, b = partners[rng.choice(len(partners), 2, replace=False)]
+            p = 0.5 * (a[:3] + b[:3])
+        else:
+            p = p + rng.normal(scale=10.0 ** rng.uniform(-4, -1), size=3)
+        want = keep_tree(0, p[0], p[1], p[2], offsets, partners, table, leaf, full)
+        assert keep_tree_cached(0, p[0], p[1], p[2], offsets, partners, table, leaf, work) == want

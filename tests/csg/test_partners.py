@@ -95,3 +95,16 @@ def test_clip_buffer_without_normals_uses_bounding_spheres():
     ref = partners_brute_force(pos, radii, patch)
     off, idx = find_partners(pos, radii, patch)
     assert np.array_equal(off, ref[0]) and np.array_equal(idx, ref[1])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_clip_buffer_kernel_equals_numpy_reference(seed):
+    """The numba clip buffer returns exactly the pairs of the estimate that share a cell."""
+    from unmesh.csg.partners import clip_buffer_reference
+
+    rng = np.random.default_rng(seed)
+    pos, nrm, radii, patch = _cloud(rng, 600, 3)
+    ref = clip_buffer_reference(pos, radii, patch, nrm)
+    off, idx = find_partners(pos, radii, patch, nrm, method="clipbuffer")
+    assert len(ref[1]) > 500
+    assert np.array_equal(off, ref[0]) and np.array_equal(idx, ref[1])

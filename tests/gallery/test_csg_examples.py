@@ -9,7 +9,7 @@ from unmesh.gallery import ExampleContext, select
 SLOW = pytest.mark.slow
 
 
-@pytest.mark.parametrize("name", ["csg-fig41", "csg-fig43", "csg-fig47", "csg-fig410",
+@pytest.mark.parametrize("name", ["csg-fig41", "csg-fig43", "csg-fig46", "csg-fig47", "csg-fig410", "csg-limits",
                                   pytest.param("csg-fig48", marks=SLOW), pytest.param("csg-fig49", marks=SLOW),
                                   pytest.param("csg-dynamic", marks=SLOW)])
 def test_example_runs_quick(tmp_path, name):

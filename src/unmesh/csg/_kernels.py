@@ -1,75 +1,171 @@
 """Numba kernels of the clip buffer (thesis Algorithm 4.1).
 
-The numpy reference is :func:`unmesh.csg.partners.partners_brute_force`; tests compare them.
+The numpy references are :func:`unmesh.csg.partners.partners_brute_force` (the 4.2.1 estimate)
+and :func:`unmesh.csg.partners.clip_buffer_reference` (the same estimate restricted to surfels
+sharing a clip-buffer cell); tests compare them.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-__all__ = ["clip_buffer_pairs"]
-
-
-@njit(cache=True)
-def _box(i, u, v, hu, hv, u0, v0, cell, nu, nv):
-    a0 = max(int(np.floor((u[i] - hu[i] - u0) / cell)), 0)
-    a1 = min(int(np.floor((u[i] + hu[i] - u0) / cell)), nu - 1)
-    b0 = max(int(np.floor((v[i] - hv[i] - v0) / cell)), 0)
-    b1 = min(int(np.floor((v[i] + hv[i] - v0) / cell)), nv - 1)
-    return a0, a1, b0, b1
+__all__ = ["cell_boxes", "clip_buffer_csr"]
 
 
 @njit(cache=True)
-def clip_buffer_pairs(pos, radii, patch, u, v, hu, hv, u0, v0, cell, nu, nv):
-    """All pairs ``i < j`` of surfels of different patches with ``|c_i - c_j| < r_i + r_j``
-    that share a clip-buffer cell (Algorithm 4.1).
+def cell_boxes(pos, radii, nrm, au, av):
+    """Clip-buffer grid (cells of twice the median radius, at most ~4N cells) of the projection onto axes ``au, av``: (N, 4) int64 inclusive cell
+    ranges ``a0, a1, b0, b1`` of the projected surfel boxes, and the grid size ``nu, nv``.
 
-    ``u, v`` (N,) projected centres, ``hu, hv`` (N,) half-extents of the projected surfel's box
-    (for a surfel seen edge-on this box is the thick line covering its ellipse), ``cell`` the
-    cell size, ``nu x nv`` cells from ``(u0, v0)``. Returns (P, 2) int64 pairs, possibly with
-    duplicates (a pair sharing several cells is found in each).
+    The projected box of the disc ``{c + t : t.n = 0, |t| <= r}`` has half-extent
+    ``r sqrt(1 - n_k^2)`` along axis ``k`` (a surfel seen edge-on covers a thick line).
     """
     n = pos.shape[0]
+    cell = 2.0 * np.median(radii)  # cells of twice the median radius, at most ~4N cells
+    hu = np.empty(n)
+    hv = np.empty(n)
+    u0 = np.inf
+    u1 = -np.inf
+    v0 = np.inf
+    v1 = -np.inf
+    for i in range(n):
+        hu[i] = radii[i] * np.sqrt(min(max(1.0 - nrm[i, au] ** 2, 0.0), 1.0)) * (1 + 1e-9) + 1e-12
+        hv[i] = radii[i] * np.sqrt(min(max(1.0 - nrm[i, av] ** 2, 0.0), 1.0)) * (1 + 1e-9) + 1e-12
+        u0 = min(u0, pos[i, au] - hu[i])
+        u1 = max(u1, pos[i, au] + hu[i])
+        v0 = min(v0, pos[i, av] - hv[i])
+        v1 = max(v1, pos[i, av] + hv[i])
+    cell = max(cell, np.sqrt((u1 - u0) * (v1 - v0) / (4.0 * n)), (u1 - u0) / 4096, (v1 - v0) / 4096, 1e-12)
+    nu = int((u1 - u0) / cell) + 1
+    nv = int((v1 - v0) / cell) + 1
+    box = np.empty((n, 4), dtype=np.int64)
+    for i in range(n):
+        box[i, 0] = max(int(np.floor((pos[i, au] - hu[i] - u0) / cell)), 0)
+        box[i, 1] = min(int(np.floor((pos[i, au] + hu[i] - u0) / cell)), nu - 1)
+        box[i, 2] = max(int(np.floor((pos[i, av] - hv[i] - v0) / cell)), 0)
+        box[i, 3] = min(int(np.floor((pos[i, av] + hv[i] - v0) / cell)), nv - 1)
+    return box, nu, nv
+
+
+@njit(cache=True)
+def _bin(box, nu, nv):
+    """Cell lists: ``items[start[c]:start[c+1]]`` are the surfels whose box covers cell ``c``."""
+    n = box.shape[0]
     ncell = nu * nv
-    counts = np.zeros(ncell + 1, dtype=np.int64)
+    start = np.zeros(ncell + 1, dtype=np.int64)
     for i in range(n):
-        a0, a1, b0, b1 = _box(i, u, v, hu, hv, u0, v0, cell, nu, nv)
-        for b in range(b0, b1 + 1):
-            for a in range(a0, a1 + 1):
-                counts[b * nu + a + 1] += 1
+        for b in range(box[i, 2], box[i, 3] + 1):
+            for a in range(box[i, 0], box[i, 1] + 1):
+                start[b * nu + a + 1] += 1
     for c in range(ncell):
-        counts[c + 1] += counts[c]
-    items = np.empty(counts[ncell], dtype=np.int64)
-    fill = counts[:-1].copy()
+        start[c + 1] += start[c]
+    items = np.empty(start[ncell], dtype=np.int64)
+    fill = start[:-1].copy()
     for i in range(n):
-        a0, a1, b0, b1 = _box(i, u, v, hu, hv, u0, v0, cell, nu, nv)
-        for b in range(b0, b1 + 1):
-            for a in range(a0, a1 + 1):
+        for b in range(box[i, 2], box[i, 3] + 1):
+            for a in range(box[i, 0], box[i, 1] + 1):
                 c = b * nu + a
                 items[fill[c]] = i
                 fill[c] += 1
-    cap = 1024
-    out = np.empty((cap, 2), dtype=np.int64)
+    return start, items
+
+
+@njit(cache=True)
+def _cell_pairs(c, nu, start, items, pos, radii, patch, box, out, base, write):
+    """Pairs met in cell ``c`` (Algorithm 4.1: a fragment meets the cell's list), each pair
+    only in the first cell its two boxes share, written from ``out[base]`` if ``write``.
+    Returns their number.
+"""
+    a = c % nu
+    b = c // nu
     m = 0
-    for c in range(ncell):
-        for p in range(counts[c], counts[c + 1]):
+    for p in range(start[c], start[c + 1]):
+        for q in range(start[c], p):
             s1 = items[p]
-            for q in range(counts[c], p):  # Algorithm 4.1: the fragment of s1 meets the cell's list
-                s2 = items[q]
-                if patch[s1] == patch[s2]:
-                    continue
-                dx = pos[s1, 0] - pos[s2, 0]
-                dy = pos[s1, 1] - pos[s2, 1]
-                dz = pos[s1, 2] - pos[s2, 2]
-                rr = radii[s1] + radii[s2]
-                if dx * dx + dy * dy + dz * dz < rr * rr:
-                    if m == cap:
-                        cap *= 2
-                        grown = np.empty((cap, 2), dtype=np.int64)
-                        grown[:m] = out[:m]
-                        out = grown
-                    out[m, 0] = min(s1, s2)
-                    out[m, 1] = max(s1, s2)
-                    m += 1
-    return out[:m]
+            s2 = items[q]
+            if patch[s1] == patch[s2]:
+                continue
+            if max(box[s1, 0], box[s2, 0]) != a or max(box[s1, 2], box[s2, 2]) != b:
+                continue
+            dx = pos[s1, 0] - pos[s2, 0]
+            dy = pos[s1, 1] - pos[s2, 1]
+            dz = pos[s1, 2] - pos[s2, 2]
+            rr = radii[s1] + radii[s2]
+            if dx * dx + dy * dy + dz * dz < rr * rr:
+                if write:
+                    out[base + m, 0] = s1
+                    out[base + m, 1] = s2
+                m += 1
+    return m
+
+
+@njit(cache=True, parallel=True)
+def clip_buffer_csr(pos, radii, patch, box, nu, nv, nchunks):
+    """Clipping partners by the clip buffer (Algorithm 4.1) as a symmetric CSR.
+
+    ``box`` (N, 4) int64 cell ranges of the projected surfel boxes (:func:`cell_boxes`) in a
+    grid of ``nu x nv`` cells, processed in ``nchunks`` parallel chunks of cells. Surfels of
+    different ``patch`` whose boxes share a cell and whose bounding spheres overlap
+    (``|c_i - c_j| < r_i + r_j``) are partners.
+
+    Returns ``offsets`` (N+1,) int64 and ``indices`` int64, each row ascending.
+    """
+    n = pos.shape[0]
+    start, items = _bin(box, nu, nv)
+    ncell = nu * nv
+    step = (ncell + nchunks - 1) // nchunks
+    # one pass: chunk k writes from the bound sum k(k-1)/2 of its cells (np.empty does not
+    # touch the memory it reserves, so the loose bound costs nothing); when that bound is
+    # too loose (huge surfels covering many cells), an exact counting pass first
+    bound = np.zeros(nchunks + 1, dtype=np.int64)
+    for k in range(nchunks):
+        m = 0
+        for c in range(k * step, min(ncell, (k + 1) * step)):
+            kc = start[c + 1] - start[c]
+            m += kc * (kc - 1) // 2
+        bound[k + 1] = bound[k] + m
+    if bound[nchunks] > 64 * n + 1000000:
+        exact = np.zeros(nchunks + 1, dtype=np.int64)
+        nowhere = np.empty((0, 2), dtype=np.int64)
+        for k in prange(nchunks):
+            m = 0
+            for c in range(k * step, min(ncell, (k + 1) * step)):
+                m += _cell_pairs(c, nu, start, items, pos, radii, patch, box, nowhere, 0, False)
+            exact[k + 1] = m
+        for k in range(nchunks):
+            bound[k + 1] = bound[k] + exact[k + 1]
+    buf = np.empty((bound[nchunks], 2), dtype=np.int64)
+    counts = np.zeros(nchunks, dtype=np.int64)
+    for k in prange(nchunks):
+        m = bound[k]
+        for c in range(k * step, min(ncell, (k + 1) * step)):
+            m += _cell_pairs(c, nu, start, items, pos, radii, patch, box, buf, m, True)
+        counts[k] = m - bound[k]
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    for k in range(nchunks):
+        for q in range(bound[k], bound[k] + counts[k]):
+            offsets[buf[q, 0] + 1] += 1
+            offsets[buf[q, 1] + 1] += 1
+    for i in range(n):
+        offsets[i + 1] += offsets[i]
+    fill = offsets[:-1].copy()
+    out = np.empty(offsets[n], dtype=np.int64)
+    for k in range(nchunks):
+        for q in range(bound[k], bound[k] + counts[k]):
+            i = buf[q, 0]
+            j = buf[q, 1]
+            out[fill[i]] = j
+            fill[i] += 1
+            out[fill[j]] = i
+            fill[j] += 1
+    for i in prange(n):
+        lo = offsets[i]
+        for q in range(lo + 1, offsets[i + 1]):  # insertion sort: rows are short
+            x = out[q]
+            r = q - 1
+            while r >= lo and out[r] > x:
+                out[r + 1] = out[r]
+                r -= 1
+            out[r + 1] = x
+    return offsets, out

@@ -28,10 +28,12 @@ Example
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh.csg.cache import local_points, local_tree, overlap_pairs
 from unmesh.csg.classify import inside_patch, maybe_on_surface, tree_values
 from unmesh.csg.model import FlatTree, Node, flatten
 from unmesh.csg.partners import find_partners
@@ -43,6 +45,13 @@ __all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "centre_classified", "conca
 
 #: Surfel classes of 4.1.2.
 SURFACE, EDGE, OUTSIDE = 0, 1, 2
+
+#: Surfels to classify from which those already decided are dropped after each patch (for
+#: fewer the tree evaluation costs more than the queries it saves).
+_DECIDE_EARLY = 2048
+
+#: Frames of the models evaluated so far (held weakly), per (method, rule).
+_FRAMES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,7 +89,7 @@ class CSGFrame:
         return int((self.classes == EDGE).sum())
 
 
-def prepare(model: Node, method: str = "clipbuffer", rule: str = "two") -> CSGFrame:
+def prepare(model: Node, method: str = "clipbuffer", rule: str = "two", reuse: bool = True) -> CSGFrame:
     """Evaluate ``model`` for its current transforms (see the module notes).
 
     Parameters
@@ -90,9 +99,24 @@ def prepare(model: Node, method: str = "clipbuffer", rule: str = "two") -> CSGFr
         Partner search (4.2.1).
     rule : {"two", "closest"}
         insidePatch for the surfel centres (4.4 or 4.3).
+    reuse : bool
+        Models are immutable (a moved patch is a new patch, so a new model): the frame of a
+        model drawn before is returned again (a static scene seen from many cameras costs one
+        evaluation). ``False`` always evaluates. Per-patch data (k-d trees, overlaps) is reused
+        in any case (:mod:`unmesh.csg.cache`).
     """
     if not isinstance(model, Node):
         raise InputError(f"model: expected a CSG Patch or node, got {type(model).__name__}")
+    if reuse:
+        hit = _FRAMES.get(model, {}).get((method, rule))
+        if hit is not None:
+            return hit
+    frame = _evaluate(model, method, rule)
+    _FRAMES.setdefault(model, {})[(method, rule)] = frame
+    return frame
+
+
+def _evaluate(model: Node, method: str, rule: str) -> CSGFrame:
     flat = flatten(model)
     clouds = [p.world_cloud() for p in flat.leaves]
     cloud = SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]
@@ -109,7 +133,7 @@ def prepare(model: Node, method: str = "clipbuffer", rule: str = "two") -> CSGFr
     # surfels between edges keep one class: classify the edge surfels and a few
     # representatives of every connected piece of the other surfels of a patch, exactly
     # (every member) where the representatives disagree
-    comp = _pieces(cloud.positions, radii, leaf, has, len(clouds))
+    comp = _pieces(flat.leaves, sizes, has)
     rep = _representatives(comp)
     on, raw = _classify(flat, clouds, cloud, leaf, meets, has | rep, rule)
     mixed = _disagreeing(comp, rep, on)
@@ -160,28 +184,28 @@ def centre_classified(model: Node, rule: str = "two") -> SurfelCloud:
     return cloud.replace(normals=nrm).subset(on)
 
 
-def _pieces(pos: np.ndarray, radii: np.ndarray, leaf: np.ndarray, edge: np.ndarray, nleaves: int) -> np.ndarray:
+def _pieces(leaves: list, sizes: list[int], edge: np.ndarray) -> np.ndarray:
     """(N,) int64 label of the connected piece (overlapping discs of one patch, edge surfels
-    removed) of every non-edge surfel; -1 for edge surfels."""
+    removed) of every non-edge surfel; -1 for edge surfels. The overlaps of each patch are
+    cached per cloud (:func:`unmesh.csg.cache.overlap_pairs`)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from unmesh.spatial import KDTree
-
-    comp = np.full(len(pos), -1, dtype=np.int64)
+    comp = np.full(len(edge), -1, dtype=np.int64)
     base = 0
-    for j in range(nleaves):
-        idx = np.flatnonzero((leaf == j) & ~edge)
-        if len(idx) == 0:
-            continue
-        r = radii[idx]
-        pairs = KDTree(pos[idx]).radius_pairs(2.0 * float(r.max())) if len(idx) > 1 else np.zeros((0, 2), np.int64)
-        d2 = ((pos[idx[pairs[:, 0]]] - pos[idx[pairs[:, 1]]]) ** 2).sum(axis=1)
-        pairs = pairs[d2 < (r[pairs[:, 0]] + r[pairs[:, 1]]) ** 2]
-        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(idx), len(idx)))
-        k, labels = connected_components(graph, directed=False)
-        comp[idx] = labels + base
-        base += k
+    start = 0
+    for patch, n in zip(leaves, sizes, strict=True):
+        ed = edge[start:start + n]
+        pairs = overlap_pairs(patch.cloud)
+        pairs = pairs[~(ed[pairs[:, 0]] | ed[pairs[:, 1]])]
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        _, labels = connected_components(graph, directed=False)
+        labels = labels[~ed]
+        if len(labels):
+            uniq, labels = np.unique(labels, return_inverse=True)
+            comp[start:start + n][~ed] = labels + base
+            base += len(uniq)
+        start += n
     return comp
 
 
@@ -214,26 +238,50 @@ def _disagreeing(comp: np.ndarray, rep: np.ndarray, on: np.ndarray) -> np.ndarra
 def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, leaf: np.ndarray, meets: np.ndarray,
               which: np.ndarray, rule: str) -> tuple[np.ndarray, np.ndarray]:
     """Centre classification of the surfels ``which``: (N,) on-surface flags (Kleene logic,
-    unknown for the patches a surfel intersects) and the raw insidePatch values (L, N) int8."""
+    unknown for the patches a surfel intersects) and the raw insidePatch values (L, N) int8
+    (-1 where not asked).
+
+    Patches are asked one after the other, and a surfel whose centre is already off the
+    surface whatever the patches not asked yet say is not asked again (Kleene logic is
+    monotone: more known values never turn *off* into *on* or *unknown*)."""
     n = len(cloud)
-    values = np.full((len(clouds), n), -1, dtype=np.int8)
+    idx = np.flatnonzero(which)
+    lw = leaf[idx]
+    values = np.full((len(clouds), len(idx)), -1, dtype=np.int8)
     raw = np.full((len(clouds), n), -1, dtype=np.int8)
+    open_ = np.ones(len(idx), dtype=bool)
     for j, c in enumerate(clouds):
-        ask = which & (leaf != j) & ~meets[j]
-        if ask.any():
-            v = inside_patch(c, cloud.positions[ask], rule)
-            raw[j, ask] = v
-            values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
-    # Kleene logic: a surfel is discarded only when its centre is off the surface whatever
-    # the patches it intersects say (the neutral unknown of 4.9/4.10 could discard surfels
-    # that are partly on the surface)
-    vals = tree_values(flat, values, logic="kleene")
+        ask = open_ & (lw != j) & ~meets[j, idx]
+        if not ask.any():
+            continue
+        patch = flat.leaves[j]
+        pts = cloud.positions[idx[ask]]
+        x = local_points(patch.transform, pts)
+        if x is None:  # not a similarity: in world space
+            v = inside_patch(c, pts, rule)
+        else:
+            v = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
+        raw[j, idx[ask]] = v
+        values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
+        if len(idx) >= _DECIDE_EARLY:
+            open_ &= _maybe_on(flat, values, lw) != 0
     on = np.ones(n, dtype=bool)
-    for j in range(len(clouds)):
-        sl = np.flatnonzero(which & (leaf == j))
-        if len(sl):
-            on[sl] = maybe_on_surface(flat, vals[:, sl], j) != 0
+    on[idx] = _maybe_on(flat, values, lw) != 0
     return on, raw
+
+
+def _maybe_on(flat: FlatTree, values: np.ndarray, lw: np.ndarray) -> np.ndarray:
+    """Algorithm 4.2 at surfel centres of leaves ``lw`` (M,) with leaf values (L, M) in Kleene
+    logic: a surfel is discarded only when its centre is off the surface whatever the patches
+    it intersects (unknown) say (the neutral unknown of 4.9/4.10 could discard surfels that are
+    partly on the surface). (M,) int8: 0 off, 1 on, -1 depends on unknowns."""
+    vals = tree_values(flat, values, logic="kleene")
+    on = np.ones(len(lw), dtype=np.int8)
+    for j in range(len(flat.leaves)):
+        sl = np.flatnonzero(lw == j)
+        if len(sl):
+            on[sl] = maybe_on_surface(flat, vals[:, sl], j)
+    return on
 
 
 def _partner_rows(flat: FlatTree, cloud: SurfelCloud, leaf: np.ndarray, radii: np.ndarray, offsets: np.ndarray,
@@ -257,9 +305,8 @@ def _partner_rows(flat: FlatTree, cloud: SurfelCloud, leaf: np.ndarray, radii: n
     koff = np.zeros(len(keep) + 1, dtype=np.int64)
     np.cumsum(counts, out=koff[1:])
     rows = np.empty((koff[-1], 7))
-    real = np.concatenate([partners[offsets[i]:offsets[i + 1]] for i in keep]) if len(partners) else \
-        np.zeros(0, dtype=np.int64)
     nreal = np.diff(offsets)[keep]
+    real = partners[np.repeat(offsets[keep] - np.cumsum(nreal) + nreal, nreal) + np.arange(nreal.sum())]
     dst_real = np.repeat(koff[:-1], nreal) + (np.arange(len(real)) - np.repeat(np.cumsum(nreal) - nreal, nreal))
     rows[dst_real, :3] = cloud.positions[real]
     rows[dst_real, 3:6] = cloud.normals[real]

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -33,7 +33,7 @@ from unmesh._validate import as_array, positive_scalar
 from unmesh.errors import InputError
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["INTERSECTION", "LEAF", "UNION", "Complement", "FlatTree", "Intersection", "Node", "Patch", "Union",
+__all__ = ["INTERSECTION", "LEAF", "UNION", "Binary", "Complement", "FlatTree", "Intersection", "Node", "Patch", "Union",
            "flatten", "normalize", "patches"]
 
 #: Node operators of :class:`FlatTree`.
@@ -198,33 +198,35 @@ class Complement(Node):
 
 
 @dataclass(frozen=True, eq=False)
-class Union(Node):
-    """``left | right`` (4.2, 4.7)."""
+class Binary(Node):
+    """Base of the binary nodes :class:`Union` and :class:`Intersection`: two operands and the
+    operator symbol ``SYMBOL`` of ``str(node)``."""
 
     left: Node
     right: Node
+
+    SYMBOL: ClassVar[str] = "?"
 
     def __post_init__(self) -> None:
         _node(self.left, "left")
         _node(self.right, "right")
 
     def __str__(self) -> str:
-        return f"({self.left} | {self.right})"
+        return f"({self.left} {self.SYMBOL} {self.right})"
 
 
 @dataclass(frozen=True, eq=False)
-class Intersection(Node):
+class Union(Binary):
+    """``left | right`` (4.2, 4.7)."""
+
+    SYMBOL: ClassVar[str] = "|"
+
+
+@dataclass(frozen=True, eq=False)
+class Intersection(Binary):
     """``left & right`` (4.1, 4.8)."""
 
-    left: Node
-    right: Node
-
-    def __post_init__(self) -> None:
-        _node(self.left, "left")
-        _node(self.right, "right")
-
-    def __str__(self) -> str:
-        return f"({self.left} & {self.right})"
+    SYMBOL: ClassVar[str] = "&"
 
 
 def normalize(tree: Node, invert: bool = False) -> Node:
@@ -235,12 +237,9 @@ def normalize(tree: Node, invert: bool = False) -> Node:
         return Complement(tree) if invert else tree
     if isinstance(tree, Complement):
         return normalize(tree.child, not invert)
-    if isinstance(tree, Union):
-        op = Intersection if invert else Union
-    elif isinstance(tree, Intersection):
-        op = Union if invert else Intersection
-    else:
+    if not isinstance(tree, Union | Intersection):
         raise InputError(f"tree: unknown node {type(tree).__name__}")
+    op = {Union: Intersection, Intersection: Union}[type(tree)] if invert else type(tree)
     return op(normalize(tree.left, invert), normalize(tree.right, invert))
 
 
@@ -257,8 +256,8 @@ def patches(tree: Node) -> list[Patch]:
                 out.append(t)
         elif isinstance(t, Complement):
             stack.append(t.child)
-        else:
-            stack.extend((t.right, t.left))  # type: ignore[attr-defined]
+        elif isinstance(t, Binary):
+            stack.extend((t.right, t.left))
     return out
 
 

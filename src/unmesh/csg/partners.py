@@ -33,11 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.csg._kernels import clip_buffer_pairs
+from unmesh.csg._kernels import cell_boxes, clip_buffer_csr
 from unmesh.errors import InputError
 from unmesh.spatial import KDTree
 
-__all__ = ["METHODS", "find_partners", "pairs_to_csr", "partners_brute_force"]
+__all__ = ["METHODS", "clip_buffer_reference", "find_partners", "pairs_to_csr", "partners_brute_force"]
 
 #: Partner search methods; the first is the default (faster in ``benchmarks/bench_csg.py``).
 METHODS = ("clipbuffer", "range")
@@ -92,7 +92,8 @@ def _range_pairs(pos: np.ndarray, r: np.ndarray, patch: np.ndarray) -> np.ndarra
     return np.concatenate(out) if out else np.zeros((0, 2), dtype=np.int64)
 
 
-def _clip_buffer(pos: np.ndarray, r: np.ndarray, nrm: np.ndarray, patch: np.ndarray) -> np.ndarray:
+def _clip_buffer_grid(pos: np.ndarray, r: np.ndarray, nrm: np.ndarray) -> tuple:
+    """Projection axes, projected centres and box half-extents, and the grid of the clip buffer."""
     ext = np.ptp(pos, axis=0)
     axis = int(np.argmin(ext))
     au, av = [k for k in range(3) if k != axis]
@@ -103,10 +104,30 @@ def _clip_buffer(pos: np.ndarray, r: np.ndarray, nrm: np.ndarray, patch: np.ndar
     hv = r * np.sqrt(np.clip(1.0 - nrm[:, av] ** 2, 0.0, 1.0)) * (1 + 1e-9) + 1e-12
     u0, u1 = float((u - hu).min()), float((u + hu).max())
     v0, v1 = float((v - hv).min()), float((v + hv).max())
-    cell = max(2.0 * float(np.median(r)), (u1 - u0) / 4096, (v1 - v0) / 4096, 1e-12)
+    # cells of twice the median radius, at most ~4N cells (memory stays O(N))
+    cell = max(2.0 * float(np.median(r)), float(np.sqrt((u1 - u0) * (v1 - v0) / (4.0 * len(pos)))),
+               (u1 - u0) / 4096, (v1 - v0) / 4096, 1e-12)
     nu = int((u1 - u0) / cell) + 1
     nv = int((v1 - v0) / cell) + 1
-    return clip_buffer_pairs(pos, r, patch.astype(np.int64), u, v, hu, hv, u0, v0, cell, nu, nv)
+    return u, v, hu, hv, u0, v0, cell, nu, nv
+
+
+def clip_buffer_reference(positions: Any, radii: Any, patch: Any, normals: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Plain numpy O(N^2) reference of the ``"clipbuffer"`` method: the pairs of the 4.2.1
+    estimate whose projected boxes cover a common clip-buffer cell."""
+    pos = np.ascontiguousarray(positions, dtype=np.float64)
+    r = np.ascontiguousarray(radii, dtype=np.float64)
+    u, v, hu, hv, u0, v0, cell, nu, nv = _clip_buffer_grid(pos, r, np.asarray(normals, dtype=np.float64))
+    a0 = np.maximum(np.floor((u - hu - u0) / cell), 0)
+    a1 = np.minimum(np.floor((u + hu - u0) / cell), nu - 1)
+    b0 = np.maximum(np.floor((v - hv - v0) / cell), 0)
+    b1 = np.minimum(np.floor((v + hv - v0) / cell), nv - 1)
+    share = ((np.maximum(a0[:, None], a0[None, :]) <= np.minimum(a1[:, None], a1[None, :]))
+             & (np.maximum(b0[:, None], b0[None, :]) <= np.minimum(b1[:, None], b1[None, :])))
+    off, idx = partners_brute_force(pos, r, patch)
+    rows = np.repeat(np.arange(len(pos)), np.diff(off))
+    keep = share[rows, idx]
+    return pairs_to_csr(np.stack([rows[keep], idx[keep]], axis=1)[rows[keep] < idx[keep]], len(pos))
 
 
 def find_partners(positions: Any, radii: Any, patch: Any, normals: Any = None,
@@ -143,5 +164,8 @@ def find_partners(positions: Any, radii: Any, patch: Any, normals: Any = None,
         pairs = _range_pairs(pos, r, p)
     else:
         nrm = np.zeros_like(pos) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
-        pairs = _clip_buffer(pos, r, nrm, p)
+        axis = int(np.argmin(np.ptp(pos, axis=0)))
+        au, av = [k for k in range(3) if k != axis]
+        box, nu, nv = cell_boxes(pos, r, nrm, au, av)
+        return clip_buffer_csr(pos, r, p, box, nu, nv, max(1, min(64, (nu * nv) // 64)))
     return pairs_to_csr(_unique_pairs(pairs, n), n)

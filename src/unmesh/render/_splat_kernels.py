@@ -464,6 +464,189 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     return True
 
 
+#: Columns of the per-tile ``work`` array of the clip tree (rows ``0..K-1`` per tree node, rows
+#: ``K, K+1`` the two fragment-cache slots, rows ``K+2+r`` the partner lists): see
+#: :func:`keep_tree_cached`.
+WORK_COLUMNS = 8
+
+
+@njit(cache=True)
+def max_rows(clip_offsets):
+    """The largest number of partners of a surfel (CSR ``clip_offsets``)."""
+    rmax = 0
+    for s in range(clip_offsets.shape[0] - 1):
+        rmax = max(rmax, clip_offsets[s + 1] - clip_offsets[s])
+    return rmax
+
+
+@njit(cache=True)
+def clip_work(tree_rows, rmax):
+    """Fresh per-tile scratch of :func:`keep_tree_cached`: (K + 2 + rmax, 8) float64 with
+    ``rmax`` the largest number of partners of a surfel (:func:`max_rows`), the cache rows
+    marked empty."""
+    work = np.empty((tree_rows + 2 + rmax, WORK_COLUMNS))
+    for c in range(WORK_COLUMNS):
+        work[tree_rows, c] = -1.0
+        work[tree_rows + 1, c] = -1.0
+    return work
+
+
+@njit(cache=True)
+def _plane_margin(P, j, x0, x1, x2):
+    """How far ``x`` may move before :func:`_clips_fragment` of row ``j`` may change (0 within
+    the coplanar band)."""
+    d = (x0 - P[j, 0]) * P[j, 3] + (x1 - P[j, 1]) * P[j, 4] + (x2 - P[j, 2]) * P[j, 5]
+    tol = COPLANAR_EPS * (1.0 + abs(x0) + abs(x1) + abs(x2))
+    return max(abs(d) - tol, 0.0) / (1.0 + 4.0 * COPLANAR_EPS) * (1.0 - 1e-9)
+
+
+@njit(cache=True)
+def _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base):
+    """insidePatch (4.3/4.4) of leaf node ``k`` for the fragment of surfel ``s`` at ``x``, from
+    the partner list of ``k`` (linked in ``work``): ``(value, margin)`` with value -1 unknown,
+    and ``margin`` the distance ``x`` may move without changing the value."""
+    d1 = np.inf
+    d2 = np.inf
+    d3 = np.inf
+    i1 = -1
+    i2 = -1
+    j = int(work[k, 1])
+    while j >= 0:  # the same scan order and ties as keep_tree
+        dx = x0 - partners[j, 0]
+        dy = x1 - partners[j, 1]
+        dz = x2 - partners[j, 2]
+        d = dx * dx + dy * dy + dz * dz
+        if d < d1:
+            d3 = d2
+            d2 = d1
+            i2 = i1
+            d1 = d
+            i1 = j
+        elif d < d2:
+            d3 = d2
+            d2 = d
+            i2 = j
+        elif d < d3:
+            d3 = d
+        j = int(work[base + j, 0])
+    if i1 < 0:
+        return -1, np.inf
+    own = leaf[s]
+    c1 = _clips_fragment(partners, i1, x0, x1, x2, own)
+    margin = _plane_margin(partners, i1, x0, x1, x2)
+    if i2 < 0:
+        inside = not c1
+    else:
+        c2 = _clips_fragment(partners, i2, x0, x1, x2, own)
+        margin = min(margin, _plane_margin(partners, i2, x0, x1, x2))
+        if d3 < np.inf:  # the two closest stay the two closest
+            margin = min(margin, 0.5 * (math.sqrt(d3) - math.sqrt(d2)) * (1.0 - 1e-9))
+        concave = (_clips(partners, i1, partners[i2, 0], partners[i2, 1], partners[i2, 2])
+                   and _clips(partners, i2, partners[i1, 0], partners[i1, 1], partners[i1, 2]))
+        if concave:
+            inside = (not c1) or (not c2)
+        else:
+            inside = (not c1) and (not c2)
+    if tree[k, 3] != 0:
+        inside = not inside
+    return (1 if inside else 0), margin
+
+
+@njit(cache=True)
+def _subtree_value(lo, hi, s, x0, x1, x2, partners, tree, leaf, work, base, margin):
+    """insideTree (Algorithm 4.3) of the sub-tree ``lo..hi`` (post order, root ``hi``) with
+    short-circuits: a left operand that decides its node (false under an intersection, true
+    under a union, 4.9/4.10) skips the right one. Returns ``(value, margin)``."""
+    k = lo
+    while k <= hi:
+        op = tree[k, 0]
+        if op == 2:
+            v, m = _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base)
+            margin = min(margin, m)
+        else:
+            right = k - 1
+            left = tree[right, 2] - 1
+            a = int(work[left, 0])
+            b = int(work[right, 0])
+            v = _tri_and(a, b) if op == 0 else _tri_or(a, b)
+        work[k, 0] = v
+        while k < hi:
+            p = tree[k, 1]
+            if k == p - 1 or v < 0 or (tree[p, 0] == 0) == (v > 0):
+                break
+            work[p, 0] = v  # k is p's left operand and decides it
+            k = p
+        k += 1
+    return int(work[hi, 0]), margin
+
+
+@njit(cache=True)
+def _cache_hit(work, row, s, x0, x1, x2):
+    """Whether cache slot ``row`` holds a result of surfel ``s`` valid at ``x``."""
+    if work[row, 0] != s:
+        return False
+    dx = x0 - work[row, 1]
+    dy = x1 - work[row, 2]
+    dz = x2 - work[row, 3]
+    return dx * dx + dy * dy + dz * dz < work[row, 4]
+
+
+@njit(cache=True)
+def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
+    """:func:`keep_tree` with the traversal short-circuited and its result reused between
+    neighbouring fragments (4.2.3: "past results of the traversal are cached and reused").
+
+    Only the sub-trees Algorithm 4.2 needs are evaluated, lazily (a sibling that puts the
+    fragment off the surface ends the walk; a deciding left operand skips the right one). With
+    the result, the distance ``margin`` that ``x`` may move without changing any value used is
+    kept (the distance to the nearest plane tested, and half the gap between the second and
+    third closest partner of every leaf evaluated); a later fragment of the same surfel
+    within ``margin`` of a cached one gets the cached result, exactly the one a new traversal
+    would give. Two slots: the last result and the one before (the start of the previous
+    pixel row, typically).
+
+    ``work`` from :func:`clip_work`: column 0 of node rows holds insideTree values, column 1
+    the first partner of each leaf node; rows ``K`` and ``K+1`` are the cache slots
+    ``(s, x, margin^2, result)`` and ``work[K, 6]`` the surfel whose partner lists rows
+    ``K + 2 + r`` link per leaf, in order.
+    """
+    K = tree.shape[0]
+    base = K + 2 - clip_offsets[s]
+    if work[K, 6] != s:  # partner lists of the leaves, each in ascending row order
+        for k in range(K):
+            work[k, 1] = -1.0
+        for j in range(clip_offsets[s + 1] - 1, clip_offsets[s] - 1, -1):
+            node = int(partners[j, 6])
+            work[base + j, 0] = work[node, 1]
+            work[node, 1] = j
+        work[K, 6] = s
+    elif _cache_hit(work, K, s, x0, x1, x2):
+        return work[K, 5] > 0.0
+    elif _cache_hit(work, K + 1, s, x0, x1, x2):
+        return work[K + 1, 5] > 0.0
+    margin = np.inf
+    keep = True
+    node = leaf[s]
+    while tree[node, 1] >= 0:
+        p = tree[node, 1]
+        right = p - 1
+        sib = tree[right, 2] - 1 if node == right else right
+        v, margin = _subtree_value(tree[sib, 2], sib, s, x0, x1, x2, partners, tree, leaf, work, base, margin)
+        if v >= 0 and not (v > 0 if tree[p, 0] == 0 else v == 0):
+            keep = False
+            break
+        node = p
+    for c in range(6):  # the last result moves to the second slot
+        work[K + 1, c] = work[K, c]
+    work[K, 0] = s
+    work[K, 1] = x0
+    work[K, 2] = x1
+    work[K, 3] = x2
+    work[K, 4] = margin * margin
+    work[K, 5] = 1.0 if keep else 0.0
+    return keep
+
+
 @njit(cache=True)
 def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, work):
     """Per-fragment clip test of surfel ``s`` at depth ``z`` (chapter 4).
@@ -489,7 +672,7 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
     wy = eye[1] + px * frame[0, 1] + py * frame[1, 1] + z * frame[2, 1]
     wz = eye[2] + px * frame[0, 2] + py * frame[1, 2] + z * frame[2, 2]
     if clip_tree is not None:  # None (plain splatting) prunes this branch at compile time
-        return keep_tree(s, wx, wy, wz, clip_offsets, clip_planes, clip_tree, clip_leaf, work)
+        return keep_tree_cached(s, wx, wy, wz, clip_offsets, clip_planes, clip_tree, clip_leaf, work)
     anymode = clip_mode[s] != 0
     for j in range(a, b):
         side = clip_planes[j, 0] * wx + clip_planes[j, 1] * wy + clip_planes[j, 2] * wz + clip_planes[j, 3]
@@ -627,6 +810,7 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
     ntx = (W + tile - 1) // tile
     invf = 1.0 / f
     inv_rf2 = 1.0 / (rfilter * rfilter) if rfilter > 0.0 else np.inf
+    rmax = 0 if clip_tree is None else max_rows(clip_offsets)
     for kk in prange(order.shape[0]):
         t = order[kk]
         a = offsets[t]
@@ -642,9 +826,9 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
         ld = np.zeros(m)
         lcount = np.zeros(m, dtype=np.int32)
         if clip_tree is None:
-            work = np.empty((1, 5))
+            work = np.empty((1, WORK_COLUMNS))
         else:
-            work = np.empty((max(clip_tree.shape[0], 1), 5))
+            work = clip_work(clip_tree.shape[0], rmax)
         if visibility:
             cap = 0
             for k in range(a, b):

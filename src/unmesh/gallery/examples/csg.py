@@ -4,8 +4,10 @@
 ``csg-fig43``: discarding surfels by their centre (holes) vs the three surfel classes.
 ``csg-fig47``: a cube of six half-spaces sampled with 1, 25 and 900 surfels per face.
 ``csg-fig48``: the blob minus two spheres, with a corner of three surfaces magnified 16x.
-``csg-fig49``: thin fins left by four spheres cut from a ball.
+``csg-fig49``: thin spikes left by four large spheres cut from a ball.
 ``csg-fig410``: an icosahedron as the intersection of 20 half-spaces, one surfel per face.
+``csg-fig46``: a square painted on a sphere, with and without texture-discontinuity surfels.
+``csg-limits``: the known limit of 4.5, nearly coplanar clipping surfels (jagged, bleeding edges).
 ``csg-dynamic``: dynamic CSG videos, a sphere carved through a box and a rotating union.
 """
 
@@ -18,7 +20,7 @@ import numpy as np
 
 from unmesh.gallery.registry import ExampleContext, example
 
-__all__ = ["side_by_side"]
+__all__ = ["coplanar_limits", "side_by_side"]
 
 
 def side_by_side(*images: np.ndarray, gap: int = 6) -> np.ndarray:
@@ -171,10 +173,11 @@ def fig48_example(ctx: ExampleContext) -> None:
                     "at the corner where the three surfaces meet")
 
 
-@example("csg-fig49", "Thin fins from sphere differences (Fig. 4.9)", section="CSG")
+@example("csg-fig49", "Thin spikes from sphere differences (Fig. 4.9)", section="CSG")
 def fig49_example(ctx: ExampleContext) -> None:
-    """A ball minus four spheres that almost touch; each surfel can be clipped by several
-    others, so the thin fins between the cuts render without holes."""
+    """A ball minus four large spheres around it (tetrahedral setup): four spikes remain that
+    taper to points on the ball; each surfel of a spike wall is clipped by the other cuts from
+    several sides, so the thin spikes render without holes or fins."""
     from unmesh.render import Camera, render, save_image
 
     model = _scene("spikes").model
@@ -183,7 +186,8 @@ def fig49_example(ctx: ExampleContext) -> None:
     a = render(model, cam).color
     b = render(model, cam.replace(eye=(-2.6, 1.2, 1.8))).color
     path = save_image(ctx.path("fig49.png"), side_by_side(a, b))
-    ctx.image(path, "a ball minus four spheres, from two sides")
+    ctx.image(path, "a ball minus four large spheres: four spikes with tiny caps of the ball at their tips, "
+                    "from two sides")
 
 
 @example("csg-fig410", "An icosahedron of 20 half-spaces, one surfel each (Fig. 4.10)", section="CSG")
@@ -203,6 +207,107 @@ def fig410_example(ctx: ExampleContext) -> None:
     c = _sampling(model, cam)
     path = save_image(ctx.path("fig410.png"), side_by_side(a, b, c))
     ctx.image(path, "left: unlit; middle: shaded; right: the 20 surfels")
+
+
+def painted_sphere(a: float = 0.4, h: float = 0.03, discontinuities: bool = True) -> Any:
+    """A unit sphere sampled at spacing ``h``, red inside the square ``|x|, |y| < a`` on its
+    ``z > 0`` side, with texture-discontinuity surfels (4.3) along the square's border: a pair
+    facing either way every ``h/2`` on the arcs ``x = +-a`` and ``y = +-a`` (none on a corner,
+    so that the two closest of a corner come from its two sides and the concave/convex rule of
+    4.4 applies). Surfels within ``1.5 h`` of the border are enlarged to ``1.3 h`` so that the
+    surfels of each colour cover the border strip up to the border (they are clipped there).
+    Returns ``[sphere, discontinuity surfels]`` or the sphere alone."""
+    from unmesh.shapes import Sphere
+    from unmesh.surfels import SurfelCloud
+
+    s = Sphere(radius=1.0).surfels(h)
+    p = s.positions
+    front = p[:, 2] > 0
+    inside = (np.abs(p[:, 0]) < a) & (np.abs(p[:, 1]) < a) & front
+    col = np.where(inside[:, None], [0.85, 0.2, 0.15], [0.85, 0.85, 0.8])
+    near = np.minimum(np.abs(np.abs(p[:, 0]) - a), np.abs(np.abs(p[:, 1]) - a)) < 1.5 * h
+    radii = np.where(near & front, np.maximum(s.radii, 1.3 * h), s.radii)
+    sphere = SurfelCloud(p, s.normals, radii=radii, colors=col, attributes={"discontinuity": np.zeros(len(p))})
+    if not discontinuities:
+        return sphere
+    t = np.arange(-a + h / 4, a - h / 4 + 1e-9, h / 2)
+    pos, nrm, axes = [], [], []
+    for axis in (0, 1):
+        other = 1 - axis
+        for sign in (-1.0, 1.0):
+            q = np.zeros((len(t), 3))
+            q[:, axis] = sign * a
+            q[:, other] = t
+            q[:, 2] = np.sqrt(1 - q[:, 0] ** 2 - q[:, 1] ** 2)
+            tang = np.zeros((len(t), 3))
+            tang[:, other] = 1.0
+            tang -= (tang * q).sum(axis=1)[:, None] * q  # along the border arc
+            tang /= np.linalg.norm(tang, axis=1)[:, None]
+            n = np.zeros((len(t), 3))
+            n[:, axis] = 1.0
+            for facing in (1.0, -1.0):
+                pos.append(q)
+                nrm.append(facing * n)
+                axes.append(np.stack([tang * h, q * h], axis=1))
+    pos_, nrm_, axes_ = np.concatenate(pos), np.concatenate(nrm), np.concatenate(axes)
+    discs = SurfelCloud(pos_, nrm_, axes=axes_, attributes={"discontinuity": np.full(len(pos_), 2)})
+    return [sphere, discs]
+
+
+@example("csg-fig46", "A square painted on a sphere, with texture-discontinuity surfels (Fig. 4.6)", section="CSG")
+def fig46_example(ctx: ExampleContext) -> None:
+    """Texture-discontinuity surfels along the border of a painted square clip the colour only
+    (4.3): the border is sharp, while normals and depth blend across it; without them the
+    colours of the samples on either side blend over a surfel's width."""
+    from unmesh.render import Camera, render, save_image
+
+    size = 160 if ctx.quick else 300
+    cam = Camera((0.9, 0.6, 2.6), (0.1, 0.1, 0.6), width=size, height=size, fov=35)
+    zoom = cam.zoomed(6.0).replace(target=(0.4, 0.4, float(np.sqrt(1 - 0.32))))
+    sharp, soft = painted_sphere(), painted_sphere(discontinuities=False)
+    images = [render(sharp, cam).color, render(soft, cam).color, render(sharp, zoom).color,
+              render(soft, zoom).color]
+    path = save_image(ctx.path("fig46.png"), side_by_side(*images))
+    ctx.image(path, "a red square painted on a sphere; left to right: with texture-discontinuity surfels, "
+                    "without, and both magnified 6x at a corner of the square")
+
+
+#: Offsets of the second sphere in :func:`coplanar_limits`: crossing angles of about 17, 6, 1.7
+#: and 0.6 degrees.
+LIMIT_OFFSETS = (0.3, 0.1, 0.03, 0.01)
+
+
+def coplanar_limits(size: int = 200) -> np.ndarray:
+    """The union of two unit spheres (red spacing 0.05, blue 0.06) whose centres are ``d`` apart
+    (:data:`LIMIT_OFFSETS`), unlit, seen along the crossing circle from outside: four panels
+    (size, size) joined left to right. The smaller ``d``, the more nearly coplanar the
+    clipping surfels at the crossing; the front/back test (4.3) against surfel planes becomes
+    unreliable where the surfaces are closer than the surfels' deviation from the sphere (4.5)."""
+    from unmesh.csg.model import Patch
+    from unmesh.render import Camera, render
+    from unmesh.shapes import Sphere
+
+    panels = []
+    for d in LIMIT_OFFSETS:
+        a = Patch.from_shape(Sphere(radius=1.0), 0.05, color=(0.85, 0.25, 0.2), name="a")
+        b = Patch.from_shape(Sphere(radius=1.0, center=(d, 0, 0)), 0.06, color=(0.2, 0.35, 0.85), name="b")
+        x = d / 2
+        z = float(np.sqrt(1 - x * x))
+        cam = Camera((x, 0, z + 3), (x, 0, z), up=(0, 1, 0), width=size, height=size, ortho=0.25)
+        panels.append(render(a | b, cam, shading="none").color)
+    return side_by_side(*panels)
+
+
+@example("csg-limits", "Known limit: nearly coplanar clipping surfels (4.5)", section="CSG")
+def limits_example(ctx: ExampleContext) -> None:
+    """Two spheres united, crossing at shrinking angles: the edge is nearly straight at 17 degrees, wavy at 6,
+    and jagged with colour bleeding across it at 1.7 and 0.6 degrees (4.5)."""
+    from unmesh.render import save_image
+
+    path = save_image(ctx.path("limits.png"), coplanar_limits(100 if ctx.quick else 200))
+    ctx.image(path, "a red and a blue sphere united, seen along their crossing, unlit; centres 0.3, 0.1, 0.03 "
+                    "and 0.01 apart (left to right): the edge between the colours is nearly straight, then wavy, "
+                    "then jagged with colour bleeding across it as the spheres cross more shallowly")
 
 
 @example("csg-dynamic", "Dynamic CSG: a sphere carving a box, a rotating union", section="CSG")

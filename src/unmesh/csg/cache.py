@@ -1,0 +1,71 @@
+"""What a CSG frame can keep from one frame to the next (dynamic CSG, 4.2.1).
+
+Patches move rigidly (or by similarity transforms) between frames, so everything intrinsic to
+one patch is computed once per surfel cloud and reused while the patch moves: the k-d tree of
+its surfel centres in the patch's own frame (insidePatch queries are mapped into that frame:
+nearest surfels and the sides of their planes are invariant under similarity transforms) and
+the pairs of its overlapping surfels (the pieces of 4.1.2). The caches hold the clouds weakly.
+
+Example
+-------
+>>> from unmesh.csg.model import Patch
+>>> p = Patch.halfspace((0, 0, 0), (0, 0, 1), extent=1.0, spacing=0.5)
+>>> local_tree(p.cloud) is local_tree(p.cloud)
+True
+>>> overlap_pairs(p.cloud).tolist()
+[[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Any
+
+import numpy as np
+
+from unmesh.spatial import KDTree
+from unmesh.surfels import SurfelCloud
+
+__all__ = ["local_points", "local_tree", "overlap_pairs"]
+
+_TREES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_PAIRS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def local_tree(cloud: SurfelCloud) -> KDTree:
+    """The k-d tree of ``cloud.positions``, built once per cloud."""
+    tree = _TREES.get(cloud)
+    if tree is None:
+        tree = KDTree(cloud.positions)
+        _TREES[cloud] = tree
+    return tree
+
+
+def overlap_pairs(cloud: SurfelCloud) -> np.ndarray:
+    """(P, 2) int64 pairs ``i < j`` of overlapping surfels of ``cloud`` (``|c_i - c_j| < r_i + r_j``),
+    computed once per cloud (they do not change under similarity transforms)."""
+    pairs = _PAIRS.get(cloud)
+    if pairs is None:
+        pos = cloud.positions
+        r = np.asarray(cloud.radii, dtype=np.float64)
+        if len(pos) < 2:
+            pairs = np.zeros((0, 2), dtype=np.int64)
+        else:
+            pairs = local_tree(cloud).radius_pairs(2.0 * float(r.max()))
+            d2 = ((pos[pairs[:, 0]] - pos[pairs[:, 1]]) ** 2).sum(axis=1)
+            pairs = np.ascontiguousarray(pairs[d2 < (r[pairs[:, 0]] + r[pairs[:, 1]]) ** 2])
+        _PAIRS[cloud] = pairs
+    return pairs
+
+
+def local_points(transform: Any, points: np.ndarray) -> np.ndarray | None:
+    """``points`` (M,3) mapped into the frame of a patch with ``transform`` (4,4) or None, or
+    None when the transform is not a similarity (the caller then works in world space)."""
+    if transform is None:
+        return points
+    lin = transform[:3, :3]
+    gram = lin.T @ lin
+    s2 = np.trace(gram) / 3.0
+    if not np.allclose(gram, s2 * np.eye(3), rtol=1e-9, atol=1e-12 * s2):
+        return None
+    return np.ascontiguousarray((points - transform[:3, 3]) @ np.linalg.inv(lin).T)

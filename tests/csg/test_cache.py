@@ -1,0 +1,73 @@
+"""Reuse between frames (dynamic CSG): per-patch caches and the frame of an unchanged model."""
+
+import numpy as np
+
+from unmesh.csg import Patch, prepare
+from unmesh.csg.cache import local_points, overlap_pairs
+from unmesh.shapes import Sphere
+
+
+def _rotation(angle, scale=1.0, shift=(0.0, 0.0, 0.0)):
+    c, s = np.cos(angle), np.sin(angle)
+    m = np.eye(4)
+    m[:3, :3] = scale * np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ np.array([[1, 0, 0], [0, c, s], [0, -s, c]])
+    m[:3, 3] = shift
+    return m
+
+
+def test_moved_patch_classifies_like_the_same_surfels_given_in_world_space():
+    """insidePatch in the patch's own frame (cached k-d tree) equals the world-space result."""
+    box = Patch.halfspace((0, 0, 0.4), (0, 0, 1), 2.0, 0.08) & Patch.halfspace((0, 0, -0.4), (0, 0, -1), 2.0, 0.08)
+    ball = Patch.from_shape(Sphere(radius=0.35), 0.05)
+    m = _rotation(0.7, 1.3, (0.2, -0.1, 0.05))
+    moved = box - ball.moved(m)
+    world = box - Patch(ball.cloud.transformed(m))
+    a, b = prepare(moved, reuse=False), prepare(world, reuse=False)
+    assert np.array_equal(a.classes, b.classes)
+    assert np.array_equal(a.offsets, b.offsets) and np.array_equal(a.partners, b.partners)
+    assert (a.classes == 1).sum() > 50
+
+
+def test_frame_of_an_unchanged_model_is_reused_and_a_moved_one_is_not():
+    a = Patch.halfspace((0, 0, 0), (0, 0, 1), 2.0, 0.25)
+    b = Patch.halfspace((0, 0, 0), (1, 0, 0), 2.0, 0.25)
+    model = a & b
+    f = prepare(model)
+    assert prepare(model) is f
+    g = prepare(model, reuse=False)
+    assert g is not f and np.array_equal(g.classes, f.classes)
+    moved = a & b.moved(_rotation(0.0, 1.0, (0.3, 0, 0)))
+    assert prepare(moved) is not f
+
+
+def test_overlap_pairs_equal_brute_force_and_local_points_invert_the_transform():
+    c = Sphere(radius=0.5).surfels(0.1)
+    pos, r = c.positions, np.asarray(c.radii)
+    d2 = ((pos[:, None] - pos[None]) ** 2).sum(-1)
+    i, j = np.nonzero(np.triu(d2 < (r[:, None] + r[None]) ** 2, 1))
+    assert np.array_equal(overlap_pairs(c), np.stack([i, j], 1))
+    m = _rotation(1.1, 0.7, (1, 2, 3))
+    x = np.random.default_rng(0).normal(size=(20, 3))
+    world = x @ m[:3, :3].T + m[:3, 3]
+    assert np.allclose(local_points(m, world), x, atol=1e-12)
+    shear = np.eye(4)
+    shear[0, 1] = 0.5
+    assert local_points(shear, world) is None
+
+
+def test_dropping_decided_surfels_between_patches_keeps_the_classes(monkeypatch):
+    """Asking the patches one after the other and dropping surfels already off the surface
+    gives the classes and partner rows of asking every patch for every surfel."""
+    import unmesh.csg.frame as frame
+
+    ball = Patch.from_shape(Sphere(radius=1.0), 0.08)
+    cuts = [Patch.from_shape(Sphere(radius=1.0, center=c), 0.1) for c in ((0.9, 0.9, 0.0), (-0.9, 0.0, 0.9))]
+    model = ball - cuts[0] - cuts[1]
+    monkeypatch.setattr(frame, "_DECIDE_EARLY", 0)
+    early = prepare(model, reuse=False)
+    monkeypatch.setattr(frame, "_DECIDE_EARLY", 10**9)
+    late = prepare(model, reuse=False)
+    assert np.array_equal(early.classes, late.classes)
+    assert np.array_equal(early.clip.offsets, late.clip.offsets)
+    assert np.array_equal(early.clip.partners, late.clip.partners)
+    assert (early.classes == 2).sum() > 100 and (early.classes == 1).sum() > 50
