@@ -425,7 +425,16 @@ class SplatRenderer:
         self._opaque = GBuffer.empty(h, w) if opaque is None else opaque if self._adopt_opaque else opaque.copy()
         if self._opaque.depth.shape != (h, w):
             raise InputError(f"opaque: expected buffers of shape {(h, w)}, got {self._opaque.depth.shape}")
-        self.zvis = self._opaque.depth.copy()
+        if self._adopt_opaque:  # a spent renderer of render(): this thread's reused buffers (no page faults)
+            self.zvis = self._scratch("zvis", (h, w), np.float64)
+            np.copyto(self.zvis, self._opaque.depth)
+            self.sum_weight = self._scratch("sum_weight", (h, w), np.float64)
+            self.sum_color = self._scratch("sum_color", (h, w, 3), np.float64)
+            self.sum_normal = self._scratch("sum_normal", (h, w, 3), np.float64)
+            self.sum_depth = self._scratch("sum_depth", (h, w), np.float64)
+            self.count = self._scratch("count", (h, w), np.int32)
+        else:
+            self.zvis = self._opaque.depth.copy()
         if getattr(self, "count", None) is not None and self.count.shape == (h, w):
             for arr in (self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth, self.count):
                 arr.fill(0)
@@ -604,7 +613,9 @@ class SplatRenderer:
         ``gbuffer`` itself instead of a copy (what :func:`unmesh.render.render` needs: it owns
         the buffer, and copying 1024x1024 G-buffers twice costs as much as the binning). The
         image is the same as ``render(clouds, opaque=gbuffer).gbuffer()``. The renderer is
-        spent afterwards: its opaque layer is the result, so it must not be updated further."""
+        spent afterwards: its opaque layer is the result, and its sums and visibility buffer are
+        this thread's work buffers (:data:`_SCRATCH`, reused by the next such call), so it must
+        not be updated further; its :attr:`zvis` stays valid until then."""
         self._adopt_opaque = True
         try:
             self.render(clouds, opaque=gbuffer, clip=clip, clip_surfels=clip_surfels)
