@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
+from unmesh.paint._paint_kernels import gather_surfels, scatter_surfels
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render.shading import GBuffer, RenderResult, shade
@@ -70,6 +72,8 @@ def same_camera(a: Camera | None, b: Camera) -> bool:
 def reflect_colors(surface: PaintSurface, rows: np.ndarray, camera: Camera) -> np.ndarray:
     """Visible colour (5.8) with environment-mapped reflection of metallic paint (5.7)."""
     col = surface.colors(rows)
+    if not surface.metal.any():
+        return col
     k = surface.refl[rows] * surface.metal[rows]
     m = k > 0
     if m.any():
@@ -129,18 +133,19 @@ class PaintView:
             g(self._on), g(self._pos), g(self._nrm), g(self._rad), g(self._col), g(self._partial))
 
     def _arrays(self, rows: np.ndarray, old: bool) -> SurfelArrays:
-        if old:
-            return SurfelArrays(self._pos[rows], self._nrm[rows], self._rad[rows], None, self._col[rows])
-        s = self.surface
-        return SurfelArrays(np.ascontiguousarray(s.pos[rows]), np.ascontiguousarray(s.nrm[rows]),
-                            np.ascontiguousarray(s.rad[rows]), None, reflect_colors(s, rows, self.camera))
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        src = (self._pos, self._nrm, self._rad) if old else (self.surface.pos, self.surface.nrm, self.surface.rad)
+        pos, nrm, rad = np.empty((len(rows), 3)), np.empty((len(rows), 3)), np.empty(len(rows))
+        with serial_if_small(len(rows)):
+            gather_surfels(rows, *src, pos, nrm, rad)
+        col = self._col[rows] if old else reflect_colors(self.surface, rows, self.camera)
+        return SurfelArrays(pos, nrm, rad, None, col)
 
     def _store(self, rows: np.ndarray, arrays: SurfelArrays) -> None:
         self._on[rows] = True
-        self._pos[rows] = arrays.positions
-        self._nrm[rows] = arrays.normals
-        self._rad[rows] = arrays.radii
-        self._col[rows] = arrays.colors
+        with serial_if_small(len(rows)):
+            scatter_surfels(np.ascontiguousarray(rows, dtype=np.int64), arrays.positions, arrays.normals, arrays.radii,
+                            np.ascontiguousarray(arrays.colors), self._pos, self._nrm, self._rad, self._col)
 
     def update(self, camera: Camera, force_full: bool = False) -> SplatRenderer:
         """Bring the buffers up to date with the surface for ``camera`` (full or differential)."""
