@@ -157,7 +157,7 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
     def tiles():
         renderer.clear()
         splat_tiles(pt, items, offsets, order, tile, size, size, f, cx, cy, ortho, near, opt.filter_radius,
-                    opt.kappa, opt.depth_tolerance, False, cam.eye, frame, coff, cpl, cmode, True, 1.0,
+                    opt.kappa, opt.depth_tolerance, False, cam.eye, frame, coff, cpl, cmode, None, None, True, 1.0,
                     renderer.zvis, renderer.sum_weight, renderer.sum_color, renderer.sum_normal, renderer.sum_depth,
                     renderer.count)
 

@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True)
@@ -47,3 +47,39 @@ def diffuse_pairs(pi, pj, coef, vw, area, wet, props, km):  # pragma: no cover -
             props[r, c] = (vr * props[r, c] + dv * props[s, c]) / tot
         vw[s] -= dv
         vw[r] = tot
+
+
+@njit(cache=True, parallel=True)
+def visible_colors_rows(idx, wet, dry, vw, rho, area, vd, base, out):  # pragma: no cover - numba
+    """``out[k]`` = visible colour (5.8) of row ``idx[k]``: the gather and
+    :func:`unmesh.paint.surface.visible_colors` (its reference, same operations) in one pass."""
+    for k in prange(idx.shape[0]):
+        i = idx[k]
+        alpha = min(rho[i] * vw[i] / area[i], 1.0)
+        beta = min(rho[i] * vd[i] / area[i], 1.0)
+        for c in range(3):
+            d = beta * dry[i, c] + (1.0 - beta) * base[i, c]
+            out[k, c] = min(max(alpha * wet[i, c] + (1.0 - alpha) * d, 0.0), 1.0)
+
+
+@njit(cache=True, parallel=True)
+def gather_surfels(idx, pos, nrm, rad, out_pos, out_nrm, out_rad):  # pragma: no cover - numba
+    """``out_pos[k] = pos[idx[k]]`` (and normals, radii) in one parallel pass."""
+    for k in prange(idx.shape[0]):
+        i = idx[k]
+        for c in range(3):
+            out_pos[k, c] = pos[i, c]
+            out_nrm[k, c] = nrm[i, c]
+        out_rad[k] = rad[i]
+
+
+@njit(cache=True, parallel=True)
+def scatter_surfels(idx, pos, nrm, rad, col, to_pos, to_nrm, to_rad, to_col):  # pragma: no cover - numba
+    """``to_pos[idx[k]] = pos[k]`` (and normals, radii, colours) in one parallel pass; ``idx`` unique."""
+    for k in prange(idx.shape[0]):
+        i = idx[k]
+        for c in range(3):
+            to_pos[i, c] = pos[k, c]
+            to_nrm[i, c] = nrm[k, c]
+            to_col[i, c] = col[k, c]
+        to_rad[i] = rad[k]

@@ -58,18 +58,6 @@ def load_model(source: str, spacing: float | None = None) -> tuple[Any, str]:
     return Session.load(path), path.stem
 
 
-def _size(text: str) -> tuple[int, int]:
-    from unmesh.errors import InputError
-
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise InputError(f"--size: expected WxH, got {text!r}") from None
-    if w < 1 or h < 1:
-        raise InputError(f"--size: expected positive sizes, got {text!r}")
-    return w, h
-
-
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -82,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--output: expected a .ply file, got {str(out)!r}")
     if args.render and Path(args.render).suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise InputError(f"--render: expected a .png or .jpg file, got {args.render!r}")
-    size = _size(args.size)
+    from unmesh.render.cli import parse_size
+
+    size = parse_size(args.size)
     if args.replay is None:
         from unmesh.paint.studio.server import run_studio
 

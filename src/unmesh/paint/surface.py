@@ -25,7 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
 from unmesh.errors import InputError
+from unmesh.paint._paint_kernels import visible_colors_rows
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 
@@ -285,9 +287,11 @@ class PaintSurface:
     def colors(self, idx: np.ndarray | None = None) -> np.ndarray:
         """Visible colour (5.8) of rows ``idx`` (default all rows), (K, 3)."""
         d = self._data
-        idx = np.arange(self.n) if idx is None else idx
-        return visible_colors(d["wet"][idx], d["dry"][idx], d["vw"][idx], d["rho"][idx], d["area"][idx],
-                              d["vd"][idx], d["base"][idx])
+        idx = np.arange(self.n) if idx is None else np.ascontiguousarray(idx, dtype=np.int64)
+        out = np.empty((len(idx), 3))
+        with serial_if_small(len(idx)):
+            visible_colors_rows(idx, d["wet"], d["dry"], d["vw"], d["rho"], d["area"], d["vd"], d["base"], out)
+        return out
 
     def total_volume(self) -> float:
         """Wet + dry paint volume on the visible surface."""

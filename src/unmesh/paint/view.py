@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
+from unmesh.paint._paint_kernels import gather_surfels, scatter_surfels
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
-from unmesh.render._kernels import shade_pixels
-from unmesh.render._splat_kernels import splat_resolve
-from unmesh.render.shading import GBuffer, RenderResult, as_shading, background_color
+from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.render.splat import SurfelArrays
 from unmesh.spatial import KDTree
 from unmesh.surfels import tangent_frame
@@ -72,6 +72,8 @@ def same_camera(a: Camera | None, b: Camera) -> bool:
 def reflect_colors(surface: PaintSurface, rows: np.ndarray, camera: Camera) -> np.ndarray:
     """Visible colour (5.8) with environment-mapped reflection of metallic paint (5.7)."""
     col = surface.colors(rows)
+    if not surface.metal.any():
+        return col
     k = surface.refl[rows] * surface.metal[rows]
     m = k > 0
     if m.any():
@@ -131,18 +133,19 @@ class PaintView:
             g(self._on), g(self._pos), g(self._nrm), g(self._rad), g(self._col), g(self._partial))
 
     def _arrays(self, rows: np.ndarray, old: bool) -> SurfelArrays:
-        if old:
-            return SurfelArrays(self._pos[rows], self._nrm[rows], self._rad[rows], None, self._col[rows])
-        s = self.surface
-        return SurfelArrays(np.ascontiguousarray(s.pos[rows]), np.ascontiguousarray(s.nrm[rows]),
-                            np.ascontiguousarray(s.rad[rows]), None, reflect_colors(s, rows, self.camera))
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        src = (self._pos, self._nrm, self._rad) if old else (self.surface.pos, self.surface.nrm, self.surface.rad)
+        pos, nrm, rad = np.empty((len(rows), 3)), np.empty((len(rows), 3)), np.empty(len(rows))
+        with serial_if_small(len(rows)):
+            gather_surfels(rows, *src, pos, nrm, rad)
+        col = self._col[rows] if old else reflect_colors(self.surface, rows, self.camera)
+        return SurfelArrays(pos, nrm, rad, None, col)
 
     def _store(self, rows: np.ndarray, arrays: SurfelArrays) -> None:
         self._on[rows] = True
-        self._pos[rows] = arrays.positions
-        self._nrm[rows] = arrays.normals
-        self._rad[rows] = arrays.radii
-        self._col[rows] = arrays.colors
+        with serial_if_small(len(rows)):
+            scatter_surfels(np.ascontiguousarray(rows, dtype=np.int64), arrays.positions, arrays.normals, arrays.radii,
+                            np.ascontiguousarray(arrays.colors), self._pos, self._nrm, self._rad, self._col)
 
     def update(self, camera: Camera, force_full: bool = False) -> SplatRenderer:
         """Bring the buffers up to date with the surface for ``camera`` (full or differential)."""
@@ -229,39 +232,14 @@ class PaintView:
             self._g = GBuffer.empty(h, w)
             win = (0, h, 0, w)
             self._color = np.empty((h, w, 3))
-        r0, r1, c0, c1 = win
-        g = self._g
-        sl = (slice(r0, r1), slice(c0, c1))
-        g.albedo[sl] = 0.0
-        g.normal[sl] = 0.0
-        g.depth[sl] = np.inf
-        g.coverage[sl] = False
-        g.weight[sl] = 0.0
-        splat_resolve(r.sum_weight[sl], r.sum_color[sl], r.sum_normal[sl], r.sum_depth[sl], r.count[sl],
-                      cam.rotation, g.albedo[sl], g.normal[sl], g.depth[sl], g.coverage[sl], g.weight[sl])
+        r.resolve_window(self._g, win)
         self._shade(win)
 
     def _shade(self, win: tuple[int, int, int, int], origin: tuple[int, int] = (0, 0)) -> None:
         """Shade the window ``win`` of the G-buffer; ``origin`` is the buffer's offset in the image."""
-        cam = self.camera
         r0, r1, c0, c1 = win
-        sl = (slice(r0, r1), slice(c0, c1))
-        g = self._g
-        sh = as_shading(self.shading)
-        bg = background_color(self.background)
-        if sh.model == "none":
-            self._color[sl] = np.where(g.coverage[sl][..., None], np.clip(g.albedo[sl], 0.0, 1.0), bg)
-            return
-        dirs = np.array([light.world_direction(cam) for light in sh.lights]).reshape(-1, 3)
-        cols = np.array([light.color * light.intensity for light in sh.lights]).reshape(-1, 3)
-        f, cx, cy, ortho, _ = cam.kernel_params()
-        out = np.empty((r1 - r0, c1 - c0, 3))
-        shade_pixels(np.ascontiguousarray(g.albedo[sl]), np.ascontiguousarray(g.normal[sl]),
-                     np.ascontiguousarray(g.depth[sl]), np.ascontiguousarray(g.coverage[sl]), f,
-                     cx - c0 - origin[1], cy - r0 - origin[0],
-                     ortho, cam.rotation, np.ascontiguousarray(dirs), np.ascontiguousarray(cols), sh.ambient,
-                     sh.specular, sh.shininess, bg, out)
-        self._color[sl] = out
+        self._color[r0:r1, c0:c1] = shade(self._g, self.camera, self.shading, self.background, window=win,
+                                          origin=origin)
 
     def set_style(self, shading: Any, background: Any) -> None:
         """Shading and background of the image; a change re-shades the whole image."""

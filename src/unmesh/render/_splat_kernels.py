@@ -697,6 +697,43 @@ def _accumulate(q, k, w, z, Pt, lw, lc, ln, ld, lcount):
     lcount[q] += 1
 
 
+#: Margin (pixels) of the per-row pixel spans of :func:`_row_span` beyond their analytic ends:
+#: the spans only skip pixels that cannot hold a fragment, every pixel inside is still tested.
+SPAN_MARGIN = 0.01
+
+
+@njit(cache=True)
+def _interval(lo, hi, bx0, bx1):
+    """Pixel indices ``[ceil(lo), floor(hi)]`` clamped to ``[bx0, bx1]`` (empty: first > last)."""
+    lo = max(lo, bx0 - 1.0)
+    hi = min(hi, bx1 + 1.0)
+    if not (lo <= hi):
+        return bx1 + 1, bx0 - 1
+    return max(math.ceil(lo), bx0), min(math.floor(hi), bx1)
+
+
+@njit(cache=True)
+def _row_span(qa, iqa, qb, qc, f, cx, lo, hi, bx0, bx1):
+    """The pixels of one row that may hold a fragment: a superset of ``rho < 1``.
+
+    ``qa X^2 + 2 qb X + qc < 0`` (``iqa = 1 / qa``) is the row's part of the ellipse
+    ``rho3 < 1`` in the ray coordinate ``X`` (``qa <= 0`` or NaN: the whole box row; ``qc``
+    inf: none); ``[lo, hi]`` (pixel columns) covers the screen-filter disc in this row. Returns
+    the hull ``(first, last)`` of both within ``[bx0, bx1]``, widened by :data:`SPAN_MARGIN`;
+    ``first > last`` when empty.
+    """
+    if qc < np.inf:
+        if qa > 0.0 and abs(qb) < np.inf and qc > -np.inf:
+            disc = qb * qb - qa * qc
+            if disc >= -1e-9 * (qb * qb + abs(qa * qc)):
+                sq = math.sqrt(max(disc, 0.0))
+                lo = min(lo, (-qb - sq) * iqa * f + cx - 0.5 - SPAN_MARGIN)
+                hi = max(hi, (-qb + sq) * iqa * f + cx - 0.5 + SPAN_MARGIN)
+        else:
+            return bx0, bx1
+    return _interval(lo, hi, bx0, bx1)
+
+
 @njit(cache=True)
 def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa, eps_factor,
                sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, work, lz, lw, lc, ln, ld,
@@ -712,19 +749,28 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
     directly with weight ``sign * w``; returns 0.
 
     A surfel that cannot reach ``lz`` anywhere in its box (``cz - |zr| > lz``) is skipped
-    before any fragment work. Chapter 4's clipped splatting tests each fragment here
-    (:func:`_keep`, surfel ``items[k]``).
+    before any fragment work; in each box row only the span that may hold fragments
+    (:func:`_row_span`) is visited. The fragment model is that of :func:`_fragment`, evaluated
+    with the per-row constants taken out (the ray-plane intersection, ``u`` and ``v`` are
+    affine in the pixel column ``X`` in orthographic views). Chapter 4's clipped splatting
+    tests each fragment here (:func:`_keep`, surfel ``items[k]``).
     """
     nrec = 0
+    f = 1.0 / invf
+    # the screen filter disc: rows with ey^2 < rf2x, columns within rfl of the centre
+    rf2x = (1.0 + 1e-9) / inv_rf2 if inv_rf2 < np.inf else 0.0
+    rfl = math.sqrt(rf2x)
     for k in range(a, b):
         bx0 = max(int(Pt[k, 19]), x0)
         bx1 = min(int(Pt[k, 20]), x0 + tw - 1)
         by0 = max(int(Pt[k, 21]), y0)
         by1 = min(int(Pt[k, 22]), y0 + th - 1)
-        cz = Pt[k, 0]
-        zr = Pt[k, 23]
+        cz = np.float64(Pt[k, 0])
+        zr = np.float64(Pt[k, 23])
         eps = eps_factor * Pt[k, 15]
-        zmin = cz - abs(zr)
+        za = abs(zr)
+        zmin = cz - za
+        zmax = cz + za
         reach = False
         for py in range(by0, by1 + 1):
             row = (py - y0) * tw - x0
@@ -736,31 +782,98 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
                 break
         if not reach:
             continue
-        nx = Pt[k, 1]
-        ny = Pt[k, 2]
-        nz = Pt[k, 3]
-        cn = Pt[k, 4]
-        b1x = Pt[k, 5]
-        b1y = Pt[k, 6]
-        b1z = Pt[k, 7]
-        b2x = Pt[k, 8]
-        b2y = Pt[k, 9]
-        b2z = Pt[k, 10]
-        cb1 = Pt[k, 11]
-        cb2 = Pt[k, 12]
-        sx = Pt[k, 13]
-        sy = Pt[k, 14]
+        nx = np.float64(Pt[k, 1])
+        ny = np.float64(Pt[k, 2])
+        nz = np.float64(Pt[k, 3])
+        cn = np.float64(Pt[k, 4])
+        b1x = np.float64(Pt[k, 5])
+        b1y = np.float64(Pt[k, 6])
+        b1z = np.float64(Pt[k, 7])
+        b2x = np.float64(Pt[k, 8])
+        b2y = np.float64(Pt[k, 9])
+        b2z = np.float64(Pt[k, 10])
+        cb1 = np.float64(Pt[k, 11])
+        cb2 = np.float64(Pt[k, 12])
+        sx = np.float64(Pt[k, 13])
+        sy = np.float64(Pt[k, 14])
+        edge = not (zr > 0.0)
         s = items[k]
         clip = has_clip and clip_offsets[s + 1] > clip_offsets[s]
+        planar = abs(nz) > 1e-12  # orthographic: the rays meet the surfel plane
+        finite = abs(cb1) < np.inf and abs(cb2) < np.inf
+        # orthographic: t = t0 + tX X, u = u0 + uX X, v = v0 + vX X along a row
+        inz = 1.0 / nz if planar else 0.0
+        tX = -nx * inz
+        tY = -ny * inz
+        tA = cn * inz
+        uX = b1x + tX * b1z
+        vX = b2x + tX * b2z
+        # perspective: u = (UX X + U0) / dn, dn = nx X + dn0 (rows of the span's quadratic)
+        UX = cn * b1x - cb1 * nx
+        VX = cn * b2x - cb2 * nx
+        qa = uX * uX + vX * vX if ortho else UX * UX + VX * VX - nx * nx
+        iqa = 1.0 / qa if qa > 0.0 else 0.0
+        flo = sx - rfl - 0.5 - SPAN_MARGIN
+        fhi = sx + rfl - 0.5 + SPAN_MARGIN
         for py in range(by0, by1 + 1):
             pcy = py + 0.5
             Y = (cy - pcy) * invf
+            ey = pcy - sy
+            ey2 = ey * ey
+            qb = 0.0
+            qc = np.inf
+            if ortho:
+                t0 = tA + tY * Y
+                u0 = Y * b1y + t0 * b1z - cb1
+                v0 = Y * b2y + t0 * b2z - cb2
+                if planar and finite:
+                    qb = uX * u0 + vX * v0
+                    qc = u0 * u0 + v0 * v0 - 1.0
+            else:
+                dn0 = Y * ny + nz
+                e10 = Y * b1y + b1z
+                e20 = Y * b2y + b2z
+                if finite:
+                    U0 = cn * e10 - cb1 * dn0
+                    V0 = cn * e20 - cb2 * dn0
+                    qb = UX * U0 + VX * V0 - nx * dn0
+                    qc = U0 * U0 + V0 * V0 - dn0 * dn0
+            if ey2 < rf2x:
+                first, last = _row_span(qa, iqa, qb, qc, f, cx, flo, fhi, bx0, bx1)
+            else:
+                first, last = _row_span(qa, iqa, qb, qc, f, cx, np.inf, -np.inf, bx0, bx1)
             row = (py - y0) * tw - x0
-            for px in range(bx0, bx1 + 1):
+            for px in range(first, last + 1):
                 pcx = px + 0.5
                 X = (pcx - cx) * invf
-                rho, z = _fragment(X, Y, pcx, pcy, ortho, inv_rf2, cz, nx, ny, nz, cn, b1x, b1y, b1z,
-                                   b2x, b2y, b2z, cb1, cb2, sx, sy, zr)
+                ex = pcx - sx
+                rho2 = (ex * ex + ey2) * inv_rf2
+                if not (rho2 >= 0.0):
+                    rho2 = np.inf
+                z = cz
+                rho3 = np.inf
+                t = np.nan
+                hit = False
+                if ortho:
+                    if planar:
+                        hit = True
+                        t = t0 + tX * X
+                        u = u0 + uX * X
+                        v = v0 + vX * X
+                        rho3 = u * u + v * v
+                else:
+                    dn = X * nx + dn0
+                    if abs(dn) > 1e-12:
+                        hit = True
+                        t = cn / dn
+                        u = t * (X * b1x + e10) - cb1
+                        v = t * (X * b2x + e20) - cb2
+                        rho3 = u * u + v * v
+                if not (rho3 >= 0.0):
+                    rho3 = np.inf
+                if hit and (not edge or rho3 <= rho2) and t == t:
+                    z = min(max(t, zmin), zmax)
+                rho = min(rho3, rho2)
                 if rho >= 1.0 or z <= near:
                     continue
                 q = row + px

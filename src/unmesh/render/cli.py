@@ -89,7 +89,14 @@ def _vector(text: str | None, name: str) -> Any:
     return vals
 
 
-def _size(text: str) -> tuple[int, int]:
+def parse_size(text: str) -> tuple[int, int]:
+    """``"WIDTHxHEIGHT"`` (``--size``) as ``(width, height)``; InputError names ``--size``.
+
+    Example
+    -------
+    >>> parse_size("800x600")
+    (800, 600)
+    """
     from unmesh.errors import InputError
 
     parts = text.lower().split("x")
@@ -100,6 +107,9 @@ def _size(text: str) -> tuple[int, int]:
     if w < 1 or h < 1 or w > 16384 or h > 16384:
         raise InputError(f"--size: expected sizes between 1 and 16384, got {text!r}")
     return w, h
+
+
+_size = parse_size  # the name the csg command imports
 
 
 def _background(text: str) -> Any:
@@ -150,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     from unmesh.render import render, render_sequence, turntable
     from unmesh.render.image import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
 
-    size = _size(args.size)
+    size = parse_size(args.size)
     out = Path(args.output)
     ext = out.suffix.lower()
     color_range = None

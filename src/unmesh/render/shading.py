@@ -313,7 +313,8 @@ class RenderResult:
         return paths
 
 
-def shade(gbuffer: GBuffer, camera: Camera, shading: str | Shading = "phong", background: Any = (1.0, 1.0, 1.0)) -> np.ndarray:
+def shade(gbuffer: GBuffer, camera: Camera, shading: str | Shading = "phong", background: Any = (1.0, 1.0, 1.0), *,
+          window: tuple[int, int, int, int] | None = None, origin: tuple[int, int] = (0, 0)) -> np.ndarray:
     """Colour image (H,W,3) float64 in [0,1] from a G-buffer (deferred shading).
 
     Blinn-Phong: ``c = a (ambient + sum_l I_l max(0, n.l)) + specular sum_l I_l max(0, n.h)^shininess``
@@ -327,10 +328,14 @@ def shade(gbuffer: GBuffer, camera: Camera, shading: str | Shading = "phong", ba
     shading : {"phong", "none"} or Shading
     background : colour
         Written where ``gbuffer.coverage`` is false.
+    window : (r0, r1, c0, c1), optional
+        Shade only rows ``r0:r1`` and columns ``c0:c1`` of ``gbuffer`` (partial updates, 5.7).
+    origin : (row, col)
+        The image pixel of ``gbuffer[0, 0]`` when ``gbuffer`` is a part cut out of the image.
 
     Returns
     -------
-    numpy.ndarray, shape (H, W, 3), float64
+    numpy.ndarray, shape (H, W, 3) or (r1 - r0, c1 - c0, 3), float64
 
     Example
     -------
@@ -338,20 +343,38 @@ def shade(gbuffer: GBuffer, camera: Camera, shading: str | Shading = "phong", ba
     >>> g = GBuffer.empty(2, 2)
     >>> shade(g, cam, "none", background=0.0).max()
     np.float64(0.0)
+    >>> shade(g, cam, window=(0, 1, 1, 2)).shape
+    (1, 1, 3)
     """
     sh = as_shading(shading)
     bg = background_color(background)
     h, w = gbuffer.depth.shape
+    r0, r1, c0, c1 = (0, h, 0, w) if window is None else _window(window, h, w)
+    sl = (slice(r0, r1), slice(c0, c1))
+    albedo, normal, depth, coverage = gbuffer.albedo[sl], gbuffer.normal[sl], gbuffer.depth[sl], gbuffer.coverage[sl]
     if sh.model == "none":
-        out = np.where(gbuffer.coverage[..., None], np.clip(gbuffer.albedo, 0.0, 1.0), bg)
+        out = np.where(coverage[..., None], np.clip(albedo, 0.0, 1.0), bg)
         return np.ascontiguousarray(out)
-    out = np.empty((h, w, 3))
+    out = np.empty((r1 - r0, c1 - c0, 3))
     dirs = np.array([light.world_direction(camera) for light in sh.lights]).reshape(-1, 3)
     cols = np.array([light.color * light.intensity for light in sh.lights]).reshape(-1, 3)
     f, cx, cy, ortho, _ = camera.kernel_params()
-    with serial_if_small(h * w, 4 * SERIAL_BELOW):
-        shade_pixels(np.ascontiguousarray(gbuffer.albedo), np.ascontiguousarray(gbuffer.normal),
-                     np.ascontiguousarray(gbuffer.depth), np.ascontiguousarray(gbuffer.coverage), f, cx, cy, ortho,
-                     camera.rotation, np.ascontiguousarray(dirs), np.ascontiguousarray(cols), sh.ambient, sh.specular,
-                     sh.shininess, bg, out)
+    # the kernel's pixel (0, 0) is image pixel (origin + window start)
+    cx -= c0 + int(origin[1])
+    cy -= r0 + int(origin[0])
+    with serial_if_small(out.shape[0] * out.shape[1], 4 * SERIAL_BELOW):
+        shade_pixels(np.ascontiguousarray(albedo), np.ascontiguousarray(normal), np.ascontiguousarray(depth),
+                     np.ascontiguousarray(coverage), f, cx, cy, ortho, camera.rotation, np.ascontiguousarray(dirs),
+                     np.ascontiguousarray(cols), sh.ambient, sh.specular, sh.shininess, bg, out)
     return out
+
+
+def _window(window: Any, h: int, w: int) -> tuple[int, int, int, int]:
+    """``window`` (r0, r1, c0, c1) checked against an (h, w) image."""
+    try:
+        r0, r1, c0, c1 = (int(v) for v in window)
+    except (TypeError, ValueError):
+        raise InputError(f"window: expected (r0, r1, c0, c1), got {window!r}") from None
+    if not (0 <= r0 <= r1 <= h and 0 <= c0 <= c1 <= w):
+        raise InputError(f"window: expected 0 <= r0 <= r1 <= {h} and 0 <= c0 <= c1 <= {w}, got {window!r}")
+    return r0, r1, c0, c1

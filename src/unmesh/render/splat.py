@@ -51,6 +51,7 @@ from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, tile_order
 from unmesh.render._splat_kernels import NPARAM, gather_rows, splat_resolve, splat_setup_bin, splat_tiles
 from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer, RenderResult, shade
+from unmesh.render.shading import _window as _check_window
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCONTINUITY
@@ -424,7 +425,16 @@ class SplatRenderer:
         self._opaque = GBuffer.empty(h, w) if opaque is None else opaque if self._adopt_opaque else opaque.copy()
         if self._opaque.depth.shape != (h, w):
             raise InputError(f"opaque: expected buffers of shape {(h, w)}, got {self._opaque.depth.shape}")
-        self.zvis = self._opaque.depth.copy()
+        if self._adopt_opaque:  # a spent renderer of render(): this thread's reused buffers (no page faults)
+            self.zvis = self._scratch("zvis", (h, w), np.float64)
+            np.copyto(self.zvis, self._opaque.depth)
+            self.sum_weight = self._scratch("sum_weight", (h, w), np.float64)
+            self.sum_color = self._scratch("sum_color", (h, w, 3), np.float64)
+            self.sum_normal = self._scratch("sum_normal", (h, w, 3), np.float64)
+            self.sum_depth = self._scratch("sum_depth", (h, w), np.float64)
+            self.count = self._scratch("count", (h, w), np.int32)
+        else:
+            self.zvis = self._opaque.depth.copy()
         if getattr(self, "count", None) is not None and self.count.shape == (h, w):
             for arr in (self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth, self.count):
                 arr.fill(0)
@@ -553,13 +563,59 @@ class SplatRenderer:
                           self.camera.rotation, g.albedo, g.normal, g.depth, g.coverage, g.weight)
         return g
 
+    def resolve_window(self, gbuffer: GBuffer, window: tuple[int, int, int, int] | None = None) -> GBuffer:
+        """Normalise the sums into ``gbuffer`` in place, only within ``window`` (after partial updates, 5.7).
+
+        The window ``(r0, r1, c0, c1)`` (rows ``r0:r1``, columns ``c0:c1``; default the whole
+        image) of ``gbuffer`` is reset to empty and gets what :meth:`gbuffer` has there
+        without an opaque layer; the rest of ``gbuffer`` is not touched.
+
+        Parameters
+        ----------
+        gbuffer : GBuffer
+            Of the camera's shape.
+        window : (r0, r1, c0, c1), optional
+
+        Returns
+        -------
+        GBuffer
+            ``gbuffer``.
+
+        Example
+        -------
+        >>> cloud = SurfelCloud([[0, 0, 0]], [[0, 0, 1]], radii=[0.5])
+        >>> r = SplatRenderer(Camera((0, 0, 3), (0, 0, 0), width=8, height=8, ortho=2.0)).render(cloud)
+        >>> g = r.resolve_window(GBuffer.empty(8, 8), (4, 5, 4, 5))
+        >>> int(g.coverage.sum())
+        1
+        """
+        h, w = self.camera.shape
+        if not isinstance(gbuffer, GBuffer) or gbuffer.depth.shape != (h, w):
+            raise InputError(f"gbuffer: expected a GBuffer of shape {(h, w)}, got "
+                             f"{getattr(getattr(gbuffer, 'depth', None), 'shape', type(gbuffer).__name__)}")
+        r0, r1, c0, c1 = (0, h, 0, w) if window is None else _check_window(window, h, w)
+        sl = (slice(r0, r1), slice(c0, c1))
+        g = gbuffer
+        g.albedo[sl] = 0.0
+        g.normal[sl] = 0.0
+        g.depth[sl] = np.inf
+        g.coverage[sl] = False
+        g.weight[sl] = 0.0
+        with serial_if_small((r1 - r0) * (c1 - c0), 4 * SERIAL_BELOW):
+            splat_resolve(self.sum_weight[sl], self.sum_color[sl], self.sum_normal[sl], self.sum_depth[sl],
+                          self.count[sl], self.camera.rotation, g.albedo[sl], g.normal[sl], g.depth[sl],
+                          g.coverage[sl], g.weight[sl])
+        return g
+
     def _render_in_place(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, gbuffer: GBuffer,
                          clip_surfels: ClipSurfels | None = None, clip: ClipPlanes | ClipTree | None = None) -> GBuffer:
         """:meth:`render` against the opaque layer ``gbuffer``, then :meth:`gbuffer` written into
         ``gbuffer`` itself instead of a copy (what :func:`unmesh.render.render` needs: it owns
         the buffer, and copying 1024x1024 G-buffers twice costs as much as the binning). The
         image is the same as ``render(clouds, opaque=gbuffer).gbuffer()``. The renderer is
-        spent afterwards: its opaque layer is the result, so it must not be updated further."""
+        spent afterwards: its opaque layer is the result, and its sums and visibility buffer are
+        this thread's work buffers (:data:`_SCRATCH`, reused by the next such call), so it must
+        not be updated further; its :attr:`zvis` stays valid until then."""
         self._adopt_opaque = True
         try:
             self.render(clouds, opaque=gbuffer, clip=clip, clip_surfels=clip_surfels)
