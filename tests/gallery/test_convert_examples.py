@@ -7,7 +7,7 @@ from unmesh.gallery import ExampleContext, select
 
 def test_convert_examples_quick(tmp_path):
     examples = select("convert-*")
-    assert [e.name for e in examples] == ["convert-resolutions", "convert-atlas", "convert-sampling"]
+    assert [e.name for e in examples] == ["convert-resolutions", "convert-atlas", "convert-sampling", "convert-painted"]
     for ex in examples:
         out = tmp_path / ex.name
         out.mkdir()
@@ -20,3 +20,5 @@ def test_convert_examples_quick(tmp_path):
         m = {name: value for name, value, _ in ctx.metrics}
         if ex.name == "convert-atlas":
             assert 50.0 < float(m["fill (all pages)"]) <= 100.0
+        if ex.name == "convert-painted":
+            assert float(m["PSNR textured mesh vs surfels (pixels both cover)"]) >= 30.0

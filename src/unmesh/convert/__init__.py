@@ -11,13 +11,13 @@
 
 Example
 -------
->>> import numpy as np
->>> from unmesh.surfels import SurfelCloud
->>> rng = np.random.default_rng(1)
->>> n = rng.normal(size=(3000, 3)); n /= np.linalg.norm(n, axis=1, keepdims=True)
->>> res = convert_cloud(SurfelCloud(n, n, radii=np.full(3000, 0.06)), ConvertOptions(faces=300))
->>> res.report["patches"]["triangles"] <= 300, res.report["reconstruction"]["boundary_edges"]
-(True, 0)
+Convert a painted or scanned cloud and write it for Blender or a game engine (the doctest
+of :func:`to_textured_mesh` runs the pipeline on a sphere)::
+
+    res = convert_cloud(cloud, ConvertOptions(mesh_error=0.005))
+    write_textured("model.glb", res.textured)      # or model.obj (+ .mtl + .png pages)
+
+    $ unmesh convert scan.ply -o scan.obj --report report.json
 """
 
 from unmesh.convert.export import write_glb, write_textured, write_textured_obj

@@ -34,7 +34,7 @@ def register(sub: Any) -> None:
     bound = p.add_mutually_exclusive_group()
     bound.add_argument("--faces", type=int, metavar="N", help="target triangle count")
     bound.add_argument("--mesh-error", type=float, metavar="E", default=None,
-                       help="largest mesh-surfel distance relative to the bounding-box diagonal (default 0.01)")
+                       help="largest mesh-surfel distance relative to the bounding-box diagonal (default 0.005)")
     p.add_argument("--texture-error", type=float, default=None, metavar="T",
                    help="patch error threshold, mean RGB distance (default 0.02)")
     p.add_argument("--normal-map", action=argparse.BooleanOptionalAction, default=True,

