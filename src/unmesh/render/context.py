@@ -3,7 +3,8 @@
 A simulation image needs what the objects act against: the floor they bounce on (with a grid
 and a soft contact shadow, so heights and impacts can be read), the walls of a tank, a blade,
 a rod or a clamp. These are drawn exactly, by ray casting their analytic shapes per pixel, as
-two drawable kinds of :func:`unmesh.render.render` (:mod:`unmesh.render.drawables`):
+two drawable kinds of :func:`unmesh.render.render` (:mod:`unmesh.render.drawables`), registered
+with the built-in kinds by :mod:`unmesh.render.pipeline`:
 
 ``"context"`` (stage ``"opaque"``, order 20)
     Objects with ``opacity == 1``: z-buffered like meshes, so they occlude and are occluded
@@ -38,10 +39,11 @@ import numpy as np
 from unmesh._validate import as_points
 from unmesh.errors import InputError
 from unmesh.render.camera import Camera
-from unmesh.render.drawables import DrawContext, register_drawable
+from unmesh.render.drawables import DrawContext
 from unmesh.render.shading import GBuffer, background_color
 
-__all__ = ["Box", "Floor", "Polygon", "context_hits"]
+__all__ = ["Box", "Floor", "Polygon", "context_hits", "draw_opaque", "draw_translucent", "is_opaque_context",
+           "is_translucent_context"]
 
 
 def _rgb(value: Any, name: str) -> np.ndarray:
@@ -417,7 +419,7 @@ def context_hits(obj: ContextObject, camera: Camera) -> tuple[np.ndarray, np.nda
     return depth, normal, albedo, line
 
 
-def _draw_opaque(gbuffer: GBuffer, objects: list[ContextObject], context: DrawContext) -> None:
+def draw_opaque(gbuffer: GBuffer, objects: list[ContextObject], context: DrawContext) -> None:
     for obj in objects:
         depth, normal, albedo, _ = context_hits(obj, context.camera)
         near = depth < gbuffer.depth
@@ -428,7 +430,7 @@ def _draw_opaque(gbuffer: GBuffer, objects: list[ContextObject], context: DrawCo
         gbuffer.weight[near] = 1.0
 
 
-def _draw_translucent(gbuffer: GBuffer, objects: list[ContextObject], context: DrawContext) -> None:
+def draw_translucent(gbuffer: GBuffer, objects: list[ContextObject], context: DrawContext) -> None:
     bg = background_color(context.options.background)
     hits = [(obj, *context_hits(obj, context.camera)) for obj in objects]
     # far to near (by the median depth of each object's pixels), so nearer glass tints last
@@ -445,13 +447,10 @@ def _draw_translucent(gbuffer: GBuffer, objects: list[ContextObject], context: D
         gbuffer.weight[empty] = 1.0
 
 
-def _is_opaque_context(obj: Any) -> bool:
+def is_opaque_context(obj: Any) -> bool:
     return isinstance(obj, Floor | Box | Polygon) and obj.opacity >= 1.0
 
 
-def _is_translucent_context(obj: Any) -> bool:
+def is_translucent_context(obj: Any) -> bool:
     return isinstance(obj, Floor | Box | Polygon) and obj.opacity < 1.0
 
-
-register_drawable("context", _is_opaque_context, _draw_opaque, stage="opaque", order=20)
-register_drawable("translucent", _is_translucent_context, _draw_translucent, stage="splat", order=100)
