@@ -43,7 +43,7 @@ from unmesh.render.drawables import DrawContext
 from unmesh.render.shading import GBuffer, background_color
 
 __all__ = ["Box", "Floor", "Polygon", "context_hits", "draw_opaque", "draw_translucent", "is_opaque_context",
-           "is_translucent_context"]
+           "is_translucent_context", "open_box"]
 
 
 def _rgb(value: Any, name: str) -> np.ndarray:
@@ -334,7 +334,7 @@ def _plane_hit(origins: np.ndarray, directions: np.ndarray, point: np.ndarray,
 
 def _grid_lines(u: np.ndarray, hit: np.ndarray, spacing: float) -> np.ndarray:
     """Coverage (H,W) in [0, 1] of lines one pixel wide at multiples of ``spacing`` along ``u``,
-    box-filtered by the pixel footprint and faded out where the lines would be under 6 pixels apart."""
+    box-filtered by the pixel footprint and faded out where the lines would be under 12 pixels apart."""
     s = np.where(hit, u / spacing, np.nan)
     with np.errstate(invalid="ignore"):
         gy, gx = np.gradient(s) if min(s.shape) > 1 else (np.zeros_like(s), np.zeros_like(s))
@@ -343,7 +343,7 @@ def _grid_lines(u: np.ndarray, hit: np.ndarray, spacing: float) -> np.ndarray:
     fw = np.where(np.isnan(fw), np.nanmedian(fw) if np.isfinite(fw).any() else 1.0, fw)
     dist = np.abs(s - np.round(s))  # in grid units
     line = np.clip(1.0 - dist / np.maximum(fw, 1e-12) + 0.5, 0.0, 1.0) * np.clip(1.0 - fw, 0.0, 1.0)
-    fade = np.clip((1.0 / 6.0 - fw) / (1.0 / 12.0), 0.0, 1.0)
+    fade = np.clip((1.0 / 12.0 - fw) / (1.0 / 24.0), 0.0, 1.0)
     return np.where(hit, np.nan_to_num(line * fade), 0.0)
 
 
@@ -454,3 +454,25 @@ def is_opaque_context(obj: Any) -> bool:
 def is_translucent_context(obj: Any) -> bool:
     return isinstance(obj, Floor | Box | Polygon) and obj.opacity < 1.0
 
+
+
+def open_box(lo: Any, hi: Any, color: Any = (0.70, 0.80, 0.95), opacity: float = 0.15,
+             edge: float = 1.0) -> list[Polygon]:
+    """The four side walls (x and z faces) of the box ``lo <= x <= hi``, open at the top and the
+    bottom: a tank standing on a :class:`Floor`. Translucent by default.
+
+    Example
+    -------
+    >>> walls = open_box((0, 0, 0), (1, 0.5, 0.2))
+    >>> len(walls), walls[0].opacity
+    (4, 0.15)
+    """
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    faces = [[(x0, y0, z0), (x0, y1, z0), (x0, y1, z1), (x0, y0, z1)],
+             [(x1, y0, z0), (x1, y0, z1), (x1, y1, z1), (x1, y1, z0)],
+             [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)],
+             [(x0, y0, z1), (x0, y1, z1), (x1, y1, z1), (x1, y0, z1)]]
+    return [Polygon(f, color=color, opacity=opacity, edge=edge) for f in faces]
