@@ -38,6 +38,23 @@ def _frames(out: Path) -> list[Path]:
     return sorted((out / "frames").glob("frame_*.ply"))
 
 
+_OBJECT_COLORS = np.array([[0.85, 0.30, 0.25], [0.25, 0.50, 0.85], [0.35, 0.70, 0.35], [0.90, 0.70, 0.25],
+                           [0.60, 0.40, 0.75], [0.30, 0.70, 0.70], [0.85, 0.50, 0.65], [0.55, 0.55, 0.50]])
+
+
+def _surface_meshes(out: Path, frame: int) -> list[Any]:
+    """The skinned meshes (8.38) of ``frame`` in ``OUTDIR/surfaces`` (``<object>_NNNNN.ply``), one
+    colour per object (in name order), or [] when the run wrote none."""
+    from unmesh import io
+
+    files = sorted((out / "surfaces").glob(f"*_{frame:05d}.ply"))
+    meshes = []
+    for k, f in enumerate(files):
+        m = io.load(f)
+        meshes.append(m.replace(vertex_colors=np.tile(_OBJECT_COLORS[k % len(_OBJECT_COLORS)], (len(m.vertices), 1))))
+    return meshes
+
+
 def _context(scene: str, dim: int, lo: np.ndarray, hi: np.ndarray) -> tuple[list[Any], np.ndarray]:
     """The floor and walls of a shipped scene's ``[[boundaries]]`` (drawing context only) and the
     points (M,3) the camera must keep in view besides the particles."""
@@ -79,8 +96,10 @@ def _context(scene: str, dim: int, lo: np.ndarray, hi: np.ndarray) -> tuple[list
 
 
 def _render(ctx: ExampleContext, out: Path, name: str, caption: str, color_by: str, dim: int,
-            color_range: Any = None, stills: int = 4, direction: Any = (0.35, 0.45, 1.0)) -> None:
-    """Video of all frames and a strip of stills (same camera), with the scene's floor and walls."""
+            color_range: Any = None, stills: int = 4, direction: Any = (0.35, 0.45, 1.0),
+            surfaces: bool = False) -> None:
+    """Video of all frames and a strip of stills (same camera), with the scene's floor and walls;
+    ``surfaces`` draws the objects' skinned meshes (``OUTDIR/surfaces``) instead of the particles."""
     from unmesh import io
     from unmesh.render import Camera, render, render_sequence, save_image
     from unmesh.render.context import Floor
@@ -104,7 +123,7 @@ def _render(ctx: ExampleContext, out: Path, name: str, caption: str, color_by: s
         flo, fhi = framed.min(axis=0), framed.max(axis=0)
         cw, ch = float(fhi[0] - flo[0]), float(fhi[1] - flo[1])
         size = max(1.1 * ch, 1.1 * cw / 0.8 * height / width) + 1e-6
-        centre = np.array([flo[0] - 0.05 * cw + 0.5 * size * width / height, 0.5 * (flo[1] + fhi[1]), 0.0])
+        centre = np.array([0.5 * (flo[0] + fhi[0]) + 0.1 * size * width / height, 0.5 * (flo[1] + fhi[1]), 0.0])
         cam = Camera(centre + np.array([0.0, 0.0, 3.0 * size]), centre, width=width, height=height, ortho=size)
     else:
         cam = Camera.fit(framed, width, height, direction=direction, margin=1.3)
@@ -113,19 +132,41 @@ def _render(ctx: ExampleContext, out: Path, name: str, caption: str, color_by: s
         return [c.with_casters(p.positions[:: max(1, len(p) // 20000)]) if isinstance(c, Floor) else c
                 for c in context]
 
-    # the video's floors cast no shadow (fixed context, drawn once); the stills get the shadow
-    video = render_sequence(out, ctx.path(f"{name}.mp4"), camera=cam, fps=30, progress=False, color_by=color_by,
-                            color_range=color_range, legend=True, context=context)
-    ctx.video(video, caption)
     picks = [frames[round(k)] for k in np.linspace(0, len(frames) - 1, stills)]
     scam = cam.resized(*((320, 240) if ctx.quick else (480, 360)))
-    images = []
-    for path in picks:
-        p = io.load(path)
-        images.append(render([p, *with_shadow(p)], scam, color_by=color_by, color_range=color_range,
-                             supersample=2).color)
+    if surfaces and _surface_meshes(out, 0):
+        # the skinned meshes of the objects (8.38) instead of their particles, one colour each
+        from unmesh.render import write_video
+
+        def scene(k: int) -> list[Any]:
+            meshes = _surface_meshes(out, k)
+            return [*meshes, *with_shadow(_Points(np.concatenate([m.vertices for m in meshes])))]
+
+        video = write_video((render(scene(k), cam).color for k in range(len(frames))), ctx.path(f"{name}.mp4"), fps=30)
+        ctx.video(video, caption)
+        images = [render(scene(int(p.stem[-5:])), scam, supersample=2).color for p in picks]
+    else:
+        # the video's floors cast no shadow (fixed context, drawn once); the stills get the shadow
+        video = render_sequence(out, ctx.path(f"{name}.mp4"), camera=cam, fps=30, progress=False, color_by=color_by,
+                                color_range=color_range, legend=True, context=context)
+        ctx.video(video, caption)
+        images = []
+        for path in picks:
+            p = io.load(path)
+            images.append(render([p, *with_shadow(p)], scam, color_by=color_by, color_range=color_range,
+                                 supersample=2).color)
     strip = np.concatenate(images, axis=1)
     ctx.image(save_image(ctx.path(f"{name}_stills.png"), strip), f"{caption} — frames {', '.join(p.stem[-3:] for p in picks)}")
+
+
+class _Points:
+    """Shadow casters: anything with ``positions`` (N,3)."""
+
+    def __init__(self, positions: np.ndarray) -> None:
+        self.positions = positions
+
+    def __len__(self) -> int:
+        return len(self.positions)
 
 
 def _momentum_metrics(ctx: ExampleContext, summary: dict[str, Any], external: bool = True) -> None:
@@ -335,7 +376,8 @@ def freezing(ctx: ExampleContext) -> None:
 def dice(ctx: ExampleContext) -> None:
     """Six stiff elastic dice collide and tumble; collisions are the repulsive part of the SPH forces (8.37)."""
     ov = {"simulation.spacing": 0.05 if ctx.quick else 0.035, "simulation.duration": 0.3 if ctx.quick else 2.5,
-          "output.skin": not ctx.quick}
+          "output.skin": True}
     out, summary = run_shipped_scene(ctx, "dice", ov)
-    _render(ctx, out, "dice", "dice (colour: object)", "object", 3)
+    _render(ctx, out, "dice", "dice: the skinned cube meshes (8.38) moved by their particles, one colour per die",
+            "object", 3, surfaces=True)
     _momentum_metrics(ctx, summary)
