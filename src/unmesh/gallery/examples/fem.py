@@ -111,7 +111,7 @@ def _blade_polygons(blades: list[Any], t: float, dt: float) -> list[Any]:
             continue
         a, c = b.blade(t)
         back = b.path[0].mean(axis=0) - b.path[-1].mean(axis=0)
-        back *= 0.35 * np.linalg.norm(c - a) / max(np.linalg.norm(back), 1e-300)
+        back *= 0.15 * np.linalg.norm(c - a) / max(np.linalg.norm(back), 1e-300)
         out.append(Polygon([a, c, c + back, a + back], color=(0.55, 0.62, 0.75), opacity=0.35, edge=1.5))
     return out
 
