@@ -436,15 +436,18 @@ def draw_translucent(gbuffer: GBuffer, objects: list[ContextObject], context: Dr
     # far to near (by the median depth of each object's pixels), so nearer glass tints last
     hits.sort(key=lambda h: -float(np.median(h[1][np.isfinite(h[1])])) if np.isfinite(h[1]).any() else 0.0)
     for obj, depth, _normal, albedo, line in hits:
-        front = depth < gbuffer.depth
-        a = np.clip(obj.opacity + (1.0 - obj.opacity) * 0.6 * line, 0.0, 1.0)[..., None]
+        front = depth < gbuffer.depth  # only the object's own pixels (inf elsewhere) are touched
         empty = front & ~gbuffer.coverage
-        gbuffer.albedo[front] = ((1.0 - a) * gbuffer.albedo + a * albedo)[front]
-        gbuffer.albedo[empty] = ((1.0 - a) * bg + a * albedo)[empty]
-        gbuffer.normal[empty] = _surface_hits(obj, context.camera)[4][empty]  # lit head-on: an even tint
-        gbuffer.depth[empty] = depth[empty]
-        gbuffer.coverage[empty] = True
-        gbuffer.weight[empty] = 1.0
+        over = np.nonzero(front & gbuffer.coverage)
+        a = np.clip(obj.opacity + (1.0 - obj.opacity) * 0.6 * line[over], 0.0, 1.0)[:, None]
+        gbuffer.albedo[over] = (1.0 - a) * gbuffer.albedo[over] + a * albedo[over]
+        bare = np.nonzero(empty)
+        a = np.clip(obj.opacity + (1.0 - obj.opacity) * 0.6 * line[bare], 0.0, 1.0)[:, None]
+        gbuffer.albedo[bare] = (1.0 - a) * bg + a * albedo[bare]
+        gbuffer.normal[bare] = _surface_hits(obj, context.camera)[4][bare]  # lit head-on: an even tint
+        gbuffer.depth[bare] = depth[bare]
+        gbuffer.coverage[bare] = True
+        gbuffer.weight[bare] = 1.0
 
 
 def is_opaque_context(obj: Any) -> bool:
