@@ -54,6 +54,9 @@ Helpers (stable names, used by other capabilities)
     with one fixed camera framing all frames.
 ``turntable(objects, n, path=None, ...)``
     An orbit of ``n`` frames (list of images, or a written video).
+``Floor(point, normal, extent, grid, casters)``, ``Box(lo, hi, opacity)``, ``Polygon(vertices, opacity)``
+    Context geometry (:mod:`unmesh.render.context`): floors with a grid and a contact shadow,
+    walls, tanks, blades; opaque or translucent.
 ``colormap(name)``, ``map_colors``, ``draw_legend``: colour maps and colour bars.
 
 Example
@@ -71,6 +74,7 @@ from typing import Any
 
 from unmesh.render.camera import Camera
 from unmesh.render.colormap import COLORMAPS, colormap, draw_legend, map_colors
+from unmesh.render.context import Box, Floor, Polygon
 from unmesh.render.drawables import (
     DrawableKind,
     DrawContext,
@@ -88,6 +92,7 @@ from unmesh.render.splat import ClipPlanes, ClipSurfels, ClipTree, SplatOptions,
 __all__ = [
     "COLORMAPS",
     "DEFAULT_LIGHTS",
+    "Box",
     "Camera",
     "ClipPlanes",
     "ClipSurfels",
@@ -96,9 +101,11 @@ __all__ = [
     "DrawContext",
     "DrawList",
     "DrawableKind",
+    "Floor",
     "GBuffer",
     "Light",
     "ParticleOptions",
+    "Polygon",
     "RenderOptions",
     "RenderResult",
     "Shading",

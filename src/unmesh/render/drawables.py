@@ -14,7 +14,9 @@ the G-buffer, and its place in the order of work. Rendering is two stages:
 
 The built-in kinds are registered by :mod:`unmesh.render.pipeline`: ``"surfels"``
 (:class:`~unmesh.SurfelCloud`, stage ``"splat"``), ``"meshes"`` (:class:`~unmesh.TriangleMesh`,
-opaque, order 0) and ``"particles"`` (:class:`~unmesh.Particles`, opaque, order 10). A new
+opaque, order 0), ``"particles"`` (:class:`~unmesh.Particles`, opaque, order 10) and the context
+geometry of :mod:`unmesh.render.context` (``"context"``, opaque, order 20; ``"translucent"``,
+splat stage, order 100). A new
 capability adds its kind with :func:`register_drawable`, without editing ``render()``.
 
 A draw function is ``draw(gbuffer, objects, context) -> GBuffer | None`` with ``objects`` the

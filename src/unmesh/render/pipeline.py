@@ -42,6 +42,7 @@ from unmesh.meshes import TriangleMesh
 from unmesh.particles import Particles
 from unmesh.render.camera import Camera
 from unmesh.render.colormap import attribute_values, draw_legend, map_colors, value_range
+from unmesh.render.context import draw_opaque, draw_translucent, is_opaque_context, is_translucent_context
 from unmesh.render.drawables import DrawContext, draw_order, drawable_kind, drawable_kinds, register_drawable
 from unmesh.render.options import DEFAULT_BACKGROUND, METHODS, RenderOptions
 from unmesh.render.particles import draw_particles
@@ -341,6 +342,8 @@ register_drawable("surfels", SurfelCloud, _draw_surfels, stage="splat", order=0,
                   clip=_discontinuities)
 register_drawable("meshes", TriangleMesh, _draw_meshes, stage="opaque", order=0)
 register_drawable("particles", Particles, _draw_particles, stage="opaque", order=10)
+register_drawable("context", is_opaque_context, draw_opaque, stage="opaque", order=20)
+register_drawable("translucent", is_translucent_context, draw_translucent, stage="splat", order=100)
 
 
 # -- render ---------------------------------------------------------------------------------------

@@ -326,6 +326,7 @@ def render_sequence(
     color_range: Sequence[float] | None = None,
     particle_radius: float | None = None,
     cutaway: bool = True,
+    context: Sequence[Any] = (),
     **render_options: Any,
 ) -> Path:
     """Render a simulation's frames into a video (MP4 or GIF) or a directory of PNGs.
@@ -351,6 +352,9 @@ def render_sequence(
         Drawing radius of particles without stored radii (default: estimated on the first frame).
     cutaway : bool
         Drop static particles (boundaries) that lie in front of the moving content.
+    context : sequence
+        Objects drawn in every frame and not framed by the default camera, e.g. the floor and
+        walls of :mod:`unmesh.render.context`.
     **render_options
         Passed to :func:`unmesh.render.render` (``method``, ``shading``, ``background``, ``legend``...).
 
@@ -373,7 +377,7 @@ def render_sequence(
     if fps is None:
         fps = sequence_fps(frames) or 30.0
     plan = sequence_plan(frames, camera, width, height, color_by, color_range, particle_radius, cutaway,
-                         **render_options)
+                         context=context, **render_options)
     images = (render_frame(plan, i) for i in tqdm(range(len(plan.groups)), desc="render", unit="frame",
                                                   disable=not progress))
     return write_frames(images, out_path, fps)
@@ -418,7 +422,7 @@ class SequencePlan:
 def sequence_plan(frames: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], camera: Camera | None = None,
                   width: int = 640, height: int = 480, color_by: str | None = None,
                   color_range: Sequence[float] | None = None, particle_radius: float | None = None,
-                  cutaway: bool = True, **render_options: Any) -> SequencePlan:
+                  cutaway: bool = True, context: Sequence[Any] = (), **render_options: Any) -> SequencePlan:
     """The camera, colour range, particle radius and static geometry of a frame sequence.
 
     Parameters are those of :func:`render_sequence` (the same defaults
@@ -471,7 +475,7 @@ def sequence_plan(frames: str | os.PathLike[str] | Sequence[str | os.PathLike[st
         sub = p.subset(keep)
         col = np.tile(STATIC_COLOR, (len(sub), 1))
         static_particles.append(sub.replace(attributes={**sub.attributes, "colors": col}))
-    static_objects = (*static.clouds, *static.meshes, *static_particles)
+    static_objects = (*static.clouds, *static.meshes, *static_particles, *context)
     crange = None if color_range is None else (float(color_range[0]), float(color_range[1]))
     return SequencePlan(tuple(tuple(g) for g in groups), static_objects, cam, color_by, crange,
                         particle_radius, dict(render_options))

@@ -3,8 +3,8 @@
 ``fem-single-element`` (Fig. 9.3), ``fem-random-planes-cube`` (Fig. 9.4),
 ``fem-progressive-slicing`` (Fig. 9.9), ``fem-blob-slicing`` (Fig. 9.10) run the shipped
 scene files; ``fem-accuracy`` shows the patch test with and without the consistency
-correction and the cantilever convergence. Surfaces are drawn faceted, every element
-in its own colour, so the element tessellation is visible.
+correction and the cantilever convergence. Surfaces are drawn faceted, every connected piece
+in its own colour, on a floor with a grid and their contact shadow; blades are drawn translucent.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 from unmesh.gallery.registry import ExampleContext, example
 
-__all__ = ["element_colored_surface", "run_shipped_scene"]
+__all__ = ["element_colored_surface", "piece_colored_surface", "pieces", "run_shipped_scene"]
 
 _PALETTE = np.array([[0.85, 0.45, 0.30], [0.35, 0.60, 0.85], [0.55, 0.78, 0.40], [0.90, 0.75, 0.35],
                      [0.70, 0.50, 0.80], [0.40, 0.75, 0.75], [0.85, 0.55, 0.65], [0.60, 0.60, 0.55]])
@@ -42,6 +42,80 @@ def element_colored_surface(mesh: Any, displacement: np.ndarray) -> Any:
     return TriangleMesh(v, np.arange(len(v)).reshape(-1, 3), vertex_colors=col)
 
 
+def pieces(mesh: Any) -> np.ndarray:
+    """Connected piece (E,) int64 of every element: elements sharing a node are in one piece.
+    Pieces are numbered by the x coordinate of their centre (left to right), so a slice keeps
+    its number (and colour) from frame to frame.
+
+    Example
+    -------
+    >>> from unmesh.fem import hex_grid
+    >>> pieces(hex_grid((2, 1, 1))).tolist()
+    [0, 0]
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    off, nodes = mesh.element_nodes()
+    rows = np.repeat(np.arange(mesh.n_elements), np.diff(off))
+    graph = coo_matrix((np.ones(len(nodes)), (rows, nodes + mesh.n_elements)),
+                       shape=(mesh.n_elements + mesh.n_nodes,) * 2)
+    _, label = connected_components(graph, directed=False)
+    label = label[: mesh.n_elements]
+    _, label = np.unique(label, return_inverse=True)
+    cx = np.bincount(label, weights=mesh.element_centers()[:, 0]) / np.bincount(label)
+    rank = np.empty(len(cx), dtype=np.int64)
+    rank[np.argsort(cx, kind="stable")] = np.arange(len(cx))
+    return rank[label]
+
+
+def piece_colored_surface(mesh: Any, displacement: np.ndarray) -> Any:
+    """Faceted boundary TriangleMesh coloured by connected piece (:func:`pieces`), not by element.
+
+    Example
+    -------
+    >>> from unmesh.fem import hex_grid
+    >>> m = hex_grid((2, 1, 1))
+    >>> len(np.unique(piece_colored_surface(m, np.zeros((m.n_nodes, 3))).vertex_colors, axis=0))
+    1
+    """
+    from unmesh.meshes import TriangleMesh
+
+    tris, elems = mesh.boundary_triangles(return_elements=True)
+    x = mesh.points + displacement
+    v = x[tris].reshape(-1, 3)
+    col = np.repeat(_PALETTE[pieces(mesh)[elems] % len(_PALETTE)], 3, axis=0)
+    return TriangleMesh(v, np.arange(len(v)).reshape(-1, 3), vertex_colors=col)
+
+
+def _blades(scene: str) -> list[Any]:
+    """The blade sweeps (:class:`unmesh.fem.events.BladeEvent`) of a shipped scene."""
+    import tomllib
+
+    from unmesh import scenes
+    from unmesh.fem.events import BladeEvent
+
+    table = tomllib.loads(scenes.path(f"fem/{scene}.toml").read_text())
+    return [BladeEvent(float(c["start"]), float(c["stop"]), np.asarray(c["path"], dtype=np.float64))
+            for c in table.get("cuts", []) if c.get("type") == "blade"]
+
+
+def _blade_polygons(blades: list[Any], t: float, dt: float) -> list[Any]:
+    """A translucent polygon per blade cutting at time ``t`` (from just before its start to just
+    after its stop): the cutting edge and the blade's body behind it (along the path, back)."""
+    from unmesh.render import Polygon
+
+    out = []
+    for b in blades:
+        if not b.start - 2 * dt <= t <= b.stop + 2 * dt:
+            continue
+        a, c = b.blade(t)
+        back = b.path[0].mean(axis=0) - b.path[-1].mean(axis=0)
+        back *= 0.15 * np.linalg.norm(c - a) / max(np.linalg.norm(back), 1e-300)
+        out.append(Polygon([a, c, c + back, a + back], color=(0.55, 0.62, 0.75), opacity=0.35, edge=1.5))
+    return out
+
+
 def run_shipped_scene(ctx: ExampleContext, name: str, overrides: dict[str, Any]) -> tuple[Path, dict[str, Any]]:
     """Run ``examples/fem/<name>.toml`` into ``ctx.outdir/<name>``; returns (outdir, summary).
 
@@ -56,26 +130,39 @@ def run_shipped_scene(ctx: ExampleContext, name: str, overrides: dict[str, Any])
 
 
 def _render_run(ctx: ExampleContext, out: Path, summary: dict[str, Any], eye: Any, target: Any, picks: list[int],
-                caption: str, size: tuple[int, int]) -> None:
+                caption: str, size: tuple[int, int], scene: str = "", by_element: bool = False) -> None:
+    """Video (at least 640x480) and a strip of stills with one camera framing the run: the pieces
+    coloured by piece, the floor with a grid and their contact shadow, the blades translucent."""
     from unmesh.fem.vtk_io import read_vtu
+    from unmesh.gallery.figures import floor_under
     from unmesh.render import Camera, render, save_image, write_video
 
     n = len(summary["frames"])
-    cam = Camera(eye, target, width=size[0], height=size[1], fov=40)
+    times = [f["time"] for f in summary["frames"]]
+    dt = float(np.median(np.diff(times))) if n > 1 else 0.0
+    blades = _blades(scene) if scene else []
 
-    from unmesh.meshes import TriangleMesh
-
-    ground = TriangleMesh([[-3, 0, -3], [3, 0, -3], [3, 0, 3], [-3, 0, 3]], [[0, 2, 1], [0, 3, 2]],
-                          vertex_colors=np.full((4, 3), 0.82))
-
-    def frame(k: int) -> np.ndarray:
+    def surface(k: int) -> Any:
         mesh, pdata = read_vtu(out / "frames" / f"mesh_{k:05d}.vtu", check=False)
-        return render([ground, element_colored_surface(mesh, pdata["displacement"])], cam).color
+        paint = element_colored_surface if by_element else piece_colored_surface
+        return paint(mesh, pdata["displacement"])
 
-    write_video((frame(k) for k in range(n)), out / "movie.mp4", fps=min(30.0, n / max(summary["frames"][-1]["time"],
-                                                                                      1e-9)))
+    sample = [surface(k).vertices for k in np.linspace(0, n - 1, 6).astype(int)]
+    pts = np.concatenate(sample)
+    framed = np.concatenate([pts, pts * [1.0, 0.0, 1.0]])
+    direction = np.asarray(eye, dtype=np.float64) - np.asarray(target, dtype=np.float64)
+    ground = floor_under(sample[0], extent=5.0)
+
+    def frame(k: int, cam: Any, supersample: int = 1) -> np.ndarray:
+        surf = surface(k)
+        objs = [surf, ground.with_casters(surf.vertices), *_blade_polygons(blades, times[k], dt)]
+        return render(objs, cam, supersample=supersample).color
+
+    vcam = Camera.fit(framed, max(640, size[0]), max(480, size[1]), direction=direction, margin=1.1)
+    write_video((frame(k, vcam) for k in range(n)), out / "movie.mp4", fps=min(30.0, n / max(times[-1], 1e-9)))
     ctx.video(out / "movie.mp4", caption)
-    strip = np.concatenate([frame(min(k, n - 1)) for k in picks], axis=1)
+    cam = vcam.resized(*size)
+    strip = np.concatenate([frame(min(k, n - 1), cam, 2) for k in picks], axis=1)
     save_image(out / "frames.png", strip)
     ctx.image(out / "frames.png", f"{caption}: frames {', '.join(str(min(k, n - 1)) for k in picks)}")
     # keep the shown frames only (the gallery's size); mesh.pvd lists what is left
@@ -119,7 +206,8 @@ def random_planes(ctx: ExampleContext) -> None:
     ctx.metric("volume after the splits", round(last["volume"], 12), "(1 before)")
     ctx.metric("solve time per frame (median)", round(_per_frame(s), 4), "s (thesis: 0.22 s on 2007 hardware)")
     size = (240, 180) if ctx.quick else (480, 360)
-    _render_run(ctx, out, s, (2.0, 1.5, 2.6), (0.0, 0.45, 0.0), [0, 9, 13, 18, 30, 74], "random planes", size)
+    _render_run(ctx, out, s, (2.0, 1.5, 2.6), (0.0, 0.45, 0.0), [0, 9, 13, 18, 30, 74], "random planes", size,
+                by_element=True)
 
 
 @example("fem-progressive-slicing", "Progressive slicing of a 3×3×3 hexahedral block (Fig. 9.9)", section="FEM")
@@ -137,7 +225,8 @@ def progressive(ctx: ExampleContext) -> None:
     ctx.metric("time per frame (solve + re-integration + cut, median)", round(_per_frame(s), 3),
                "s (thesis: 0.8 s, 0.04 s without re-integration)")
     size = (240, 180) if ctx.quick else (480, 360)
-    _render_run(ctx, out, s, (1.7, 1.6, 2.4), (0.0, 0.4, 0.0), [0, 12, 25, 40, 55, 75], "progressive slicing", size)
+    _render_run(ctx, out, s, (1.7, 1.6, 2.4), (0.0, 0.4, 0.0), [0, 12, 25, 40, 55, 75], "progressive slicing", size,
+                "progressive_slicing")
 
 
 @example("fem-blob-slicing", "Slicing a tetrahedralised organic blob (Fig. 9.10)", section="FEM")
@@ -153,7 +242,8 @@ def blob(ctx: ExampleContext) -> None:
     ctx.metric("time per frame (solve + re-integration + cut, median)", round(_per_frame(s), 3), "s (thesis: 6.08 s)")
     ctx.metric("cut steps skipped as degenerate", sum(f.get("cuts_skipped", 0) for f in s["frames"]))
     size = (240, 180) if ctx.quick else (480, 360)
-    _render_run(ctx, out, s, (0.9, 1.5, 2.8), (0.0, 0.4, 0.0), [0, 15, 30, 45, 60, 75], "blob slicing", size)
+    _render_run(ctx, out, s, (0.9, 1.5, 2.8), (0.0, 0.4, 0.0), [0, 15, 30, 45, 60, 75], "blob slicing", size,
+                "blob_slicing")
 
 
 @example("fem-accuracy", "Patch test and cantilever convergence", section="FEM")

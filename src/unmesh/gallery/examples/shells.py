@@ -32,14 +32,17 @@ def run_shell_scene(ctx: ExampleContext, name: str, quick: dict[str, Any], durat
 
 
 def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path | None = None, size: int = 320,
-                  fps: float = 25.0) -> tuple[list[np.ndarray], Path | None]:
+                  fps: float = 25.0, floor: bool = False) -> tuple[list[np.ndarray], Path | None]:
     """Render selected frames (stills, anti-aliased by 2x2 supersampling) and optionally every
-    frame (video) with one camera.
+    frame (video, at least 640x480) with one camera.
 
     The frames keep their discontinuity surfels (``SurfelCloud.surfel_kinds``): the renderer
     passes them to the splatter as clip information (section 4.3) and draws no colour for them.
+    ``floor`` draws the floor ``y = 0`` of the scenes' plane colliders with a grid and the
+    contact shadow of the shell (:class:`unmesh.render.Floor`).
     """
     from unmesh import io
+    from unmesh.gallery.figures import floor_under
     from unmesh.render import Camera, render, write_video
 
     files = sorted((outdir / "frames").glob("frame_*.ply"))
@@ -52,11 +55,22 @@ def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path |
         return clouds[i]
 
     pts = np.concatenate([load(i).visible().positions[::7] for i in np.linspace(0, len(files) - 1, 6).astype(int)])
-    cam = Camera.fit(pts, size, size, direction=direction)
-    stills = [render(load(min(i, len(files) - 1)), cam, supersample=2).color for i in frames]  # anti-aliased
+    ground = floor_under(pts) if floor else None
+    framed = np.concatenate([pts, pts * [1.0, 0.0, 1.0]]) if floor else pts  # keep the floor contact in view
+
+    def scene(i: int) -> list[Any]:
+        cloud = load(i)
+        if ground is None:
+            return [cloud]
+        vis = cloud.visible().positions
+        return [cloud, ground.with_casters(vis[:: max(1, len(vis) // 20000)])]
+
+    cam = Camera.fit(framed, size, size, direction=direction)
+    stills = [render(scene(min(i, len(files) - 1)), cam, supersample=2).color for i in frames]  # anti-aliased
     written = None
     if video is not None:
-        written = write_video((render(load(i), cam).color for i in range(len(files))), video, fps=fps)
+        vcam = Camera.fit(framed, 640, 480, direction=direction)
+        written = write_video((render(scene(i), vcam).color for i in range(len(files))), video, fps=fps)
     return stills, written
 
 
@@ -154,7 +168,7 @@ def elastic_drop(ctx: ExampleContext) -> None:
     g = [f["gravity_energy"] for f in s["frames"]]
     hit = int(np.argmin(g[: last // 2 + 1]))
     picks = [0, hit, min(hit + 5, last), last]
-    stills, video = render_frames(out, picks, (0.0, 0.35, 1.0), ctx.path("elastic_drop.mp4"))
+    stills, video = render_frames(out, picks, (0.0, 0.35, 1.0), ctx.path("elastic_drop.mp4"), floor=True)
     _strip(ctx, "elastic_drop", stills, "before, at and after the impact, and the rest state")
     ctx.video(video, "the dome bouncing")
     ctx.metric("rise of the centre of mass after the impact (bounce)",
@@ -172,7 +186,7 @@ def plastic_drop(ctx: ExampleContext) -> None:
     s = _summary(out)
     last = len(s["frames"]) - 1
     picks = [0, last // 4, last // 2, last]
-    stills, video = render_frames(out, picks, (0.4, 0.3, 1.0), ctx.path("plastic_drop.mp4"))
+    stills, video = render_frames(out, picks, (0.4, 0.3, 1.0), ctx.path("plastic_drop.mp4"), floor=True)
     _strip(ctx, "plastic_drop", stills, "the blob denting on impact; the dent stays")
     ctx.video(video, "plastic impact")
     h0 = np.ptp(_nodes(out, 0).positions[:, 1])

@@ -38,37 +38,135 @@ def _frames(out: Path) -> list[Path]:
     return sorted((out / "frames").glob("frame_*.ply"))
 
 
+_OBJECT_COLORS = np.array([[0.85, 0.30, 0.25], [0.25, 0.50, 0.85], [0.35, 0.70, 0.35], [0.90, 0.70, 0.25],
+                           [0.60, 0.40, 0.75], [0.30, 0.70, 0.70], [0.85, 0.50, 0.65], [0.55, 0.55, 0.50]])
+
+
+def _surface_meshes(out: Path, frame: int) -> list[Any]:
+    """The skinned meshes (8.38) of ``frame`` in ``OUTDIR/surfaces`` (``<object>_NNNNN.ply``), one
+    colour per object (in name order), or [] when the run wrote none."""
+    from unmesh import io
+
+    files = sorted((out / "surfaces").glob(f"*_{frame:05d}.ply"))
+    meshes = []
+    for k, f in enumerate(files):
+        m = io.load(f)
+        meshes.append(m.replace(vertex_colors=np.tile(_OBJECT_COLORS[k % len(_OBJECT_COLORS)], (len(m.vertices), 1))))
+    return meshes
+
+
+def _context(scene: str, dim: int, lo: np.ndarray, hi: np.ndarray) -> tuple[list[Any], np.ndarray]:
+    """The floor and walls of a shipped scene's ``[[boundaries]]`` (drawing context only) and the
+    points (M,3) the camera must keep in view besides the particles."""
+    import tomllib
+
+    from unmesh import scenes
+    from unmesh.gallery.figures import floor_under
+    from unmesh.render import Box
+    from unmesh.render.context import open_box
+
+    table = tomllib.loads(scenes.path(f"sph/{scene}.toml").read_text())
+    size = float(np.max(hi - lo))
+    out: list[Any] = []
+    keep = []
+    grey = (0.62, 0.62, 0.64)
+    for b in table.get("boundaries", []):
+        if b.get("type") == "plane" and dim == 2:  # the ground under the 2D view, as a slab
+            y = float(b["point"][1])
+            t = 0.04 * size
+            out.append(Box((lo[0] - 3 * size, y - t, -t), (hi[0] + 3 * size, y, 0.0), color=grey))
+            keep.append([0.5 * (lo[0] + hi[0]), y - t, 0.0])
+        elif b.get("type") == "plane":
+            pts = np.array([lo, hi])
+            out.append(floor_under(pts, height=float(b["point"][1])))
+        elif b.get("type") == "box" and dim == 2:
+            bmin, bmax = np.asarray(b["min"], float), np.asarray(b["max"], float)
+            t = 0.04 * float(np.max(bmax - bmin))
+            out += [Box((bmin[0] - t, bmin[1] - t, -t), (bmax[0] + t, bmin[1], 0.0), color=grey),
+                    Box((bmin[0] - t, bmin[1] - t, -t), (bmin[0], bmax[1], 0.0), color=grey),
+                    Box((bmax[0], bmin[1] - t, -t), (bmax[0] + t, bmax[1], 0.0), color=grey)]
+            keep += [[bmin[0] - t, bmin[1] - t, 0.0], [bmax[0] + t, bmin[1] - t, 0.0]]
+        elif b.get("type") == "box":
+            bmin, bmax = np.asarray(b["min"], float), np.asarray(b["max"], float)
+            top = min(bmax[1], bmin[1] + 1.1 * (hi[1] - bmin[1]))  # walls up to a little above the action
+            out.append(floor_under(np.array([bmin, bmax]), height=float(bmin[1]), extent=4.0))
+            out += open_box(bmin, (bmax[0], top, bmax[2]))
+            keep += [[x, bmin[1], z] for x in (bmin[0], bmax[0]) for z in (bmin[2], bmax[2])]
+    return out, np.asarray(keep, dtype=np.float64).reshape(-1, 3)
+
+
 def _render(ctx: ExampleContext, out: Path, name: str, caption: str, color_by: str, dim: int,
-            color_range: Any = None, stills: int = 4) -> None:
-    """Video of all frames and a strip of stills (same camera)."""
+            color_range: Any = None, stills: int = 4, direction: Any = (0.35, 0.45, 1.0),
+            surfaces: bool = False) -> None:
+    """Video of all frames and a strip of stills (same camera), with the scene's floor and walls;
+    ``surfaces`` draws the objects' skinned meshes (``OUTDIR/surfaces``) instead of the particles."""
     from unmesh import io
     from unmesh.render import Camera, render, render_sequence, save_image
+    from unmesh.render.context import Floor
 
     frames = _frames(out)
     sample = [io.load(f) for f in frames[:: max(1, len(frames) // 8)]]
     pts = np.concatenate([p.positions for p in sample])
     lo = np.percentile(pts, 0.2, axis=0) if dim == 3 else pts.min(axis=0)
     hi = np.percentile(pts, 99.8, axis=0) if dim == 3 else pts.max(axis=0)
-    centre = 0.5 * (lo + hi)
-    size = float(np.max(hi - lo)) * 1.15 + 1e-6
+    context, keep = _context(name, dim, lo, hi)
     if color_range is None:
         vals = np.concatenate([np.asarray(p.attributes[color_by], dtype=np.float64) for p in sample])
         color_range = (float(np.percentile(vals, 1)), float(np.percentile(vals, 99)))
         if color_range[1] <= color_range[0]:
             color_range = (color_range[0], color_range[0] + 1.0)
-    width, height = (480, 360) if not ctx.quick else (240, 180)
+    width, height = (640, 480) if not ctx.quick else (320, 240)
+    inside = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
+    framed = np.concatenate([inside[:: max(1, len(inside) // 20000)], keep])
     if dim == 2:
+        # head-on, the content in the left 80 % of the image (the colour bar is on the right)
+        flo, fhi = framed.min(axis=0), framed.max(axis=0)
+        cw, ch = float(fhi[0] - flo[0]), float(fhi[1] - flo[1])
+        size = max(1.1 * ch, 1.1 * cw / 0.8 * height / width) + 1e-6
+        centre = np.array([0.5 * (flo[0] + fhi[0]) + 0.1 * size * width / height, 0.5 * (flo[1] + fhi[1]), 0.0])
         cam = Camera(centre + np.array([0.0, 0.0, 3.0 * size]), centre, width=width, height=height, ortho=size)
     else:
-        eye = centre + np.array([0.35, 0.45, 1.0]) * 1.6 * size
-        cam = Camera(eye, centre, width=width, height=height, fov=38)
-    video = render_sequence(out, ctx.path(f"{name}.mp4"), camera=cam, fps=30, progress=False, color_by=color_by,
-                            color_range=color_range, legend=True)
-    ctx.video(video, caption)
+        cam = Camera.fit(framed, width, height, direction=direction, margin=1.3)
+
+    def with_shadow(p: Any) -> list[Any]:
+        return [c.with_casters(p.positions[:: max(1, len(p) // 20000)]) if isinstance(c, Floor) else c
+                for c in context]
+
     picks = [frames[round(k)] for k in np.linspace(0, len(frames) - 1, stills)]
-    images = [render(io.load(p), cam, color_by=color_by, color_range=color_range).color for p in picks]
+    scam = cam.resized(*((320, 240) if ctx.quick else (480, 360)))
+    if surfaces and _surface_meshes(out, 0):
+        # the skinned meshes of the objects (8.38) instead of their particles, one colour each
+        from unmesh.render import write_video
+
+        def scene(k: int) -> list[Any]:
+            meshes = _surface_meshes(out, k)
+            return [*meshes, *with_shadow(_Points(np.concatenate([m.vertices for m in meshes])))]
+
+        video = write_video((render(scene(k), cam).color for k in range(len(frames))), ctx.path(f"{name}.mp4"), fps=30)
+        ctx.video(video, caption)
+        images = [render(scene(int(p.stem[-5:])), scam, supersample=2).color for p in picks]
+    else:
+        # the video's floors cast no shadow (fixed context, drawn once); the stills get the shadow
+        video = render_sequence(out, ctx.path(f"{name}.mp4"), camera=cam, fps=30, progress=False, color_by=color_by,
+                                color_range=color_range, legend=True, context=context)
+        ctx.video(video, caption)
+        images = []
+        for path in picks:
+            p = io.load(path)
+            images.append(render([p, *with_shadow(p)], scam, color_by=color_by, color_range=color_range,
+                                 supersample=2).color)
     strip = np.concatenate(images, axis=1)
     ctx.image(save_image(ctx.path(f"{name}_stills.png"), strip), f"{caption} — frames {', '.join(p.stem[-3:] for p in picks)}")
+
+
+class _Points:
+    """Shadow casters: anything with ``positions`` (N,3)."""
+
+    def __init__(self, positions: np.ndarray) -> None:
+        self.positions = positions
+
+    def __len__(self) -> int:
+        return len(self.positions)
 
 
 def _momentum_metrics(ctx: ExampleContext, summary: dict[str, Any], external: bool = True) -> None:
@@ -278,7 +376,8 @@ def freezing(ctx: ExampleContext) -> None:
 def dice(ctx: ExampleContext) -> None:
     """Six stiff elastic dice collide and tumble; collisions are the repulsive part of the SPH forces (8.37)."""
     ov = {"simulation.spacing": 0.05 if ctx.quick else 0.035, "simulation.duration": 0.3 if ctx.quick else 2.5,
-          "output.skin": not ctx.quick}
+          "output.skin": True}
     out, summary = run_shipped_scene(ctx, "dice", ov)
-    _render(ctx, out, "dice", "dice (colour: object)", "object", 3)
+    _render(ctx, out, "dice", "dice: the skinned cube meshes (8.38) moved by their particles, one colour per die",
+            "object", 3, surfaces=True)
     _momentum_metrics(ctx, summary)
