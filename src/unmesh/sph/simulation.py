@@ -107,6 +107,12 @@ class SPHConfig:
         ``r = d/2`` on (a fluid at rest is unaffected), outweighs the tension's pull from
         ``r ≈ 0.42 d`` inwards and is 37 times it at ``r = 0`` (``ε = 4``, ``h = 2d``), so tension
         cannot pull particles onto each other (the pairing of tensile instability). 0 switches it off.
+    contact_damping : float
+        Damping ratio ζ in [0, 1] of the contacts of solids (0: off, elastic contacts): a pair of
+        particles of different objects closer than ``d`` gets a dashpot ``2ζ√k_c`` on its normal
+        relative velocity, ``k_c = CONTACT (K_e,i + K_e,j) m_j/ρ0 W`` the stiffness of its contact
+        spring (8.37); a solid particle closer than ``d`` to a wall plane is damped by
+        ``2ζ√(CONTACT K_e)`` times its velocity (restitution and friction). Dice come to rest.
     lattice : {"closest", "cubic"}
         The lattice the objects are sampled on (:mod:`unmesh.sph.sampling`): it sets the
         particle mass (density exactly ``ρ0`` on that lattice, eq. 8.4) and the gradient
@@ -132,6 +138,7 @@ class SPHConfig:
     gradient_correction: bool = True
     lattice: str = "closest"
     tensile_correction: float = 4.0
+    contact_damping: float = 0.0
 
     def __post_init__(self) -> None:
         if self.dim not in (2, 3):
@@ -144,6 +151,8 @@ class SPHConfig:
                 raise InputError(f"{key}: expected a positive number, got {v!r}")
         if not (isinstance(self.tensile_correction, int | float) and 0 <= self.tensile_correction < math.inf):
             raise InputError(f"tensile_correction: expected a number >= 0, got {self.tensile_correction!r}")
+        if not (isinstance(self.contact_damping, int | float) and 0 <= self.contact_damping <= 1):
+            raise InputError(f"contact_damping: expected a number in [0, 1], got {self.contact_damping!r}")
         if self.smoothing <= 1.0:
             raise InputError(f"smoothing: expected h/d > 1, got {self.smoothing}")
         if self.cfl is not None and not 0 < self.cfl <= 1:
@@ -534,7 +543,7 @@ class SPHSimulation(Simulation):
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
                      self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.bnoslip,
-                     self.grad_scale, self.config.tensile_correction, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
+                     self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
         if self.elastic:
             # the new lattice state (in the new order) becomes the previous one of the next step
             self.amat, s["amat_out"] = s["amat_out"], self.amat
