@@ -44,7 +44,8 @@ def _kernel(x, rho, dim, delta=0.5, solid=None, passes=1):
     r = rho.copy()
     p = np.zeros(n)
     grad, out = DK.empty_scratch(n)
-    DK.density_diffusion_pass(x, np.full(n, _mass(dim)), r, p, phase, np.zeros(n, np.int32), mats, nbr, nn, H, dim, grad, out)
+    DK.density_diffusion_pass(x, np.full(n, _mass(dim)), r, p, phase, np.zeros(n, np.int32), mats, nbr, nn, H, dim, grad, out,
+                              np.zeros(n))
     return r, p
 
 

@@ -130,7 +130,7 @@ def _diffusion(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad):
 
 
 @njit(cache=True, parallel=True)
-def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, grad, out):
+def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, grad, out, corr):
     """Filter the density of every fluid particle in place and recompute its pressure (8.15–8.16).
 
     ``nbr`` / ``nnbr``: the neighbour lists of :func:`unmesh.sph._kernels.density_pass`
@@ -140,6 +140,14 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
     on the result of the previous one) the column ``DENSITY_PASSES``; particles with
     ``δ = 0`` and solid particles are left unchanged (pairs are fluid–fluid of one material,
     so a pair is filtered in the same passes from both sides).
+
+    ``corr`` (N,) is the particles' accumulated correction ``c_i`` (state, carried from step to
+    step): the filter starts from ``ρ_i + c_i`` and on return ``c_i`` is the filtered density
+    minus the summation density ``ρ_i`` it was given. The passes of successive steps therefore
+    add up (a fluid at rest is filtered as by as many passes as it has taken steps) at the cost
+    of ``density_passes`` per step, like the diffusion term of δ-SPH's continuity equation. It
+    is set to 0 for particles that take no part (solids, free surface). With ``corr = 0`` one
+    call is the plain filter of ``ρ``.
     """
     n = x.shape[0]
     lam = laplacian_scale(h, dim)
@@ -148,12 +156,20 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
         if mats[i, M.DENSITY_DIFFUSION] > 0.0:
             passes = max(passes, int(mats[i, M.DENSITY_PASSES]))
     if passes == 0:
+        for i in prange(n):
+            corr[i] = 0.0
         return
     # who takes part: fluid particles of a filtered material, not at a free surface (SURFACE)
     part = np.empty(n, np.uint8)
+    base = np.empty(n)
     for i in prange(n):
         mt = matid[i]
         part[i] = (phase[i] != SOLID) & (mats[mt, M.DENSITY_DIFFUSION] > 0.0) & (rho[i] >= M.SURFACE * mats[mt, M.RHO0])
+        base[i] = rho[i]  # the summation density
+        if part[i] != 0:
+            rho[i] += corr[i]
+        else:
+            corr[i] = 0.0
     for k in range(passes):
         for i in prange(n):
             mt = matid[i]
@@ -171,10 +187,12 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
             else:
                 out[i] = rho[i]
         for i in prange(n):
-            if out[i] != rho[i]:
-                mt = matid[i]
-                rho[i] = out[i]
-                p[i] = pressure_eos(out[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+            rho[i] = out[i]
+    for i in prange(n):
+        if part[i] != 0:
+            mt = matid[i]
+            corr[i] = rho[i] - base[i]
+            p[i] = pressure_eos(rho[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
 
 
 def empty_scratch(n: int) -> tuple[np.ndarray, np.ndarray]:
