@@ -184,3 +184,20 @@ def test_no_freezing_into_a_site_the_solid_occupies(dim):
         rates.append(_freezing_rates(sim)[len(rod)])
     assert rates[0] > 0.0
     assert rates[1] == 0.0
+
+
+def test_two_particles_do_not_freeze_into_one_site_in_one_step():
+    """Two cold fluid particles 0.3 d apart next to a solid, both certain to freeze: only the one with
+    the smaller id does (the other would sit in its site, the defect that pairs frozen particles)."""
+    d = 0.01
+    rod = closest_packing([0, 0, 0], [0.06, 0.04, 0], d, 2, centered=True)
+    top = rod[np.argmax(rod[:, 1])]
+    drops = top + np.array([[0.0, d, 0.0], [0.3 * d, d, 0.0]])
+    mats = {"steel": Material("steel", elastic_stiffness=1e5),
+            "water": Material("water", elastic_stiffness=1e5, freeze_rate=1e9, freezing_point=0.0)}
+    sim = SPHSimulation(SPHConfig(dim=2, spacing=d, dt=1e-3, gravity=(0, 0, 0)), mats,
+                        [SPHObject("rod", rod, "steel", phase="solid", fixed=True, temperature=-10.0),
+                         SPHObject("drops", drops, "water", temperature=-10.0)])
+    assert np.all(_freezing_rates(sim)[len(rod):] > 0)
+    sim._phase_transitions(1e-3)
+    assert sim.particles().phases[len(rod):].tolist() == [SOLID, FLUID]

@@ -666,6 +666,20 @@ class SPHSimulation(Simulation):
         if len(changed) == 0:
             return
         frozen = changed[new_phase[changed] == SOLID]
+        if len(frozen) > 1:
+            # two particles that freeze in the same step into one lattice site (closer than the site's
+            # reach, 0.75 d): only the one with the smaller id freezes (else the same defect as freezing
+            # into an occupied site, phase_pass)
+            from unmesh.spatial import radius_pairs
+
+            pairs = radius_pairs(self.x[frozen, : self.dim], 0.75 * self.spacing)
+            if len(pairs):
+                a, b = frozen[pairs[:, 0]], frozen[pairs[:, 1]]
+                later = np.unique(np.where(self.uid[a] > self.uid[b], a, b))
+                new_phase[later] = FLUID
+                donor[later] = -1
+                changed = np.flatnonzero(new_phase != self.phase)
+                frozen = changed[new_phase[changed] == SOLID]
         has = frozen[donor[frozen] >= 0]
         self.obj[has] = self.obj[donor[has]]
         if self.elastic:
