@@ -153,7 +153,7 @@ negative_pressure = 1.0
 viscosity = 0.05
 artificial_viscosity = 0.05
 density_diffusion = 1.0
-density_passes = 16
+density_passes = 1
 
 [[objects]]
 name = "water"

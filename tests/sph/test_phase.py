@@ -201,3 +201,28 @@ def test_two_particles_do_not_freeze_into_one_site_in_one_step():
     assert np.all(_freezing_rates(sim)[len(rod):] > 0)
     sim._phase_transitions(1e-3)
     assert sim.particles().phases[len(rod):].tolist() == [SOLID, FLUID]
+
+
+def test_frozen_particle_pushed_into_an_occupied_site_thaws():
+    """A frozen particle that the flow pushes into a solid neighbour's lattice site thaws: the lattice
+    forces would otherwise pull it onto that particle (a frozen slime particle sat 0.2 d from a rod
+    particle in a coarse freezing-rod run); one at a free site stays frozen."""
+    d = 0.01
+    rod = closest_packing([0, 0, 0], [0.06, 0.04, 0], d, 2, centered=True)
+    k = int(np.argmax(rod[:, 1]))
+    top = rod[k]
+    mats = {"steel": Material("steel", elastic_stiffness=1e5),
+            "water": Material("water", elastic_stiffness=1e5, freeze_rate=1.0, freezing_point=0.0)}
+    phases = []
+    for offset in ([0.0, d, 0.0], [0.2 * d, 0.3 * d, 0.0]):
+        sim = SPHSimulation(SPHConfig(dim=2, spacing=d, dt=1e-3, gravity=(0, 0, 0)), mats,
+                            [SPHObject("rod", rod, "steel", phase="solid", fixed=True, temperature=-10.0),
+                             SPHObject("ice", (top + np.array([0.0, d, 0.0]))[None], "water", phase="solid",
+                                       temperature=-10.0)])
+        ice = sim.uid == len(rod)
+        sim.obj[ice] = sim.obj[sim.uid == k]           # frozen onto the rod: the rod's object
+        sim.x[ice] = top + np.array(offset)
+        sim._update()
+        sim._phase_transitions(1e-3)
+        phases.append(int(sim.phase[sim.uid == len(rod)][0]))
+    assert phases == [SOLID, FLUID]

@@ -40,7 +40,13 @@ from numba import njit, prange
 from unmesh.sph import materials as M
 from unmesh.sph._kernels import PLAIN, SOLID, kernel_gradf, pressure_eos
 
-__all__ = ["density_diffusion_pass", "laplacian_scale"]
+__all__ = ["KEEP", "density_diffusion_pass", "laplacian_scale"]
+
+#: Fraction of the accumulated correction a step starts from (a memory of about 1/(1 − KEEP) = 16
+#: steps): without the decay a resting fluid is filtered as by as many passes as it has taken steps,
+#: the filtered pressure is pinned by the values at the floor and under the surface, and its slope
+#: steepened (2D column 1.08 ρ0 g, 3D tank 1.18 ρ0 g).
+KEEP = 1.0 - 1.0 / 16.0
 
 
 @njit(**PLAIN)
@@ -142,12 +148,13 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
     so a pair is filtered in the same passes from both sides).
 
     ``corr`` (N,) is the particles' accumulated correction ``c_i`` (state, carried from step to
-    step): the filter starts from ``ρ_i + c_i`` and on return ``c_i`` is the filtered density
+    step): the filter starts from ``ρ_i + KEEP c_i`` and on return ``c_i`` is the filtered density
     minus the summation density ``ρ_i`` it was given. The passes of successive steps therefore
-    add up (a fluid at rest is filtered as by as many passes as it has taken steps) at the cost
-    of ``density_passes`` per step, like the diffusion term of δ-SPH's continuity equation. It
-    is set to 0 for particles that take no part (solids, free surface). With ``corr = 0`` one
-    call is the plain filter of ``ρ``.
+    add up with a memory of about 16 steps (:data:`KEEP`): one pass per step smooths a resting
+    fluid about as much as 16 passes in one step, like the diffusion term of δ-SPH's continuity
+    equation. ``Σ m c`` stays 0 (each pass conserves it, the decay scales it). ``c`` is set to 0
+    for particles that take no part (solids, free surface). With ``corr = 0`` one call is the
+    plain filter of ``ρ``.
     """
     n = x.shape[0]
     lam = laplacian_scale(h, dim)
@@ -167,7 +174,7 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
         part[i] = (phase[i] != SOLID) & (mats[mt, M.DENSITY_DIFFUSION] > 0.0) & (rho[i] >= M.SURFACE * mats[mt, M.RHO0])
         base[i] = rho[i]  # the summation density
         if part[i] != 0:
-            rho[i] += corr[i]
+            rho[i] += KEEP * corr[i]
         else:
             corr[i] = 0.0
     for k in range(passes):

@@ -682,6 +682,13 @@ class SPHSimulation(Simulation):
                 frozen = changed[new_phase[changed] == SOLID]
         has = frozen[donor[frozen] >= 0]
         self.obj[has] = self.obj[donor[has]]
+        # a particle that melts or thaws returns to the first object of its material (a slime particle
+        # that froze onto the rod and thaws is slime again, and collides with the rod and its ice)
+        thawed = changed[new_phase[changed] == FLUID]
+        home = np.array([next((k for k, o in enumerate(self.objects) if o.material == name), -1)
+                         for name in self.material_names], np.int32)
+        back = thawed[home[self.mat[thawed]] >= 0]
+        self.obj[back] = home[self.mat[back]]
         if self.elastic:
             self.amat[frozen] = self.frame
             self.ainv[frozen] = self.frame.T
