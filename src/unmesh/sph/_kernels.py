@@ -361,7 +361,8 @@ PAIR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 @njit(cache=True, fastmath=PAIR_FASTMATH, error_model="numpy")
 def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, mats, h, dim, gravity, nbr, nnbr,
                  bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-                 plane_noslip, wall_visc, bnoslip, grad_scale, tensile, spacing, elastic, fel, fown, pk, acc, xsph, dtemp):
+                 plane_noslip, wall_visc, bnoslip, grad_scale, tensile, damping, spacing, elastic, fel, fown, pk, acc, xsph,
+                 dtemp):
     """Particles ``r0 .. r1 - 1`` of :func:`force_pass` (one block, serial): the first ``ncol`` columns
     of the neighbours' ``pk`` rows are gathered, the others are the constants of material ``mat0``
     and object ``obj0``."""
@@ -470,7 +471,10 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
             w6 = c6 * t6 * t6 * t6
             # and a contact spring that pushes the pair back to the rest distance d, as stiff as the
             # lattice force (8.31) of the two materials: K_e m_j/ρ0 W (d − r)₊ / r along x_ij
-            pen = CONTACT * (kei + buf[PK_KE, t]) * mj / rho0 * w6 * max(dsp - r, 0.0) / max(r, 1e-12 * h)
+            kc = CONTACT * (kei + buf[PK_KE, t]) * mj / rho0 * w6
+            pen = kc * max(dsp - r, 0.0) / max(r, 1e-12 * h)
+            # and a dashpot on the normal relative velocity while in contact (r < d): 2ζ√k_c (v_ij·x̂_ij)
+            pen -= (2.0 * damping * math.sqrt(kc) * vx / max(r2, 1e-24 * h2)) if r < dsp else 0.0
             coef = max(coef, 0.0) + pen if other else coef
             wx = 0.0 if other else xii * mj * rsum * w6
             xs0 -= wx * vij0
@@ -530,9 +534,15 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
             ai0 += coef * d0
             ai1 += coef * d1
             ai2 += coef * d2
-        # analytic walls
+        # analytic walls; a solid particle in contact (closer than d) is damped like the contacts
+        # between objects: ``−2ζ√(CONTACT K_e) v`` (normal: restitution; tangential: friction)
+        cw = 2.0 * damping * math.sqrt(CONTACT * kei) if solid_i else 0.0
         for k in range(plane_p.shape[0]):
             dist = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, k)
+            if dist < dsp and cw > 0.0:
+                ai0 -= cw * vi0
+                ai1 -= cw * vi1
+                ai2 -= cw * vi2
             if dist < h:
                 s = rho0 * pb * _table(wall_grad, dist, h)
                 if plane_noslip[k] != 0:
@@ -573,8 +583,8 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
 @njit(cache=True, parallel=True, error_model="numpy")
 def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
                bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-               plane_noslip, wall_visc, bnoslip, grad_scale, tensile, spacing, elastic, fel, fown, pk, acc, xsph,
-               dtemp):
+               plane_noslip, wall_visc, bnoslip, grad_scale, tensile, damping, spacing, elastic, fel, fown, pk, acc,
+               xsph, dtemp):
     """Accelerations, XSPH corrections and temperature rates of every particle.
 
     See the module docstring for the terms. ``elastic`` (bool) adds the lattice forces
@@ -634,8 +644,8 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     for blk in prange(nblk):
         _force_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid,
                      mats, h, dim, gravity, nbr, nnbr, bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners,
-                     corner_grad, wall_mirror, plane_noslip, wall_visc, bnoslip, grad_scale, tensile, spacing, elastic,
-                     fel, fown, pk, acc, xsph, dtemp)
+                     corner_grad, wall_mirror, plane_noslip, wall_visc, bnoslip, grad_scale, tensile, damping, spacing,
+                     elastic, fel, fown, pk, acc, xsph, dtemp)
 
 
 @njit(cache=True, parallel=True)

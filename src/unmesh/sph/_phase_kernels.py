@@ -10,7 +10,7 @@ import math
 from numba import njit, prange
 
 from unmesh.sph import materials as M
-from unmesh.sph._kernels import kernel_w
+from unmesh.sph._kernels import PLAIN, kernel_w
 from unmesh.sph._rng import STREAM_FREEZE, STREAM_MELT, uniform
 from unmesh.sph._slot_kernels import nearest_slot
 
@@ -42,6 +42,26 @@ def freezing_rate(lam0, temp, t_freeze, n_solid, n_min, dv, v_max, force, f_max)
     return max(0.0, lam0 * (t_freeze - temp) * (n_solid - n_min + 1) * cv * cf)
 
 
+@njit(**PLAIN)
+def _in_occupied_site(i, x, phase, obj, nbr, nnbr, ainv, spacing, tmat, table, dim):
+    """Whether particle ``i`` lies in the lattice site of a solid neighbour of its object: its nearest
+    lattice point in that neighbour's lattice (eq. 8.21) is the neighbour's own."""
+    for t in range(min(nnbr[i], nbr.shape[1])):
+        j = nbr[i, t]
+        if phase[j] != SOLID or obj[j] != obj[i]:
+            continue
+        r0 = x[i, 0] - x[j, 0]
+        r1 = x[i, 1] - x[j, 1]
+        r2 = x[i, 2] - x[j, 2]
+        y0 = (ainv[j, 0, 0] * r0 + ainv[j, 0, 1] * r1 + ainv[j, 0, 2] * r2) / spacing
+        y1 = (ainv[j, 1, 0] * r0 + ainv[j, 1, 1] * r1 + ainv[j, 1, 2] * r2) / spacing
+        y2 = (ainv[j, 2, 0] * r0 + ainv[j, 2, 1] * r1 + ainv[j, 2, 2] * r2) / spacing if dim == 3 else 0.0
+        q, _d2 = nearest_slot(y0, y1, y2, tmat, table, dim)
+        if q < 0 and y0 * y0 + y1 * y1 + y2 * y2 < 1.0:
+            return True
+    return False
+
+
 @njit(cache=True, parallel=True)
 def phase_pass(x, v, m, phase, obj, matid, uid, temp, mats, nbr, nnbr, h, dim, spacing,
                slot_vecs, tmat, table, ainv, gmat, occ, valid, seed, step, dt,
@@ -51,6 +71,14 @@ def phase_pass(x, v, m, phase, obj, matid, uid, temp, mats, nbr, nnbr, h, dim, s
     Writes ``new_phase`` (N,) int8, ``donor`` (N,) int64 — for a particle that
     freezes, its closest solid neighbour (whose object and lattice it joins), else
     -1 — and ``rates`` (N,) the transition rate ``λ`` used.
+
+    A fluid particle whose nearest lattice point in the lattice of a solid neighbour ``j`` is ``j``'s
+    own (``A_j⁻¹ x_ij / d`` rounds to the origin, eq. 8.21) sits in an occupied site and does not
+    freeze (rate 0): frozen, it would have no slot in ``j``'s neighbourhood nor ``j`` one in its own,
+    and the lattice forces of the other neighbours would pull it onto ``j`` (frozen particles 0.07 d
+    from rod particles in the freezing-rod scene). For the same reason a frozen particle of a
+    freezing material that the flow has pushed into such a site thaws (becomes fluid, so that
+    pressure pushes it out again instead of the lattice forces pulling it in).
     """
     n = x.shape[0]
     cap = nbr.shape[1]
@@ -64,6 +92,9 @@ def phase_pass(x, v, m, phase, obj, matid, uid, temp, mats, nbr, nnbr, h, dim, s
             rates[i] = lam
             if lam > 0.0 and uniform(seed, step, uid[i], 0, STREAM_MELT) < 1.0 - math.exp(-lam * dt):
                 new_phase[i] = FLUID
+            elif mats[mt, M.FREEZE_RATE] > 0.0 and _in_occupied_site(i, x, phase, obj, nbr, nnbr, ainv, spacing, tmat,
+                                                                      table, dim):
+                new_phase[i] = FLUID  # frozen, but pushed into the site of a solid neighbour: it thaws
             continue
         lam0 = mats[mt, M.FREEZE_RATE]
         if lam0 <= 0.0 or temp[i] >= mats[mt, M.FREEZE_T]:
@@ -77,6 +108,7 @@ def phase_pass(x, v, m, phase, obj, matid, uid, temp, mats, nbr, nnbr, h, dim, s
         f2 = 0.0
         best = 1e300
         near = -1
+        taken = False
         for t in range(min(nnbr[i], cap)):
             j = nbr[i, t]
             if phase[j] != SOLID:
@@ -92,13 +124,16 @@ def phase_pass(x, v, m, phase, obj, matid, uid, temp, mats, nbr, nnbr, h, dim, s
             if rr < best:
                 best = rr
                 near = j
-            if valid[j] == 0:
-                continue
-            # hypothetical lattice force: slot of i in j's lattice, if free
+            # the slot of i in j's lattice: i's lattice point is j's own (i sits in j's site) -> i cannot freeze
             y0 = (ainv[j, 0, 0] * r0 + ainv[j, 0, 1] * r1 + ainv[j, 0, 2] * r2) / spacing
             y1 = (ainv[j, 1, 0] * r0 + ainv[j, 1, 1] * r1 + ainv[j, 1, 2] * r2) / spacing
             y2 = (ainv[j, 2, 0] * r0 + ainv[j, 2, 1] * r1 + ainv[j, 2, 2] * r2) / spacing if dim == 3 else 0.0
             q, _d2 = nearest_slot(y0, y1, y2, tmat, table, dim)
+            if q < 0 and y0 * y0 + y1 * y1 + y2 * y2 < 1.0:
+                taken = True
+            if valid[j] == 0:
+                continue
+            # hypothetical lattice force of i in j's slot q, if free
             if q < 0 or (occ[j, q] >= 0 and occ[j, q] != uid[i]):
                 continue
             mtj = matid[j]
@@ -118,6 +153,8 @@ def phase_pass(x, v, m, phase, obj, matid, uid, temp, mats, nbr, nnbr, h, dim, s
         force = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2) / m[i]
         lam = freezing_rate(lam0, temp[i], mats[mt, M.FREEZE_T], ns, mats[mt, M.FREEZE_NMIN], dv,
                             mats[mt, M.FREEZE_VMAX], force, mats[mt, M.FREEZE_FMAX])
+        if taken:
+            lam = 0.0
         rates[i] = lam
         if lam > 0.0 and uniform(seed, step, uid[i], 0, STREAM_FREEZE) < 1.0 - math.exp(-lam * dt):
             new_phase[i] = SOLID

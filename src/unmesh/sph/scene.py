@@ -44,14 +44,16 @@ from unmesh.sph.simulation import SPHConfig, SPHObject, SPHSimulation
 
 __all__ = ["MATERIAL_KEYS", "build_simulation"]
 
-#: Scene keys of a material and their defaults (see :class:`unmesh.sph.Material`).
+#: Scene keys of a material and their defaults (see :class:`unmesh.sph.Material`). Scenes switch the
+#: δ-SPH density filter on for fluids (``density_diffusion = 1``, one pass per step, accumulated:
+#: :mod:`unmesh.sph._diffusion_kernels`); ``"off"`` gives the thesis' plain summation density.
 MATERIAL_KEYS: dict[str, Any] = {
     "density": 1.0, "stiffness": 200.0, "gamma": 1.0, "negative_pressure": 0.01, "viscosity": 0.0,
     "xsph": 0.0, "artificial_viscosity": 0.05, "elastic_stiffness": 0.0, "goal_deformation": 0.5,
     "young": 0.0, "poisson": 0.3, "docking_rate": math.inf, "docking_gain": math.inf, "docking_loss": 0.0,
     "fracture_stretch": math.inf, "diffusivity": 0.0, "melt_rate": 0.0, "melting_point": math.inf,
     "freeze_rate": 0.0, "freezing_point": -math.inf, "freeze_min_neighbors": 1, "freeze_max_velocity": math.inf,
-    "freeze_max_force": math.inf, "density_diffusion": 0.0,
+    "freeze_max_force": math.inf, "density_diffusion": 1.0,
     "density_passes": 1,
 }
 
@@ -161,9 +163,10 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
     name = sim_t.string("name", default=scene.file.stem)
     lattice = sim_t.string("lattice", default="closest", choices=LATTICES)
     tensile = sim_t.number("tensile_correction", default=4.0, nonnegative=True)
+    damping = sim_t.number("contact_damping", default=0.0, nonnegative=True)
     config = sim_t.call(None, SPHConfig, dim=dim, spacing=spacing, dt=dt, smoothing=smoothing, cfl=cfl,
                         gravity=gravity, seed=seed, wall_pressure=wall_pressure, lattice=lattice,
-                        tensile_correction=tensile)
+                        tensile_correction=tensile, contact_damping=damping)
     out_t = scene.table("output", required=False)
     surfaces = "none"
     resolution = 0.5

@@ -63,7 +63,8 @@ __all__ = ["SPHConfig", "SPHObject", "SPHSimulation"]
 #: :func:`unmesh._threads.serial_if_small`).
 PARALLEL_MIN = 2000
 
-_PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed")
+_PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed",
+                    "dcorr")
 _ELASTIC_ARRAYS = ("amat", "ainv", "occ", "docked", "lam")
 #: Per-particle arrays that every step recomputes after the re-sort (not re-sorted in a step).
 _RECOMPUTED = ("a", "xsph", "rho", "p", "dtemp")
@@ -107,6 +108,12 @@ class SPHConfig:
         ``r = d/2`` on (a fluid at rest is unaffected), outweighs the tension's pull from
         ``r ≈ 0.42 d`` inwards and is 37 times it at ``r = 0`` (``ε = 4``, ``h = 2d``), so tension
         cannot pull particles onto each other (the pairing of tensile instability). 0 switches it off.
+    contact_damping : float
+        Damping ratio ζ in [0, 1] of the contacts of solids (0: off, elastic contacts): a pair of
+        particles of different objects closer than ``d`` gets a dashpot ``2ζ√k_c`` on its normal
+        relative velocity, ``k_c = CONTACT (K_e,i + K_e,j) m_j/ρ0 W`` the stiffness of its contact
+        spring (8.37); a solid particle closer than ``d`` to a wall plane is damped by
+        ``2ζ√(CONTACT K_e)`` times its velocity (restitution and friction). Dice come to rest.
     lattice : {"closest", "cubic"}
         The lattice the objects are sampled on (:mod:`unmesh.sph.sampling`): it sets the
         particle mass (density exactly ``ρ0`` on that lattice, eq. 8.4) and the gradient
@@ -132,6 +139,7 @@ class SPHConfig:
     gradient_correction: bool = True
     lattice: str = "closest"
     tensile_correction: float = 4.0
+    contact_damping: float = 0.0
 
     def __post_init__(self) -> None:
         if self.dim not in (2, 3):
@@ -144,6 +152,8 @@ class SPHConfig:
                 raise InputError(f"{key}: expected a positive number, got {v!r}")
         if not (isinstance(self.tensile_correction, int | float) and 0 <= self.tensile_correction < math.inf):
             raise InputError(f"tensile_correction: expected a number >= 0, got {self.tensile_correction!r}")
+        if not (isinstance(self.contact_damping, int | float) and 0 <= self.contact_damping <= 1):
+            raise InputError(f"contact_damping: expected a number in [0, 1], got {self.contact_damping!r}")
         if self.smoothing <= 1.0:
             raise InputError(f"smoothing: expected h/d > 1, got {self.smoothing}")
         if self.cfl is not None and not 0 < self.cfl <= 1:
@@ -377,6 +387,7 @@ class SPHSimulation(Simulation):
         self.p = np.zeros(n)
         self.temp = np.concatenate(ts)
         self.dtemp = np.zeros(n)
+        self.dcorr = np.zeros(n)  # accumulated δ-SPH density correction (_diffusion_kernels)
         self.phase = np.concatenate(ph)
         self.obj = np.concatenate(ob)
         self.mat = np.concatenate(mt)
@@ -516,7 +527,7 @@ class SPHSimulation(Simulation):
             self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
         if np.any(self.mats[:, MT.DENSITY_DIFFUSION] > 0):  # δ-SPH density filter of the fluids
             DK.density_diffusion_pass(self.x, self.m, self.rho, self.p, self.phase, self.mat, self.mats, self.nbr,
-                                      self.nnbr, self.h, self.dim, self._rows["dgrad"], self._rows["drho"])
+                                      self.nnbr, self.h, self.dim, self._rows["dgrad"], self._rows["drho"], self.dcorr)
 
     def _update(self, prime: bool = False) -> None:
         """Sort, density, lattice and force passes at the current positions."""
@@ -534,7 +545,7 @@ class SPHSimulation(Simulation):
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
                      self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.bnoslip,
-                     self.grad_scale, self.config.tensile_correction, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
+                     self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
         if self.elastic:
             # the new lattice state (in the new order) becomes the previous one of the next step
             self.amat, s["amat_out"] = s["amat_out"], self.amat
@@ -655,8 +666,29 @@ class SPHSimulation(Simulation):
         if len(changed) == 0:
             return
         frozen = changed[new_phase[changed] == SOLID]
+        if len(frozen) > 1:
+            # two particles that freeze in the same step into one lattice site (closer than the site's
+            # reach, 0.75 d): only the one with the smaller id freezes (else the same defect as freezing
+            # into an occupied site, phase_pass)
+            from unmesh.spatial import radius_pairs
+
+            pairs = radius_pairs(self.x[frozen, : self.dim], 0.75 * self.spacing)
+            if len(pairs):
+                a, b = frozen[pairs[:, 0]], frozen[pairs[:, 1]]
+                later = np.unique(np.where(self.uid[a] > self.uid[b], a, b))
+                new_phase[later] = FLUID
+                donor[later] = -1
+                changed = np.flatnonzero(new_phase != self.phase)
+                frozen = changed[new_phase[changed] == SOLID]
         has = frozen[donor[frozen] >= 0]
         self.obj[has] = self.obj[donor[has]]
+        # a particle that melts or thaws returns to the first object of its material (a slime particle
+        # that froze onto the rod and thaws is slime again, and collides with the rod and its ice)
+        thawed = changed[new_phase[changed] == FLUID]
+        home = np.array([next((k for k, o in enumerate(self.objects) if o.material == name), -1)
+                         for name in self.material_names], np.int32)
+        back = thawed[home[self.mat[thawed]] >= 0]
+        self.obj[back] = home[self.mat[back]]
         if self.elastic:
             self.amat[frozen] = self.frame
             self.ainv[frozen] = self.frame.T
@@ -826,6 +858,8 @@ class SPHSimulation(Simulation):
         # neighbour lists for diagnostics and surfaces at the restored positions
         with serial_if_small(len(self.x), PARALLEL_MIN):
             self._sort()
+            dcorr = self.dcorr.copy()  # the filter's state is the checkpoint's, not one pass further
             self._density()
+            self.dcorr[:] = dcorr
             self._ensure_scratch()
             self._diag = K.diagnostics(self.x, self.v, self.a, self.m, self.rho, self.mat, self.mats)

@@ -223,7 +223,12 @@ def hydrostatic(ctx: ExampleContext) -> None:
 
     ov = {"simulation.duration": 0.3 if ctx.quick else 1.5}
     out, summary = run_shipped_scene(ctx, "hydrostatic", ov)
-    _render(ctx, out, "hydrostatic", "pressure in the resting column", "pressure", 2)
+    # colours span the physical range 0 .. ρ0 g H (not the start-up transient of frame 0); H is the
+    # column height, the top layer of particles lying d/2 below the free surface (ρ0 = 1, g = 9.81)
+    y0 = io.load(_frames(out)[0]).positions[:, 1]
+    column = float(np.ptp(y0)) + float(summary["spacing"])
+    _render(ctx, out, "hydrostatic", f"pressure in the resting column (colour: 0 to ρ0 g H = {9.81 * column:.2f} Pa)",
+            "pressure", 2, color_range=(0.0, 9.81 * column))
     last = io.load(_frames(out)[-1])
     y = last.positions[:, 1]
     depth = y.max() - y
@@ -245,7 +250,7 @@ def hydrostatic(ctx: ExampleContext) -> None:
 def dam_break(ctx: ExampleContext) -> None:
     """3D dam break, column a × 2a (n² = 2); surge front Z = x/a over T = t√(2g/a) vs the experiment."""
     from unmesh import io
-    from unmesh.spatial import knn
+    from unmesh.sph.front import surge_front
 
     a = 0.25
     spacing = 0.025 if ctx.quick else 0.01
@@ -259,9 +264,7 @@ def dam_break(ctx: ExampleContext) -> None:
     zs = []
     for big_t in t_mm:
         k = int(np.argmin(np.abs(times - big_t / np.sqrt(2 * 9.81 / a))))
-        p = io.load(frames[k]).positions
-        dist, _ = knn(p, 2)
-        zs.append(float(p[dist[:, 1] < 1.5 * spacing, 0].max()) / a)
+        zs.append(surge_front(io.load(frames[k]).positions, spacing) / a)
     dev = (np.asarray(zs) - z_mm) / z_mm
     ctx.text("Surge front Z = x/a at the experiment's times T = " + ", ".join(f"{t:.2f}" for t in t_mm)
              + ": SPH " + ", ".join(f"{z:.2f}" for z in zs) + "; Martin & Moyce " + ", ".join(f"{z:.2f}" for z in z_mm))
