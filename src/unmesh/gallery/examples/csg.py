@@ -269,7 +269,8 @@ def fig46_example(ctx: ExampleContext) -> None:
               render(soft, zoom).color]
     path = save_image(ctx.path("fig46.png"), side_by_side(*images))
     ctx.image(path, "a red square painted on a sphere; left to right: with texture-discontinuity surfels, "
-                    "without, and both magnified 6x at a corner of the square")
+                    "without, and both magnified 6x at a corner of the square (with them, a faint light arc "
+                    "remains inside the red next to the corner)")
 
 
 #: Offsets of the second sphere in :func:`coplanar_limits`: crossing angles of about 17, 6, 1.7
