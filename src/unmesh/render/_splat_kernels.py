@@ -75,7 +75,12 @@ def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, ne
     than a quarter of their depth); then united with the screen filter disc around the
     projected centre.
     """
-    x0, x1, y0, y1 = sphere_box(c0, c1, c2, r, f, cx, cy, ortho, near, W, H, 0.0)
+    if c2 + r <= near:
+        return 1, 0, 1, 0
+    if ortho:
+        x0, x1, y0, y1 = 0, W - 1, 0, H - 1  # the ellipse box below is exact in orthographic views
+    else:
+        x0, x1, y0, y1 = sphere_box(c0, c1, c2, r, f, cx, cy, ortho, near, W, H, 0.0)
     if ortho or c2 > near:
         if ortho:
             sx = cx + f * c0
@@ -140,15 +145,27 @@ def _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, c
     # dual basis b1, b2 of the (possibly non-orthogonal) axes: b_i . a_j = delta_ij in the
     # surfel plane, so (u, v) = ((p - c) . b1, (p - c) . b2) are the ellipse coordinates of
     # {c + u a1 + v a2 : u^2 + v^2 <= 1}; for orthogonal axes b_i = a_i / |a_i|^2 (eq. 3.13).
-    g00 = a00 * a00 + a01 * a01 + a02 * a02
-    g11 = a10 * a10 + a11 * a11 + a12 * a12
-    g01 = a00 * a10 + a01 * a11 + a02 * a12
-    det = g00 * g11 - g01 * g01
-    tr = g00 + g11
-    valid = g00 > 1e-300 and g11 > 1e-300 and det > 1e-12 * tr * tr
-    hd = 0.5 * (g00 - g11)
-    r = math.sqrt(0.5 * tr + math.sqrt(hd * hd + g01 * g01))  # largest semi-axis
-    if valid:
+    if not elliptical:  # orthogonal axes of length rad: b_i = a_i / rad^2
+        rad = radii[i]
+        r = rad
+        valid = rad * rad > 1e-300
+        ir2 = 1.0 / (rad * rad) if valid else 0.0
+        b10 = a00 * ir2
+        b11 = a01 * ir2
+        b12 = a02 * ir2
+        b20 = a10 * ir2
+        b21 = a11 * ir2
+        b22 = a12 * ir2
+    else:
+        g00 = a00 * a00 + a01 * a01 + a02 * a02
+        g11 = a10 * a10 + a11 * a11 + a12 * a12
+        g01 = a00 * a10 + a01 * a11 + a02 * a12
+        det = g00 * g11 - g01 * g01
+        tr = g00 + g11
+        valid = g00 > 1e-300 and g11 > 1e-300 and det > 1e-12 * tr * tr
+        hd = 0.5 * (g00 - g11)
+        r = math.sqrt(0.5 * tr + math.sqrt(hd * hd + g01 * g01))  # largest semi-axis
+    if elliptical and valid:
         idet = 1.0 / det
         b10 = (g11 * a00 - g01 * a10) * idet
         b11 = (g11 * a01 - g01 * a11) * idet
@@ -156,7 +173,7 @@ def _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, c
         b20 = (g00 * a10 - g01 * a00) * idet
         b21 = (g00 * a11 - g01 * a01) * idet
         b22 = (g00 * a12 - g01 * a02) * idet
-    else:
+    elif elliptical:
         b10 = b11 = b12 = b20 = b21 = b22 = 0.0
     P[i, 0] = c2
     P[i, 1] = n0
