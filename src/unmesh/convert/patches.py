@@ -270,9 +270,11 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         slot_c[active], slot_x[active], slot_y[active] = canvas, ox, oy
         sums = np.zeros((nf, 3))  # sum A, sum A e_color, sum A e_normal
         pair_canvas = slot_c[pt[sel]]
+        by_canvas = np.argsort(pair_canvas, kind="stable")
+        canvas_start = np.searchsorted(pair_canvas[by_canvas], np.arange(int(canvas.max()) + 2))
         for c in range(int(canvas.max()) + 1):
             tri_c = active[canvas == c]
-            kk = np.flatnonzero(pair_canvas == c)
+            kk = by_canvas[canvas_start[c]:canvas_start[c + 1]]
             idx = sel[kk]
             t_i = pt[idx]
             sc = s_p[kk]
@@ -312,7 +314,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
                 tn /= np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-12)
                 e_n = 1.0 - np.einsum("ij,ij->i", tn, lnrm[idx[q]])
                 a = area[idx[q]]
-                np.add.at(sums, t_i[q], np.stack([a, a * e_c, a * e_n], axis=1))
+                for j, wgt in enumerate((a, a * e_c, a * e_n)):
+                    sums[:, j] += np.bincount(t_i[q], weights=wgt, minlength=nf)
             # extract the patches of the triangles that stop here
             with np.errstate(invalid="ignore", divide="ignore"):
                 ec = np.where(sums[tri_c, 0] > 0, sums[tri_c, 1] / sums[tri_c, 0], 0.0)
