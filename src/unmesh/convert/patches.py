@@ -124,6 +124,10 @@ class Patches:
         surfels).
     samples : (F,) int64
         Surfels whose centres project into the triangle and are visible.
+    depth : list of (height, width) float64 arrays or None
+        With ``depth=True``: the height of the splatted surface above the triangle's plane
+        (world units, along the face normal) at every texel, the depth (displacement) texture
+        of 6.2.
     """
 
     level: np.ndarray
@@ -138,6 +142,7 @@ class Patches:
     capped: np.ndarray
     uncovered: np.ndarray
     samples: np.ndarray
+    depth: list[np.ndarray] | None = None
 
 
 def patch_size(frames: TriangleFrames, level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -173,7 +178,7 @@ def _layout(widths: np.ndarray, heights: np.ndarray, gap: int,
 
 
 def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: float, normal_error: float | None,
-                   max_level: int, progress: bool = False) -> Patches:
+                   max_level: int, progress: bool = False, depth: bool = False) -> Patches:
     """Adaptive texture patches of every triangle of ``mesh`` from the surfels (6.2.1).
 
     Parameters
@@ -190,6 +195,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         Largest level.
     progress : bool
         Progress bar over the levels.
+    depth : bool
+        Also keep the depth (displacement) texture of every patch (``Patches.depth``).
     """
     frames = triangle_frames(mesh)
     nf = len(mesh.faces)
@@ -232,6 +239,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     out_color: list[np.ndarray | None] = [None] * nf
     out_normal: list[np.ndarray | None] = [None] * nf
     out_cov: list[np.ndarray | None] = [None] * nf
+    out_depth: list[np.ndarray | None] | None = [None] * nf if depth else None
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -337,6 +345,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
                 out_color[t] = g.albedo[sl].copy()
                 out_normal[t] = g.normal[sl].copy()
                 out_cov[t] = g.coverage[sl].copy()
+                if out_depth is not None:  # canvas depth (texel units) -> height above the plane
+                    out_depth[t] = (zeye - g.depth[sl]) / scale[t]
             done[tri_c[stop]] = True
             if bar is not None:
                 bar.update(int(stop.sum()))
@@ -345,9 +355,10 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     color_level[color_level < 0] = level[color_level < 0]
     normal_level[normal_level < 0] = level[normal_level < 0]
     width, height = patch_size(frames, level)
-    uncovered = _fill_uncovered(mesh, cloud, frames, level, width, height, out_color, out_normal, out_cov)
+    uncovered = _fill_uncovered(mesh, cloud, frames, level, width, height, out_color, out_normal, out_cov,
+                                out_depth)
     return Patches(level, color_level, normal_level, width, height, out_color, out_normal,  # type: ignore[arg-type]
-                   c_err, n_err, capped, uncovered, samples)
+                   c_err, n_err, capped, uncovered, samples, out_depth)  # type: ignore[arg-type]
 
 
 def _depth_band(pt: np.ndarray, ps: np.ndarray, loc: np.ndarray, lnrm: np.ndarray, nearest: np.ndarray,
@@ -378,8 +389,10 @@ def texel_positions(frames: TriangleFrames, t: np.ndarray, level: np.ndarray, he
 
 
 def _fill_uncovered(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFrames, level: np.ndarray,
-                    width: np.ndarray, height: np.ndarray, colors: list, normals: list, cov: list) -> np.ndarray:
-    """Give texels no splat reached the nearest surfel's colour and normal; count those inside."""
+                    width: np.ndarray, height: np.ndarray, colors: list, normals: list, cov: list,
+                    depths: list | None = None) -> np.ndarray:
+    """Give texels no splat reached the nearest surfel's colour, normal (and height above the
+    plane); count those inside."""
     nf = len(level)
     tt, rr, cc = [], [], []
     for t in range(nf):
@@ -399,6 +412,7 @@ def _fill_uncovered(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFram
     j = idx[:, 0]
     col = cloud.colors[j]
     nrm = np.einsum("pij,pj->pi", frames.rotation[t_all], cloud.normals[j])
+    hgt = np.einsum("pj,pj->p", frames.rotation[t_all, 2], cloud.positions[j] - frames.origin[t_all])
     ax, ay, length = frames.apex[t_all, 0], frames.apex[t_all, 1], frames.length[t_all]
     x, y = lxy[:, 0], lxy[:, 1]
     inside = (y >= 0) & (ax * y - ay * x <= 0) & ((length - ax) * y + ay * (x - length) <= 0)
@@ -409,4 +423,6 @@ def _fill_uncovered(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFram
         t = int(t_all[s])
         colors[t][r_all[s:e], c_all[s:e]] = col[s:e]
         normals[t][r_all[s:e], c_all[s:e]] = nrm[s:e]
+        if depths is not None:
+            depths[t][r_all[s:e], c_all[s:e]] = hgt[s:e]
     return uncovered
