@@ -264,8 +264,10 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         s_l = scale[pt[live]]
         px_l = 1.0 + x[live] * s_l
         py_l = 1.0 + y[live] * s_l
-        r_l = radii[live] * s_l
         w_l, h_l = width[pt[live]], height[pt[live]]
+        # splat radii in texels, at most twice the patch size: a larger splat is constant over
+        # the patch anyway, and the canvas gaps (which follow the largest splat) stay bounded
+        r_l = np.minimum(radii[live] * s_l, 2.0 * np.maximum(w_l, h_l) + 2.0)
         keep = (px_l > -r_l - 1) & (px_l < w_l + r_l + 1) & (py_l > -r_l - 1) & (py_l < h_l + r_l + 1)
         sel = live[keep]
         s_p, px_s, py_s, r_s = s_l[keep], px_l[keep], py_l[keep], r_l[keep]
