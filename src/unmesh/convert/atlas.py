@@ -65,6 +65,8 @@ def assemble(mesh: TriangleMesh, frames: TriangleFrames, patches: Patches, place
     rr = np.where(place.flip_v[t], h[t] - 1 - r, r) + place.y[t]
     cc = np.where(place.flip_h[t], w[t] - 1 - c, c) + place.x[t]
     col_flat = np.concatenate([p.reshape(-1, 3) for p in patches.color])[pix]
+    dep_flat = None if patches.depth is None else np.concatenate([d.ravel() for d in patches.depth])[pix]
+    depth_pages = []
     # uv per corner
     X = np.where(place.flip_h[:, None], w[:, None] - corners[:, :, 0], corners[:, :, 0]) + place.x[:, None]
     Y = np.where(place.flip_v[:, None], h[:, None] - corners[:, :, 1], corners[:, :, 1]) + place.y[:, None]
@@ -87,10 +89,14 @@ def assemble(mesh: TriangleMesh, frames: TriangleFrames, patches: Patches, place
             nmap[:] = (0.5, 0.5, 1.0)
             nmap[rr[sel], cc[sel]] = _tangent_normals(part, on, frames, patches, place, t[sel], r[sel], c[sel])
         parts.append(part.replace(texture=img, normal_map=nmap))
+        if dep_flat is not None:
+            dpage = np.zeros((edge, edge))
+            dpage[rr[sel], cc[sel]] = dep_flat[sel]
+            depth_pages.append(dpage)
         if mipmaps:
             mips.append(tuple(_mip(rr[sel], cc[sel], np.clip(col_flat[sel], 0.0, 1.0), edge, k, img[0, 0])
                               for k in (1, 2)))
-    return TexturedMesh(tuple(parts), tuple(mips))
+    return TexturedMesh(tuple(parts), tuple(mips), tuple(depth_pages))
 
 
 def _tangent_normals(part: TriangleMesh, on: np.ndarray, frames: TriangleFrames, patches: Patches,

@@ -41,6 +41,8 @@ def register(sub: Any) -> None:
                    help="bake a tangent-space normal map (default on)")
     p.add_argument("--page-size", type=int, default=2048, metavar="N", help="largest atlas page edge (power of two)")
     p.add_argument("--mipmaps", action="store_true", help="also assemble half and quarter resolution pages")
+    p.add_argument("--depth-map", action="store_true",
+                   help="also bake a depth (displacement) texture (OBJ: disp; not in .glb)")
     p.add_argument("--report", metavar="FILE.json", help="write a JSON report")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     p.set_defaults(func=run)
@@ -63,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     if not src.exists():
         raise InputError(f"IN: no such file {os.fspath(src)!r}")
     kw: dict[str, Any] = {"normal_map": args.normal_map, "page_size": args.page_size, "mipmaps": args.mipmaps,
+                          "depth_map": args.depth_map,
                           "progress": not args.no_progress}
     if args.faces is not None:
         kw["faces"] = args.faces

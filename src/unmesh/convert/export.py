@@ -5,8 +5,10 @@ MTL with one material per page (``map_Kd`` colour page; the tangent-space normal
 ``norm`` and ``map_Bump``, the two spellings tools read), and the PNGs. One page: ``NAME.png``
 and ``NAME_normal.png`` (as :func:`unmesh.io.obj.write_obj`); several: ``NAME_pK.png`` and
 ``NAME_pK_normal.png``; with mip levels (6.5) also ``NAME[_pK]_mip1.png`` and ``_mip2.png``
-(half and quarter resolution, same layout; MTL has no statement for them). The text comes
-from :func:`unmesh.io.obj.encode_obj`.
+(half and quarter resolution, same layout; MTL has no statement for them); with depth maps
+``NAME[_pK]_depth.png`` (16-bit grey) and ``disp -mm base gain`` in the MTL (height above the
+triangle's plane = base + gain * grey, world units). The text comes from
+:func:`unmesh.io.obj.encode_obj`. glTF has no displacement texture: .glb files carry none.
 
 glTF (:func:`write_glb`, needs the ``convert`` extra: trimesh): one primitive per page with a
 PBR material, ``baseColorTexture`` and ``normalTexture`` (tangent-space, OpenGL convention as
@@ -40,6 +42,14 @@ def _png(path: Path, image: np.ndarray) -> None:
 
     data = np.clip(np.rint(np.asarray(image) * 255.0), 0, 255).astype(np.uint8)
     Image.fromarray(data, mode="RGB").save(path, format="PNG")
+
+
+def _png16(path: Path, image: np.ndarray) -> None:
+    """A (H, W) array of values in [0, 1] as a 16-bit greyscale PNG."""
+    from PIL import Image
+
+    data = np.clip(np.rint(np.asarray(image) * 65535.0), 0, 65535).astype(np.uint16)
+    Image.fromarray(data).save(path, format="PNG")  # uint16 -> mode "I;16"
 
 
 def _merged(tm: TexturedMesh) -> tuple[TriangleMesh, list[int]]:
@@ -92,6 +102,12 @@ def write_textured_obj(path: str | os.PathLike[str], tm: TexturedMesh) -> list[P
         if p.normal_map is not None:
             mtl += [f"norm {name}_normal.png", f"map_Bump {name}_normal.png"]
             files.append((target.with_name(f"{name}_normal.png"), p.normal_map))
+        if k < len(tm.depth_pages):
+            # MTL ``disp -mm base gain``: height = base + gain * grey (grey in [0, 1])
+            d = tm.depth_pages[k]
+            base, gain = float(d.min()), float(np.ptp(d)) or 1.0
+            mtl.append(f"disp -mm {base:.9g} {gain:.9g} {name}_depth.png")
+            files.append((target.with_name(f"{name}_depth.png"), (d - base) / gain))
         if k < len(tm.mip_levels):
             for j, mip in enumerate(tm.mip_levels[k], start=1):
                 files.append((target.with_name(f"{name}_mip{j}.png"), mip))
@@ -108,6 +124,8 @@ def _write_all(files: list[tuple[Path, Any]]) -> None:
                 tmp.write_text(content, encoding="utf-8")
             elif isinstance(content, bytes):
                 tmp.write_bytes(content)
+            elif np.asarray(content).ndim == 2:
+                _png16(tmp, content)
             else:
                 _png(tmp, content)
 

@@ -54,6 +54,9 @@ class ConvertOptions:
         holds the patches, and several pages when one of this size is not enough (6.3).
     mipmaps : bool
         Also assemble half- and quarter-resolution atlases in the same layout (6.5).
+    depth_map : bool
+        Also bake a depth (displacement) texture (6.2): the height of the surface above each
+        triangle's plane, world units (OBJ output: ``disp``; .glb files carry none).
     grid_factor : float
         Marching-cubes cell edge in units of the median surfel radius.
     max_level : int
@@ -78,6 +81,7 @@ class ConvertOptions:
     normal_map: bool = True
     page_size: int = 2048
     mipmaps: bool = False
+    depth_map: bool = False
     grid_factor: float = 3.0
     max_level: int = 7
     backend: str = "mls"

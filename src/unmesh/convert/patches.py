@@ -124,6 +124,10 @@ class Patches:
         surfels).
     samples : (F,) int64
         Surfels whose centres project into the triangle and are visible.
+    depth : list of (height, width) float64 arrays or None
+        With ``depth=True``: the height of the splatted surface above the triangle's plane
+        (world units, along the face normal) at every texel, the depth (displacement) texture
+        of 6.2.
     """
 
     level: np.ndarray
@@ -138,6 +142,7 @@ class Patches:
     capped: np.ndarray
     uncovered: np.ndarray
     samples: np.ndarray
+    depth: list[np.ndarray] | None = None
 
 
 def patch_size(frames: TriangleFrames, level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -173,7 +178,7 @@ def _layout(widths: np.ndarray, heights: np.ndarray, gap: int,
 
 
 def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: float, normal_error: float | None,
-                   max_level: int, progress: bool = False) -> Patches:
+                   max_level: int, progress: bool = False, depth: bool = False) -> Patches:
     """Adaptive texture patches of every triangle of ``mesh`` from the surfels (6.2.1).
 
     Parameters
@@ -190,6 +195,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         Largest level.
     progress : bool
         Progress bar over the levels.
+    depth : bool
+        Also keep the depth (displacement) texture of every patch (``Patches.depth``).
     """
     frames = triangle_frames(mesh)
     nf = len(mesh.faces)
@@ -232,6 +239,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     out_color: list[np.ndarray | None] = [None] * nf
     out_normal: list[np.ndarray | None] = [None] * nf
     out_cov: list[np.ndarray | None] = [None] * nf
+    out_depth: list[np.ndarray | None] | None = [None] * nf if depth else None
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -256,8 +264,10 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         s_l = scale[pt[live]]
         px_l = 1.0 + x[live] * s_l
         py_l = 1.0 + y[live] * s_l
-        r_l = radii[live] * s_l
         w_l, h_l = width[pt[live]], height[pt[live]]
+        # splat radii in texels, at most twice the patch size: a larger splat is constant over
+        # the patch anyway, and the canvas gaps (which follow the largest splat) stay bounded
+        r_l = np.minimum(radii[live] * s_l, 2.0 * np.maximum(w_l, h_l) + 2.0)
         keep = (px_l > -r_l - 1) & (px_l < w_l + r_l + 1) & (py_l > -r_l - 1) & (py_l < h_l + r_l + 1)
         sel = live[keep]
         s_p, px_s, py_s, r_s = s_l[keep], px_l[keep], py_l[keep], r_l[keep]
@@ -270,9 +280,11 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         slot_c[active], slot_x[active], slot_y[active] = canvas, ox, oy
         sums = np.zeros((nf, 3))  # sum A, sum A e_color, sum A e_normal
         pair_canvas = slot_c[pt[sel]]
+        by_canvas = np.argsort(pair_canvas, kind="stable")
+        canvas_start = np.searchsorted(pair_canvas[by_canvas], np.arange(int(canvas.max()) + 2))
         for c in range(int(canvas.max()) + 1):
             tri_c = active[canvas == c]
-            kk = np.flatnonzero(pair_canvas == c)
+            kk = by_canvas[canvas_start[c]:canvas_start[c + 1]]
             idx = sel[kk]
             t_i = pt[idx]
             sc = s_p[kk]
@@ -312,7 +324,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
                 tn /= np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-12)
                 e_n = 1.0 - np.einsum("ij,ij->i", tn, lnrm[idx[q]])
                 a = area[idx[q]]
-                np.add.at(sums, t_i[q], np.stack([a, a * e_c, a * e_n], axis=1))
+                for j, wgt in enumerate((a, a * e_c, a * e_n)):
+                    sums[:, j] += np.bincount(t_i[q], weights=wgt, minlength=nf)
             # extract the patches of the triangles that stop here
             with np.errstate(invalid="ignore", divide="ignore"):
                 ec = np.where(sums[tri_c, 0] > 0, sums[tri_c, 1] / sums[tri_c, 0], 0.0)
@@ -334,6 +347,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
                 out_color[t] = g.albedo[sl].copy()
                 out_normal[t] = g.normal[sl].copy()
                 out_cov[t] = g.coverage[sl].copy()
+                if out_depth is not None:  # canvas depth (texel units) -> height above the plane
+                    out_depth[t] = (zeye - g.depth[sl]) / scale[t]
             done[tri_c[stop]] = True
             if bar is not None:
                 bar.update(int(stop.sum()))
@@ -342,9 +357,10 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     color_level[color_level < 0] = level[color_level < 0]
     normal_level[normal_level < 0] = level[normal_level < 0]
     width, height = patch_size(frames, level)
-    uncovered = _fill_uncovered(mesh, cloud, frames, level, width, height, out_color, out_normal, out_cov)
+    uncovered = _fill_uncovered(mesh, cloud, frames, level, width, height, out_color, out_normal, out_cov,
+                                out_depth)
     return Patches(level, color_level, normal_level, width, height, out_color, out_normal,  # type: ignore[arg-type]
-                   c_err, n_err, capped, uncovered, samples)
+                   c_err, n_err, capped, uncovered, samples, out_depth)  # type: ignore[arg-type]
 
 
 def _depth_band(pt: np.ndarray, ps: np.ndarray, loc: np.ndarray, lnrm: np.ndarray, nearest: np.ndarray,
@@ -375,8 +391,10 @@ def texel_positions(frames: TriangleFrames, t: np.ndarray, level: np.ndarray, he
 
 
 def _fill_uncovered(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFrames, level: np.ndarray,
-                    width: np.ndarray, height: np.ndarray, colors: list, normals: list, cov: list) -> np.ndarray:
-    """Give texels no splat reached the nearest surfel's colour and normal; count those inside."""
+                    width: np.ndarray, height: np.ndarray, colors: list, normals: list, cov: list,
+                    depths: list | None = None) -> np.ndarray:
+    """Give texels no splat reached the nearest surfel's colour, normal (and height above the
+    plane); count those inside."""
     nf = len(level)
     tt, rr, cc = [], [], []
     for t in range(nf):
@@ -396,6 +414,7 @@ def _fill_uncovered(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFram
     j = idx[:, 0]
     col = cloud.colors[j]
     nrm = np.einsum("pij,pj->pi", frames.rotation[t_all], cloud.normals[j])
+    hgt = np.einsum("pj,pj->p", frames.rotation[t_all, 2], cloud.positions[j] - frames.origin[t_all])
     ax, ay, length = frames.apex[t_all, 0], frames.apex[t_all, 1], frames.length[t_all]
     x, y = lxy[:, 0], lxy[:, 1]
     inside = (y >= 0) & (ax * y - ay * x <= 0) & ((length - ax) * y + ay * (x - length) <= 0)
@@ -406,4 +425,6 @@ def _fill_uncovered(mesh: TriangleMesh, cloud: SurfelCloud, frames: TriangleFram
         t = int(t_all[s])
         colors[t][r_all[s:e], c_all[s:e]] = col[s:e]
         normals[t][r_all[s:e], c_all[s:e]] = nrm[s:e]
+        if depths is not None:
+            depths[t][r_all[s:e], c_all[s:e]] = hgt[s:e]
     return uncovered

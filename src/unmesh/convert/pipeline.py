@@ -132,7 +132,7 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
     bar.stage("texture patches")
     normal_error = opt.normal_error if opt.normal_map else None
     patches = render_patches(mesh, cloud, texture_error=opt.texture_error, normal_error=normal_error,
-                             max_level=opt.max_level, progress=opt.progress)
+                             max_level=opt.max_level, progress=opt.progress, depth=opt.depth_map)
     times["patches"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

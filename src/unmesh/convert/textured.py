@@ -47,10 +47,14 @@ class TexturedMesh:
         Each with ``uv`` and ``texture`` (and ``normal_map`` when normal maps were baked).
     mip_levels : sequence of tuples of (H, W, 3) arrays, optional
         Per part, the half- and quarter-resolution colour pages (6.5).
+    depth_pages : sequence of (H, W) float64 arrays, optional
+        Per part, the depth (displacement) page (6.2): the height of the surface above each
+        triangle's plane along its face normal, in world units (0 outside the patches).
     """
 
     parts: tuple[TriangleMesh, ...]
     mip_levels: tuple[tuple[np.ndarray, ...], ...] = field(default=())
+    depth_pages: tuple[np.ndarray, ...] = field(default=())
 
     def __post_init__(self) -> None:
         parts = tuple(self.parts)
@@ -63,6 +67,10 @@ class TexturedMesh:
                 raise InputError(f"parts[{i}]: expected uv coordinates and a texture")
         object.__setattr__(self, "parts", parts)
         object.__setattr__(self, "mip_levels", tuple(tuple(m) for m in self.mip_levels))
+        depth = tuple(np.asarray(d, dtype=np.float64) for d in self.depth_pages)
+        if depth and len(depth) != len(parts):
+            raise InputError(f"depth_pages: expected one page per part ({len(parts)}), got {len(depth)}")
+        object.__setattr__(self, "depth_pages", depth)
 
     def __repr__(self) -> str:
         pages = ", ".join(f"{p.texture.shape[1]}x{p.texture.shape[0]}" for p in self.parts)  # type: ignore[union-attr]
@@ -85,7 +93,7 @@ class TexturedMesh:
 
     def without_normal_map(self) -> TexturedMesh:
         """The same mesh without its normal maps (e.g. Fig. 6.6, middle row)."""
-        return TexturedMesh(tuple(p.replace(normal_map=None) for p in self.parts), self.mip_levels)
+        return TexturedMesh(tuple(p.replace(normal_map=None) for p in self.parts), self.mip_levels, self.depth_pages)
 
 
 def _draw(gbuffer: GBuffer, objects: Sequence[Any], context: DrawContext) -> None:
