@@ -55,7 +55,7 @@ def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path |
         return clouds[i]
 
     pts = np.concatenate([load(i).visible().positions[::7] for i in np.linspace(0, len(files) - 1, 6).astype(int)])
-    ground = floor_under(pts) if floor else None
+    ground = floor_under(pts, extent=3.0) if floor else None
     framed = np.concatenate([pts, pts * [1.0, 0.0, 1.0]]) if floor else pts  # keep the floor contact in view
 
     def scene(i: int) -> list[Any]:
