@@ -159,6 +159,35 @@ def _render(ctx: ExampleContext, out: Path, name: str, caption: str, color_by: s
     ctx.image(save_image(ctx.path(f"{name}_stills.png"), strip), f"{caption} — frames {', '.join(p.stem[-3:] for p in picks)}")
 
 
+def _fluid_surface_stills(ctx: ExampleContext, out: Path, name: str, spacing: float, stills: int = 4) -> None:
+    """The stills again as the water's surface: marching cubes of the SPH density (8.4) at half
+    the rest density (:func:`unmesh.sph.surface.fluid_surface`, section 8.2.7), in the tank."""
+    from unmesh import io
+    from unmesh.render import Camera, render, save_image
+    from unmesh.sph.surface import fluid_surface
+
+    frames = _frames(out)
+    sample = [io.load(f) for f in frames[:: max(1, len(frames) // 8)]]
+    pts = np.concatenate([p.positions for p in sample])
+    lo, hi = np.percentile(pts, 0.2, axis=0), np.percentile(pts, 99.8, axis=0)
+    context, keep = _context(name, 3, lo, hi)
+    inside = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
+    framed = np.concatenate([inside[:: max(1, len(inside) // 20000)], keep])
+    cam = Camera.fit(framed, *((320, 240) if ctx.quick else (480, 360)), direction=(0.35, 0.45, 1.0), margin=1.3)
+    images = []
+    picks = [frames[round(k)] for k in np.linspace(0, len(frames) - 1, stills)]
+    for path in picks:
+        x = io.load(path).positions
+        # closest packing: mass d³/√2 per particle at rest density 1 (h = 2d)
+        mesh = fluid_surface(x, np.full(len(x), spacing ** 3 / np.sqrt(2.0)), 1.0, 2.0 * spacing, step=0.5 * spacing)
+        mesh = mesh.replace(vertex_colors=np.tile([0.30, 0.55, 0.85], (len(mesh.vertices), 1)))
+        shown = [mesh, *(c.with_casters(x[:: max(1, len(x) // 20000)]) if hasattr(c, "with_casters") else c
+                         for c in context)]
+        images.append(render(shown, cam, supersample=2).color)
+    ctx.image(save_image(ctx.path(f"{name}_surface.png"), np.concatenate(images, axis=1)),
+              "the same frames as the water's surface: marching cubes of the SPH density at half the rest density")
+
+
 class _Points:
     """Shadow casters: anything with ``positions`` (N,3)."""
 
@@ -252,6 +281,7 @@ def dam_break(ctx: ExampleContext) -> None:
     ov = {"simulation.spacing": spacing, "simulation.duration": 0.4 if ctx.quick else 1.0}
     out, summary = run_shipped_scene(ctx, "dam_break", ov)
     _render(ctx, out, "dam_break", "dam break (colour: horizontal velocity vx)", "vx", 3)
+    _fluid_surface_stills(ctx, out, "dam_break", spacing)
     t_mm = np.array([0.832, 1.219, 1.997, 2.547, 3.345])
     z_mm = np.array([1.217, 1.474, 2.292, 2.995, 4.134])
     times = np.array([f["time"] for f in summary["frames"]])
