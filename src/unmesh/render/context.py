@@ -90,7 +90,7 @@ class Floor:
     color, grid_color : RGB in [0, 1]
     grid : float or None
         Spacing of the grid lines (world units, lines one pixel wide, faded out where they would
-        be closer than a few pixels); None draws no grid.
+        be closer than 14 pixels); None draws no grid.
     casters : (N,3) float, optional
         Points that cast the contact shadow: each darkens the floor below it (along
         ``-normal``) in a Gaussian of width ``shadow_radius``, fading with its height over
@@ -344,10 +344,10 @@ def _footprint(s: np.ndarray) -> np.ndarray:
 def _grid_lines(u: np.ndarray, v: np.ndarray, hit: np.ndarray, spacing: float) -> np.ndarray:
     """Coverage (H,W) in [0, 1] of the lines one pixel wide at multiples of ``spacing`` along ``u``
     and ``v``, box-filtered by the pixel footprint and faded out (with the larger footprint of
-    the two, so the fade depends on the distance only) where lines would be under 20 pixels apart."""
+    the two, so the fade depends on the distance only) where lines would be under 14 pixels apart."""
     su, sv = np.where(hit, u / spacing, np.nan), np.where(hit, v / spacing, np.nan)
     fu, fv = _footprint(su), _footprint(sv)
-    fade = np.clip((1.0 / 20.0 - np.maximum(fu, fv)) / (1.0 / 40.0), 0.0, 1.0)
+    fade = np.clip((1.0 / 14.0 - np.maximum(fu, fv)) / (1.0 / 28.0), 0.0, 1.0)
     lines = []
     for s, fw in ((su, fu), (sv, fv)):
         dist = np.abs(s - np.round(s))  # in grid units
