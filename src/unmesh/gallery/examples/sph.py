@@ -91,7 +91,10 @@ def _context(scene: str, dim: int, lo: np.ndarray, hi: np.ndarray) -> tuple[list
             top = min(bmax[1], bmin[1] + 1.1 * (hi[1] - bmin[1]))  # walls up to a little above the action
             out.append(floor_under(np.array([bmin, bmax]), height=float(bmin[1]), extent=4.0))
             out += open_box(bmin, (bmax[0], top, bmax[2]))
-            keep += [[x, bmin[1], z] for x in (bmin[0], bmax[0]) for z in (bmin[2], bmax[2])]
+            # frame the action: the tank's floor corners, but not far beyond the particles
+            near_lo, near_hi = lo - 0.3 * size, hi + 0.3 * size
+            keep += [[np.clip(x, near_lo[0], near_hi[0]), bmin[1], np.clip(z, near_lo[2], near_hi[2])]
+                     for x in (bmin[0], bmax[0]) for z in (bmin[2], bmax[2])]
     return out, np.asarray(keep, dtype=np.float64).reshape(-1, 3)
 
 
@@ -160,8 +163,8 @@ def _render(ctx: ExampleContext, out: Path, name: str, caption: str, color_by: s
 
 
 def _fluid_surface_stills(ctx: ExampleContext, out: Path, name: str, spacing: float, stills: int = 4) -> None:
-    """The stills again as the water's surface: marching cubes of the SPH density (8.4) at half
-    the rest density (:func:`unmesh.sph.surface.fluid_surface`, section 8.2.7), in the tank."""
+    """The stills again as a surface: marching cubes of the SPH density (8.4) of all particles at
+    half the rest density (:func:`unmesh.sph.surface.fluid_surface`, section 8.2.7), in the tank."""
     from unmesh import io
     from unmesh.render import Camera, render, save_image
     from unmesh.sph.surface import fluid_surface
@@ -185,7 +188,7 @@ def _fluid_surface_stills(ctx: ExampleContext, out: Path, name: str, spacing: fl
                          for c in context)]
         images.append(render(shown, cam, supersample=2).color)
     ctx.image(save_image(ctx.path(f"{name}_surface.png"), np.concatenate(images, axis=1)),
-              "the same frames as the water's surface: marching cubes of the SPH density at half the rest density")
+              "the same frames as a surface: marching cubes of the SPH density at half the rest density")
 
 
 class _Points:
@@ -380,6 +383,7 @@ def melting(ctx: ExampleContext) -> None:
         if ctx.quick else {"simulation.spacing": 0.01, "simulation.duration": 3.0}
     out, summary = run_shipped_scene(ctx, "melting_blob", ov)
     _render(ctx, out, "melting_blob", "melting blob (colour: temperature)", "temperature", 3, color_range=(20, 100))
+    _fluid_surface_stills(ctx, out, "melting_blob", ov["simulation.spacing"])
     last = summary["frames"][-1]["phase_counts"]
     ctx.metric("melted fraction at the end", round(last["fluid"] / (last["fluid"] + last["solid"]), 3))
     p = io.load(_frames(out)[-1]).positions
