@@ -72,3 +72,12 @@ def test_pieces_colour_separated_parts_and_number_them_left_to_right():
     assert label.tolist() == [2, 1, 0]
     surf = piece_colored_surface(split, np.zeros((split.n_nodes, 3)))
     assert len(np.unique(surf.vertex_colors, axis=0)) == 3
+
+
+def test_the_hanging_sheet_clamp_is_drawn_where_the_scene_pins_it():
+    from unmesh.gallery.examples.shells import _clamps
+
+    (clamp,) = _clamps("hanging_sheet")
+    assert np.allclose(0.5 * (clamp.lo + clamp.hi), [-0.5, 1.0, 0.0])
+    assert np.allclose(clamp.hi - clamp.lo, [0.2, 0.02, 1.2])
+    assert _clamps("elastic_drop") == ()

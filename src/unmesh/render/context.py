@@ -90,7 +90,7 @@ class Floor:
     color, grid_color : RGB in [0, 1]
     grid : float or None
         Spacing of the grid lines (world units, lines one pixel wide, faded out where they would
-        be closer than a few pixels); None draws no grid.
+        be closer than 14 pixels); None draws no grid.
     casters : (N,3) float, optional
         Points that cast the contact shadow: each darkens the floor below it (along
         ``-normal``) in a Gaussian of width ``shadow_radius``, fading with its height over
@@ -157,7 +157,7 @@ class Floor:
         hit = np.isfinite(t)
         albedo = np.broadcast_to(self.color, x.shape).copy()
         if self.grid is not None and hit.any():
-            line = np.maximum(_grid_lines(u, hit, self.grid), _grid_lines(v, hit, self.grid))
+            line = _grid_lines(u, v, hit, self.grid)
             albedo += line[..., None] * (self.grid_color - self.color)
         return t, np.broadcast_to(self.normal, x.shape).copy(), albedo, np.full(t.shape, np.inf), u, v
 
@@ -332,19 +332,27 @@ def _plane_hit(origins: np.ndarray, directions: np.ndarray, point: np.ndarray,
     return t, x
 
 
-def _grid_lines(u: np.ndarray, hit: np.ndarray, spacing: float) -> np.ndarray:
-    """Coverage (H,W) in [0, 1] of lines one pixel wide at multiples of ``spacing`` along ``u``,
-    box-filtered by the pixel footprint and faded out where the lines would be under 12 pixels apart."""
-    s = np.where(hit, u / spacing, np.nan)
+def _footprint(s: np.ndarray) -> np.ndarray:
+    """Change (H,W) of ``s`` (NaN off the object) from one pixel to the next, |ds/dx| + |ds/dy|."""
     with np.errstate(invalid="ignore"):
         gy, gx = np.gradient(s) if min(s.shape) > 1 else (np.zeros_like(s), np.zeros_like(s))
         fw = np.abs(gx) + np.abs(gy)
     fw = np.where(np.isfinite(fw) & (fw > 0), fw, np.nan)
-    fw = np.where(np.isnan(fw), np.nanmedian(fw) if np.isfinite(fw).any() else 1.0, fw)
-    dist = np.abs(s - np.round(s))  # in grid units
-    line = np.clip(1.0 - dist / np.maximum(fw, 1e-12) + 0.5, 0.0, 1.0) * np.clip(1.0 - fw, 0.0, 1.0)
-    fade = np.clip((1.0 / 12.0 - fw) / (1.0 / 24.0), 0.0, 1.0)
-    return np.where(hit, np.nan_to_num(line * fade), 0.0)
+    return np.where(np.isnan(fw), np.nanmedian(fw) if np.isfinite(fw).any() else 1.0, fw)
+
+
+def _grid_lines(u: np.ndarray, v: np.ndarray, hit: np.ndarray, spacing: float) -> np.ndarray:
+    """Coverage (H,W) in [0, 1] of the lines one pixel wide at multiples of ``spacing`` along ``u``
+    and ``v``, box-filtered by the pixel footprint and faded out (with the larger footprint of
+    the two, so the fade depends on the distance only) where lines would be under 14 pixels apart."""
+    su, sv = np.where(hit, u / spacing, np.nan), np.where(hit, v / spacing, np.nan)
+    fu, fv = _footprint(su), _footprint(sv)
+    fade = np.clip((1.0 / 14.0 - np.maximum(fu, fv)) / (1.0 / 28.0), 0.0, 1.0)
+    lines = []
+    for s, fw in ((su, fu), (sv, fv)):
+        dist = np.abs(s - np.round(s))  # in grid units
+        lines.append(np.clip(1.0 - dist / np.maximum(fw, 1e-12) + 0.5, 0.0, 1.0) * np.clip(1.0 - fw, 0.0, 1.0))
+    return np.where(hit, np.nan_to_num(np.maximum(*lines) * fade), 0.0)
 
 
 def _pixel_size(camera: Camera, depth: np.ndarray) -> np.ndarray:

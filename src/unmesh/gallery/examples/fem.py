@@ -88,6 +88,19 @@ def piece_colored_surface(mesh: Any, displacement: np.ndarray) -> Any:
     return TriangleMesh(v, np.arange(len(v)).reshape(-1, 3), vertex_colors=col)
 
 
+def _area_samples(mesh: Any, n: int = 6000) -> np.ndarray:
+    """``n`` points (n,3) spread over a triangle mesh by area (fixed seed): contact-shadow casters
+    that do not depend on how finely the surface is triangulated."""
+    tri = mesh.vertices[mesh.faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    rng = np.random.default_rng(0)
+    k = rng.choice(len(tri), size=n, p=area / area.sum())
+    a, b = rng.random((2, n, 1))
+    flip = a + b > 1
+    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
+    return tri[k, 0] + a * (tri[k, 1] - tri[k, 0]) + b * (tri[k, 2] - tri[k, 0])
+
+
 def _blades(scene: str) -> list[Any]:
     """The blade sweeps (:class:`unmesh.fem.events.BladeEvent`) of a shipped scene."""
     import tomllib
@@ -134,7 +147,7 @@ def _render_run(ctx: ExampleContext, out: Path, summary: dict[str, Any], eye: An
     """Video (at least 640x480) and a strip of stills with one camera framing the run: the pieces
     coloured by piece, the floor with a grid and their contact shadow, the blades translucent."""
     from unmesh.fem.vtk_io import read_vtu
-    from unmesh.gallery.figures import floor_under
+    from unmesh.gallery.figures import floor_under, nice_step
     from unmesh.render import Camera, render, save_image, write_video
 
     n = len(summary["frames"])
@@ -151,11 +164,11 @@ def _render_run(ctx: ExampleContext, out: Path, summary: dict[str, Any], eye: An
     pts = np.concatenate(sample)
     framed = np.concatenate([pts, pts * [1.0, 0.0, 1.0]])
     direction = np.asarray(eye, dtype=np.float64) - np.asarray(target, dtype=np.float64)
-    ground = floor_under(sample[0], extent=5.0)
+    ground = floor_under(sample[0], extent=5.0, grid=nice_step(float(np.ptp(sample[0], axis=0).max()), 3))
 
     def frame(k: int, cam: Any, supersample: int = 1) -> np.ndarray:
         surf = surface(k)
-        objs = [surf, ground.with_casters(surf.vertices), *_blade_polygons(blades, times[k], dt)]
+        objs = [surf, ground.with_casters(_area_samples(surf)), *_blade_polygons(blades, times[k], dt)]
         return render(objs, cam, supersample=supersample).color
 
     vcam = Camera.fit(framed, max(640, size[0]), max(480, size[1]), direction=direction, margin=1.1)

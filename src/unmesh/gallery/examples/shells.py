@@ -32,14 +32,15 @@ def run_shell_scene(ctx: ExampleContext, name: str, quick: dict[str, Any], durat
 
 
 def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path | None = None, size: int = 320,
-                  fps: float = 25.0, floor: bool = False) -> tuple[list[np.ndarray], Path | None]:
+                  fps: float = 25.0, floor: bool = False, context: tuple[Any, ...] = ()) -> tuple[list[np.ndarray], Path | None]:
     """Render selected frames (stills, anti-aliased by 2x2 supersampling) and optionally every
     frame (video, at least 640x480) with one camera.
 
     The frames keep their discontinuity surfels (``SurfelCloud.surfel_kinds``): the renderer
     passes them to the splatter as clip information (section 4.3) and draws no colour for them.
     ``floor`` draws the floor ``y = 0`` of the scenes' plane colliders with a grid and the
-    contact shadow of the shell (:class:`unmesh.render.Floor`).
+    contact shadow of the shell (:class:`unmesh.render.Floor`); ``context`` adds fixed objects
+    (e.g. the clamp, :func:`_clamps`).
     """
     from unmesh import io
     from unmesh.gallery.figures import floor_under
@@ -55,15 +56,19 @@ def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path |
         return clouds[i]
 
     pts = np.concatenate([load(i).visible().positions[::7] for i in np.linspace(0, len(files) - 1, 6).astype(int)])
-    ground = floor_under(pts) if floor else None
+    ground = floor_under(pts, extent=3.0) if floor else None
     framed = np.concatenate([pts, pts * [1.0, 0.0, 1.0]]) if floor else pts  # keep the floor contact in view
+    corners = [np.array([[b.lo, b.hi][i][0], [b.lo, b.hi][j][1], [b.lo, b.hi][k][2]])
+               for b in context for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    if corners:
+        framed = np.concatenate([framed, np.repeat(np.array(corners), 50, axis=0)])  # the clamps in view too
 
     def scene(i: int) -> list[Any]:
         cloud = load(i)
         if ground is None:
-            return [cloud]
+            return [cloud, *context]
         vis = cloud.visible().positions
-        return [cloud, ground.with_casters(vis[:: max(1, len(vis) // 20000)])]
+        return [cloud, ground.with_casters(vis[:: max(1, len(vis) // 20000)]), *context]
 
     cam = Camera.fit(framed, size, size, direction=direction)
     stills = [render(scene(min(i, len(files) - 1)), cam, supersample=2).color for i in frames]  # anti-aliased
@@ -72,6 +77,25 @@ def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path |
         vcam = Camera.fit(framed, 640, 480, direction=direction)
         written = write_video((render(scene(i), vcam).color for i in range(len(files))), video, fps=fps)
     return stills, written
+
+
+def _clamps(scene: str) -> tuple[Any, ...]:
+    """The ``[[pinned]]`` box regions of a shipped shell scene as dark bars (drawing context):
+    the clamp, flattened to a tenth of its height so the sheet's edge shows above and below it."""
+    import tomllib
+
+    from unmesh import scenes
+    from unmesh.render import Box
+
+    table = tomllib.loads(scenes.path(f"shells/{scene}.toml").read_text())
+    out = []
+    for pin in table.get("pinned", []):
+        r = pin.get("region", {})
+        if r.get("type") == "box":
+            c, half = np.asarray(r["center"], float), 0.5 * np.asarray(r["size"], float)
+            half[1] *= 0.1
+            out.append(Box(c - half, c + half, color=(0.35, 0.36, 0.40)))
+    return tuple(out)
 
 
 def _strip(ctx: ExampleContext, name: str, images: list[np.ndarray], caption: str) -> None:
@@ -113,7 +137,8 @@ def hanging_sheet(ctx: ExampleContext) -> None:
     s = _summary(out)
     last = len(s["frames"]) - 1
     picks = [0, last // 4, last // 2, last]
-    stills, video = render_frames(out, picks, (0.5, 0.3, 1.0), ctx.path("hanging_sheet.mp4"))
+    stills, video = render_frames(out, picks, (0.5, 0.3, 1.0), ctx.path("hanging_sheet.mp4"),
+                                  context=_clamps("hanging_sheet"))
     _strip(ctx, "hanging_sheet", stills, "frames 0, 1/4, 1/2 and the end")
     ctx.video(video, "the sheet sagging")
     _sag_image(ctx, out, last)

@@ -91,7 +91,10 @@ def _context(scene: str, dim: int, lo: np.ndarray, hi: np.ndarray) -> tuple[list
             top = min(bmax[1], bmin[1] + 1.1 * (hi[1] - bmin[1]))  # walls up to a little above the action
             out.append(floor_under(np.array([bmin, bmax]), height=float(bmin[1]), extent=4.0))
             out += open_box(bmin, (bmax[0], top, bmax[2]))
-            keep += [[x, bmin[1], z] for x in (bmin[0], bmax[0]) for z in (bmin[2], bmax[2])]
+            # frame the action: the tank's floor corners, but not far beyond the particles
+            near_lo, near_hi = lo - 0.3 * size, hi + 0.3 * size
+            keep += [[np.clip(x, near_lo[0], near_hi[0]), bmin[1], np.clip(z, near_lo[2], near_hi[2])]
+                     for x in (bmin[0], bmax[0]) for z in (bmin[2], bmax[2])]
     return out, np.asarray(keep, dtype=np.float64).reshape(-1, 3)
 
 
@@ -157,6 +160,35 @@ def _render(ctx: ExampleContext, out: Path, name: str, caption: str, color_by: s
                                  supersample=2).color)
     strip = np.concatenate(images, axis=1)
     ctx.image(save_image(ctx.path(f"{name}_stills.png"), strip), f"{caption} — frames {', '.join(p.stem[-3:] for p in picks)}")
+
+
+def _fluid_surface_stills(ctx: ExampleContext, out: Path, name: str, spacing: float, stills: int = 4) -> None:
+    """The stills again as a surface: marching cubes of the SPH density (8.4) of all particles at
+    half the rest density (:func:`unmesh.sph.surface.fluid_surface`, section 8.2.7), in the tank."""
+    from unmesh import io
+    from unmesh.render import Camera, render, save_image
+    from unmesh.sph.surface import fluid_surface
+
+    frames = _frames(out)
+    sample = [io.load(f) for f in frames[:: max(1, len(frames) // 8)]]
+    pts = np.concatenate([p.positions for p in sample])
+    lo, hi = np.percentile(pts, 0.2, axis=0), np.percentile(pts, 99.8, axis=0)
+    context, keep = _context(name, 3, lo, hi)
+    inside = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
+    framed = np.concatenate([inside[:: max(1, len(inside) // 20000)], keep])
+    cam = Camera.fit(framed, *((320, 240) if ctx.quick else (480, 360)), direction=(0.35, 0.45, 1.0), margin=1.3)
+    images = []
+    picks = [frames[round(k)] for k in np.linspace(0, len(frames) - 1, stills)]
+    for path in picks:
+        x = io.load(path).positions
+        # closest packing: mass d³/√2 per particle at rest density 1 (h = 2d)
+        mesh = fluid_surface(x, np.full(len(x), spacing ** 3 / np.sqrt(2.0)), 1.0, 2.0 * spacing, step=0.5 * spacing)
+        mesh = mesh.replace(vertex_colors=np.tile([0.30, 0.55, 0.85], (len(mesh.vertices), 1)))
+        shown = [mesh, *(c.with_casters(x[:: max(1, len(x) // 20000)]) if hasattr(c, "with_casters") else c
+                         for c in context)]
+        images.append(render(shown, cam, supersample=2).color)
+    ctx.image(save_image(ctx.path(f"{name}_surface.png"), np.concatenate(images, axis=1)),
+              "the same frames as a surface: marching cubes of the SPH density at half the rest density")
 
 
 class _Points:
@@ -257,6 +289,7 @@ def dam_break(ctx: ExampleContext) -> None:
     ov = {"simulation.spacing": spacing, "simulation.duration": 0.4 if ctx.quick else 1.0}
     out, summary = run_shipped_scene(ctx, "dam_break", ov)
     _render(ctx, out, "dam_break", "dam break (colour: horizontal velocity vx)", "vx", 3)
+    _fluid_surface_stills(ctx, out, "dam_break", spacing)
     t_mm = np.array([0.832, 1.219, 1.997, 2.547, 3.345])
     z_mm = np.array([1.217, 1.474, 2.292, 2.995, 4.134])
     times = np.array([f["time"] for f in summary["frames"]])
@@ -353,6 +386,7 @@ def melting(ctx: ExampleContext) -> None:
         if ctx.quick else {"simulation.spacing": 0.01, "simulation.duration": 3.0}
     out, summary = run_shipped_scene(ctx, "melting_blob", ov)
     _render(ctx, out, "melting_blob", "melting blob (colour: temperature)", "temperature", 3, color_range=(20, 100))
+    _fluid_surface_stills(ctx, out, "melting_blob", ov["simulation.spacing"])
     last = summary["frames"][-1]["phase_counts"]
     ctx.metric("melted fraction at the end", round(last["fluid"] / (last["fluid"] + last["solid"]), 3))
     p = io.load(_frames(out)[-1]).positions
