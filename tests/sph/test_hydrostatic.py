@@ -44,8 +44,7 @@ def _kernel(x, rho, dim, delta=0.5, solid=None, passes=1):
     r = rho.copy()
     p = np.zeros(n)
     grad, out = DK.empty_scratch(n)
-    DK.density_diffusion_pass(x, np.full(n, _mass(dim)), r, p, phase, np.zeros(n, np.int32), mats, nbr, nn, H, dim, grad, out,
-                              np.zeros(n))
+    DK.density_diffusion_pass(x, np.full(n, _mass(dim)), r, p, phase, np.zeros(n, np.int32), mats, nbr, nn, H, dim, grad, out)
     return r, p
 
 
@@ -153,7 +152,7 @@ negative_pressure = 1.0
 viscosity = 0.05
 artificial_viscosity = 0.05
 density_diffusion = 1.0
-density_passes = 1
+density_passes = 16
 
 [[objects]]
 name = "water"

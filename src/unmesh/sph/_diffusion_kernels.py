@@ -40,13 +40,7 @@ from numba import njit, prange
 from unmesh.sph import materials as M
 from unmesh.sph._kernels import PLAIN, SOLID, kernel_gradf, pressure_eos
 
-__all__ = ["KEEP", "density_diffusion_pass", "laplacian_scale"]
-
-#: Fraction of the accumulated correction a step starts from (a memory of about 1/(1 − KEEP) = 16
-#: steps): without the decay a resting fluid is filtered as by as many passes as it has taken steps,
-#: the filtered pressure is pinned by the values at the floor and under the surface, and its slope
-#: steepened (2D column 1.08 ρ0 g, 3D tank 1.18 ρ0 g).
-KEEP = 1.0 - 1.0 / 16.0
+__all__ = ["density_diffusion_pass", "laplacian_scale"]
 
 
 @njit(**PLAIN)
@@ -136,7 +130,7 @@ def _diffusion(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad):
 
 
 @njit(cache=True, parallel=True)
-def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, grad, out, corr):
+def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, grad, out):
     """Filter the density of every fluid particle in place and recompute its pressure (8.15–8.16).
 
     ``nbr`` / ``nnbr``: the neighbour lists of :func:`unmesh.sph._kernels.density_pass`
@@ -146,15 +140,6 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
     on the result of the previous one) the column ``DENSITY_PASSES``; particles with
     ``δ = 0`` and solid particles are left unchanged (pairs are fluid–fluid of one material,
     so a pair is filtered in the same passes from both sides).
-
-    ``corr`` (N,) is the particles' accumulated correction ``c_i`` (state, carried from step to
-    step): the filter starts from ``ρ_i + KEEP c_i`` and on return ``c_i`` is the filtered density
-    minus the summation density ``ρ_i`` it was given. The passes of successive steps therefore
-    add up with a memory of about 16 steps (:data:`KEEP`): one pass per step smooths a resting
-    fluid about as much as 16 passes in one step, like the diffusion term of δ-SPH's continuity
-    equation. ``Σ m c`` stays 0 (each pass conserves it, the decay scales it). ``c`` is set to 0
-    for particles that take no part (solids, free surface). With ``corr = 0`` one call is the
-    plain filter of ``ρ``.
     """
     n = x.shape[0]
     lam = laplacian_scale(h, dim)
@@ -163,20 +148,12 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
         if mats[i, M.DENSITY_DIFFUSION] > 0.0:
             passes = max(passes, int(mats[i, M.DENSITY_PASSES]))
     if passes == 0:
-        for i in prange(n):
-            corr[i] = 0.0
         return
     # who takes part: fluid particles of a filtered material, not at a free surface (SURFACE)
     part = np.empty(n, np.uint8)
-    base = np.empty(n)
     for i in prange(n):
         mt = matid[i]
         part[i] = (phase[i] != SOLID) & (mats[mt, M.DENSITY_DIFFUSION] > 0.0) & (rho[i] >= M.SURFACE * mats[mt, M.RHO0])
-        base[i] = rho[i]  # the summation density
-        if part[i] != 0:
-            rho[i] += KEEP * corr[i]
-        else:
-            corr[i] = 0.0
     for k in range(passes):
         for i in prange(n):
             mt = matid[i]
@@ -194,12 +171,10 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
             else:
                 out[i] = rho[i]
         for i in prange(n):
-            rho[i] = out[i]
-    for i in prange(n):
-        if part[i] != 0:
-            mt = matid[i]
-            corr[i] = rho[i] - base[i]
-            p[i] = pressure_eos(rho[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+            if out[i] != rho[i]:
+                mt = matid[i]
+                rho[i] = out[i]
+                p[i] = pressure_eos(out[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
 
 
 def empty_scratch(n: int) -> tuple[np.ndarray, np.ndarray]:

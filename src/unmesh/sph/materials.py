@@ -99,8 +99,8 @@ class Material:
         (8.15) is taken from it. It removes the particle-scale pressure noise of a
         disordered arrangement (a resting column's pressure becomes linear in depth),
         conserves mass (``Σ m_i Δρ_i = 0``) and leaves a linear density field unchanged.
-        0 (the default) disables it: the thesis' plain summation density. Solid particles
-        are never filtered.
+        0 (the default) disables it: the thesis' plain summation density. Solid particles and
+        particles at a free surface (``ρ < SURFACE ρ0``) are never filtered.
     density_passes : int
         Number of filter passes per force evaluation (each on the previous result); the
         particle-scale smoothing grows with it, and so does the cost (two neighbour loops
