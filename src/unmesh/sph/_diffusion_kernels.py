@@ -21,12 +21,7 @@ The pair weights ``2 m_i m_j/(ρ_i + ρ_j)`` are symmetric and ``ψ_ij (x_ji·�
 antisymmetric, so ``Σ_i m_i (ρ̃_i − ρ_i) = 0`` to round-off.
 
 Only fluid particles are filtered, and only with fluid neighbours of the same material
-(same ``ρ0``); solid particles keep their summation density. So do particles at a free
-surface, whose summation density lacks the missing neighbours (``ρ < SURFACE ρ0`` before
-filtering, :data:`unmesh.sph.materials.SURFACE`): they are neither filtered nor neighbours in
-the filter. Otherwise the passes carry that deficit into the fluid below (about ``√passes · h``
-deep: in a 3D tank of 8 layers, 16 passes lowered the pressure under the surface and steepened
-its slope to 1.17 ρ0 g). Numpy reference:
+(same ``ρ0``); solid particles keep their summation density. Numpy reference:
 :func:`unmesh.sph.fluid.density_diffusion_reference`.
 """
 
@@ -50,20 +45,19 @@ def laplacian_scale(h, dim):
 
 
 @njit(**PLAIN)
-def _pairs_ok(i, j, part, matid):
-    """``part``: the filter mask, 1 for the particles that take part."""
-    return part[j] != 0 and matid[j] == matid[i]
+def _pairs_ok(i, j, phase, matid):
+    return phase[j] != SOLID and matid[j] == matid[i]
 
 
 @njit(**PLAIN)
-def _gradient(i, x, m, rho, part, matid, nbr, nnbr, h, dim, out):
+def _gradient(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, out):
     """Renormalised density gradient ``⟨∇ρ⟩_i`` into ``out[i]`` (0 when ``L_i`` is singular)."""
     cap = nbr.shape[1]
     a00 = a01 = a02 = a11 = a12 = a22 = 0.0
     g0 = g1 = g2 = 0.0
     for t in range(min(nnbr[i], cap)):
         j = nbr[i, t]
-        if not _pairs_ok(i, j, part, matid):
+        if not _pairs_ok(i, j, phase, matid):
             continue
         d0 = x[i, 0] - x[j, 0]
         d1 = x[i, 1] - x[j, 1]
@@ -108,13 +102,13 @@ def _gradient(i, x, m, rho, part, matid, nbr, nnbr, h, dim, out):
 
 
 @njit(**PLAIN)
-def _diffusion(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad):
+def _diffusion(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, grad):
     """``D_i`` (see the module docstring)."""
     cap = nbr.shape[1]
     acc = 0.0
     for t in range(min(nnbr[i], cap)):
         j = nbr[i, t]
-        if not _pairs_ok(i, j, part, matid):
+        if not _pairs_ok(i, j, phase, matid):
             continue
         d0 = x[j, 0] - x[i, 0]  # x_ji
         d1 = x[j, 1] - x[i, 1]
@@ -147,18 +141,11 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
     for i in range(mats.shape[0]):
         if mats[i, M.DENSITY_DIFFUSION] > 0.0:
             passes = max(passes, int(mats[i, M.DENSITY_PASSES]))
-    if passes == 0:
-        return
-    # who takes part: fluid particles of a filtered material, not at a free surface (SURFACE)
-    part = np.empty(n, np.uint8)
-    for i in prange(n):
-        mt = matid[i]
-        part[i] = (phase[i] != SOLID) & (mats[mt, M.DENSITY_DIFFUSION] > 0.0) & (rho[i] >= M.SURFACE * mats[mt, M.RHO0])
     for k in range(passes):
         for i in prange(n):
             mt = matid[i]
-            if part[i] != 0 and k < mats[mt, M.DENSITY_PASSES]:
-                _gradient(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad)
+            if phase[i] != SOLID and mats[mt, M.DENSITY_DIFFUSION] > 0.0 and k < mats[mt, M.DENSITY_PASSES]:
+                _gradient(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, grad)
             else:
                 grad[i, 0] = 0.0
                 grad[i, 1] = 0.0
@@ -166,8 +153,8 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
         for i in prange(n):
             mt = matid[i]
             delta = mats[mt, M.DENSITY_DIFFUSION]
-            if part[i] != 0 and k < mats[mt, M.DENSITY_PASSES]:
-                out[i] = rho[i] + delta * _diffusion(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad) / lam
+            if phase[i] != SOLID and delta > 0.0 and k < mats[mt, M.DENSITY_PASSES]:
+                out[i] = rho[i] + delta * _diffusion(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, grad) / lam
             else:
                 out[i] = rho[i]
         for i in prange(n):

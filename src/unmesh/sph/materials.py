@@ -33,10 +33,6 @@ RHO0, K, GAMMA, ZETA, VISC, XI, KE, GOAL, LMU, LLAM, DIFF = range(11)
 DOCK_MAX, DOCK_GAIN, DOCK_LOSS, FRACTURE, MELT_RATE, MELT_T = range(11, 17)
 FREEZE_RATE, FREEZE_T, FREEZE_NMIN, FREEZE_VMAX, FREEZE_FMAX = range(17, 22)
 ALPHA, SOUND, DENSITY_DIFFUSION, DENSITY_PASSES = 22, 23, 24, 25
-#: δ-SPH density filter: a fluid particle with a summation density below ``SURFACE ρ0`` lacks neighbours
-#: (a free surface, a splash) and takes no part in the filter (:mod:`unmesh.sph._diffusion_kernels`);
-#: hydrostatic compression and the particle noise of a resting fluid stay within a few 0.1 % of ``ρ0``.
-SURFACE = 0.99
 NCOL = 26
 
 
@@ -99,8 +95,8 @@ class Material:
         (8.15) is taken from it. It removes the particle-scale pressure noise of a
         disordered arrangement (a resting column's pressure becomes linear in depth),
         conserves mass (``Σ m_i Δρ_i = 0``) and leaves a linear density field unchanged.
-        0 (the default) disables it: the thesis' plain summation density. Solid particles and
-        particles at a free surface (``ρ < SURFACE ρ0``) are never filtered.
+        0 (the default) disables it: the thesis' plain summation density. Solid particles
+        are never filtered.
     density_passes : int
         Number of filter passes per force evaluation (each on the previous result); the
         particle-scale smoothing grows with it, and so does the cost (two neighbour loops
