@@ -21,12 +21,7 @@ The pair weights ``2 m_i m_j/(ρ_i + ρ_j)`` are symmetric and ``ψ_ij (x_ji·�
 antisymmetric, so ``Σ_i m_i (ρ̃_i − ρ_i) = 0`` to round-off.
 
 Only fluid particles are filtered, and only with fluid neighbours of the same material
-(same ``ρ0``); solid particles keep their summation density. So do particles at a free
-surface, whose summation density lacks the missing neighbours (``ρ < SURFACE ρ0`` before
-filtering, :data:`unmesh.sph.materials.SURFACE`): they are neither filtered nor neighbours in
-the filter. Otherwise the passes carry that deficit into the fluid below (about ``√passes · h``
-deep: in a 3D tank of 8 layers, 16 passes lowered the pressure under the surface and steepened
-its slope to 1.17 ρ0 g). Numpy reference:
+(same ``ρ0``); solid particles keep their summation density. Numpy reference:
 :func:`unmesh.sph.fluid.density_diffusion_reference`.
 """
 
@@ -40,13 +35,7 @@ from numba import njit, prange
 from unmesh.sph import materials as M
 from unmesh.sph._kernels import PLAIN, SOLID, kernel_gradf, pressure_eos
 
-__all__ = ["KEEP", "density_diffusion_pass", "laplacian_scale"]
-
-#: Fraction of the accumulated correction a step starts from (a memory of about 1/(1 − KEEP) = 16
-#: steps): without the decay a resting fluid is filtered as by as many passes as it has taken steps,
-#: the filtered pressure is pinned by the values at the floor and under the surface, and its slope
-#: steepened (2D column 1.08 ρ0 g, 3D tank 1.18 ρ0 g).
-KEEP = 1.0 - 1.0 / 16.0
+__all__ = ["density_diffusion_pass", "laplacian_scale"]
 
 
 @njit(**PLAIN)
@@ -56,20 +45,19 @@ def laplacian_scale(h, dim):
 
 
 @njit(**PLAIN)
-def _pairs_ok(i, j, part, matid):
-    """``part``: the filter mask, 1 for the particles that take part."""
-    return part[j] != 0 and matid[j] == matid[i]
+def _pairs_ok(i, j, phase, matid):
+    return phase[j] != SOLID and matid[j] == matid[i]
 
 
 @njit(**PLAIN)
-def _gradient(i, x, m, rho, part, matid, nbr, nnbr, h, dim, out):
+def _gradient(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, out):
     """Renormalised density gradient ``⟨∇ρ⟩_i`` into ``out[i]`` (0 when ``L_i`` is singular)."""
     cap = nbr.shape[1]
     a00 = a01 = a02 = a11 = a12 = a22 = 0.0
     g0 = g1 = g2 = 0.0
     for t in range(min(nnbr[i], cap)):
         j = nbr[i, t]
-        if not _pairs_ok(i, j, part, matid):
+        if not _pairs_ok(i, j, phase, matid):
             continue
         d0 = x[i, 0] - x[j, 0]
         d1 = x[i, 1] - x[j, 1]
@@ -114,13 +102,13 @@ def _gradient(i, x, m, rho, part, matid, nbr, nnbr, h, dim, out):
 
 
 @njit(**PLAIN)
-def _diffusion(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad):
+def _diffusion(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, grad):
     """``D_i`` (see the module docstring)."""
     cap = nbr.shape[1]
     acc = 0.0
     for t in range(min(nnbr[i], cap)):
         j = nbr[i, t]
-        if not _pairs_ok(i, j, part, matid):
+        if not _pairs_ok(i, j, phase, matid):
             continue
         d0 = x[j, 0] - x[i, 0]  # x_ji
         d1 = x[j, 1] - x[i, 1]
@@ -136,7 +124,7 @@ def _diffusion(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad):
 
 
 @njit(cache=True, parallel=True)
-def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, grad, out, corr):
+def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, grad, out):
     """Filter the density of every fluid particle in place and recompute its pressure (8.15–8.16).
 
     ``nbr`` / ``nnbr``: the neighbour lists of :func:`unmesh.sph._kernels.density_pass`
@@ -146,15 +134,6 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
     on the result of the previous one) the column ``DENSITY_PASSES``; particles with
     ``δ = 0`` and solid particles are left unchanged (pairs are fluid–fluid of one material,
     so a pair is filtered in the same passes from both sides).
-
-    ``corr`` (N,) is the particles' accumulated correction ``c_i`` (state, carried from step to
-    step): the filter starts from ``ρ_i + KEEP c_i`` and on return ``c_i`` is the filtered density
-    minus the summation density ``ρ_i`` it was given. The passes of successive steps therefore
-    add up with a memory of about 16 steps (:data:`KEEP`): one pass per step smooths a resting
-    fluid about as much as 16 passes in one step, like the diffusion term of δ-SPH's continuity
-    equation. ``Σ m c`` stays 0 (each pass conserves it, the decay scales it). ``c`` is set to 0
-    for particles that take no part (solids, free surface). With ``corr = 0`` one call is the
-    plain filter of ``ρ``.
     """
     n = x.shape[0]
     lam = laplacian_scale(h, dim)
@@ -162,26 +141,11 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
     for i in range(mats.shape[0]):
         if mats[i, M.DENSITY_DIFFUSION] > 0.0:
             passes = max(passes, int(mats[i, M.DENSITY_PASSES]))
-    if passes == 0:
-        for i in prange(n):
-            corr[i] = 0.0
-        return
-    # who takes part: fluid particles of a filtered material, not at a free surface (SURFACE)
-    part = np.empty(n, np.uint8)
-    base = np.empty(n)
-    for i in prange(n):
-        mt = matid[i]
-        part[i] = (phase[i] != SOLID) & (mats[mt, M.DENSITY_DIFFUSION] > 0.0) & (rho[i] >= M.SURFACE * mats[mt, M.RHO0])
-        base[i] = rho[i]  # the summation density
-        if part[i] != 0:
-            rho[i] += KEEP * corr[i]
-        else:
-            corr[i] = 0.0
     for k in range(passes):
         for i in prange(n):
             mt = matid[i]
-            if part[i] != 0 and k < mats[mt, M.DENSITY_PASSES]:
-                _gradient(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad)
+            if phase[i] != SOLID and mats[mt, M.DENSITY_DIFFUSION] > 0.0 and k < mats[mt, M.DENSITY_PASSES]:
+                _gradient(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, grad)
             else:
                 grad[i, 0] = 0.0
                 grad[i, 1] = 0.0
@@ -189,17 +153,15 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
         for i in prange(n):
             mt = matid[i]
             delta = mats[mt, M.DENSITY_DIFFUSION]
-            if part[i] != 0 and k < mats[mt, M.DENSITY_PASSES]:
-                out[i] = rho[i] + delta * _diffusion(i, x, m, rho, part, matid, nbr, nnbr, h, dim, grad) / lam
+            if phase[i] != SOLID and delta > 0.0 and k < mats[mt, M.DENSITY_PASSES]:
+                out[i] = rho[i] + delta * _diffusion(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, grad) / lam
             else:
                 out[i] = rho[i]
         for i in prange(n):
-            rho[i] = out[i]
-    for i in prange(n):
-        if part[i] != 0:
-            mt = matid[i]
-            corr[i] = rho[i] - base[i]
-            p[i] = pressure_eos(rho[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+            if out[i] != rho[i]:
+                mt = matid[i]
+                rho[i] = out[i]
+                p[i] = pressure_eos(out[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
 
 
 def empty_scratch(n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -38,7 +38,6 @@ import numpy as np
 from unmesh._validate import as_array, as_points
 from unmesh.kernels import poly6, spiky_derivative, spiky_gradient
 from unmesh.sph.collisions import penalty_projection
-from unmesh.sph.materials import SURFACE
 
 __all__ = ["acceleration_reference", "density_diffusion_reference", "density_reference", "pressure", "xsph_reference"]
 
@@ -145,12 +144,11 @@ def xsph_reference(x: Any, v: Any, m: Any, rho: Any, xi: float, h: float, dim: i
 
 
 def density_diffusion_reference(x: Any, m: Any, rho: Any, delta: float, h: float, dim: int,
-                                fluid: Any = None, rho0: float = 1.0) -> np.ndarray:
+                                fluid: Any = None) -> np.ndarray:
     """The δ-SPH filtered density ``ρ + δ D/Λ`` (Antuono-corrected diffusion), shape (N,).
 
     Brute force over all pairs within ``h``; ``fluid`` (N,) bool marks the particles that
-    are filtered and serve as neighbours (default: all), of those only the ones with
-    ``ρ ≥ SURFACE ρ0`` (not at a free surface). Definitions of ``D``, ``Λ`` and
+    are filtered and serve as neighbours (default: all). Definitions of ``D``, ``Λ`` and
     the renormalised gradient: :mod:`unmesh.sph._diffusion_kernels`.
 
     Example
@@ -167,7 +165,6 @@ def density_diffusion_reference(x: Any, m: Any, rho: Any, delta: float, h: float
     mm = as_array(m, "m", (None,), length=n)
     rr = as_array(rho, "rho", (None,), length=n)
     fl = np.ones(n, bool) if fluid is None else np.asarray(fluid, bool)
-    fl = fl & (rr >= SURFACE * rho0)
     i, j = _pairs(pts, h)
     keep = fl[i] & fl[j]
     i, j = i[keep], j[keep]

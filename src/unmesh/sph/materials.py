@@ -33,10 +33,6 @@ RHO0, K, GAMMA, ZETA, VISC, XI, KE, GOAL, LMU, LLAM, DIFF = range(11)
 DOCK_MAX, DOCK_GAIN, DOCK_LOSS, FRACTURE, MELT_RATE, MELT_T = range(11, 17)
 FREEZE_RATE, FREEZE_T, FREEZE_NMIN, FREEZE_VMAX, FREEZE_FMAX = range(17, 22)
 ALPHA, SOUND, DENSITY_DIFFUSION, DENSITY_PASSES = 22, 23, 24, 25
-#: δ-SPH density filter: a fluid particle with a summation density below ``SURFACE ρ0`` lacks neighbours
-#: (a free surface, a splash) and takes no part in the filter (:mod:`unmesh.sph._diffusion_kernels`);
-#: hydrostatic compression and the particle noise of a resting fluid stay within a few 0.1 % of ``ρ0``.
-SURFACE = 0.99
 NCOL = 26
 
 

@@ -44,16 +44,14 @@ from unmesh.sph.simulation import SPHConfig, SPHObject, SPHSimulation
 
 __all__ = ["MATERIAL_KEYS", "build_simulation"]
 
-#: Scene keys of a material and their defaults (see :class:`unmesh.sph.Material`). Scenes switch the
-#: δ-SPH density filter on for fluids (``density_diffusion = 1``, one pass per step, accumulated:
-#: :mod:`unmesh.sph._diffusion_kernels`); ``"off"`` gives the thesis' plain summation density.
+#: Scene keys of a material and their defaults (see :class:`unmesh.sph.Material`).
 MATERIAL_KEYS: dict[str, Any] = {
     "density": 1.0, "stiffness": 200.0, "gamma": 1.0, "negative_pressure": 0.01, "viscosity": 0.0,
     "xsph": 0.0, "artificial_viscosity": 0.05, "elastic_stiffness": 0.0, "goal_deformation": 0.5,
     "young": 0.0, "poisson": 0.3, "docking_rate": math.inf, "docking_gain": math.inf, "docking_loss": 0.0,
     "fracture_stretch": math.inf, "diffusivity": 0.0, "melt_rate": 0.0, "melting_point": math.inf,
     "freeze_rate": 0.0, "freezing_point": -math.inf, "freeze_min_neighbors": 1, "freeze_max_velocity": math.inf,
-    "freeze_max_force": math.inf, "density_diffusion": 1.0,
+    "freeze_max_force": math.inf, "density_diffusion": 0.0,
     "density_passes": 1,
 }
 

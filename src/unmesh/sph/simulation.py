@@ -63,8 +63,7 @@ __all__ = ["SPHConfig", "SPHObject", "SPHSimulation"]
 #: :func:`unmesh._threads.serial_if_small`).
 PARALLEL_MIN = 2000
 
-_PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed",
-                    "dcorr")
+_PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed")
 _ELASTIC_ARRAYS = ("amat", "ainv", "occ", "docked", "lam")
 #: Per-particle arrays that every step recomputes after the re-sort (not re-sorted in a step).
 _RECOMPUTED = ("a", "xsph", "rho", "p", "dtemp")
@@ -387,7 +386,6 @@ class SPHSimulation(Simulation):
         self.p = np.zeros(n)
         self.temp = np.concatenate(ts)
         self.dtemp = np.zeros(n)
-        self.dcorr = np.zeros(n)  # accumulated δ-SPH density correction (_diffusion_kernels)
         self.phase = np.concatenate(ph)
         self.obj = np.concatenate(ob)
         self.mat = np.concatenate(mt)
@@ -527,7 +525,7 @@ class SPHSimulation(Simulation):
             self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
         if np.any(self.mats[:, MT.DENSITY_DIFFUSION] > 0):  # δ-SPH density filter of the fluids
             DK.density_diffusion_pass(self.x, self.m, self.rho, self.p, self.phase, self.mat, self.mats, self.nbr,
-                                      self.nnbr, self.h, self.dim, self._rows["dgrad"], self._rows["drho"], self.dcorr)
+                                      self.nnbr, self.h, self.dim, self._rows["dgrad"], self._rows["drho"])
 
     def _update(self, prime: bool = False) -> None:
         """Sort, density, lattice and force passes at the current positions."""
@@ -858,8 +856,6 @@ class SPHSimulation(Simulation):
         # neighbour lists for diagnostics and surfaces at the restored positions
         with serial_if_small(len(self.x), PARALLEL_MIN):
             self._sort()
-            dcorr = self.dcorr.copy()  # the filter's state is the checkpoint's, not one pass further
             self._density()
-            self.dcorr[:] = dcorr
             self._ensure_scratch()
             self._diag = K.diagnostics(self.x, self.v, self.a, self.m, self.rho, self.mat, self.mats)
