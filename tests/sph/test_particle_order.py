@@ -46,6 +46,7 @@ def test_dam_break_particles_do_not_pair_small():
     assert worst > 0.3
 
 
+@pytest.mark.slow  # 8-9 s of simulation (warm): the control run of the test above
 def test_without_the_tensile_correction_particles_pair():
     """The same run without the correction pairs particles (the test above guards the method)."""
     worst, _n = min_distance_over_run("dam_break", {"simulation.spacing": 0.03, "simulation.duration": 0.15,
@@ -152,6 +153,7 @@ def _die_drop_energy(damping: float) -> tuple[float, float]:
     return ke_max, sim.particles().kinetic_energy()
 
 
+@pytest.mark.slow  # 21 s warm, 33 s in CI: two 0.4 s die drops
 def test_damped_contacts_bring_a_die_to_rest():
     """Dice (Fig. 8.8) were still bouncing after 2.5 s (0.097 J): the contacts of solids were springs
     without loss. With the shipped dice scene's contact damping a dropped die keeps less than 1 % of
