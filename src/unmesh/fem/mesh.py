@@ -36,6 +36,7 @@ from unmesh._validate import as_array, as_points, scalar
 from unmesh.errors import InputError
 from unmesh.fem import _kernels as K
 from unmesh.fem import _meshcheck
+from unmesh.fem.cellparse import parse_cells as _parse_cells
 
 __all__ = ["PolyMesh"]
 
@@ -455,60 +456,3 @@ class PolyMesh:
 
 def _centers(points: np.ndarray, off: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     return np.add.reduceat(points[nodes], off[:-1], axis=0) / np.diff(off)[:, None]
-
-
-def _parse_cells(cells: Any, n_nodes: int) -> tuple[np.ndarray, ...]:
-    """List-of-lists elements -> CSR arrays, identifying shared faces by their node sets."""
-    if not isinstance(cells, list | tuple):
-        raise InputError(f"cells: expected a list of elements (lists of faces), got {type(cells).__name__}")
-    seen: dict[tuple[int, ...], tuple[int, list[int]]] = {}
-    face_nodes: list[int] = []
-    face_offsets = [0]
-    elem_faces: list[int] = []
-    elem_signs: list[int] = []
-    elem_offsets = [0]
-    uses: list[int] = []
-    for e, cell in enumerate(cells):
-        if not isinstance(cell, list | tuple) or len(cell) < 4:
-            raise InputError(f"cells[{e}]: expected a list of at least 4 faces, got {cell!r}")
-        for k, face in enumerate(cell):
-            try:
-                cyc = [int(v) for v in face]
-            except (TypeError, ValueError):
-                raise InputError(f"cells[{e}][{k}]: expected a list of node indices, got {face!r}") from None
-            if len(cyc) < 3:
-                raise InputError(f"element {e}: face {k} has {len(cyc)} nodes, expected at least 3")
-            bad = [v for v in cyc if not 0 <= v < n_nodes]
-            if bad:
-                raise InputError(f"element {e}: face {k} refers to node {bad[0]}, expected indices in [0, {n_nodes})")
-            key = tuple(sorted(cyc))
-            hit = seen.get(key)
-            if hit is None:
-                fid = len(face_offsets) - 1
-                seen[key] = (fid, cyc)
-                face_nodes.extend(cyc)
-                face_offsets.append(len(face_nodes))
-                uses.append(1)
-                elem_faces.append(fid)
-                elem_signs.append(1)
-                continue
-            fid, ref = hit
-            uses[fid] += 1
-            if uses[fid] > 2:
-                raise InputError(f"element {e}: face {k} {cyc} is shared by more than two elements")
-            i = ref.index(cyc[0])
-            rot = ref[i:] + ref[:i]
-            rev = [rot[0], *rot[:0:-1]]
-            if cyc == rev:
-                sign = -1
-            elif cyc == rot:
-                raise InputError(f"element {e}: face {k} {cyc} has the same orientation as in the element sharing "
-                                 "it; faces must be counter-clockwise seen from outside each element")
-            else:
-                raise InputError(f"element {e}: face {k} {cyc} has the nodes of another face in a different cyclic order")
-            elem_faces.append(fid)
-            elem_signs.append(sign)
-        elem_offsets.append(len(elem_faces))
-    i64 = np.int64
-    return (np.array(face_nodes, i64), np.array(face_offsets, i64), np.array(elem_faces, i64),
-            np.array(elem_signs, i64), np.array(elem_offsets, i64))

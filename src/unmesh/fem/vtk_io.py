@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from unmesh.errors import FormatError, InputError
+from unmesh.fem.cellparse import parse_face_stream
 from unmesh.fem.mesh import PolyMesh
 from unmesh.io.atomic import atomic_write_text
 
@@ -212,6 +213,41 @@ def _count(piece: ET.Element, key: str, path: Path) -> int | None:
     return n
 
 
+def _face_stream(faces: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The ``faces`` / ``faceoffsets`` stream -> (nodes, face_offsets, cell_offsets) flat arrays
+    (see :func:`unmesh.fem.cellparse.parse_face_stream`), or None when the stream is malformed
+    (then :func:`_polyhedra` says where). All cells are walked together, one face at a time."""
+    if ends.ndim != 1 or faces.ndim != 1 or len(ends) == 0:
+        return None
+    begin = np.concatenate([[0], ends[:-1]])
+    if np.any(ends <= begin) or ends[-1] > len(faces):
+        return None
+    n_faces = faces[begin]
+    if np.any(n_faces < 1) or np.any(n_faces > ends - begin - 1):
+        return None
+    width = int(n_faces.max())
+    face_start = np.zeros((len(ends), width), dtype=np.int64)
+    face_size = np.zeros((len(ends), width), dtype=np.int64)
+    k = begin + 1
+    for j in range(width):
+        act = np.flatnonzero(n_faces > j)
+        at, end = k[act], ends[act]
+        if np.any(at >= end):
+            return None
+        size = faces[at]
+        if np.any(size < 0) or np.any(size > end - at - 1):
+            return None
+        face_start[act, j], face_size[act, j] = at + 1, size
+        k[act] = at + 1 + size
+    if np.any(k != ends):
+        return None
+    used = np.arange(width) < n_faces[:, None]
+    start, size = face_start[used], face_size[used]
+    offsets = np.concatenate([[0], np.cumsum(size)]).astype(np.int64)
+    take = np.repeat(start - offsets[:-1], size) + np.arange(offsets[-1])
+    return faces[take], offsets, np.concatenate([[0], np.cumsum(n_faces)]).astype(np.int64)
+
+
 def _polyhedra(faces: np.ndarray, ends: np.ndarray, npts: int, path: Path) -> list[list[list[int]]]:
     """The ``faces`` / ``faceoffsets`` arrays -> cells as lists of faces (vertex lists), checked."""
     if ends.ndim != 1 or faces.ndim != 1:
@@ -313,8 +349,15 @@ def read_vtu(path: str | os.PathLike[str], *, tolerance: float = 1e-6, abs_toler
         if disp.shape != pts.shape or not np.all(np.isfinite(disp)):
             raise FormatError(f"{p}: point data 'displacement': expected finite (N, 3) values, got shape {disp.shape}")
         pts = pts - disp
-    cells = _polyhedra(arrays["faces"].astype(np.int64), ends, len(pts), p)
+    faces = arrays["faces"].astype(np.int64)
+    flat = _face_stream(faces, ends)
+    csr = parse_face_stream(*flat, len(pts)) if flat is not None else None
     try:
+        if csr is not None:
+            return PolyMesh.from_arrays(pts, *csr, tolerance=tolerance, abs_tolerance=abs_tolerance,
+                                        check=check), pdata
+        # something is irregular: the checked list path names it
+        cells = _polyhedra(faces, ends, len(pts), p)
         return PolyMesh(pts, cells, tolerance=tolerance, abs_tolerance=abs_tolerance, check=check), pdata
     except (InputError, ValueError, IndexError) as exc:  # the mesh's own validation
         raise FormatError(f"{p}: {exc}") from None
