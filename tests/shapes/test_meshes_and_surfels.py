@@ -123,3 +123,26 @@ def test_mesh_arguments():
     m = Box().mesh()
     assert m.vertex_normals is None  # sharp edges: no single vertex normal
     assert Sphere().mesh().vertex_normals is not None
+
+
+def test_blob_candidate_mesh_is_capped_and_the_sampling_still_covers(monkeypatch):
+    """Fine samplings draw their candidates from a mesh of at most ``CANDIDATE_CELLS`` cells
+    along the blob (memory), and the projected, thinned samples still cover the surface."""
+    import unmesh.shapes.blob as blob_mod
+
+    shape = Blob(scale=0.6, rotation=ROT)
+    h = shape.size() / 50
+    monkeypatch.setattr(blob_mod, "CANDIDATE_CELLS", 30)   # 2.4x coarser than 0.7 h
+    seen = []
+    real = blob_mod.marching_mesh
+    monkeypatch.setattr(blob_mod, "marching_mesh", lambda *a, **k: seen.append(a[3]) or real(*a, **k))
+    cloud = shape.surfels(h)
+    assert seen == [pytest.approx(shape.size() / 30)]
+    v = shape.implicit(cloud.positions)[0]
+    np.testing.assert_allclose(v, 0.0, atol=1e-12 * shape.size())
+    d, _ = knn(cloud.positions, 2)
+    assert 0.5 * h < np.median(d[:, 1]) < 1.2 * h
+    monkeypatch.undo()
+    pts = shape.mesh(h / 3).vertices          # projected marching-cubes vertices: on the exact surface
+    bad = uncovered(cloud, pts, shape.implicit(pts)[1], offset_frac=0.5, min_dot=0.0)
+    assert len(bad) == 0, f"{len(bad)} of {len(pts)} points uncovered"
