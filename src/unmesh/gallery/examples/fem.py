@@ -201,8 +201,6 @@ def single_element(ctx: ExampleContext) -> None:
     (Y = 50, ν = 0.3, Δt = 0.001, implicit Euler, stiffness warping)."""
     out, s = run_shipped_scene(ctx, "single_element", {"simulation.duration": 0.8} if ctx.quick else {})
     ctx.metric("nodes / elements", f"{s['nodes_initial']} / {s['elements_initial']}", "(thesis: 12 / 1)")
-    ctx.metric("simulation wall time (summary.json)", round(s["wall_seconds"], 2),
-               "s, including numba compilation on a cold cache")
     ctx.metric("solve time per frame (median)", round(_per_frame(s), 4), "s (thesis: 0.012 s on 2007 hardware)")
     size = (240, 180) if ctx.quick else (480, 360)
     _render_run(ctx, out, s, (2.2, 1.3, 2.6), (0.0, 0.4, 0.0), [0, 12, 16, 20, 30, 60], "12-node element", size)
