@@ -175,7 +175,10 @@ def select_cracks(candidates: np.ndarray, topology: ShellTopology, rest: np.ndar
         The crack normal is the fiber's rest tangent at its centre, made perpendicular to
         the rest surface normal; a candidate is skipped when an existing crack at the same
         node has almost the same normal, or when its node lies beside the face of an
-        existing crack (between a quarter and two radii from its plane, within its disc).
+        existing crack (between a quarter and two radii from its plane, within its disc;
+        ``BESIDE_RULE``, off). A disc near a nearly parallel crack continues that crack's
+        plane when it still cuts the fiber (:func:`_continue_crack`); it is skipped when that
+        disc exists already.
     """
     out: list[tuple[int, np.ndarray, np.ndarray, float]] = []
     f = topology.fibers
@@ -206,9 +209,9 @@ def select_cracks(candidates: np.ndarray, topology: ShellTopology, rest: np.ndar
         center = rest[i].copy()
         if len(cracks) and CONTINUE_COS < 1.0:
             c2, t2 = _continue_crack(center, t, cracks)
-            probe = CrackSet(c2[None], t2[None], np.array([radius]), np.array([i]), np.zeros(1))
             # the continued disc must cut the overloaded fiber (else the thesis' disc at its node)
-            if probe.blocked(rest[[j1, i]], rest[[i, j2]]).any():
+            if c2 is not center and CrackSet(c2[None], t2[None], np.array([radius]), np.array([i]),
+                                             np.zeros(1)).blocked(rest[[j1, i]], rest[[i, j2]]).any():
                 if _duplicate(c2, t2, radius, cracks):
                     continue
                 center, t = c2, t2
