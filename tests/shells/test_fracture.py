@@ -234,3 +234,66 @@ def test_the_surface_does_not_follow_crumbs():
     b, w = bind_points(surf.dense.view("points"), rest, surf.k, blocked=sim.cracks.blocked, exclude=sim.anchor >= 0)
     np.testing.assert_array_equal(surf.dense.view("bind"), b)
     assert (b == i).any()
+
+
+def test_a_crack_beside_a_parallel_one_continues_its_plane():
+    """A new disc one node beside a parallel crack moves into that crack's plane: no sliver of
+    nodes between two planes stays connected to both sides of the tear."""
+    cloud = grid_cloud(41, 41, 0.025)
+    idx = grid_nodes(41, 41, 2)
+    rest, nrm = cloud.positions[idx], cloud.normals[idx]
+    topo = build_topology(rest, nrm)
+    f = topo.fibers
+    a = int(np.argmin(np.linalg.norm(rest, axis=1)))
+    b = int(np.argmin(np.linalg.norm(rest - [0.05, 0.0, -0.05], axis=1)))      # one node right, one row down
+    along_x = np.abs((rest[f[:, 2]] - rest[f[:, 0]])[:, 2]) < 1e-9
+    ka = int(np.flatnonzero(along_x & (f[:, 1] == a))[0])
+    kb = int(np.flatnonzero(along_x & (f[:, 1] == b))[0])
+    cracks = CrackSet()
+    for node, center, normal, radius in select_cracks(np.array([ka]), topo, rest, nrm, cracks):
+        cracks.add(center, normal, radius, node, 0.0)
+    (node, center, normal, radius), = select_cracks(np.array([kb]), topo, rest, nrm, cracks)
+    assert node == b
+    np.testing.assert_allclose(center, [0.0, 0.0, -0.05], atol=1e-12)      # b projected onto the plane x = 0
+    np.testing.assert_allclose(np.abs(normal), [1.0, 0.0, 0.0], atol=1e-12)
+    cracks.add(center, normal, radius, node, 0.0)
+    near = np.flatnonzero(np.linalg.norm(rest - rest[a], axis=1) < 0.3)
+    new, _, _ = rebuild_near(rest, nrm, topo, FiberState.at_rest(rest, topo), cracks, near, 12, 120.0,
+                             ShellMaterial(ks=1.0, kb=1.0).fiber_material)
+    rows = np.repeat(np.arange(new.n_nodes), np.diff(new.neighbor_offsets))
+    p, q = rest[rows], rest[new.neighbors]
+    cut = (np.minimum(p[:, 2], q[:, 2]) > -0.05 - radius + 1e-9) & (np.maximum(p[:, 2], q[:, 2]) < radius - 1e-9)
+    assert not np.any(cut & ((p[:, 0] < 0) != (q[:, 0] < 0)))      # nothing crosses the cut along both discs
+    # the same candidate once more adds nothing (the disc is already there)
+    assert select_cracks(np.array([kb]), topo, rest, nrm, cracks) == []
+
+
+def test_slivers_smaller_than_a_neighbourhood_become_crumbs():
+    """A strip of three nodes that holds only itself by a fiber is detached and follows the sheet."""
+    from unmesh.shells.topology import ShellTopology
+
+    cloud = grid_cloud(41, 41, 0.025)
+    idx = grid_nodes(41, 41, 2)
+    sim = ShellSimulation(cloud, ShellMaterial(ks=100.0, kb=1.0, damping=1.0, fracture_stretch=10.0), 0.0005,
+                          node_indices=idx, gravity=(0, 0, 0), total_area=1.0)
+    t = sim.topology
+    x = sim.rest[:, 0]
+    on_row = np.abs(sim.rest[:, 2]) < 1e-9
+    strip = np.flatnonzero(on_row & (np.isclose(np.abs(x), 0.1) | np.isclose(x, 0.0)))   # one fiber's nodes
+    assert len(strip) == 3
+    inside = np.isin(t.fibers, strip)
+    keep = inside.all(axis=1) | ~inside.any(axis=1)               # cut every fiber joining the strip to the rest
+    sim.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
+                                       t.fibers[keep], t.soft)
+    sim.fibers = sim.fibers.take(keep)
+    sim._accelerations()
+    assert np.isin(sim.topology.fibers, strip).all(axis=1).any()   # the strip holds itself
+    count, labels = sim.pieces()
+    sheet = np.argmax(np.bincount(labels))
+    assert len(set(labels[strip])) == 1 and labels[strip[0]] != sheet       # a piece of its own
+    assert sim._drop_slivers()
+    assert not np.isin(sim.topology.fibers, strip).any()
+    after, labels = sim.pieces()
+    assert np.all(sim.anchor[strip] >= 0) and np.all(labels[strip] == np.argmax(np.bincount(labels)))
+    assert after < count
+    assert not sim._drop_slivers()                                 # nothing left to detach

@@ -30,7 +30,7 @@ def _halves(out, s, frame):
     f, n = d["fibers"], s["nodes"]
     g = coo_matrix((np.ones(2 * len(f)), (np.r_[f[:, 0], f[:, 1]], np.r_[f[:, 1], f[:, 2]])), shape=(n, n))
     _, labels = connected_components(g, directed=False)
-    return labels, np.argsort(np.bincount(labels))[::-1][:2]
+    return labels, np.argsort(np.bincount(labels), kind="stable")[::-1][:2]
 
 
 @pytest.mark.slow
@@ -48,7 +48,7 @@ def test_poster_tears_down_from_the_weak_point_into_two_separated_halves(tmp_pat
     fronts = [centres[k][np.abs(centres[k][:, 0]) < 6.0, 1].min() for k in cracked]
     assert np.all(np.diff(fronts) <= 1e-9)
     assert fronts[-1] < -15.0
-    # two halves, one each side of the crease, with a gap between them
+    # two halves, one each side of the crease, and at most a few small shards
     last = frames[-1]
     labels, (a, b) = _halves(out, s, last)
     rest = io.load(out / "nodes" / "frame_00000.ply").positions
@@ -56,7 +56,27 @@ def test_poster_tears_down_from_the_weak_point_into_two_separated_halves(tmp_pat
     for piece in (a, b):
         side = np.sign(rest[labels == piece, 0])
         assert max((side > 0).mean(), (side < 0).mean()) > 0.9
-    assert (labels == a).sum() + (labels == b).sum() > 0.95 * len(labels)
+    sizes = np.bincount(labels)
+    n = len(labels)
+    # single nodes are crumbs: cut off from every fiber by the crack discs, they follow a node
+    # of a piece (the summary counts them with it)
+    crumbs = int((sizes == 1).sum())
+    assert crumbs < 0.04 * n
+    assert sizes[a] + sizes[b] + crumbs > 0.99 * n
+    shards = np.delete(sizes, [a, b])
+    shards = shards[shards > 1]
+    assert len(shards) <= 4 and shards.max(initial=0) <= 0.01 * n
+    assert s["frames"][-1]["components"] == 2 + len(shards)
+    # the halves came apart during the run, not just at its end, and hang apart: their closest
+    # nodes are more than three node spacings apart at the end
+    split = next(k for k in frames if _split(out, s, k))
+    assert split <= 0.75 * last
     spacing = float(np.median(knn(rest, 2)[0][:, 1]))
     gap = float(knn(x[labels == a], 1, queries=x[labels == b])[0].min())
-    assert gap > 0.5 * spacing  # no node of one half touches the other
+    assert gap > 3.0 * spacing
+
+
+def _split(out, s, frame):
+    """True when the second largest piece of the fiber graph holds 30 % of the nodes."""
+    sizes = np.sort(np.bincount(_halves(out, s, frame)[0]))[::-1]
+    return len(sizes) > 1 and sizes[1] > 0.3 * sizes.sum()

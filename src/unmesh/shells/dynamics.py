@@ -265,12 +265,15 @@ class Pull(ExternalForce):
 
 @dataclass(frozen=True)
 class Handle:
-    """Nodes moved kinematically with a constant velocity during ``[start, stop)``; fixed otherwise.
+    """Nodes moved kinematically during ``[start, stop)`` with velocity ``velocity + acceleration
+    * (t - start)``; fixed otherwise.
 
     Example
     -------
     >>> h = Handle(nodes=[0], velocity=(1.0, 0, 0), stop=2.0)
     >>> h.displacement(3.0)
+    array([2., 0., 0.])
+    >>> Handle(nodes=[0], velocity=(1.0, 0, 0), acceleration=(2.0, 0, 0)).displacement(1.0)
     array([2., 0., 0.])
     """
 
@@ -278,16 +281,20 @@ class Handle:
     velocity: Any = (0.0, 0.0, 0.0)
     start: float = 0.0
     stop: float = math.inf
+    acceleration: Any = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "nodes", as_array(self.nodes, "nodes", (None,), np.int64))
         object.__setattr__(self, "velocity", as_array(self.velocity, "velocity", (3,)))
+        object.__setattr__(self, "acceleration", as_array(self.acceleration, "acceleration", (3,)))
 
     def displacement(self, time: float) -> np.ndarray:
         """Displacement from the rest position at ``time``, (3,)."""
         active = min(max(time, self.start), self.stop) - self.start
-        return self.velocity * active
+        return self.velocity * active + 0.5 * self.acceleration * active**2
 
     def current_velocity(self, time: float) -> np.ndarray:
         """Velocity at ``time``, (3,)."""
-        return self.velocity if self.start <= time < self.stop else np.zeros(3)
+        if not self.start <= time < self.stop:
+            return np.zeros(3)
+        return self.velocity + self.acceleration * (time - self.start)

@@ -36,6 +36,11 @@ __all__ = ["CrackSet", "fracture_candidates", "fracture_candidates_fast", "rebui
 CRACK_RING = 6
 #: Skip crack candidates right beside an existing crack face.
 BESIDE_RULE = False
+#: A new crack whose normal is within this cosine of a crack it lies near continues that crack's
+#: plane (:func:`select_cracks`); 1 disables it.
+CONTINUE_COS = 0.6
+#: "Near": the node lies within this many radii of the existing crack's centre.
+CONTINUE_REACH = 2.5
 
 #: A node that sees fewer neighbours than this after a crack is detached (loses all fibers).
 MIN_VISIBLE = 3
@@ -170,7 +175,10 @@ def select_cracks(candidates: np.ndarray, topology: ShellTopology, rest: np.ndar
         The crack normal is the fiber's rest tangent at its centre, made perpendicular to
         the rest surface normal; a candidate is skipped when an existing crack at the same
         node has almost the same normal, or when its node lies beside the face of an
-        existing crack (between a quarter and two radii from its plane, within its disc).
+        existing crack (between a quarter and two radii from its plane, within its disc;
+        ``BESIDE_RULE``, off). A disc near a nearly parallel crack continues that crack's
+        plane when it still cuts the fiber (:func:`_continue_crack`); it is skipped when that
+        disc exists already.
     """
     out: list[tuple[int, np.ndarray, np.ndarray, float]] = []
     f = topology.fibers
@@ -198,10 +206,54 @@ def select_cracks(candidates: np.ndarray, topology: ShellTopology, rest: np.ndar
             beside = (off > 0.25 * cracks.radii) & (off < 2.0 * cracks.radii) & (lateral < 0.75 * cracks.radii)
             if same.any() or (BESIDE_RULE and beside.any()):
                 continue
-        if any(np.linalg.norm(rest[i] - c) < 2 * max(radius, r) for _, c, _, r in out):
+        center = rest[i].copy()
+        if len(cracks) and CONTINUE_COS < 1.0:
+            c2, t2 = _continue_crack(center, t, cracks)
+            # the continued disc must cut the overloaded fiber (else the thesis' disc at its node)
+            if c2 is not center and CrackSet(c2[None], t2[None], np.array([radius]), np.array([i]),
+                                             np.zeros(1)).blocked(rest[[j1, i]], rest[[i, j2]]).any():
+                if _duplicate(c2, t2, radius, cracks):
+                    continue
+                center, t = c2, t2
+        if any(np.linalg.norm(center - c) < 2 * max(radius, r) for _, c, _, r in out):
             continue
-        out.append((int(i), rest[i].copy(), t, radius))
+        out.append((int(i), center, t, radius))
     return out
+
+
+def _duplicate(center: np.ndarray, normal: np.ndarray, radius: float, cracks: CrackSet) -> bool:
+    """True when an existing disc has (almost) this centre and plane."""
+    close = np.linalg.norm(cracks.centers - center, axis=1) < 0.25 * radius
+    return bool((close & (np.abs(cracks.normals @ normal) > 0.9)).any())
+
+
+def _continue_crack(center: np.ndarray, normal: np.ndarray, cracks: CrackSet) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and normal of a new crack disc that continues the nearest existing crack it extends.
+
+    A crack is a surface; its discs sit at nodes, so where the tip steps from one row of
+    nodes to the next, a new disc parallel to the last one but one node beside it leaves the
+    nodes between the two planes connected to both sides (a sliver bridging the tear, and
+    the halves never separate). A new disc whose node lies within ``CONTINUE_REACH`` radii of
+    an existing crack with a normal within ``arccos(CONTINUE_COS)`` of its own is therefore
+    moved into that crack's plane (the node's projection onto it) and takes its normal.
+
+    Example
+    -------
+    >>> c = CrackSet()
+    >>> c.add([0.0, 0, 0], [1.0, 0, 0], 1.0, node=0, time=0.0)
+    >>> p, n = _continue_crack(np.array([0.3, -1.1, 0]), np.array([0.8, 0.6, 0]), c)
+    >>> p.tolist(), n.tolist()
+    ([0.0, -1.1, 0.0], [1.0, 0.0, 0.0])
+    """
+    d = center - cracks.centers
+    dist = np.linalg.norm(d, axis=1)
+    cos = cracks.normals @ normal
+    near = (dist < CONTINUE_REACH * cracks.radii) & (np.abs(cos) > CONTINUE_COS)
+    if not near.any():
+        return center, normal
+    k = int(np.flatnonzero(near)[np.argmin(dist[near])])
+    n = cracks.normals[k] * np.sign(cos[k])
+    return center - (d[k] @ n) * n, n.copy()
 
 
 def _replace_rows(offsets: np.ndarray, values: np.ndarray, rows: np.ndarray, new_offsets: np.ndarray,

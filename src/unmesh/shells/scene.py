@@ -187,7 +187,8 @@ def build_simulation(scene: Table) -> tuple[Any, RunSettings]:
     pinned = [p.shape("region") for p in scene.array("pinned")]
     handles = [{"region": h.shape("region"), "velocity": h.vector("velocity", 3),
                 "start": h.number("start", default=0.0, nonnegative=True),
-                "stop": _inf(h, "stop", nonnegative=True)} for h in scene.array("handles")]
+                "stop": _inf(h, "stop", nonnegative=True),
+                "acceleration": h.vector("acceleration", 3, default=(0.0, 0.0, 0.0))} for h in scene.array("handles")]
     pulls: list[dict[str, Any]] = []
     pressure = None
     for f in scene.array("forces"):

@@ -120,7 +120,7 @@ class ShellSimulation(Tearing, Simulation):
     pinned : sequence
         Regions (shapes with ``contains``, or node index arrays) of fixed nodes.
     handles : sequence of dict
-        ``{"region", "velocity", "start", "stop"}``: nodes moved kinematically.
+        ``{"region", "velocity", "start", "stop", "acceleration"}``: nodes moved kinematically.
     pulls : sequence of dict
         ``{"region", "force", "ramp", "start", "stop"}``: total forces on node groups.
     pressure : Pressure, optional
@@ -193,7 +193,8 @@ class ShellSimulation(Tearing, Simulation):
             self.fixed[_select(region, self.rest, f"pinned[{i}]")] = True
         self.handles = tuple(
             Handle(_select(h["region"], self.rest, f"handles[{i}]"), h.get("velocity", (0.0, 0.0, 0.0)),
-                   float(h.get("start", 0.0)), float(h.get("stop", math.inf))) for i, h in enumerate(handles))
+                   float(h.get("start", 0.0)), float(h.get("stop", math.inf)), h.get("acceleration", (0.0, 0.0, 0.0)))
+            for i, h in enumerate(handles))
         for h in self.handles:
             self.fixed[h.nodes] = True
         self.pulls = tuple(

@@ -86,6 +86,41 @@ class Tearing:
         self._anchor_crumbs(None)
         return True
 
+    def _drop_slivers(self) -> bool:
+        """Detach pieces of fewer than ``neighbors`` nodes from their fibers (they become crumbs).
+
+        Crack discs sit at nodes; where the tip steps between two rows of nodes, two nearly
+        parallel discs one node apart can cut out a short strip of nodes that still hold each
+        other by fibers along the strip. Such a sliver is an artifact of the disc placement,
+        not a piece of material (it is narrower than one neighbourhood): like a single node
+        cut off from every fiber (:meth:`_anchor_crumbs`) it follows a node of a piece it still
+        sees. Pieces holding fixed or kinematic nodes are kept.
+        """
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        f = self.topology.fibers
+        n = len(self.rest)
+        if not len(f):
+            return False
+        rows, cols = np.concatenate([f[:, 0], f[:, 1]]), np.concatenate([f[:, 1], f[:, 2]])
+        _, labels = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False)
+        on_fiber = np.zeros(n, bool)
+        on_fiber[f.ravel()] = True
+        sizes = np.bincount(labels[on_fiber], minlength=labels.max() + 1)
+        small = (sizes > 0) & (sizes < self.neighbors)
+        small[np.unique(labels[self.fixed])] = False
+        if not small.any():
+            return False
+        keep = ~small[labels[f[:, 1]]]
+        self._carry_angles(self._last.angles, np.flatnonzero(keep))
+        t = self.topology
+        self.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
+                                           f[keep], t.soft, validate=False)
+        self.fibers = self.fibers.take(keep)
+        self._anchor_crumbs(None)
+        return True
+
     def _fracture(self) -> None:
         st = self.fibers
         with threads_for(len(st), key="fracture_scan"):
@@ -144,6 +179,11 @@ class Tearing:
         # the dense surface is re-bound once per rendered frame (_update_surface), not per event
         self._pending_cracks.extend(len(self.cracks) - len(chosen) + np.arange(len(chosen)))
         self.acc = self._accelerations_after(last, origin)
+        if self._drop_slivers():
+            before = self._last.node_terms
+            had = np.ones(self.topology.n_nodes, bool)
+            self._keep_node_terms(before, had, np.unique(self.topology.fibers[:, 1]))
+            self.acc = self._accelerations()
 
     def _accelerations_after(self, last: dict[str, Any], origin: np.ndarray) -> np.ndarray:
         """:meth:`_accelerations` after a rebuild, from the last force pass and the changed centres
