@@ -59,8 +59,10 @@ from unmesh.errors import InputError
 
 __all__ = ["estimate_radii", "voronoi_radii_reference"]
 
-#: Neighbours with ``n_i . n_j`` at or below this are ignored (other sheet, other face of an edge).
+#: Unoriented normals: neighbours with ``|n_i . n_j|`` at or below this are ignored (other face of an edge).
 MIN_DOT = 0.25
+#: Oriented normals: neighbours with ``n_i . n_j`` at or below this are ignored (other side of a thin part).
+MIN_DOT_ORIENTED = -0.5
 #: Inradius of the clip polygon in units of the k-th neighbour distance; a cell reaching it is open.
 OPEN_CLIP = 2.0
 #: Boundary cells are closed at this multiple of the 4th valid neighbour distance.
@@ -135,10 +137,12 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
     rows = np.arange(n)
     valid = _valid(nrm, rows, dist, idx, oriented)
     clip = OPEN_CLIP * _positive_scale(dist)  # the local sample spacing, whatever the normals
-    radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, MIN_DOT)
-    # Open cells, or too few valid neighbours (another sheet was nearer): retry with 4k neighbours.
+    radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, _min_dot(oriented))
+    # Open cells, too few valid neighbours (another sheet was nearer), or cells that a neighbour
+    # beyond the k-th could still cut (a vertex farther than half the k-th neighbour distance):
+    # retry with 4k neighbours.
     kq2 = min(4 * kk + 1, n)
-    redo = np.flatnonzero(opened | (valid.sum(axis=1) < min(kk, n - 1)))
+    redo = np.flatnonzero(opened | (valid.sum(axis=1) < min(kk, n - 1)) | (radii > 0.5 * dist[:, -1]))
     if len(redo) and kq2 > kq:
         dist2, idx2 = tree.knn(pts[redo], kq2)
         valid2 = _valid(nrm, redo, dist2, idx2, oriented)
@@ -151,6 +155,16 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
         valid3 = _valid(nrm, still, dist3, nbrs3, oriented)
         close = np.minimum(BOUNDARY_FACTOR * _valid_scale(dist3, valid3, 4), clip[still])
         radii[still] = _subset_radii(pts, nrm, still, np.where(valid3, nbrs3, -1), close, oriented)[0]
+    # Cells reaching past the k-th nearest neighbour of any orientation: at a tip or rim sharper
+    # than the spacing the samples round the bend were ignored as facing away; bounded by every
+    # neighbour (3-D bisectors) the cell ends at the bend.
+    wide = np.flatnonzero(radii > clip / OPEN_CLIP)
+    if len(wide):
+        dist4, nbrs4 = tree.knn(pts[wide], kq2)
+        distinct = (nbrs4 >= 0) & (nbrs4 != wide[:, None]) & (dist4 > 0)
+        r_all, open_all = _subset_radii(pts, nrm, wide, np.where(distinct, nbrs4, -1), clip[wide], oriented,
+                                        min_dot=-2.0)
+        radii[wide] = np.where(open_all, radii[wide], np.minimum(radii[wide], r_all))
     np.minimum(radii, MAX_FACTOR * clip / OPEN_CLIP, out=radii)  # bound by the local sample density
     radii *= m
     bad = ~(radii > 0)
@@ -166,7 +180,7 @@ def _positive_scale(dist: np.ndarray) -> np.ndarray:
 
 
 def _subset_radii(pts: np.ndarray, nrm: np.ndarray, rows: np.ndarray, nbrs: np.ndarray, clip: np.ndarray,
-                  oriented: bool) -> tuple[np.ndarray, np.ndarray]:
+                  oriented: bool, min_dot: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Voronoi radii of the points ``rows`` with neighbour lists ``nbrs`` (indices into pts)."""
     from unmesh.surfels._radii_kernels import voronoi_radii
 
@@ -182,7 +196,8 @@ def _subset_radii(pts: np.ndarray, nrm: np.ndarray, rows: np.ndarray, nbrs: np.n
     full_nb[: len(rows)] = nb
     full_clip = np.ones(len(order))
     full_clip[: len(rows)] = clip
-    r, o = voronoi_radii(sub_pts, sub_nrm, full_nb, full_clip, oriented, MIN_DOT)
+    r, o = voronoi_radii(sub_pts, sub_nrm, full_nb, full_clip, oriented,
+                         _min_dot(oriented) if min_dot is None else min_dot)
     return r[: len(rows)], o[: len(rows)]
 
 
@@ -191,7 +206,12 @@ def _valid(nrm: np.ndarray, rows: np.ndarray, dist: np.ndarray, idx: np.ndarray,
     dn = np.einsum("qki,qi->qk", nrm[np.maximum(idx, 0)], nrm[rows])
     if not oriented:
         dn = np.abs(dn)
-    return (idx >= 0) & (idx != rows[:, None]) & (dist > 0) & (dn > MIN_DOT)
+    return (idx >= 0) & (idx != rows[:, None]) & (dist > 0) & (dn > _min_dot(oriented))
+
+
+def _min_dot(oriented: bool) -> float:
+    """The normal-agreement threshold of a neighbour (module docstring)."""
+    return MIN_DOT_ORIENTED if oriented else MIN_DOT
 
 
 def _valid_scale(dist: np.ndarray, valid: np.ndarray, k: int) -> np.ndarray:
