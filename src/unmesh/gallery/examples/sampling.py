@@ -43,9 +43,10 @@ def _label_colors(labels: np.ndarray, seed: int = 3) -> np.ndarray:
 def _view(objects: Any, bounds: np.ndarray, size: tuple[int, int], **options: Any) -> np.ndarray:
     """A still (H,W,3), anti-aliased by 2x2 supersampling unless ``supersample`` is given."""
     from unmesh.render import Camera, render
+    from unmesh.render.options import STILL_SUPERSAMPLE
 
     cam = Camera.framing(bounds, *size, fov=30)
-    options.setdefault("supersample", 2)
+    options.setdefault("supersample", STILL_SUPERSAMPLE)
     return render(objects, cam, **options).color
 
 
