@@ -40,13 +40,16 @@ def _label_colors(labels: np.ndarray, seed: int = 3) -> np.ndarray:
 
 
 
-def _view(objects: Any, bounds: np.ndarray, size: tuple[int, int], **options: Any) -> np.ndarray:
-    """A still (H,W,3), anti-aliased by 2x2 supersampling unless ``supersample`` is given."""
+def _view(objects: Any, bounds: np.ndarray, size: tuple[int, int], closed: bool = True, **options: Any) -> np.ndarray:
+    """A still (H,W,3), anti-aliased by 2x2 supersampling unless ``supersample`` is given; the far
+    side of a ``closed`` surface is culled (no dark back-facing splats past thin silhouettes)."""
     from unmesh.render import Camera, render
     from unmesh.render.options import STILL_SUPERSAMPLE
+    from unmesh.render.splat import SplatOptions
 
     cam = Camera.framing(bounds, *size, fov=30)
     options.setdefault("supersample", STILL_SUPERSAMPLE)
+    options.setdefault("splat", SplatOptions(cull_backfaces=closed))
     return render(objects, cam, **options).color
 
 
@@ -75,8 +78,9 @@ def shapes_example(ctx: ExampleContext) -> None:
         ctx.metric(f"{name}: mean radius / spacing", round(float(cloud.radii.mean() / spacing), 3))
         ctx.metric(f"{name}: sampling time", round(dt, 3), "s")
         bounds = shape.bounds()
-        shrunk.append(_view(cloud.replace(radii=0.4 * cloud.radii), bounds, size))
-        full.append(_view(cloud, bounds, size))
+        closed = name not in ("disc", "plane")
+        shrunk.append(_view(cloud.replace(radii=0.4 * cloud.radii), bounds, size, closed=False))  # see-through
+        full.append(_view(cloud, bounds, size, closed))
     path = ctx.path("shapes.png")
     save_image(path, tile([img for pair in zip(shrunk, full, strict=True) for img in pair], columns=4))
     ctx.image(path, "Each shape: splats at 40 % radius (sampling pattern) and full splats (closed surface).")
@@ -196,8 +200,8 @@ def normals_example(ctx: ExampleContext) -> None:
     cloud = SurfelCloud(noisy, n, radii=radii, colors=0.5 + 0.5 * n, attributes={"angle_error": err})
     size = (320, 300) if ctx.quick else (640, 600)
     bounds = blob.bounds()
-    left = _view(cloud, bounds, size, shading="none")
-    right = _view(cloud, bounds, size, color_by="angle_error", colormap="viridis", color_range=(0.0, 20.0))
+    left = _view(cloud, bounds, size, False, shading="none")  # estimated normals: both sides drawn
+    right = _view(cloud, bounds, size, False, color_by="angle_error", colormap="viridis", color_range=(0.0, 20.0))
     path = ctx.path("normals.png")
     save_image(path, tile([left, right], 2))
     ctx.image(path, "Estimated normals (RGB = 0.5 + 0.5 n) and their angle error in degrees.")
