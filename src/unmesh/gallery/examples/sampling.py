@@ -69,7 +69,10 @@ def shapes_example(ctx: ExampleContext) -> None:
     shrunk, full = [], []
     for name in SHAPES:
         shape = by_name(name, **params.get(name, {}))
-        spacing = shape.size() / ((12 if ctx.quick else 30) * (2 if name == "blob" else 1))  # resolve the ears
+        if name == "blob":  # resolve the ears (spacing <= 0.05 * scale), also in quick mode
+            spacing = shape.size() / (40 if ctx.quick else 60)
+        else:
+            spacing = shape.size() / (12 if ctx.quick else 30)
         cloud, dt = ctx.timed(shape.surfels, spacing, color=(0.85, 0.72, 0.55),
                               warm=lambda s=shape, h=spacing: s.surfels(4 * h))
         d, _ = knn(cloud.positions, 2)
