@@ -11,7 +11,9 @@ Examples::
 A default camera frames the bounding box of the input (from the front-right-above; flat 2D data
 is viewed head-on). ``--buffers DIR`` writes ``depth.npy`` (H,W float, camera z, inf = background),
 ``normal.npy`` (H,W,3 world normals, zeros in background), ``coverage.npy`` (H,W bool) and
-``weight.npy`` (H,W accumulated splat weight).
+``weight.npy`` (H,W accumulated splat weight). Still images are anti-aliased by 2 x 2
+supersampling unless ``--aa`` says otherwise (the buffers are then block averages; ``--aa 1``
+gives exact ones); videos and frame sequences use one sample per pixel.
 
 A simulation output directory is read through its ``frames.json`` (the files the run wrote;
 nothing is guessed from names, other files are ignored); its video plays at the simulation's
