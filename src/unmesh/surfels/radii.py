@@ -34,10 +34,11 @@ splat reaches about one and a half sample spacings beyond the last sample
 non-uniform clouds this cap can leave small gaps where a dense region borders a
 much sparser one.
 
-**Exact cells.** A cell computed from k neighbours is exact when its farthest vertex is
-within half the k-th neighbour distance (a farther neighbour's bisector lies beyond it);
-cells past that are recomputed from ``4k`` neighbours, so the radii are those of the
-restricted Voronoi cells and not of cells left too large by a neighbour beyond the k-th.
+**Outlier cells.** A cell computed from k neighbours is exact when its farthest vertex is
+within half the k-th neighbour distance (a farther neighbour's bisector lies beyond it).
+Typical cells reach about 0.55 of that distance; cells past ``RECHECK`` (0.75) times it are
+recomputed from ``4k`` neighbours, so outliers are not left too large by a neighbour beyond
+the k-th (recomputing every cell past 0.5 would cost about 3x the run time).
 
 **Smooth surfaces** (``smooth=True``, e.g. the blob's exact surface: no creases). Only
 neighbours facing away by more than 120 degrees (``n_i . n_j <= -0.5``, the other side of a
@@ -81,6 +82,9 @@ MIN_DOT_SMOOTH = -0.5
 REACH = 1.0
 #: Inradius of the clip polygon in units of the k-th neighbour distance; a cell reaching it is open.
 OPEN_CLIP = 2.0
+#: Cells with a vertex past this multiple of the k-th neighbour distance are recomputed from 4k
+#: neighbours (0.5 would make every cell exact; larger cells are rare outliers, typical ones ~0.55).
+RECHECK = 0.75
 #: Boundary cells are closed at this multiple of the 4th valid neighbour distance.
 BOUNDARY_FACTOR = 1.0
 #: Radii (before margin) are capped at this multiple of the k-th nearest neighbour distance.
@@ -162,10 +166,10 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
     clip = OPEN_CLIP * _positive_scale(dist)  # the local sample spacing, whatever the normals
     radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, min_dot)
     # Open cells, too few valid neighbours (another sheet was nearer), or cells that a neighbour
-    # beyond the k-th could still cut (a vertex farther than half the k-th neighbour distance):
+    # beyond the k-th may cut by much (a vertex past RECHECK times the k-th neighbour distance):
     # retry with 4k neighbours.
     kq2 = min(4 * kk + 1, n)
-    redo = np.flatnonzero(opened | (valid.sum(axis=1) < min(kk, n - 1)) | (radii > 0.5 * dist[:, -1]))
+    redo = np.flatnonzero(opened | (valid.sum(axis=1) < min(kk, n - 1)) | (radii > RECHECK * dist[:, -1]))
     if len(redo) and kq2 > kq:
         dist2, idx2 = tree.knn(pts[redo], kq2)
         valid2 = _valid(nrm, redo, dist2, idx2, oriented, min_dot)
