@@ -147,7 +147,8 @@ class Blob(FramedShape):
     (relative accuracy about 1e-5). The mesh is marching cubes
     (scikit-image) with every vertex moved along its grid edge onto the exact
     surface (resolve the ears: ``spacing <= 0.05 * scale``); surfels are a
-    maximal Poisson-disk sampling of the surface with tangent-plane Voronoi radii.
+    maximal Poisson-disk sampling of the surface with tangent-plane Voronoi radii
+    (``estimate_radii(smooth=True)``: bounded at the ear tips).
 
     Example
     -------
