@@ -86,3 +86,20 @@ def test_errors_are_one_line(tmp_path, sphere_file, capsys, argv, message):
 def test_missing_input(tmp_path, capsys):
     assert main(["render", str(tmp_path / "nope.ply"), "-o", str(tmp_path / "a.png")]) == 1
     assert "nope.ply" in capsys.readouterr().err
+
+
+def test_stills_are_antialiased_by_default(tmp_path, sphere_file):
+    from PIL import Image
+
+    args = ["render", str(sphere_file), "--size", "40x40", "--ortho", "2.4", "--shading", "none"]
+    assert main([*args, "-o", str(tmp_path / "aa.png")]) == 0
+    assert main([*args, "-o", str(tmp_path / "one.png"), "--aa", "1"]) == 0
+    aa = np.asarray(Image.open(tmp_path / "aa.png")).astype(float) / 255
+    one = np.asarray(Image.open(tmp_path / "one.png")).astype(float) / 255
+    interior = aa[20, 20, :3]
+
+    def blended(img):  # neither the background (white) nor the surface colour
+        rgb = img[..., :3]
+        return (np.abs(rgb - 1.0).max(-1) > 0.03) & (np.abs(rgb - interior).max(-1) > 0.03)
+
+    assert blended(aa).sum() > 20 and blended(one).sum() == 0

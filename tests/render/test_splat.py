@@ -339,3 +339,25 @@ def test_discontinuity_surfels_are_not_splatted():
     b = render(flagged, cam)
     np.testing.assert_array_equal(a.color, b.color)
     np.testing.assert_array_equal(a.depth, b.depth)
+
+
+def test_backface_culling_drops_only_the_far_side():
+    """``cull_backfaces``: a surfel facing away is not drawn; on a closed sphere the image is unchanged
+    except at the silhouette, where the far side's splats no longer poke out."""
+    from unmesh.render import Camera, render
+    from unmesh.shapes import Sphere
+
+    cam = Camera((0, 0, 3), (0, 0, 0), width=48, height=48, ortho=2.6)
+    cull = SplatOptions(cull_backfaces=True)
+    away = SurfelCloud([[0.0, 0.0, 0.0]], [[0.0, 0.0, -1.0]], radii=[0.5])
+    assert render(away, cam).coverage.any() and not render(away, cam, splat=cull).coverage.any()
+    ortho_tilted = SurfelCloud([[0.0, 0.0, 0.0]], [[0.0, 0.6, 0.8]], radii=[0.5])  # faces the camera
+    assert render(ortho_tilted, cam, splat=cull).coverage.any()
+    sphere = Sphere().surfels(0.08)
+    a = render(sphere, cam, shading="none")
+    b = render(sphere, cam, shading="none", splat=cull)
+    inner = np.hypot(*np.meshgrid(np.arange(48) - 23.5, np.arange(48) - 23.5)) < 0.85 * 48 / 2.6
+    np.testing.assert_allclose(a.color[inner], b.color[inner], atol=1e-6)
+    assert b.coverage.sum() >= 0.98 * a.coverage.sum()
+    persp = Camera((0, 0, 3), (0, 0, 0), width=48, height=48, fov=50)
+    assert render(sphere, persp, splat=cull).coverage.sum() >= 0.98 * render(sphere, persp).coverage.sum()

@@ -26,6 +26,25 @@ def test_kernel_matches_the_reference(rng):
         r_ref, o_ref = voronoi_radii_reference(pts, nrm, idx, clip, oriented, 0.25, rows=range(120))
         np.testing.assert_allclose(r[sub], r_ref[sub], rtol=1e-9)
         np.testing.assert_array_equal(o[sub], o_ref[sub])
+    # the smooth-surface variant: facing-away threshold -0.5, bounds pulled in to the tangential offset
+    r, o = voronoi_radii(pts, nrm, idx, clip, True, -0.5, 1.0)
+    r_ref, o_ref = voronoi_radii_reference(pts, nrm, idx, clip, True, -0.5, rows=range(40), reach=1.0)
+    np.testing.assert_allclose(r[:40], r_ref[:40], rtol=1e-9)
+    np.testing.assert_array_equal(o[:40], o_ref[:40])
+
+
+def test_reach_pulls_in_a_steep_neighbour():
+    # one neighbour at tangential offset 1 and 3 below the plane: the plain 3-D bisector is at
+    # (1 + 9) / 2 = 5 along it, the smooth variant stops at its tangential offset 1
+    pts = np.array([[0.0, 0, 0], [1.0, 0, -3.0]] + [[np.cos(a), np.sin(a), 0.0] for a in (1.6, 3.2, 4.8)])
+    nrm = np.tile([0.0, 0.0, 1.0], (5, 1))
+    nbrs = np.array([[1, 2, 3, 4]] + [[-1] * 4] * 4)
+    clip = np.full(5, 100.0)
+    plain, _ = voronoi_radii(pts, nrm, nbrs, clip, True, -0.5, 0.0)
+    pulled, _ = voronoi_radii(pts, nrm, nbrs, clip, True, -0.5, 1.0)
+    ref, _ = voronoi_radii_reference(pts, nrm, nbrs, clip, True, -0.5, rows=[0], reach=1.0)
+    assert plain[0] > 4.0 and pulled[0] < plain[0]
+    np.testing.assert_allclose(pulled[0], ref[0], rtol=1e-9)
 
 
 def test_regular_grids_give_the_exact_voronoi_radius():

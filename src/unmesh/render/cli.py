@@ -11,7 +11,9 @@ Examples::
 A default camera frames the bounding box of the input (from the front-right-above; flat 2D data
 is viewed head-on). ``--buffers DIR`` writes ``depth.npy`` (H,W float, camera z, inf = background),
 ``normal.npy`` (H,W,3 world normals, zeros in background), ``coverage.npy`` (H,W bool) and
-``weight.npy`` (H,W accumulated splat weight).
+``weight.npy`` (H,W accumulated splat weight). Still images are anti-aliased by 2 x 2
+supersampling unless ``--aa`` says otherwise (the buffers are then block averages; ``--aa 1``
+gives exact ones); videos and frame sequences use one sample per pixel.
 
 A simulation output directory is read through its ``frames.json`` (the files the run wrote;
 nothing is guessed from names, other files are ignored); its video plays at the simulation's
@@ -44,8 +46,9 @@ def register(sub: Any) -> None:
     p.add_argument("--range", metavar="LO,HI", help="fixed value range for --color-by")
     p.add_argument("--no-legend", action="store_true", help="no colour bar with --color-by")
     p.add_argument("--background", default="1,1,1", metavar="R,G,B", help="background colour (0-1 or #rrggbb)")
-    p.add_argument("--aa", type=int, default=1, metavar="K",
-                   help="anti-aliasing: K x K samples per pixel (default 1; buffers are then block averages)")
+    p.add_argument("--aa", type=int, default=None, metavar="K",
+                   help="anti-aliasing: K x K samples per pixel (default 2 for a still image, 1 for videos and "
+                        "frame sequences; buffers are then block averages)")
     p.add_argument("--buffers", metavar="DIR", help="also write depth/normal/coverage/weight .npy files (stills)")
     p.add_argument("--turntable", type=int, metavar="N", help="render an orbit of N frames to OUT.mp4/.gif")
     p.add_argument("--fps", type=float, metavar="FPS",
@@ -184,6 +187,10 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"input: no such file or directory: {p}")
     is_sequence = (len(inputs) == 1 and inputs[0].is_dir()) or (ext in VIDEO_EXTENSIONS and args.turntable is None) \
         or (ext == "" and args.turntable is None)
+    if args.aa is None:  # stills anti-aliased by default; videos stay fast
+        from unmesh.render.options import STILL_SUPERSAMPLE
+
+        options["supersample"] = 1 if is_sequence or args.turntable is not None else STILL_SUPERSAMPLE
     if (args.workers is not None or args.scheduler is not None) and not is_sequence:
         raise InputError("--workers/--scheduler: only for frame sequences (a simulation directory to .mp4, .gif "
                          "or a folder)")

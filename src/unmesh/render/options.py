@@ -30,12 +30,16 @@ from unmesh.errors import InputError
 from unmesh.render.shading import Light, Shading, as_shading, background_color
 from unmesh.render.splat import SplatOptions
 
-__all__ = ["METHODS", "ColorOptions", "ParticleOptions", "RenderOptions"]
+__all__ = ["METHODS", "STILL_SUPERSAMPLE", "ColorOptions", "ParticleOptions", "RenderOptions"]
 
 #: Surfel rendering methods: EWA splatting (3.2) or ray casting of the MLS surface (3.1.3).
 METHODS = ("splat", "raycast")
 #: Default background of :func:`unmesh.render.render` (white).
 DEFAULT_BACKGROUND = (1.0, 1.0, 1.0)
+#: Supersampling of still images where a caller chooses for the user (``unmesh render`` stills,
+#: gallery stills): 2 x 2 samples anti-alias silhouettes; ``render()`` itself defaults to 1 (exact
+#: buffers) and videos stay at 1.
+STILL_SUPERSAMPLE = 2
 
 
 @dataclass(frozen=True)

@@ -301,10 +301,19 @@ def _draw_surfels(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], context: Draw
     clouds = [c for c in clouds if len(c)]
     if not clouds:
         return None
-    colors = None
-    if any(id(c) in context.colors for c in clouds):
-        colors = np.concatenate([context.colors.get(id(c), np.asarray(c.colors)) for c in clouds])
     opts = context.options
+    own = [context.colors.get(id(c)) for c in clouds]
+    if opts.method == "splat" and opts.splat.cull_backfaces:
+        keep = [_front_facing(c, context.camera) for c in clouds]
+        own = [None if o is None else np.asarray(o)[k] for o, k in zip(own, keep, strict=True)]
+        clouds = [c.subset(k) for c, k in zip(clouds, keep, strict=True)]
+        own = [o for o, c in zip(own, clouds, strict=True) if len(c)]
+        clouds = [c for c in clouds if len(c)]
+        if not clouds:
+            return None
+    colors = None
+    if any(o is not None for o in own):
+        colors = np.concatenate([np.asarray(c.colors) if o is None else o for c, o in zip(clouds, own, strict=True)])
     if opts.method == "splat":
         arrays = surfel_arrays(clouds, colors)
         clip = context.clip_surfels
@@ -328,6 +337,13 @@ def _draw_surfels(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], context: Draw
 
     draw_mls(gbuffer, clouds, context.camera, colors=colors, mls_options=opts.mls, progress=opts.progress)
     return None
+
+
+def _front_facing(cloud: SurfelCloud, camera: Camera) -> np.ndarray:
+    """Mask (N,) of the surfels whose normal faces the camera (``n . (eye - x) > 0``)."""
+    if camera.is_ortho:
+        return np.asarray(cloud.normals) @ (-camera.forward) > 0
+    return np.einsum("ij,ij->i", np.asarray(cloud.normals), np.asarray(camera.eye) - np.asarray(cloud.positions)) > 0
 
 
 def _discontinuities(cloud: SurfelCloud) -> SurfelCloud | None:

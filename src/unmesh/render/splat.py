@@ -86,6 +86,11 @@ class SplatOptions:
     precision : {"single", "double"}
         Storage of the per-surfel parameters. ``"single"`` (float32) halves the memory traffic;
         fragment arithmetic and accumulation are float64 in both cases.
+    cull_backfaces : bool
+        Skip surfels whose normal faces away from the camera (``render()`` only). For closed,
+        consistently oriented surfaces: the far side's splats otherwise poke out past thin
+        silhouettes (the blob's ear tips), drawn dark by the two-sided shading. Leave False
+        for open sheets seen from both sides.
 
     Example
     -------
@@ -98,6 +103,7 @@ class SplatOptions:
     depth_tolerance: float = 1.0
     tile: int = 32
     precision: str = "single"
+    cull_backfaces: bool = False
 
     def __post_init__(self) -> None:
         if self.precision not in ("single", "double"):
@@ -109,6 +115,7 @@ class SplatOptions:
         if tile != self.tile or tile < 4 or tile > 1024:
             raise InputError(f"tile: expected an integer in [4, 1024], got {self.tile!r}")
         object.__setattr__(self, "tile", tile)
+        object.__setattr__(self, "cull_backfaces", bool(self.cull_backfaces))
 
 
 @dataclass(frozen=True)

@@ -152,7 +152,8 @@ class Blob(FramedShape):
     (relative accuracy about 1e-5). The mesh is marching cubes
     (scikit-image) with every vertex moved along its grid edge onto the exact
     surface (resolve the ears: ``spacing <= 0.05 * scale``); surfels are a
-    maximal Poisson-disk sampling of the surface with tangent-plane Voronoi radii.
+    maximal Poisson-disk sampling of the surface with tangent-plane Voronoi radii
+    (``estimate_radii(smooth=True)``: bounded at the ear tips).
 
     Example
     -------
@@ -194,10 +195,12 @@ class Blob(FramedShape):
         lo, hi = _part_bounds()
         return marching_mesh(self._implicit_local, lo * self.scale, hi * self.scale, spacing, lipschitz=True)
 
-    def _surfels_local(self, spacing: float) -> tuple[np.ndarray, np.ndarray, None]:
+    def _surfels_local(self, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         from unmesh.shapes._sampling import poisson_surface
+        from unmesh.surfels.radii import estimate_radii
 
         verts, faces = self._mesh_local(max(0.7 * spacing, self.size() / CANDIDATE_CELLS))
         pos = poisson_surface(verts, faces, spacing, self._implicit_local)
         _, nrm = self._implicit_local(pos)
-        return pos, nrm, None
+        # smooth: the ear tips and rims bend away faster than the spacing; bound their cells there
+        return pos, nrm, estimate_radii(pos, nrm, smooth=True)

@@ -34,7 +34,7 @@ def _clip(px, py, n, ax, ay, c, qx, qy):  # pragma: no cover - numba
 
 
 @njit(cache=True, parallel=True)
-def voronoi_radii(points, normals, nbrs, clip, oriented, min_dot):  # pragma: no cover - numba
+def voronoi_radii(points, normals, nbrs, clip, oriented, min_dot, reach=0.0):  # pragma: no cover - numba
     """Farthest vertex distance (N,) of each point's restricted Voronoi cell in its tangent plane.
 
     The cell of point i is the set of points p of its tangent plane that are
@@ -44,6 +44,11 @@ def voronoi_radii(points, normals, nbrs, clip, oriented, min_dot):  # pragma: no
     ``clip[i]``. Neighbours ``nbrs[i]`` (-1 = padding) count unless coincident or
     ``n_i . n_j <= min_dot`` (``|n_i . n_j|`` when not ``oriented``). Also returns
     whether the final cell touches the clip polygon (the cell is open there).
+
+    ``reach > 0``: a neighbour bounds the cell at its 3-D bisector but never beyond ``reach``
+    times its own tangential offset (``c = min(|x_j - x_i|^2 / 2, reach |q'_j|^2)``): where the surface bends
+    away faster than the spacing (a neighbour far below the tangent plane) the plain
+    bisector lies far out in the plane, off the surface.
     """
     n = points.shape[0]
     kk = nbrs.shape[1]
@@ -102,6 +107,8 @@ def voronoi_radii(points, normals, nbrs, clip, oriented, min_dot):  # pragma: no
             if u * u + v * v <= 1e-24 * dist * dist:
                 continue  # straight above or below: no constraint in this plane
             c = 0.5 * dist * dist
+            if reach > 0.0:
+                c = min(c, reach * (u * u + v * v))
             m = _clip(px, py, m, u, v, c, qx, qy)
             px, qx = qx, px
             py, qy = qy, py

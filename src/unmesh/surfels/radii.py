@@ -34,6 +34,21 @@ splat reaches about one and a half sample spacings beyond the last sample
 non-uniform clouds this cap can leave small gaps where a dense region borders a
 much sparser one.
 
+**Outlier cells.** A cell computed from k neighbours is exact when its farthest vertex is
+within half the k-th neighbour distance (a farther neighbour's bisector lies beyond it).
+Typical cells reach about 0.55 of that distance; cells past ``RECHECK`` (0.75) times it are
+recomputed from ``4k`` neighbours, so outliers are not left too large by a neighbour beyond
+the k-th (recomputing every cell past 0.5 would cost about 3x the run time).
+
+**Smooth surfaces** (``smooth=True``, e.g. the blob's exact surface: no creases). Only
+neighbours facing away by more than 120 degrees (``n_i . n_j <= -0.5``, the other side of a
+thin part) are ignored, so samples round a tip or rim sharper than the spacing (the blob's
+ear tips) bound the cell. Cells that are still open or reach past the k-th neighbour are
+recomputed with each neighbour's bound pulled in to at most its own tangential offset
+(``REACH``): where the surface bends away faster than the spacing, the plain bisector of a
+neighbour far below the tangent plane lies far out in the plane, off the surface. Meshes
+with sharp edges keep the default: each face must be covered by its own splats.
+
 **Bound.** Finally every radius (before ``margin``) is capped at ``MAX_FACTOR``
 (1.25) times the distance to the k-th nearest neighbour of any orientation, the
 local sample density. Without it, samples at thin features (the blob's ear tips,
@@ -61,8 +76,15 @@ __all__ = ["estimate_radii", "voronoi_radii_reference"]
 
 #: Neighbours with ``n_i . n_j`` at or below this are ignored (other sheet, other face of an edge).
 MIN_DOT = 0.25
+#: The same for smooth surfaces (no creases): only the other side of a thin part is ignored.
+MIN_DOT_SMOOTH = -0.5
+#: Smooth surfaces: a neighbour bounds a wide cell at most this many times its tangential offset away.
+REACH = 1.0
 #: Inradius of the clip polygon in units of the k-th neighbour distance; a cell reaching it is open.
 OPEN_CLIP = 2.0
+#: Cells with a vertex past this multiple of the k-th neighbour distance are recomputed from 4k
+#: neighbours (0.5 would make every cell exact; larger cells are rare outliers, typical ones ~0.55).
+RECHECK = 0.75
 #: Boundary cells are closed at this multiple of the 4th valid neighbour distance.
 BOUNDARY_FACTOR = 1.0
 #: Radii (before margin) are capped at this multiple of the k-th nearest neighbour distance.
@@ -70,7 +92,7 @@ MAX_FACTOR = 1.25
 
 
 def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: float = 1.05,
-                   max_radius: float | None = None) -> np.ndarray:
+                   max_radius: float | None = None, smooth: bool = False) -> np.ndarray:
     """Splat radii (N,) from the tangent-plane Voronoi rule of the module docstring.
 
     Parameters
@@ -88,6 +110,12 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
     max_radius : float, optional
         Upper bound of every radius (after ``margin``): the sampling's covering
         distance when it is known (module docstring, "Bound").
+    smooth : bool
+        The sampled surface is smooth (no creases), so neighbours facing away are the
+        surface bending round a tip or rim sharper than the spacing: cells that are open or
+        reach past the k-th neighbour are also bounded by them (module docstring, "Smooth
+        surfaces"). Leave False for meshes with sharp edges, whose faces must each be
+        covered by their own splats.
 
     Returns
     -------
@@ -133,24 +161,35 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
     kq = min(kk + 1, n)
     dist, idx = tree.knn(None, kq)
     rows = np.arange(n)
-    valid = _valid(nrm, rows, dist, idx, oriented)
+    min_dot = MIN_DOT_SMOOTH if smooth else MIN_DOT
+    valid = _valid(nrm, rows, dist, idx, oriented, min_dot)
     clip = OPEN_CLIP * _positive_scale(dist)  # the local sample spacing, whatever the normals
-    radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, MIN_DOT)
-    # Open cells, or too few valid neighbours (another sheet was nearer): retry with 4k neighbours.
+    radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, min_dot)
+    # Open cells, too few valid neighbours (another sheet was nearer), or cells that a neighbour
+    # beyond the k-th may cut by much (a vertex past RECHECK times the k-th neighbour distance):
+    # retry with 4k neighbours.
     kq2 = min(4 * kk + 1, n)
-    redo = np.flatnonzero(opened | (valid.sum(axis=1) < min(kk, n - 1)))
+    redo = np.flatnonzero(opened | (valid.sum(axis=1) < min(kk, n - 1)) | (radii > RECHECK * dist[:, -1]))
     if len(redo) and kq2 > kq:
         dist2, idx2 = tree.knn(pts[redo], kq2)
-        valid2 = _valid(nrm, redo, dist2, idx2, oriented)
+        valid2 = _valid(nrm, redo, dist2, idx2, oriented, min_dot)
         nb2 = np.where(valid2, idx2, -1)
-        radii[redo], opened[redo] = _subset_radii(pts, nrm, redo, nb2, clip[redo], oriented)
+        radii[redo], opened[redo] = _subset_radii(pts, nrm, redo, nb2, clip[redo], oriented, min_dot)
     # Still open: a boundary or sharp edge. Close the cell at the 4th valid neighbour distance.
     still = np.flatnonzero(opened)
     if len(still):
         dist3, nbrs3 = tree.knn(pts[still], kq2)
-        valid3 = _valid(nrm, still, dist3, nbrs3, oriented)
+        valid3 = _valid(nrm, still, dist3, nbrs3, oriented, min_dot)
         close = np.minimum(BOUNDARY_FACTOR * _valid_scale(dist3, valid3, 4), clip[still])
-        radii[still] = _subset_radii(pts, nrm, still, np.where(valid3, nbrs3, -1), close, oriented)[0]
+        radii[still] = _subset_radii(pts, nrm, still, np.where(valid3, nbrs3, -1), close, oriented, min_dot)[0]
+    if smooth:  # cells open or reaching past the k-th neighbour: a bend sharper than the spacing
+        wide = np.flatnonzero((radii > clip / OPEN_CLIP) | opened)
+        if len(wide):
+            dist4, nbrs4 = tree.knn(pts[wide], kq2)
+            distinct = (nbrs4 >= 0) & (nbrs4 != wide[:, None]) & (dist4 > 0)
+            r_all, open_all = _subset_radii(pts, nrm, wide, np.where(distinct, nbrs4, -1), clip[wide], oriented,
+                                            min_dot, reach=REACH)
+            radii[wide] = np.where(open_all, radii[wide], np.minimum(radii[wide], r_all))
     np.minimum(radii, MAX_FACTOR * clip / OPEN_CLIP, out=radii)  # bound by the local sample density
     radii *= m
     bad = ~(radii > 0)
@@ -166,7 +205,7 @@ def _positive_scale(dist: np.ndarray) -> np.ndarray:
 
 
 def _subset_radii(pts: np.ndarray, nrm: np.ndarray, rows: np.ndarray, nbrs: np.ndarray, clip: np.ndarray,
-                  oriented: bool) -> tuple[np.ndarray, np.ndarray]:
+                  oriented: bool, min_dot: float, reach: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Voronoi radii of the points ``rows`` with neighbour lists ``nbrs`` (indices into pts)."""
     from unmesh.surfels._radii_kernels import voronoi_radii
 
@@ -182,16 +221,18 @@ def _subset_radii(pts: np.ndarray, nrm: np.ndarray, rows: np.ndarray, nbrs: np.n
     full_nb[: len(rows)] = nb
     full_clip = np.ones(len(order))
     full_clip[: len(rows)] = clip
-    r, o = voronoi_radii(sub_pts, sub_nrm, full_nb, full_clip, oriented, MIN_DOT)
+    r, o = voronoi_radii(sub_pts, sub_nrm, full_nb, full_clip, oriented,
+                         min_dot, reach)
     return r[: len(rows)], o[: len(rows)]
 
 
-def _valid(nrm: np.ndarray, rows: np.ndarray, dist: np.ndarray, idx: np.ndarray, oriented: bool) -> np.ndarray:
+def _valid(nrm: np.ndarray, rows: np.ndarray, dist: np.ndarray, idx: np.ndarray, oriented: bool,
+           min_dot: float) -> np.ndarray:
     """Mask (Q,K) of neighbours that bound a cell: distinct, present, normals within ~75 degrees."""
     dn = np.einsum("qki,qi->qk", nrm[np.maximum(idx, 0)], nrm[rows])
     if not oriented:
         dn = np.abs(dn)
-    return (idx >= 0) & (idx != rows[:, None]) & (dist > 0) & (dn > MIN_DOT)
+    return (idx >= 0) & (idx != rows[:, None]) & (dist > 0) & (dn > min_dot)
 
 
 def _valid_scale(dist: np.ndarray, valid: np.ndarray, k: int) -> np.ndarray:
@@ -207,7 +248,7 @@ def _valid_scale(dist: np.ndarray, valid: np.ndarray, k: int) -> np.ndarray:
 
 def voronoi_radii_reference(points: np.ndarray, normals: np.ndarray, nbrs: np.ndarray, clip: np.ndarray,
                             oriented: bool, min_dot: float = MIN_DOT, sides: int = 16,
-                            rows: Any = None) -> tuple[np.ndarray, np.ndarray]:
+                            rows: Any = None, reach: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Numpy reference of :func:`unmesh.surfels._radii_kernels.voronoi_radii`.
 
     Independent formulation: the cell's vertices are all pairwise intersections
@@ -238,7 +279,7 @@ def voronoi_radii_reference(points: np.ndarray, normals: np.ndarray, nbrs: np.nd
             if q @ q <= 1e-24 * dist * dist:
                 continue
             lines_a.append(q)
-            lines_c.append(0.5 * dist * dist)
+            lines_c.append(min(0.5 * dist * dist, reach * (q @ q)) if reach > 0 else 0.5 * dist * dist)
         a = np.array(lines_a)
         c = np.array(lines_c)
         best = 0.0

@@ -40,12 +40,16 @@ def _label_colors(labels: np.ndarray, seed: int = 3) -> np.ndarray:
 
 
 
-def _view(objects: Any, bounds: np.ndarray, size: tuple[int, int], **options: Any) -> np.ndarray:
-    """A still (H,W,3), anti-aliased by 2x2 supersampling unless ``supersample`` is given."""
+def _view(objects: Any, bounds: np.ndarray, size: tuple[int, int], closed: bool = True, **options: Any) -> np.ndarray:
+    """A still (H,W,3), anti-aliased by 2x2 supersampling unless ``supersample`` is given; the far
+    side of a ``closed`` surface is culled (no dark back-facing splats past thin silhouettes)."""
     from unmesh.render import Camera, render
+    from unmesh.render.options import STILL_SUPERSAMPLE
+    from unmesh.render.splat import SplatOptions
 
     cam = Camera.framing(bounds, *size, fov=30)
-    options.setdefault("supersample", 2)
+    options.setdefault("supersample", STILL_SUPERSAMPLE)
+    options.setdefault("splat", SplatOptions(cull_backfaces=closed))
     return render(objects, cam, **options).color
 
 
@@ -65,7 +69,10 @@ def shapes_example(ctx: ExampleContext) -> None:
     shrunk, full = [], []
     for name in SHAPES:
         shape = by_name(name, **params.get(name, {}))
-        spacing = shape.size() / ((12 if ctx.quick else 30) * (2 if name == "blob" else 1))  # resolve the ears
+        if name == "blob":  # resolve the ears (spacing <= 0.05 * scale), also in quick mode
+            spacing = shape.size() / (40 if ctx.quick else 60)
+        else:
+            spacing = shape.size() / (12 if ctx.quick else 30)
         cloud, dt = ctx.timed(shape.surfels, spacing, color=(0.85, 0.72, 0.55),
                               warm=lambda s=shape, h=spacing: s.surfels(4 * h))
         d, _ = knn(cloud.positions, 2)
@@ -74,8 +81,9 @@ def shapes_example(ctx: ExampleContext) -> None:
         ctx.metric(f"{name}: mean radius / spacing", round(float(cloud.radii.mean() / spacing), 3))
         ctx.metric(f"{name}: sampling time", round(dt, 3), "s")
         bounds = shape.bounds()
-        shrunk.append(_view(cloud.replace(radii=0.4 * cloud.radii), bounds, size))
-        full.append(_view(cloud, bounds, size))
+        closed = name not in ("disc", "plane")
+        shrunk.append(_view(cloud.replace(radii=0.4 * cloud.radii), bounds, size, closed=False))  # see-through
+        full.append(_view(cloud, bounds, size, closed))
     path = ctx.path("shapes.png")
     save_image(path, tile([img for pair in zip(shrunk, full, strict=True) for img in pair], columns=4))
     ctx.image(path, "Each shape: splats at 40 % radius (sampling pattern) and full splats (closed surface).")
@@ -195,8 +203,8 @@ def normals_example(ctx: ExampleContext) -> None:
     cloud = SurfelCloud(noisy, n, radii=radii, colors=0.5 + 0.5 * n, attributes={"angle_error": err})
     size = (320, 300) if ctx.quick else (640, 600)
     bounds = blob.bounds()
-    left = _view(cloud, bounds, size, shading="none")
-    right = _view(cloud, bounds, size, color_by="angle_error", colormap="viridis", color_range=(0.0, 20.0))
+    left = _view(cloud, bounds, size, False, shading="none")  # estimated normals: both sides drawn
+    right = _view(cloud, bounds, size, False, color_by="angle_error", colormap="viridis", color_range=(0.0, 20.0))
     path = ctx.path("normals.png")
     save_image(path, tile([left, right], 2))
     ctx.image(path, "Estimated normals (RGB = 0.5 + 0.5 n) and their angle error in degrees.")
