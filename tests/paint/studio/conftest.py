@@ -58,9 +58,24 @@ def studio(tmp_path_factory):
     from unmesh.paint.studio.workspace import Workspace
 
     out = tmp_path_factory.mktemp("studio") / "blob_painted.ply"
-    bg = BackgroundStudio(Workspace(new_session(), out, autosave_every=3, advance_every=None))
+    ws = Workspace(new_session(), out, autosave_every=3, advance_every=None)
+    _warm_up(ws.camera())
+    bg = BackgroundStudio(ws)
     with bg as s:
         yield s
+
+
+def _warm_up(camera) -> None:
+    """Render and paint once on a throwaway session, so numba compiles the splatting and paint
+    kernels here and not while a page waits for its first frames (on a cold cache that takes
+    over a minute when another test worker compiles at the same time)."""
+    from unmesh.paint import Brush, Paint, Sample
+
+    s = new_session()
+    s.render(camera)
+    p = s.cloud().positions[0]
+    s.stroke([Sample(0.05 * k, p, 0.6) for k in range(3)], brush=Brush("round", 0.04), paint=Paint("oil", (0.9, 0.1, 0.1)))
+    s.render(camera)
 
 
 def open_page(browser, studio, **context_args):
