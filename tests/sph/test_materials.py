@@ -186,3 +186,20 @@ def test_docking_rates_make_open_cracks_brittle_or_closable(loss):
     else:                            # ductile: the crack closes
         assert lam_max == pytest.approx(DOCK_MAX - loss * t, rel=1e-4)
         assert docked_fraction == 1.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("d", [0.02, 0.01])
+def test_broken_beam_lands_without_shattering(d):
+    """Fig. 8.7 (c), issue 23 item 7: the beam breaks off the wall and lands on the floor in one piece.
+
+    The stress criterion used to release an overstretched neighbour at once and zero its docking
+    rate: the transients of the landing then shattered the beam into about 8 shards. It now lowers
+    the rate of the overstretched slot by ``Δλ_d⁻`` per second, like an empty slot (section 8.2.5:
+    "a stress criterion can be used to additionally modify λ_d"), so only a sustained overload breaks.
+    """
+    sim, _ = run_scene("fracture_2d", {"simulation.spacing": d, "materials.chalk.elastic_stiffness": 2e7 * (0.01 / d) ** 2},
+                       1.5)
+    x = sim.particles().positions[:, :2]
+    assert components(x, 1.5 * d) == 2                                  # the stub in the wall and the beam
+    assert np.sort(x[:, 1])[len(x) // 2] < 0.15                         # most of it lies on the floor
