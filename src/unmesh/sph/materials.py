@@ -85,8 +85,10 @@ class Material:
         Creep rate ``α`` (1/s) of that rule; ``α Δt ≥ 1`` (e.g. ``inf``) returns a yielding
         particle to the yield surface within one step (perfect plasticity).
     fracture_stretch : float
-        Stress criterion: a neighbour stretched beyond ``(1 + fracture_stretch)``
-        times its lattice distance is released and its slot's rate set to 0.
+        Stress criterion (section 8.2.5, "modifies λ_d"): a docked neighbour stretched beyond
+        ``(1 + fracture_stretch)`` times its lattice distance makes its slot lose ``Δλ_d^-`` per
+        second, as if it were empty, and is released when the rate reaches 0 (at once when
+        the rates are not tracked, ``docking_gain = inf``).
     diffusivity : float
         Thermal diffusivity (m²/s) of the SPH heat conduction.
     melt_rate, melting_point : float
