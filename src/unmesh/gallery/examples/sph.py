@@ -361,7 +361,7 @@ def plastic_cube(ctx: ExampleContext) -> None:
     from unmesh import io
 
     # K_e ∝ 1/d² keeps the same clay at the coarser quick spacing (see the fracture example)
-    ov = {"simulation.spacing": 0.02, "simulation.duration": 1.2, "materials.clay.elastic_stiffness": 2.5e6} \
+    ov = {"simulation.spacing": 0.02, "simulation.duration": 1.0, "materials.clay.elastic_stiffness": 2.5e6} \
         if ctx.quick else {"simulation.spacing": 0.01, "simulation.duration": 1.5}
     out, summary = run_shipped_scene(ctx, "plastic_cube_2d", ov)
     _render(ctx, out, "plastic_cube_2d", "plastic cube (colour: pressure)", "pressure", 2)
@@ -381,7 +381,7 @@ def plastic_cube(ctx: ExampleContext) -> None:
 def fracture(ctx: ExampleContext) -> None:
     """A block clamped to a wall sags under gravity and breaks off (docking rates, 8.2.5)."""
     # K_e (8.31) acts per unit mass on displacements: the same chalk at twice the spacing needs K_e / 4
-    ov = {"simulation.spacing": 0.02, "simulation.duration": 0.5, "materials.chalk.elastic_stiffness": 5e6} \
+    ov = {"simulation.spacing": 0.02, "simulation.duration": 0.7, "materials.chalk.elastic_stiffness": 5e6} \
         if ctx.quick else {"simulation.spacing": 0.01, "simulation.duration": 1.5}
     out, summary = run_shipped_scene(ctx, "fracture_2d", ov)
     _render(ctx, out, "fracture_2d", "fracture (colour: pressure)", "pressure", 2)
