@@ -738,7 +738,7 @@ def _dock(i, o, rt, row, uid, bestt, memb, occ, docked, lam, occ_out, docked_out
             rr = rt[0, t] * rt[0, t] + rt[1, t] * rt[1, t] + rt[2, t] * rt[2, t]
             rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
             if math.sqrt(rr) > (1.0 + frac) * rest:
-                if track:
+                if track and gain_fin:
                     # the stress criterion modifies λ_d (section 8.2.5): an overstretched slot loses its
                     # rate like an empty one and lets go when it reaches 0 (a sustained overload breaks
                     # it, a transient of less than λ_d/Δλ_d⁻ does not)
@@ -746,8 +746,10 @@ def _dock(i, o, rt, row, uid, bestt, memb, occ, docked, lam, occ_out, docked_out
                     lam[i, q] = ldown
                     if ldown <= 0.0:
                         dk = 0
-                else:
+                else:  # an infinite gain restores any rate at once: the overstretched neighbour lets go now
                     dk = 0
+                    if track:
+                        lam[i, q] = 0.0
         docked_out[i, q] = dk
         if has and dk == 1:
             memb[t] = 1.0

@@ -88,7 +88,7 @@ class Material:
         Stress criterion (section 8.2.5, "modifies λ_d"): a docked neighbour stretched beyond
         ``(1 + fracture_stretch)`` times its lattice distance makes its slot lose ``Δλ_d^-`` per
         second, as if it were empty, and is released when the rate reaches 0 (at once when
-        the rates are not tracked, ``docking_gain = inf``).
+        the docking gain is infinite).
     diffusivity : float
         Thermal diffusivity (m²/s) of the SPH heat conduction.
     melt_rate, melting_point : float
