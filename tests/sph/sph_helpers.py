@@ -35,7 +35,8 @@ class LatticeState:
     """
 
     def __init__(self, x: np.ndarray, dim: int, spacing: float, material: Material, masses: np.ndarray,
-                 a_prev: np.ndarray | None = None, solid: np.ndarray | None = None) -> None:
+                 a_prev: np.ndarray | None = None, solid: np.ndarray | None = None,
+                 pmat: np.ndarray | None = None) -> None:
         self.x = np.ascontiguousarray(x)
         self.dim = dim
         self.d = spacing
@@ -51,6 +52,8 @@ class LatticeState:
         self.ainv = np.ascontiguousarray(np.linalg.inv(self.amat))
         self.nbr, self.nn = neighbour_table(self.x, self.h, dim)
         self.solid = np.ones(self.n, bool) if solid is None else np.asarray(solid, bool)
+        # stored plastic deformations (rest offsets P l); none: no plasticity (an empty table)
+        self.pmat = np.zeros((0, 3, 3)) if pmat is None else np.ascontiguousarray(pmat, dtype=np.float64)
 
     def run(self) -> None:
         n, q = self.n, len(self.vecs)
@@ -60,13 +63,14 @@ class LatticeState:
         self.out = {
             "amat": np.zeros((n, 3, 3)), "ainv": np.zeros((n, 3, 3)), "gmat": np.zeros((n, 3, 3)),
             "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8), "fel": np.full((n, 3), np.nan),
+            "pmat": np.full(self.pmat.shape, np.nan),
         }
         o = self.out
         EK.lattice_update(self.x, self.m, self.solid.astype(np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
                           np.arange(n, dtype=np.int64), self.mats, self.nbr, self.nn, self.h, self.dim, self.d,
                           self.vecs, self.tmat, self.table, np.arange(n, dtype=np.int64), self.amat, self.ainv,
                           self.occ, self.docked, self.lam, 0, 0, 1e-4, 1, o["amat"], o["ainv"], self.occ, self.docked,
-                          o["gmat"], o["fown"], o["valid"], o["fel"])
+                          o["gmat"], o["fown"], o["valid"], o["fel"], self.pmat, o["pmat"])
 
     def forces(self) -> np.ndarray:
         """Total elastic force on every particle, as the force pass adds it (own share + member forces)."""
@@ -77,7 +81,7 @@ class LatticeState:
         """The same forces from the numpy reference (:mod:`unmesh.sph.elastic`)."""
         mu, lam = self.mat.lame
         par = ElasticParams(self.dim, self.mat.elastic_stiffness, self.mat.goal_deformation, mu, lam,
-                            self.mat.density)
+                            self.mat.density, self.mat.plastic_yield, self.mat.plastic_creep)
         w0 = float(poly6(0.0, self.h, self.dim))
         f = np.zeros((self.n, 3))
         for i in np.flatnonzero(self.solid):
@@ -88,7 +92,9 @@ class LatticeState:
             keep = slot >= 0
             js, r, slot = js[keep], r[keep], slot[keep]
             w = np.asarray(poly6(np.linalg.norm(r, axis=1), self.h, self.dim))
-            fi, fj = neighbourhood_forces(self.x[i], r, self.vecs[slot] * self.d, w, w0, self.m[i], self.m[js], par)
+            plastic = self.pmat[i] if len(self.pmat) else None
+            fi, fj = neighbourhood_forces(self.x[i], r, self.vecs[slot] * self.d, w, w0, self.m[i], self.m[js], par,
+                                          plastic)
             f[i] += fi
             np.add.at(f, js, fj)
         return f

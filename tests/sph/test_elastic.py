@@ -140,7 +140,8 @@ def test_untracked_docking_rates_and_goal_matrices_change_nothing(dim):
             EK.lattice_update(s.x, s.m, np.ones(n, np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
                               np.arange(n, dtype=np.int64), s.mats, s.nbr, s.nn, s.h, dim, d, s.vecs, s.tmat, s.table,
                               np.arange(n, dtype=np.int64), s.amat, s.ainv, occ, docked, lam, 0, step, 1e-2, 0,
-                              o["amat"], o["ainv"], occ, docked, gmat, o["fown"], o["valid"], o["fel"])
+                              o["amat"], o["ainv"], occ, docked, gmat, o["fown"], o["valid"], o["fel"],
+                              np.zeros((0, 3, 3)), np.zeros((0, 3, 3)))
         outs.append((occ, docked, *o.values()))
     assert outs[0][1].any() and not outs[0][1].all() and outs[0][4].any()  # some slots docked, some forces
     for a, b in zip(*outs, strict=True):
@@ -170,7 +171,7 @@ def test_lattice_state_read_through_the_sort_order():
         EK.lattice_update(s.x, s.m, np.ones(n, np.int8), np.zeros(n, np.int32), np.zeros(n, np.int32),
                           np.arange(n, dtype=np.int64), s.mats, s.nbr, s.nn, s.h, 3, d, s.vecs, s.tmat, s.table, o_,
                           a_, ai_, oc_, dk_, np.zeros((n, 0)), 0, 1, 1e-4, 0, out[0], out[1], out[2], out[3],
-                          np.zeros((0, 3, 3)), out[4], out[5], out[6])
+                          np.zeros((0, 3, 3)), out[4], out[5], out[6], np.zeros((0, 3, 3)), np.zeros((0, 3, 3)))
         results.append(out)
     assert results[0][5].all()
     for a, b in zip(*results, strict=True):
@@ -347,3 +348,67 @@ def test_permute_rows_matches_fancy_indexing():
             a, b = a.view(np.uint64), b.view(np.uint64)
         K.permute_rows(a, order, b)
         assert np.array_equal(dst, src[order])
+
+
+def _plastic_shapes(n: int, dim: int, rng: np.random.Generator, size: float) -> np.ndarray:
+    """Random rest shapes ``P = exp(T)`` with traceless symmetric ``T`` (det 1; z identity in 2D)."""
+    k = 2 if dim == 2 else 3
+    out = np.repeat(np.eye(3)[None], n, 0)
+    for i in range(n):
+        t = size * rng.standard_normal((k, k))
+        t = 0.5 * (t + t.T)
+        t -= np.trace(t) / k * np.eye(k)
+        w, q = np.linalg.eigh(t)
+        out[i, :k, :k] = q @ np.diag(np.exp(w)) @ q.T
+    return out
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("young", [0.0, 300.0])
+def test_plastic_rest_shapes_match_numpy_reference(dim, young):
+    """Stored plastic deformation (rest offsets ``P l``): the lattice pass gives the forces of the numpy
+    reference with the same ``P`` and advances ``P`` as :func:`plastic_flow` does (yielding and
+    non-yielding particles both present), keeping ``det P = 1``."""
+    from unmesh.sph.elastic import plastic_flow
+
+    rng = np.random.default_rng(5)
+    d = 0.1
+    x = _disturbed_lattice(dim, d, rng, 0.12, 0.1)
+    x[:, 0] *= 1.15                                                     # a stretch: most particles yield
+    mat = Material(elastic_stiffness=2e4, young=young, poisson=0.25, goal_deformation=0.7, plastic_yield=0.1,
+                   plastic_creep=2e3)
+    p0 = _plastic_shapes(len(x), dim, rng, 0.1)
+    s = LatticeState(x, dim, d, mat, rng.uniform(0.5, 1.5, len(x)), pmat=p0)
+    f = s.forces()
+    ref = s.reference_forces()
+    assert np.abs(f - ref).max() <= 1e-10 * np.abs(ref).max()
+    par = ElasticParams(dim, mat.elastic_stiffness, mat.goal_deformation, *mat.lame, mat.density, mat.plastic_yield,
+                        mat.plastic_creep)
+    valid = s.out["valid"].astype(bool)
+    moved = 0
+    for i in np.flatnonzero(valid):
+        expected = plastic_flow(s.out["amat"][i], p0[i], par, 1e-4)
+        assert np.allclose(s.out["pmat"][i], expected, rtol=0, atol=1e-10)
+        moved += not np.allclose(expected, p0[i])
+    assert 0 < moved < valid.sum()
+    n = 2 if dim == 2 else 3
+    assert np.allclose(np.linalg.det(s.out["pmat"][valid][:, :n, :n]), 1.0, atol=1e-12)
+    assert np.array_equal(s.out["pmat"][~valid], p0[~valid])
+
+
+def test_plastic_flow_yield_and_creep():
+    """Below the yield strain ``P`` stays; beyond it ``P`` moves towards the current shape at the
+    creep rate (``c = α Δt (1 − β/ε)``), never past it, and a rotation alone never yields."""
+    from unmesh.sph.elastic import plastic_flow
+
+    a = np.diag([1.2, 1 / 1.2, 1.0])                                   # isochoric stretch, ε = ‖diag(.2, −.167)‖
+    eps = float(np.hypot(0.2, 1 / 1.2 - 1))
+    rot = _rotation(2, np.array([0.7]))
+    assert np.array_equal(plastic_flow(a, np.eye(3), ElasticParams(2, 1.0, plastic_yield=eps + 1e-3), 1e-3), np.eye(3))
+    assert np.allclose(plastic_flow(rot @ a, np.eye(3), ElasticParams(2, 1.0, plastic_yield=0.0), 1.0), a)
+    slow = plastic_flow(a, np.eye(3), ElasticParams(2, 1.0, plastic_yield=0.1, plastic_creep=10.0), 1e-3)
+    c = 10.0 * 1e-3 * (1 - 0.1 / eps)
+    expected = np.eye(3) + c * (a - np.eye(3))
+    expected[:2, :2] /= np.sqrt(np.linalg.det(expected[:2, :2]))
+    assert np.allclose(slow, expected)
+    assert np.allclose(plastic_flow(rot, np.eye(3), ElasticParams(2, 1.0, plastic_yield=0.0), 1.0), np.eye(3))

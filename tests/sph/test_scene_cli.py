@@ -271,6 +271,9 @@ def test_fracture_scene_breaks_off_the_wall(spacing):
 
     The elastic stiffness ``K_e`` (8.31) acts per unit mass on displacements, so the same material at
     a coarser spacing ``d`` needs ``K_e ∝ 1/d²`` (the shipped 2e7 at d = 0.01 is 5e6 at d = 0.02).
+    It breaks off as one piece: the stress criterion lowers the docking rate of an overstretched
+    slot (section 8.2.5) and releases it only after ``λ_d/Δλ_d⁻`` = 10 ms of overload, so it is no
+    longer shattered by transients (it breaks at about 0.3 s at d = 0.01, 0.55 s at d = 0.02).
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -281,7 +284,7 @@ def test_fracture_scene_breaks_off_the_wall(spacing):
     ke = 2e7 * (0.01 / d) ** 2
     sim, _ = build_simulation(load_scene(scene_path("sph/fracture_2d.toml"),
                                          {"simulation.spacing": d, "materials.chalk.elastic_stiffness": ke}))
-    while sim.time < 0.4:
+    while sim.time < 0.8:
         sim.step()
         assert sim.check() is None
     s = sim.particles()
@@ -291,7 +294,7 @@ def test_fracture_scene_breaks_off_the_wall(spacing):
     count, label = connected_components(graph, directed=False)
     clamped = label[np.argmin(s.positions[:, 0])]
     free = label != clamped
-    assert count >= 2 and free.sum() > 0.5 * n  # most of the block has broken away from the clamp
+    assert count == 2 and free.sum() > 0.5 * n  # most of the block has broken away from the clamp, in one piece
     assert s.positions[free, 1].mean() < 0.5 - 0.1  # and fallen
     assert np.all(s.positions[~free, 0] < 0.25)  # the stub stays clamped in the wall
 

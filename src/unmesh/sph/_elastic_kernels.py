@@ -61,13 +61,107 @@ def _w_zero(h, dim):
 
 
 @njit(**PLAIN)
-def _keep_previous(i, o, amat, ainv, amat_out, ainv_out):
-    """Row ``i`` of the new lattice transformation and its inverse: the previous ones, rows ``o``
-    (no shape matching)."""
+def _keep_previous(i, o, amat, ainv, amat_out, ainv_out, pmat, pmat_out):
+    """Row ``i`` of the new lattice transformation, its inverse and the plastic deformation: the
+    previous ones, rows ``o`` (no shape matching)."""
     for p in range(3):
         for q in range(3):
             amat_out[i, p, q] = amat[o, p, q]
             ainv_out[i, p, q] = ainv[o, p, q]
+    if pmat.shape[0] > 0:
+        for p in range(3):
+            for q in range(3):
+                pmat_out[i, p, q] = pmat[o, p, q]
+
+
+@njit(**PLAIN)
+def _plastic_split(k, o, pmat, la, lminv, ltot, lp, lpi, pm, pinv):
+    """Lane ``k``: the elastic part ``A_e = A P⁻¹`` of the fitted lattice transformation ``A`` (8.23)
+    for the stored plastic deformation ``P = pmat[o]`` (rest offsets ``P l``); ``A`` is kept in
+    ``ltot``, ``P`` and ``P⁻¹`` in ``lp`` and ``lpi``; ``lminv`` becomes ``P⁻ᵀ M⁻¹`` (strain forces of
+    the rest offsets ``P l``: ``(P M Pᵀ)⁻¹ P = P⁻ᵀ M⁻¹``)."""
+    for p in range(3):
+        for q in range(3):
+            pm[p, q] = pmat[o, p, q]
+    _inv3(pm, pinv)
+    for e in range(9):
+        ltot[e, k] = la[e, k]
+        lp[e, k] = pm[e // 3, e % 3]
+        lpi[e, k] = pinv[e // 3, e % 3]
+    for p in range(3):
+        for q in range(3):
+            la[3 * p + q, k] = ltot[3 * p, k] * pinv[0, q] + ltot[3 * p + 1, k] * pinv[1, q] + ltot[3 * p + 2, k] * pinv[2, q]
+    m0 = np.empty(9)
+    for e in range(9):
+        m0[e] = lminv[e, k]
+    for p in range(3):
+        for q in range(3):
+            lminv[3 * p + q, k] = pinv[0, p] * m0[q] + pinv[1, p] * m0[3 + q] + pinv[2, p] * m0[6 + q]
+
+
+@njit(**PLAIN)
+def _plastic_finish(i, k, ys, ltot, lp, lpi, lg, amat_out, ainv_out, pmat_out, yld, creep, dt, dim, pm):
+    """Particle ``i`` (lane ``k``) with a stored plastic deformation ``P``: the lattice transformation
+    ``A = A_e P`` and its inverse ``P⁻¹ A_e⁻¹`` for the next assignment (8.21), the goal matrix
+    ``U S Vᵀ P`` (goals ``g' = U S Vᵀ P l``, 8.29), and the plastic flow (the thesis' yield and creep
+    rule 7.20–7.22 applied to the lattice): with the isochoric elastic stretch ``Ŷ = Y / det(Y)^(1/n)``
+    (``Y = V Σ Vᵀ``, the right stretch of ``A_e``) and ``ε = ‖Ŷ − I‖_F``, a particle beyond the yield
+    strain ``β`` moves its rest shape towards the current one,
+    ``P ← (I + c (Ŷ − I)) P``, ``c = min(1, α Δt)(1 − β/ε)``, normalised to ``det P = 1``."""
+    n = 2 if dim == 2 else 3
+    for p in range(3):
+        for q in range(3):
+            amat_out[i, p, q] = ltot[3 * p + q, k]
+    for p in range(3):
+        for q in range(3):
+            pm[p, q] = lpi[3 * p, k] * ainv_out[i, 0, q] + lpi[3 * p + 1, k] * ainv_out[i, 1, q] \
+                + lpi[3 * p + 2, k] * ainv_out[i, 2, q]
+    for p in range(3):
+        for q in range(3):
+            ainv_out[i, p, q] = pm[p, q]
+    for p in range(3):
+        g0 = lg[3 * p, k]
+        g1 = lg[3 * p + 1, k]
+        g2 = lg[3 * p + 2, k]
+        for q in range(3):
+            pm[p, q] = g0 * lp[q, k] + g1 * lp[3 + q, k] + g2 * lp[6 + q, k]
+    for p in range(3):
+        for q in range(3):
+            lg[3 * p + q, k] = pm[p, q]
+    # plastic flow
+    if dim == 2:
+        det = ys[0, 0] * ys[1, 1] - ys[0, 1] * ys[1, 0]
+    else:
+        det = (ys[0, 0] * (ys[1, 1] * ys[2, 2] - ys[1, 2] * ys[2, 1]) - ys[0, 1] * (ys[1, 0] * ys[2, 2] - ys[1, 2] * ys[2, 0])
+               + ys[0, 2] * (ys[1, 0] * ys[2, 1] - ys[1, 1] * ys[2, 0]))
+    scale = det ** (-1.0 / n) if det > 0.0 else 1.0
+    eps2 = 0.0
+    for p in range(n):
+        for q in range(n):
+            e = ys[p, q] * scale - (1.0 if p == q else 0.0)
+            eps2 += e * e
+    eps = math.sqrt(eps2)
+    c = 0.0
+    if eps > yld:
+        c = min(1.0, creep * dt) * (1.0 - yld / eps)
+    for p in range(3):
+        for q in range(3):
+            acc = 0.0
+            for r in range(3):
+                fr = (ys[p, r] * scale - (1.0 if p == r else 0.0)) * c + (1.0 if p == r else 0.0)
+                if p >= n or r >= n:
+                    fr = 1.0 if p == r else 0.0
+                acc += fr * lp[3 * r + q, k]
+            pm[p, q] = acc
+    if dim == 2:
+        pdet = pm[0, 0] * pm[1, 1] - pm[0, 1] * pm[1, 0]
+    else:
+        pdet = (pm[0, 0] * (pm[1, 1] * pm[2, 2] - pm[1, 2] * pm[2, 1]) - pm[0, 1] * (pm[1, 0] * pm[2, 2] - pm[1, 2] * pm[2, 0])
+                + pm[0, 2] * (pm[1, 0] * pm[2, 1] - pm[1, 1] * pm[2, 0]))
+    ps = pdet ** (-1.0 / n) if pdet > 0.0 else 1.0
+    for p in range(3):
+        for q in range(3):
+            pmat_out[i, p, q] = pm[p, q] * ps if (p < n and q < n) else pm[p, q]
 
 
 #: Blocks of the lattice pass. Each block of particles owns a window of member-force
@@ -87,7 +181,7 @@ LANES = 8
 @njit(cache=True, fastmath=LATTICE_FASTMATH, error_model="numpy")
 def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing, slot_vecs, lv, dti,
                    c6, w_self, tm, table, order, amat, ainv, occ, docked, lam, seed, step, dt, prime, onebody,
-                   amat_out, ainv_out, occ_out, docked_out, gmat, fown, valid):
+                   amat_out, ainv_out, occ_out, docked_out, gmat, fown, valid, pmat, pmat_out):
     """The particles ``r0 .. r1 - 1`` of :func:`lattice_update` (one block, serial); member forces are
     added into ``win`` (W, 3), the accumulator rows ``lo_b, lo_b + 1, ...``. ``onebody``: every
     particle is solid and of one object (no neighbour needs the phase and object test)."""
@@ -132,6 +226,15 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
     sg = np.empty(3)
     work = np.empty((4, 3, 3))
     keep_goal = gmat.shape[0] > 0
+    # stored plastic deformation (materials with a finite yield strain): per lane A, P, P⁻¹; flags
+    plastic = pmat.shape[0] > 0
+    ltot = np.empty((9, LANES))
+    lp = np.empty((9, LANES))
+    lpi = np.empty((9, LANES))
+    lpl = np.zeros(LANES)
+    pm = np.empty((3, 3))
+    pinv = np.empty((3, 3))
+    ys = np.empty((3, 3))
     track = lam.shape[1] > 0
     st00, st01, st02 = dti[0, 0], dti[0, 1], dti[0, 2]
     st10, st11, st12 = dti[1, 0], dti[1, 1], dti[1, 2]
@@ -162,7 +265,7 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                 for q in range(nq):
                     occ_out[i, q] = -1
                     docked_out[i, q] = 0
-                _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
+                _keep_previous(i, o, amat, ainv, amat_out, ainv_out, pmat, pmat_out)
                 continue
             rt = nb[k]
             xi0 = x[i, 0]
@@ -313,7 +416,7 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                 b21 += w * y2 * l1
                 b22 += w * y2 * l2
             if count < dim:
-                _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
+                _keep_previous(i, o, amat, ainv, amat_out, ainv_out, pmat, pmat_out)
                 continue
             if dim == 2:
                 s02 = s12 = 0.0
@@ -350,6 +453,12 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                 la[3 * p, k] = bp0 * m00 + bp1 * m01 + bp2 * m02 if use else (1.0 if p == 0 else 0.0)
                 la[3 * p + 1, k] = bp0 * m01 + bp1 * m11 + bp2 * m12 if use else (1.0 if p == 1 else 0.0)
                 la[3 * p + 2, k] = bp0 * m02 + bp1 * m12 + bp2 * m22 if use else (1.0 if p == 2 else 0.0)
+        # stored plastic deformation: decompose the elastic part A_e = A P⁻¹ (rest offsets P l)
+        for k in range(LANES):
+            lpl[k] = 0.0
+            if plastic and k < nl and ok[k] > 0.0 and mats[matid[g0 + k], M.YIELD] < np.inf:
+                lpl[k] = 1.0
+                _plastic_split(k, order[g0 + k], pmat, la, lminv, ltot, lp, lpi, pm, pinv)
         # polar decomposition (8.24) of every lane at once (3D; the SVD where it does not apply)
         if dim == 3:
             polar_lanes(la, lrot, lsym, fast, act)
@@ -363,7 +472,7 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
             mt = matid[i]
             if ok[k] == 0.0:
                 if cand[k] > 0.0:  # M near singular: the previous transformation stays
-                    _keep_previous(i, o, amat, ainv, amat_out, ainv_out)
+                    _keep_previous(i, o, amat, ainv, amat_out, ainv_out, pmat, pmat_out)
                 continue
             valid[i] = 1
             for p in range(3):
@@ -375,6 +484,9 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                 y00, y01, y02 = lsym[0, k], lsym[1, k], lsym[2, k]
                 y11, y12, y22 = lsym[4, k], lsym[5, k], lsym[8, k]
                 trs = y00 + y11 + y22 - 3.0
+                if lpl[k] > 0.0:
+                    for e in range(9):
+                        ys[e // 3, e % 3] = lsym[e, k]
                 f00 = s * y00 + (1.0 - s)
                 f11 = s * y11 + (1.0 - s)
                 f22 = s * y22 + (1.0 - s)
@@ -422,12 +534,24 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                 dg0 /= norm
                 dg1 /= norm
                 trs = (sg[0] - 1.0) + (sg[1] - 1.0)
+                if lpl[k] > 0.0:  # the right stretch V Σ Vᵀ (clamped like the goal)
+                    for p in range(3):
+                        for q in range(3):
+                            ys[p, q] = (v[p, 0] * max(sg[0], SIGMA_FLOOR) * v[q, 0] + v[p, 1] * max(sg[1], SIGMA_FLOOR)
+                                        * v[q, 1] + v[p, 2] * max(sg[2], SIGMA_FLOOR) * v[q, 2])
                 if dim == 3:
                     trs += sg[2] - 1.0
                 for p in range(3):
                     for q in range(3):
                         lg[3 * p + q, k] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
                         lrot[3 * p + q, k] = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
+            if lpl[k] > 0.0:
+                _plastic_finish(i, k, ys, ltot, lp, lpi, lg, amat_out, ainv_out, pmat_out, mats[mt, M.YIELD],
+                                mats[mt, M.CREEP], dt, dim, pm)
+            elif plastic:
+                for p in range(3):
+                    for q in range(3):
+                        pmat_out[i, p, q] = pmat[o, p, q]
             if keep_goal:
                 for e in range(9):
                     gmat[i, e // 3, e % 3] = lg[e, k]
@@ -614,9 +738,18 @@ def _dock(i, o, rt, row, uid, bestt, memb, occ, docked, lam, occ_out, docked_out
             rr = rt[0, t] * rt[0, t] + rt[1, t] * rt[1, t] + rt[2, t] * rt[2, t]
             rest = spacing * math.sqrt(slot_vecs[q, 0] ** 2 + slot_vecs[q, 1] ** 2 + slot_vecs[q, 2] ** 2)
             if math.sqrt(rr) > (1.0 + frac) * rest:
-                dk = 0
-                if track:
-                    lam[i, q] = 0.0
+                if track and gain_fin:
+                    # the stress criterion modifies λ_d (section 8.2.5): an overstretched slot loses its
+                    # rate like an empty one and lets go when it reaches 0 (a sustained overload breaks
+                    # it, a transient of less than λ_d/Δλ_d⁻ does not)
+                    ldown = max(lq - loss * dt, 0.0) if loss_fin else 0.0
+                    lam[i, q] = ldown
+                    if ldown <= 0.0:
+                        dk = 0
+                else:  # an infinite gain restores any rate at once: the overstretched neighbour lets go now
+                    dk = 0
+                    if track:
+                        lam[i, q] = 0.0
         docked_out[i, q] = dk
         if has and dk == 1:
             memb[t] = 1.0
@@ -626,7 +759,7 @@ def _dock(i, o, rt, row, uid, bestt, memb, occ, docked, lam, occ_out, docked_out
 def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacing,
                    slot_vecs, tmat, table, order, amat, ainv, occ, docked, lam,
                    seed, step, dt, prime,
-                   amat_out, ainv_out, occ_out, docked_out, gmat, fown, valid, fel):
+                   amat_out, ainv_out, occ_out, docked_out, gmat, fown, valid, fel, pmat, pmat_out):
     """Lattice assignment, docking, shape matching and neighbourhood forces for every solid particle.
 
     Inputs are in cell-sorted order; ``nbr`` rows ascending. The state of the previous step
@@ -703,7 +836,7 @@ def lattice_update(x, m, phase, obj, matid, uid, mats, nbr, nnbr, h, dim, spacin
         _lattice_block(blk * n // nblk, (blk + 1) * n // nblk, lo[blk], win[blk], x, m, phase, obj, matid, uid, mats,
                        nbr, nnbr, h, dim, spacing, slot_vecs, lv, dti, c6, w_self, tm, table, order, amat,
                        ainv, occ, docked, lam, seed, step, dt, prime, onebody, amat_out, ainv_out, occ_out, docked_out,
-                       gmat, fown, valid)
+                       gmat, fown, valid, pmat, pmat_out)
     # the windows summed in block order (deterministic, whatever the thread count), in parallel over rows
     nchunk = (n + SUM_ROWS - 1) // SUM_ROWS
     for ch in prange(nchunk):

@@ -37,6 +37,15 @@ For a particle ``i`` with neighbours ``j`` (``r_ij = x_j − x_i``, weights
    ``I_i = Σ w_k (‖y_k‖² I − y_k y_kᵀ)``, ``y_k = x_k − c_i``, add zero net force
    (``Σ w_k y_k = 0``) and exactly the torque ``−τ_i``. Total linear and angular
    momentum of the elastic forces are therefore conserved to round-off.
+6. **Stored plastic deformation** (optional, :func:`plastic_flow`): a particle keeps a rest
+   shape ``P`` of its lattice (``det P = 1``): its neighbours' rest offsets are ``P l``. The
+   fit ``A`` of eq. (8.23) is unchanged (it maps lattice offsets to the current ones and is
+   used for the assignment 8.21); the best fit to the rest offsets ``P l`` is the elastic part
+   ``A_e = A P⁻¹``, which is decomposed (8.24) and gives the goals ``g' = U S Vᵀ P l``
+   (8.29–8.30) and the strain forces (``M⁻¹`` becomes ``P⁻ᵀ M⁻¹``). Beyond the yield strain
+   the rest shape creeps towards the current shape (the thesis' yield and creep rule for
+   shells, eqs. 7.20–7.22, applied to the lattice; section 8.2.5 names stored plastic strain as
+   an addition to the inherent plasticity).
 
 Example
 -------
@@ -72,6 +81,7 @@ __all__ = [
     "lame_parameters",
     "linear_stress",
     "neighbourhood_forces",
+    "plastic_flow",
     "rotation_svd",
     "shape_matching",
     "torque_correction",
@@ -99,6 +109,9 @@ class ElasticParams:
         :func:`lame_parameters`.
     rest_density : float
         ``ρ0`` (particle rest volume ``m/ρ0``).
+    plastic_yield, plastic_creep : float
+        Yield strain ``β`` and creep rate ``α`` (1/s) of the stored plastic deformation
+        (:func:`plastic_flow`; ``β = inf``: none).
 
     Example
     -------
@@ -113,13 +126,15 @@ class ElasticParams:
     mu: float = 0.0
     lam: float = 0.0
     rest_density: float = 1.0
+    plastic_yield: float = float("inf")
+    plastic_creep: float = float("inf")
 
     def __post_init__(self) -> None:
         if self.dim not in (2, 3):
             raise InputError(f"dim: expected 2 or 3, got {self.dim!r}")
         if not 0.0 <= self.goal_deformation <= 1.0:
             raise InputError(f"goal_deformation: expected a number in [0, 1], got {self.goal_deformation}")
-        for name in ("stiffness", "mu", "lam"):
+        for name in ("stiffness", "mu", "lam", "plastic_yield", "plastic_creep"):
             if not getattr(self, name) >= 0.0:
                 raise InputError(f"{name}: expected a number >= 0, got {getattr(self, name)}")
         if not self.rest_density > 0.0:
@@ -381,8 +396,55 @@ def torque_correction(x: np.ndarray, f: np.ndarray, w: np.ndarray, dim: int) -> 
     return w[:, None] * np.cross(omega[None, :], y)
 
 
+def plastic_flow(a: Any, p: Any, params: ElasticParams, dt: float) -> np.ndarray:
+    """One step of the stored plastic deformation ``P`` (module docstring, item 6).
+
+    With the elastic part ``A_e = A P⁻¹ = U Σ Vᵀ``, its isochoric right stretch
+    ``Ŷ = V Σ Vᵀ / det(Σ)^(1/n)`` and ``ε = ‖Ŷ − I‖_F``: if ``ε > β`` (yield),
+    ``P ← (I + c (Ŷ − I)) P`` with ``c = min(1, α Δt)(1 − β/ε)`` (the rule 7.20–7.22 of the
+    thesis; ``c = 1 − β/ε`` returns the stretch to about the yield surface), normalised to ``det P = 1``.
+
+    Parameters
+    ----------
+    a : array_like, shape (3, 3)
+        Fitted lattice transformation ``A`` of eq. (8.23).
+    p : array_like, shape (3, 3)
+        Current plastic deformation (z row and column identity in 2D).
+    params : ElasticParams
+    dt : float
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+
+    Example
+    -------
+    >>> par = ElasticParams(dim=2, stiffness=1.0, plastic_yield=0.1)
+    >>> p = plastic_flow(np.diag([1.5, 1 / 1.5, 1.0]), np.eye(3), par, 1e-3)   # sheared far beyond yield
+    >>> e = np.diag([1.5, 1 / 1.5, 1.0]) @ np.linalg.inv(p) - np.eye(3)
+    >>> round(float(np.linalg.norm(e[:2, :2])), 2), round(float(np.linalg.det(p)), 12)
+    (0.1, 1.0)
+    """
+    aa = as_array(a, "a", (3, 3))
+    pp = as_array(p, "p", (3, 3))
+    n = 2 if params.dim == 2 else 3
+    _, sig, v = rotation_svd(aa @ np.linalg.inv(pp), params.dim)
+    sig = np.maximum(sig, SIGMA_FLOOR)
+    y = v @ np.diag(sig) @ v.T
+    y[:n, :n] /= np.prod(sig[:n]) ** (1.0 / n)
+    dev = y[:n, :n] - np.eye(n)
+    eps = float(np.linalg.norm(dev))
+    if not eps > params.plastic_yield:
+        return pp.copy()
+    c = min(1.0, params.plastic_creep * dt) * (1.0 - params.plastic_yield / eps)
+    out = pp.copy()
+    out[:n, :] = (np.eye(n) + c * dev) @ pp[:n, :]
+    out[:n, :n] /= np.linalg.det(out[:n, :n]) ** (1.0 / n)
+    return out
+
+
 def neighbourhood_forces(xi: Any, r: Any, l: Any, w: Any, w_self: float, mi: float, mj: Any,
-                         params: ElasticParams) -> tuple[np.ndarray, np.ndarray]:
+                         params: ElasticParams, plastic: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """Forces that the neighbourhood of particle ``i`` exerts on its members.
 
     Direct forces (8.29–8.31) plus strain forces (section 8.2.2) plus the exact
@@ -405,6 +467,8 @@ def neighbourhood_forces(xi: Any, r: Any, l: Any, w: Any, w_self: float, mi: flo
     mj : array_like, shape (K,)
         Neighbour masses.
     params : ElasticParams
+    plastic : array_like, shape (3, 3), optional
+        Stored plastic deformation ``P`` (rest offsets ``P l``, item 6 of the module docstring).
 
     Returns
     -------
@@ -439,17 +503,20 @@ def neighbourhood_forces(xi: Any, r: Any, l: Any, w: Any, w_self: float, mi: flo
     if not np.linalg.det(m[:n, :n]) > 1e-6 * scale**n:  # e.g. a flat neighbourhood in 3D: no A exists
         return np.zeros(3), fj
     a = _shape_matrix(rr, ll, ww, n, m)
+    pl = np.eye(3) if plastic is None else as_array(plastic, "plastic", (3, 3))
+    pinv = np.linalg.inv(pl)
+    a = a @ pinv                                  # the elastic part A_e = A P⁻¹
     u, sig, v = rotation_svd(a, dim)
     rot = u @ v.T
     if params.stiffness > 0.0:
-        g = goal_matrix(u, sig, v, params.goal_deformation, dim)
+        g = goal_matrix(u, sig, v, params.goal_deformation, dim) @ pl
         pair = params.stiffness * (mi * mm / params.rest_density)[:, None] * ww[:, None] * (ll @ g.T - rr)
         fj += 0.5 * pair
     if params.mu > 0.0 or params.lam > 0.0:
         p = 2.0 * params.mu * (a - rot) + params.lam * (np.trace((rot.T @ a)[:n, :n]) - n) * rot
         p[n:, :] = 0.0
         p[:, n:] = 0.0
-        b = (mi / params.rest_density) * p @ np.linalg.inv(m)
+        b = (mi / params.rest_density) * p @ pinv.T @ np.linalg.inv(m)
         b[n:, :] = 0.0
         fj -= ww[:, None] * (ll @ b.T)
     fi = -fj.sum(axis=0)

@@ -14,7 +14,7 @@ Example
 -------
 >>> jelly = Material("jelly", stiffness=200.0, xsph=0.1, negative_pressure=0.01, elastic_stiffness=39528.0)
 >>> jelly.is_elastic, material_table([jelly]).shape
-(True, (1, 26))
+(True, (1, 28))
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ RHO0, K, GAMMA, ZETA, VISC, XI, KE, GOAL, LMU, LLAM, DIFF = range(11)
 DOCK_MAX, DOCK_GAIN, DOCK_LOSS, FRACTURE, MELT_RATE, MELT_T = range(11, 17)
 FREEZE_RATE, FREEZE_T, FREEZE_NMIN, FREEZE_VMAX, FREEZE_FMAX = range(17, 22)
 ALPHA, SOUND, DENSITY_DIFFUSION, DENSITY_PASSES = 22, 23, 24, 25
-NCOL = 26
+YIELD, CREEP = 26, 27
+NCOL = 28
 
 
 @dataclass(frozen=True)
@@ -72,9 +73,22 @@ class Material:
         Maximum docking rate ``λ_d`` of a lattice slot (1/s; ``inf`` = immediate).
     docking_gain, docking_loss : float
         ``Δλ_d^+`` and ``Δλ_d^-`` per second (1/s²) for occupied / empty slots.
+    plastic_yield : float
+        Yield strain ``β`` of the stored plastic deformation (``inf`` = none, the default: only
+        the inherent plasticity of section 8.2.5). Each solid particle keeps a rest shape ``P``
+        of its lattice (rest offsets ``P l``, ``det P = 1``); when the isochoric elastic stretch
+        of its neighbourhood deviates from the identity by more than ``β`` (Frobenius norm), the
+        rest shape creeps towards the current shape — the yield and creep rule of the thesis'
+        shells (7.20–7.22) applied to the lattice, the "stored plastic strain" that section 8.2.5
+        names as an addition to the inherent plasticity.
+    plastic_creep : float
+        Creep rate ``α`` (1/s) of that rule; ``α Δt ≥ 1`` (e.g. ``inf``) returns a yielding
+        particle to the yield surface within one step (perfect plasticity).
     fracture_stretch : float
-        Stress criterion: a neighbour stretched beyond ``(1 + fracture_stretch)``
-        times its lattice distance is released and its slot's rate set to 0.
+        Stress criterion (section 8.2.5, "modifies λ_d"): a docked neighbour stretched beyond
+        ``(1 + fracture_stretch)`` times its lattice distance makes its slot lose ``Δλ_d^-`` per
+        second, as if it were empty, and is released when the rate reaches 0 (at once when
+        the docking gain is infinite).
     diffusivity : float
         Thermal diffusivity (m²/s) of the SPH heat conduction.
     melt_rate, melting_point : float
@@ -135,6 +149,8 @@ class Material:
     freeze_max_force: float = math.inf
     density_diffusion: float = 0.0
     density_passes: int = 1
+    plastic_yield: float = math.inf
+    plastic_creep: float = math.inf
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -149,7 +165,7 @@ class Material:
                 raise InputError(f"{self.name}.{key}: expected a positive finite number, got {getattr(self, key)}")
         nonneg = ("viscosity", "artificial_viscosity", "elastic_stiffness", "young", "docking_rate", "docking_gain", "docking_loss",
                   "fracture_stretch", "diffusivity", "melt_rate", "freeze_rate", "freeze_max_velocity",
-                  "freeze_max_force")
+                  "freeze_max_force", "plastic_yield", "plastic_creep")
         for key in nonneg:
             if not getattr(self, key) >= 0:
                 raise InputError(f"{self.name}.{key}: expected a number >= 0, got {getattr(self, key)}")
@@ -183,7 +199,7 @@ class Material:
 
 
 def material_table(materials: list[Material]) -> np.ndarray:
-    """Pack materials into the (n_materials, 26) float64 table of the numba kernels.
+    """Pack materials into the (n_materials, 28) float64 table of the numba kernels.
 
     Example
     -------
@@ -206,4 +222,6 @@ def material_table(materials: list[Material]) -> np.ndarray:
         t[i, SOUND] = mat.sound_speed
         t[i, DENSITY_DIFFUSION] = mat.density_diffusion
         t[i, DENSITY_PASSES] = mat.density_passes
+        t[i, YIELD] = mat.plastic_yield
+        t[i, CREEP] = mat.plastic_creep
     return t

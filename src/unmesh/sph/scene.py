@@ -52,7 +52,7 @@ MATERIAL_KEYS: dict[str, Any] = {
     "fracture_stretch": math.inf, "diffusivity": 0.0, "melt_rate": 0.0, "melting_point": math.inf,
     "freeze_rate": 0.0, "freezing_point": -math.inf, "freeze_min_neighbors": 1, "freeze_max_velocity": math.inf,
     "freeze_max_force": math.inf, "density_diffusion": 0.0,
-    "density_passes": 1,
+    "density_passes": 1, "plastic_yield": math.inf, "plastic_creep": math.inf,
 }
 
 

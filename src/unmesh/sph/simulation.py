@@ -64,11 +64,11 @@ __all__ = ["SPHConfig", "SPHObject", "SPHSimulation"]
 PARALLEL_MIN = 2000
 
 _PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed")
-_ELASTIC_ARRAYS = ("amat", "ainv", "occ", "docked", "lam")
+_ELASTIC_ARRAYS = ("amat", "ainv", "occ", "docked", "lam", "pmat")
 #: Per-particle arrays that every step recomputes after the re-sort (not re-sorted in a step).
 _RECOMPUTED = ("a", "xsph", "rho", "p", "dtemp")
 #: Lattice state that the lattice pass reads in the previous order and writes in the new one (not re-sorted in a step).
-_RESORTED_BY_LATTICE = ("amat", "ainv", "occ", "docked")
+_RESORTED_BY_LATTICE = ("amat", "ainv", "occ", "docked", "pmat")
 
 
 @dataclass(frozen=True)
@@ -400,6 +400,9 @@ class SPHSimulation(Simulation):
         # docking rates: only a finite docking gain needs them (lattice_update)
         rates = q if self.elastic and np.any(np.isfinite(self.mats[:, MT.DOCK_GAIN])) else 0
         self.lam = np.repeat(self.mats[self.mat, MT.DOCK_MAX][:, None], rates, axis=1)
+        # stored plastic deformation (rest shape P of each lattice, identity): only a finite yield strain needs it
+        plastic = self.elastic and np.any(np.isfinite(self.mats[:, MT.YIELD]))
+        self.pmat = np.ascontiguousarray(np.repeat(np.eye(3)[None], n if plastic else 0, axis=0))
         cap = self.config.neighbor_capacity or (24 if self.dim == 2 else 64)
         self.nbr = np.zeros((n, cap + 1), np.int32)  # + the scratch column of the branch-free fill
         self.nnbr = np.zeros(n, np.int64)
@@ -501,7 +504,7 @@ class SPHSimulation(Simulation):
                 # the goal matrices only for freezing (phase_pass)
                 "gmat": np.zeros((n if self.phase_changes else 0, 3, 3)),
                 "fown": np.zeros((n, 3)), "valid": np.zeros(n, np.uint8),
-                "fel": np.zeros((n, 3)),
+                "fel": np.zeros((n, 3)), "pmat_out": np.zeros(self.pmat.shape),
             }
 
     def _density(self) -> None:
@@ -538,7 +541,7 @@ class SPHSimulation(Simulation):
                               self.h, self.dim, self.spacing, self.slot_vecs, self.tmat, self.slot_table,
                               self._order, self.amat, self.ainv, self.occ, self.docked, self.lam, self.config.seed,
                               self.steps, self.dt_last, 1 if prime else 0, s["amat_out"], s["ainv_out"], s["occ_out"],
-                              s["docked_out"], s["gmat"], s["fown"], s["valid"], s["fel"])
+                              s["docked_out"], s["gmat"], s["fown"], s["valid"], s["fel"], self.pmat, s["pmat_out"])
         K.force_pass(self.x, self.v, self.m, self.rho, self.p, self.temp, self.phase, self.obj, self.mat, self.uid,
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
@@ -550,6 +553,7 @@ class SPHSimulation(Simulation):
             self.ainv, s["ainv_out"] = s["ainv_out"], self.ainv
             self.occ, s["occ_out"] = s["occ_out"], self.occ
             self.docked, s["docked_out"] = s["docked_out"], self.docked
+            self.pmat, s["pmat_out"] = s["pmat_out"], self.pmat
 
     def max_sound_speed(self) -> float:
         """Largest wave speed of the materials present: ``√(ΓK/ρ0)``, elastic ``√((λ+2μ)/ρ0)``."""
@@ -692,6 +696,8 @@ class SPHSimulation(Simulation):
             self.ainv[frozen] = self.frame.T
             self.amat[has] = self.amat[donor[has]]
             self.ainv[has] = self.ainv[donor[has]]
+            if len(self.pmat):
+                self.pmat[changed] = np.eye(3)  # a new solid has its lattice's rest shape
             self.occ[changed] = -1
             self.docked[changed] = 0
             if self.lam.shape[1]:
