@@ -89,7 +89,10 @@ def test_elastic_cube_dropped_flat_does_not_spin():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["dam_break", "melting_blob", "freezing_rod", "dice"])
 def test_shipped_3d_scenes_have_no_paired_particles(name):
-    """Every frame of the shipped 3D scenes (full resolution): no particle closer than 0.3 d."""
+    """Every frame of the shipped 3D scenes (full resolution): no particle closer than 0.3 d.
+
+    Measured (closest pair over the run): melting blob 0.356 d, freezing rod 0.326 d (0.05 d while
+    fluid and ice were held together by contact springs), dice 0.665 d."""
     sim, settings = build_simulation(load_scene(scene_path(f"sph/{name}.toml")))
     worst = nearest_in_spacings(sim)
     frame = 1.0 / settings.fps
