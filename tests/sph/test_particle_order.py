@@ -89,7 +89,11 @@ def test_elastic_cube_dropped_flat_does_not_spin():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["dam_break", "melting_blob", "freezing_rod", "dice"])
 def test_shipped_3d_scenes_have_no_paired_particles(name):
-    """Every frame of the shipped 3D scenes (full resolution): no particle closer than 0.3 d."""
+    """Every frame of the shipped 3D scenes (full resolution): no particle closer than 0.3 d.
+
+    Measured (closest pair over the run): melting blob 0.356 d, freezing rod 0.326 d (0.05 d while
+    fluid and ice were held together by contact springs), dice 0.665 d; the dam break at d = 0.0125
+    until 0.7 s 0.299 d (fails, by 0.001 d: open)."""
     sim, settings = build_simulation(load_scene(scene_path(f"sph/{name}.toml")))
     worst = nearest_in_spacings(sim)
     frame = 1.0 / settings.fps
@@ -167,3 +171,33 @@ def test_damped_contacts_bring_a_die_to_rest():
     assert ke_end < 0.01 * ke_max
     ke_max0, ke_end0 = _die_drop_energy(0.0)
     assert ke_end0 > 0.1 * ke_max0
+
+
+def _fluid_on_ice_acceleration(ice_stiffness: float) -> np.ndarray:
+    """The acceleration of a fluid drop particle 0.7 d above a particle of a block of ice (another
+    object, fixed), approaching it at 1 m/s, without gravity."""
+    from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation
+    from unmesh.sph.sampling import closest_packing
+
+    d = 0.02
+    block = closest_packing([-0.06] * 3, [0.06] * 3, d, 3, centered=True)
+    top = block[np.argmax(block[:, 1])]
+    drop = top + np.array([[0.0, 0.7 * d, 0.0]])
+    # no tension (ζ = 0): the repulsive part is the artificial viscosity of the approaching pair
+    mats = {"ice": Material("ice", stiffness=300.0, negative_pressure=0.0, elastic_stiffness=ice_stiffness),
+            "slime": Material("slime", stiffness=300.0, negative_pressure=0.0, artificial_viscosity=0.1)}
+    sim = SPHSimulation(SPHConfig(dim=3, spacing=d, dt=1e-4, gravity=(0, 0, 0)), mats,
+                        [SPHObject("ice", block, "ice", phase="solid", fixed=True),
+                         SPHObject("drop", drop, "slime", phase="fluid", velocity=(0.0, -1.0, 0.0))])
+    sim.step()  # the forces at (almost) the initial positions
+    return sim.a[sim.obj == 1][0].copy()
+
+
+def test_fluid_meets_a_solid_with_the_repulsive_sph_force_alone():
+    """Contact between a fluid and a solid object (8.37) is the repulsive part of the SPH pair force:
+    no contact spring as stiff as the solid's lattice. With one (¼(K_e,i + K_e,j) m_j/ρ0 W (d − r)₊),
+    fluid particles caught in a pocket of ice on the freezing rod were squeezed onto each other
+    (0.05 d). The fluid particle's acceleration does not depend on the ice's K_e."""
+    soft, stiff = _fluid_on_ice_acceleration(2e3), _fluid_on_ice_acceleration(2e6)
+    assert soft[1] > 0.0  # pushed away from the ice
+    np.testing.assert_allclose(stiff, soft, rtol=1e-12, atol=1e-12 * np.abs(soft).max())

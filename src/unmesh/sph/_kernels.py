@@ -13,8 +13,8 @@ Pass 2 ``force_pass``: symmetric pressure acceleration (8.17, spiky gradient),
 viscosity (8.18, Monaghan's central form of ``μ∇²v``, plus Monaghan's artificial
 viscosity between approaching particles, Monaghan's tensile correction below ``d/2``), XSPH
 velocity correction (8.19), heat conduction (Cleary & Monaghan), penalty collisions between objects
-(8.37: the repulsive part of the pair force plus a contact spring ``CONTACT (K_e,i + K_e,j) m_j/ρ0
-W (d − r)₊`` towards the rest distance), elastic forces gathered from the neighbourhoods (section
+(8.37: the repulsive part of the pair force plus, between two solids, a contact spring
+``CONTACT · 2 min(K_e,i, K_e,j) m_j/ρ0 W (d − r)₊`` towards the rest distance), elastic forces gathered from the neighbourhoods (section
 8.2), gravity.
 """
 
@@ -35,7 +35,7 @@ from unmesh.sph import materials as M
 PLAIN = {"cache": True, "fastmath": False, "error_model": "python"}
 
 SOLID = 1
-#: Contact springs between objects (8.37): ``CONTACT (K_e,i + K_e,j)`` is their stiffness, half the
+#: Contact springs between solid objects (8.37): ``CONTACT · 2 min(K_e,i, K_e,j)`` is their stiffness, half the
 #: mean lattice stiffness (so that a particle touching several particles of another body stays
 #: within the elastic step limit ``Δt √K_e ≲ 1.2``); 0.05 still let stiff dice come within 0.18 d.
 CONTACT = 0.25
@@ -469,9 +469,11 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
             # penalty collision between objects (8.37): repulsive part only; XSPH (8.19) within one body
             other = oi != buf[PK_OBJ, t] and si + buf[PK_SOLID, t] > 0.0
             w6 = c6 * t6 * t6 * t6
-            # and a contact spring that pushes the pair back to the rest distance d, as stiff as the
-            # lattice force (8.31) of the two materials: K_e m_j/ρ0 W (d − r)₊ / r along x_ij
-            kc = CONTACT * (kei + buf[PK_KE, t]) * mj / rho0 * w6
+            # and, between two solids, a contact spring that pushes the pair back to the rest distance d,
+            # as stiff as the softer one's lattice force (8.31): K_e m_j/ρ0 W (d − r)₊ / r along x_ij. A fluid
+            # (K_e = 0) meets a solid with the repulsive SPH force alone: springs as stiff as the ice's
+            # K_e squeezed the fluid particles in a pocket of ice onto each other (0.05 d, freezing rod)
+            kc = CONTACT * 2.0 * min(kei, buf[PK_KE, t]) * mj / rho0 * w6
             pen = kc * max(dsp - r, 0.0) / max(r, 1e-12 * h)
             # and a dashpot on the normal relative velocity while in contact (r < d): 2ζ√k_c (v_ij·x̂_ij)
             pen -= (2.0 * damping * math.sqrt(kc) * vx / max(r2, 1e-24 * h2)) if r < dsp else 0.0

@@ -110,7 +110,7 @@ class SPHConfig:
     contact_damping : float
         Damping ratio ζ in [0, 1] of the contacts of solids (0: off, elastic contacts): a pair of
         particles of different objects closer than ``d`` gets a dashpot ``2ζ√k_c`` on its normal
-        relative velocity, ``k_c = CONTACT (K_e,i + K_e,j) m_j/ρ0 W`` the stiffness of its contact
+        relative velocity, ``k_c = 2 CONTACT min(K_e,i, K_e,j) m_j/ρ0 W`` the stiffness of its contact
         spring (8.37); a solid particle closer than ``d`` to a wall plane is damped by
         ``2ζ√(CONTACT K_e)`` times its velocity (restitution and friction). Dice come to rest.
     lattice : {"closest", "cubic"}
