@@ -78,13 +78,18 @@ class Tearing:
         if not bad.any():
             return False
         keep = ~bad
+        self._keep_fibers(keep)
+        return True
+
+    def _keep_fibers(self, keep: np.ndarray) -> None:
+        """Keep the fibers where ``keep`` (F,) bool: topology, fiber state and bending angles;
+        nodes left without fibers become crumbs."""
         self._carry_angles(self._last.angles, np.flatnonzero(keep))
         t = self.topology
         self.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
-                                           f[keep], t.soft, validate=False)
+                                           t.fibers[keep], t.soft, validate=False)
         self.fibers = self.fibers.take(keep)
         self._anchor_crumbs(None)
-        return True
 
     def _drop_slivers(self) -> bool:
         """Detach pieces of fewer than ``neighbors`` nodes from their fibers (they become crumbs).
@@ -113,12 +118,7 @@ class Tearing:
         if not small.any():
             return False
         keep = ~small[labels[f[:, 1]]]
-        self._carry_angles(self._last.angles, np.flatnonzero(keep))
-        t = self.topology
-        self.topology = ShellTopology.build(t.n_nodes, t.neighbor_offsets, t.neighbors, t.pairs, t.pair_center,
-                                           f[keep], t.soft, validate=False)
-        self.fibers = self.fibers.take(keep)
-        self._anchor_crumbs(None)
+        self._keep_fibers(keep)
         return True
 
     def _fracture(self) -> None:
