@@ -22,6 +22,20 @@ from numba import njit
 __all__ = ["pack_page"]
 
 
+@njit(cache=True, inline="always")
+def _span(i, r, flip_h, flip_v, hbar, lft, rgt, off, h, w):
+    """Row of the page, first and last used column of row ``r`` of patch i placed in a row of
+    height ``hbar`` in the given orientation (row -1: the mask row is empty)."""
+    src = h - 1 - r if flip_v else r
+    if rgt[off[i] + src] < 0:
+        return -1, 0, 0
+    lo = lft[off[i] + src]
+    hi = rgt[off[i] + src]
+    if flip_h:
+        lo, hi = w - 1 - hi, w - 1 - lft[off[i] + src]
+    return (r if flip_v else hbar - h + r), lo, hi
+
+
 @njit(cache=True)
 def _fit(i, flip_h, mirror, hbar, lft, rgt, off, heights, widths, right_prof):
     """x0 and the free texels left of patch i in one orientation (x0 = -1: empty patch)."""
@@ -29,24 +43,14 @@ def _fit(i, flip_h, mirror, hbar, lft, rgt, off, heights, widths, right_prof):
     w = widths[i]
     x0 = 0
     for r in range(h):
-        src = h - 1 - r if mirror else r
-        lo = lft[off[i] + src]
-        if rgt[off[i] + src] < 0:
-            continue
-        if flip_h:
-            lo = w - 1 - rgt[off[i] + src]
-        row = r if mirror else hbar - h + r
-        x0 = max(x0, right_prof[row] - lo)
+        row, lo, _hi = _span(i, r, flip_h, mirror, hbar, lft, rgt, off, h, w)
+        if row >= 0:
+            x0 = max(x0, right_prof[row] - lo)
     waste = 0
     for r in range(h):
-        src = h - 1 - r if mirror else r
-        if rgt[off[i] + src] < 0:
-            continue
-        lo = lft[off[i] + src]
-        if flip_h:
-            lo = w - 1 - rgt[off[i] + src]
-        row = r if mirror else hbar - h + r
-        waste += x0 + lo - right_prof[row]
+        row, lo, _hi = _span(i, r, flip_h, mirror, hbar, lft, rgt, off, h, w)
+        if row >= 0:
+            waste += x0 + lo - right_prof[row]
     return x0, waste
 
 
@@ -183,14 +187,9 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
             h = heights[i]
             w = widths[i]
             for r in range(h):
-                src = h - 1 - r if flip_v else r
-                if rgt[off[i] + src] < 0:
-                    continue
-                hi = rgt[off[i] + src]
-                if flip_h:
-                    hi = w - 1 - lft[off[i] + src]
-                row = r if flip_v else hbar - h + r
-                right_prof[row] = x0 + hi + 1
+                row, _lo, hi = _span(i, r, flip_h, flip_v, hbar, lft, rgt, off, h, w)
+                if row >= 0:
+                    right_prof[row] = x0 + hi + 1
             page_of[i] = page
             xs[i] = x0
             ys[i] = ymin + (0 if flip_v else hbar - h)

@@ -100,6 +100,15 @@ def _plastic_split(k, o, pmat, la, lminv, ltot, lp, lpi, pm, pinv):
 
 
 @njit(**PLAIN)
+def _det(a, dim):
+    """Determinant of the leading ``dim`` x ``dim`` block of the 3x3 matrix ``a``."""
+    if dim == 2:
+        return a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    return (a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]) - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
+            + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
+
+
+@njit(**PLAIN)
 def _plastic_finish(i, k, ys, ltot, lp, lpi, lg, amat_out, ainv_out, pmat_out, yld, creep, dt, dim, pm):
     """Particle ``i`` (lane ``k``) with a stored plastic deformation ``P``: the lattice transformation
     ``A = A_e P`` and its inverse ``P⁻¹ A_e⁻¹`` for the next assignment (8.21), the goal matrix
@@ -129,11 +138,7 @@ def _plastic_finish(i, k, ys, ltot, lp, lpi, lg, amat_out, ainv_out, pmat_out, y
         for q in range(3):
             lg[3 * p + q, k] = pm[p, q]
     # plastic flow
-    if dim == 2:
-        det = ys[0, 0] * ys[1, 1] - ys[0, 1] * ys[1, 0]
-    else:
-        det = (ys[0, 0] * (ys[1, 1] * ys[2, 2] - ys[1, 2] * ys[2, 1]) - ys[0, 1] * (ys[1, 0] * ys[2, 2] - ys[1, 2] * ys[2, 0])
-               + ys[0, 2] * (ys[1, 0] * ys[2, 1] - ys[1, 1] * ys[2, 0]))
+    det = _det(ys, dim)
     scale = det ** (-1.0 / n) if det > 0.0 else 1.0
     eps2 = 0.0
     for p in range(n):
@@ -153,11 +158,7 @@ def _plastic_finish(i, k, ys, ltot, lp, lpi, lg, amat_out, ainv_out, pmat_out, y
                     fr = 1.0 if p == r else 0.0
                 acc += fr * lp[3 * r + q, k]
             pm[p, q] = acc
-    if dim == 2:
-        pdet = pm[0, 0] * pm[1, 1] - pm[0, 1] * pm[1, 0]
-    else:
-        pdet = (pm[0, 0] * (pm[1, 1] * pm[2, 2] - pm[1, 2] * pm[2, 1]) - pm[0, 1] * (pm[1, 0] * pm[2, 2] - pm[1, 2] * pm[2, 0])
-                + pm[0, 2] * (pm[1, 0] * pm[2, 1] - pm[1, 1] * pm[2, 0]))
+    pdet = _det(pm, dim)
     ps = pdet ** (-1.0 / n) if pdet > 0.0 else 1.0
     for p in range(3):
         for q in range(3):
