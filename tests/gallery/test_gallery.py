@@ -83,3 +83,21 @@ def test_keep_frames_thins_a_run_consistently(tmp_path):
     assert (run / "boundary.ply").is_file() and not (run / "checkpoint.npz").exists()
     m = read_manifest(run)
     assert [e["frame"] for e in m["frames"]] == [0, 3] and m["static"] == ["boundary.ply"] and m["fps"] == 10.0
+
+
+def test_worker_processes_give_the_same_page_in_the_same_order(tmp_path):
+    serial = run_examples(select("zz-test-*"), tmp_path / "serial", quick=True, progress=False)
+    pooled = run_examples(select("zz-test-*"), tmp_path / "pooled", quick=True, progress=False, jobs=2)
+    assert [r.example.name for r in pooled] == [r.example.name for r in serial] == ["zz-test-ok", "zz-test-fail"]
+    assert [r.error is None for r in pooled] == [True, False] and "deliberate" in pooled[1].error
+    assert pooled[0].context.metrics == serial[0].context.metrics == [("answer", 42.0, "units")]
+    assert (tmp_path / "pooled" / "zz-test-ok" / "note.txt").read_text() == "hi"
+    html = (tmp_path / "pooled" / "index.html").read_text()
+    assert html.index("A passing example") < html.index("A failing example") and "deliberate" in html
+
+
+def test_jobs_must_be_positive(capsys):
+    from unmesh.cli import main
+
+    assert main(["gallery", "--only", "zz-test-ok", "--jobs", "0", "-o", "/nonexistent/x"]) == 1
+    assert "--jobs" in capsys.readouterr().err

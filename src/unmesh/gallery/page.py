@@ -3,68 +3,59 @@
 from __future__ import annotations
 
 import html
-import shutil
 import time
-import traceback
-from dataclasses import dataclass, field
 from pathlib import Path
 
-from unmesh.gallery.registry import Example, ExampleContext
+from unmesh.gallery.pool import run_in_workers
+from unmesh.gallery.registry import Example
+from unmesh.gallery.run import ExampleResult, run_one
 from unmesh.gallery.timing import expected_seconds, record
 from unmesh.io.atomic import atomic_write_text
 
 __all__ = ["ExampleResult", "run_examples", "write_index"]
 
 
-@dataclass
-class ExampleResult:
-    """Outcome of one example run."""
-
-    example: Example
-    context: ExampleContext
-    seconds: float
-    error: str | None = None
-    details: list[str] = field(default_factory=list)
-
-
-def run_examples(examples: list[Example], outdir: Path, quick: bool = False, progress: bool = True) -> list[ExampleResult]:
+def run_examples(examples: list[Example], outdir: Path, quick: bool = False, progress: bool = True,
+                 jobs: int = 1) -> list[ExampleResult]:
     """Run ``examples`` into ``outdir/<name>/`` and write ``outdir/index.html``.
 
     A failing example is recorded (with its traceback) and the others still run. The progress
     bar counts the examples' expected seconds (:func:`unmesh.gallery.timing.expected_seconds`);
     each successful example's time is recorded in ``outdir/timings.json`` for the next run.
+    ``jobs`` > 1 runs them in that many worker processes (:mod:`unmesh.gallery.pool`); the page
+    lists them in the order given either way and is rewritten as each one ends.
+
+    Returns
+    -------
+    list of ExampleResult, in the order of ``examples``.
     """
     from tqdm import tqdm
 
     outdir.mkdir(parents=True, exist_ok=True)
-    results: list[ExampleResult] = []
     weights = [round(w, 1) for w in expected_seconds(examples, outdir, quick)]
+    done: dict[int, ExampleResult] = {}
     # the bar counts expected seconds, so its estimate of the time left weighs each example by its cost
     bar = tqdm(total=sum(weights), disable=not progress, leave=True,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]")
-    for k, (ex, weight) in enumerate(zip(examples, weights, strict=True)):
-        bar.set_description_str(f"gallery {k}/{len(examples)} {ex.name}")
-        exdir = outdir / ex.name
-        if exdir.exists():
-            shutil.rmtree(exdir)
-        exdir.mkdir(parents=True)
-        ctx = ExampleContext(outdir=exdir, root=outdir, quick=quick, progress=progress)
-        t0 = time.perf_counter()
-        error = None
-        try:
-            ex.func(ctx)
-        except KeyboardInterrupt:
-            raise
-        except Exception as exc:  # an example failing must not stop the gallery
-            error = f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}"
-        results.append(ExampleResult(ex, ctx, time.perf_counter() - t0, error))
-        write_index(results, outdir, quick)
-        if error is None:
-            record(outdir, quick, {ex.name: results[-1].seconds})
-        bar.update(weight)
+
+    def finish(k: int, result: ExampleResult) -> None:
+        done[k] = result
+        write_index([done[i] for i in sorted(done)], outdir, quick)
+        if result.error is None:
+            record(outdir, quick, {result.example.name: result.seconds})
+        bar.update(weights[k])
+        bar.set_description_str(f"gallery {len(done)}/{len(examples)} (last: {result.example.name})")
+
+    if jobs > 1 and len(examples) > 1:
+        bar.set_description_str(f"gallery 0/{len(examples)} ({jobs} processes)")
+        run_in_workers(list(enumerate(examples)), weights, outdir, quick, jobs, finish)
+    else:
+        for k, ex in enumerate(examples):
+            bar.set_description_str(f"gallery {k}/{len(examples)} {ex.name}")
+            finish(k, run_one(ex, outdir, quick, progress))
     bar.set_description_str(f"gallery {len(examples)}/{len(examples)}")
     bar.close()
-    return results
+    return [done[k] for k in range(len(examples))]
 
 
 _CSS = """

@@ -1,0 +1,94 @@
+"""Gallery examples in worker processes: ``unmesh gallery --jobs N``.
+
+Most of a cold gallery run is numba compiling each capability's kernels, which uses one core
+whatever numba's thread count. :func:`run_in_workers` runs the examples in ``jobs`` spawned
+processes, longest expected first, each process with ``cpu_count // jobs`` numba threads, so
+the cores stay busy while one example compiles. An example runs exactly as in-process
+(:func:`unmesh.gallery.run.run_one`); only its own progress bars are off (the parent shows one
+bar for the gallery). A worker that dies (a crash, out of memory) fails the examples it had,
+with a message saying so, and the others still run.
+
+Example
+-------
+>>> default_jobs() >= 1 and threads_per_job(1) >= 1
+True
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from unmesh.gallery.registry import Example, ExampleContext
+from unmesh.gallery.run import ExampleResult, run_one
+
+__all__ = ["MAX_DEFAULT_JOBS", "default_jobs", "run_in_workers", "threads_per_job"]
+
+#: Most worker processes ``--jobs`` defaults to (each example may hold a few GB).
+MAX_DEFAULT_JOBS = 4
+
+
+def _cpus() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def default_jobs() -> int:
+    """Worker processes for ``unmesh gallery``: the usable CPUs, at most :data:`MAX_DEFAULT_JOBS`."""
+    return min(_cpus(), MAX_DEFAULT_JOBS)
+
+
+def threads_per_job(jobs: int) -> int:
+    """numba threads of each of ``jobs`` workers: the usable CPUs shared out, at least one."""
+    return max(1, _cpus() // max(1, int(jobs)))
+
+
+def _init_worker(threads: int) -> None:
+    import numba
+
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+
+
+def run_in_workers(items: Sequence[tuple[int, Example]], weights: Sequence[float], outdir: Path, quick: bool,
+                   jobs: int, on_done: Callable[[int, ExampleResult], None]) -> None:
+    """Run ``items`` (``(index, example)``) in ``jobs`` processes; ``on_done(index, result)`` as each ends.
+
+    Parameters
+    ----------
+    items : sequence of (int, Example)
+        The examples and their positions on the page.
+    weights : sequence of float
+        Expected seconds of each item; the longest start first.
+    outdir : Path
+        The gallery's root folder.
+    quick : bool
+        Small, fast versions.
+    jobs : int
+        Worker processes (>= 1).
+    on_done : callable
+        Called in this process, in completion order.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    order = sorted(range(len(items)), key=lambda k: -weights[k])
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_init_worker, initargs=(threads_per_job(jobs),))
+    try:
+        futures = {pool.submit(run_one, items[k][1], outdir, quick, False): items[k] for k in order}
+        for fut in as_completed(futures):
+            index, ex = futures[fut]
+            try:
+                result = fut.result()
+            except BrokenProcessPool as exc:
+                ctx = ExampleContext(outdir=Path(outdir) / ex.name, root=Path(outdir), quick=quick, progress=False)
+                result = ExampleResult(ex, ctx, 0.0, f"the worker process running it died ({exc})")
+            on_done(index, result)
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
