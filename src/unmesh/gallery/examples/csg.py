@@ -49,16 +49,23 @@ def _drawn(model: Any) -> Any:
     return SurfelCloud(a.positions, a.normals, radii=a.radii)
 
 
+def _still(model: Any, camera: Any, **options: Any) -> np.ndarray:
+    """A still (H,W,3) of ``model``, anti-aliased by 2x2 supersampling (timed frames are rendered apart)."""
+    from unmesh.render import render
+    from unmesh.render.options import STILL_SUPERSAMPLE
+
+    return render(model, camera, supersample=STILL_SUPERSAMPLE, **options).color
+
+
 def _sampling(model: Any, camera: Any) -> np.ndarray:
     """The drawn surfels as small discs in their patch colours (the sampling of a model)."""
     from unmesh.csg import prepare
-    from unmesh.render import render
     from unmesh.surfels import SurfelCloud
 
     f = prepare(model)
     a = f.arrays
     small = SurfelCloud(a.positions, a.normals, radii=np.minimum(a.radii * 0.35, 0.06), colors=a.colors)
-    return render(small, camera, background=(0.12, 0.12, 0.14)).color
+    return _still(small, camera, background=(0.12, 0.12, 0.14))
 
 
 @example("csg-fig41", "Closest surfel vs two closest surfels at an edge (Fig. 4.1)", section="CSG")
@@ -107,19 +114,20 @@ def fig43_example(ctx: ExampleContext) -> None:
     from unmesh.csg.cli import classify_cloud
     from unmesh.csg.draw import front_facing
     from unmesh.csg.frame import centre_classified
-    from unmesh.render import Camera, SplatRenderer, render, save_image
+    from unmesh.render import Camera, render, save_image
 
     size = 200 if ctx.quick else 400
     model = _scene("carved_cube").model
     cam = Camera((1.9, 1.5, 2.3), (0, 0, 0), width=size, height=size, fov=36)
     f = prepare(model)
-    classes = render(classify_cloud(model), cam).color
+    classes = _still(classify_cloud(model), cam)
     conv = centre_classified(model)
     conv = conv.subset(front_facing(conv.positions, conv.normals, cam))
-    plain = SplatRenderer(cam).render(conv).result().color
+    plain = _still(conv, cam)
     t0 = time.perf_counter()
-    clipped = render(model, cam).color
+    render(model, cam)
     ctx.metric("frame time (partners, classes, splatting)", round(time.perf_counter() - t0, 3), "s")
+    clipped = _still(model, cam)
     path = save_image(ctx.path("fig43.png"), side_by_side(classes, plain, clipped))
     ctx.image(path, "left: surfel classes (blue surface, grey edge, red outside); middle: surfels kept by "
                     "their centre, unclipped; right: edge surfels clipped per fragment")
@@ -132,13 +140,13 @@ def fig47_example(ctx: ExampleContext) -> None:
     """Six half-space patches sampled at wildly different densities: the edges and corners are
     where the planes meet, whatever the sampling. Left: unlit colours; middle: shaded; right:
     the sampling."""
-    from unmesh.render import Camera, render, save_image
+    from unmesh.render import Camera, save_image
 
     size = 200 if ctx.quick else 360
     model = _scene("sampled_cube").model
     cam = Camera((2.0, 1.7, 2.4), (0, 0, 0), width=size, height=size, fov=30)
-    a = render(model, cam, shading="none").color
-    b = render(model, cam).color
+    a = _still(model, cam, shading="none")
+    b = _still(model, cam)
     c = _sampling(model, cam)
     path = save_image(ctx.path("fig47.png"), side_by_side(a, b, c))
     ctx.image(path, "left: unlit face colours; middle: shaded; right: the surfels (1, 25 and 900 per face)")
@@ -149,13 +157,13 @@ def fig48_example(ctx: ExampleContext) -> None:
     """Three patches of different sampling densities; where all three meet, the corner stays
     sharp when magnified 16 times (right)."""
     from unmesh.csg import prepare
-    from unmesh.render import Camera, render, save_image
+    from unmesh.render import Camera, save_image
 
     scene = _scene("blob_minus_spheres")
     model = scene.model
     size = 200 if ctx.quick else 400
     cam = Camera.fit(_drawn(model).positions, size, size, fov=35)
-    full = render(model, cam).color
+    full = _still(model, cam)
     # a corner: an edge surfel of the blob with clipping partners on both spheres
     f = prepare(model)
     blob_leaf = [p.name for p in f.flat.leaves].index("blob")
@@ -166,7 +174,7 @@ def fig48_example(ctx: ExampleContext) -> None:
     pick = three if len(three) else np.flatnonzero(f.classes == 1)
     corner = f.cloud.positions[pick[len(pick) // 2]]
     close = cam.replace(target=corner, eye=corner + (cam.eye - cam.target)).zoomed(16.0)
-    zoom = render(model, close).color
+    zoom = _still(model, close)
     sampling = _sampling(model, cam)
     path = save_image(ctx.path("fig48.png"), side_by_side(full, sampling, zoom))
     ctx.image(path, "left: blob minus two spheres; middle: the sampling; right: 16x magnification "
@@ -178,13 +186,13 @@ def fig49_example(ctx: ExampleContext) -> None:
     """A ball minus four large spheres around it (tetrahedral setup): four spikes remain that
     taper to points on the ball; each surfel of a spike wall is clipped by the other cuts from
     several sides, so the thin spikes render without holes or fins."""
-    from unmesh.render import Camera, render, save_image
+    from unmesh.render import Camera, save_image
 
     model = _scene("spikes").model
     size = 200 if ctx.quick else 400
     cam = Camera((0.6, 0.9, 3.2), (0, 0, 0), width=size, height=size, fov=40)
-    a = render(model, cam).color
-    b = render(model, cam.replace(eye=(-2.6, 1.2, 1.8))).color
+    a = _still(model, cam)
+    b = _still(model, cam.replace(eye=(-2.6, 1.2, 1.8)))
     path = save_image(ctx.path("fig49.png"), side_by_side(a, b))
     ctx.image(path, "a ball minus four large spheres: four spikes with tiny caps of the ball at their tips, "
                     "from two sides")
@@ -201,9 +209,10 @@ def fig410_example(ctx: ExampleContext) -> None:
     cam = Camera((1.8, 1.3, 2.4), (0, 0, 0), width=size, height=size, fov=35)
     render(model, cam.resized(16, 16))
     t0 = time.perf_counter()
-    a = render(model, cam, shading="none").color
+    render(model, cam, shading="none")
     ctx.metric(f"frame time at {size}x{size}", round(time.perf_counter() - t0, 3), "s")
-    b = render(model, cam).color
+    a = _still(model, cam, shading="none")
+    b = _still(model, cam)
     c = _sampling(model, cam)
     path = save_image(ctx.path("fig410.png"), side_by_side(a, b, c))
     ctx.image(path, "left: unlit; middle: shaded; right: the 20 surfels")
@@ -259,14 +268,13 @@ def fig46_example(ctx: ExampleContext) -> None:
     """Texture-discontinuity surfels along the border of a painted square clip the colour only
     (4.3): the border is sharp, while normals and depth blend across it; without them the
     colours of the samples on either side blend over a surfel's width."""
-    from unmesh.render import Camera, render, save_image
+    from unmesh.render import Camera, save_image
 
     size = 160 if ctx.quick else 300
     cam = Camera((0.9, 0.6, 2.6), (0.1, 0.1, 0.6), width=size, height=size, fov=35)
     zoom = cam.zoomed(6.0).replace(target=(0.4, 0.4, float(np.sqrt(1 - 0.32))))
     sharp, soft = painted_sphere(), painted_sphere(discontinuities=False)
-    images = [render(sharp, cam).color, render(soft, cam).color, render(sharp, zoom).color,
-              render(soft, zoom).color]
+    images = [_still(sharp, cam), _still(soft, cam), _still(sharp, zoom), _still(soft, zoom)]
     path = save_image(ctx.path("fig46.png"), side_by_side(*images))
     ctx.image(path, "a red square painted on a sphere; left to right: with texture-discontinuity surfels, "
                     "without, and both magnified 6x at a corner of the square (with them, a faint light arc "
@@ -285,7 +293,7 @@ def coplanar_limits(size: int = 200) -> np.ndarray:
     clipping surfels at the crossing; the front/back test (4.3) against surfel planes becomes
     unreliable where the surfaces are closer than the surfels' deviation from the sphere (4.5)."""
     from unmesh.csg.model import Patch
-    from unmesh.render import Camera, render
+    from unmesh.render import Camera
     from unmesh.shapes import Sphere
 
     panels = []
@@ -295,7 +303,7 @@ def coplanar_limits(size: int = 200) -> np.ndarray:
         x = d / 2
         z = float(np.sqrt(1 - x * x))
         cam = Camera((x, 0, z + 3), (x, 0, z), up=(0, 1, 0), width=size, height=size, ortho=0.25)
-        panels.append(render(a | b, cam, shading="none").color)
+        panels.append(_still(a | b, cam, shading="none"))
     return side_by_side(*panels)
 
 
