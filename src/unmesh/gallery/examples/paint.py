@@ -61,6 +61,21 @@ def _canvas_camera(width: int, height: int, extent: float, centre: tuple[float, 
     return Camera((cx, 2.0, cz), (cx, 0.0, cz), up=(0, 0, -1), width=width, height=height, ortho=extent)
 
 
+def _closed() -> Any:
+    from unmesh.render.splat import SplatOptions
+
+    return SplatOptions(cull_backfaces=True)
+
+
+def _still(session: Any, camera: Any, **options: Any) -> np.ndarray:
+    """The session's image (H,W,3) through ``camera``, anti-aliased: rendered 2x2 larger and averaged."""
+    from unmesh.render.options import STILL_SUPERSAMPLE as K
+
+    h, w = camera.shape
+    big = session.render(camera.resized(w * K, h * K), **options).color
+    return big.reshape(h, K, w, K, big.shape[-1]).mean(axis=(1, 3))
+
+
 def _side_by_side(images: list[np.ndarray], gap: int = 6) -> np.ndarray:
     h = max(i.shape[0] for i in images)
     parts = []
@@ -109,7 +124,7 @@ def paint_backtransfer(ctx: ExampleContext) -> None:
             d["strokes"][-1]["paint"]["back_transfer"] = back
         s = _replay(cloud, d)
         events += sum(len(st["samples"]) for st in d["strokes"])
-        images.append(s.render(cam, brush=False).color)
+        images.append(_still(s, cam, brush=False))
     elapsed = time.perf_counter() - t0
     path = ctx.path("backtransfer.png")
     save_image(path, _stacked(images))
@@ -123,6 +138,7 @@ def paint_backtransfer(ctx: ExampleContext) -> None:
          section="Painting")
 def paint_diffusion(ctx: ExampleContext) -> None:
     from unmesh.render import draw_legend, map_colors, render, save_image
+    from unmesh.render.options import STILL_SUPERSAMPLE as K
 
     data = shipped_strokes("diffusion")
     cloud = model_for(data)
@@ -132,13 +148,13 @@ def paint_diffusion(ctx: ExampleContext) -> None:
     d0["strokes"][0]["paint"]["diffusion"] = 0.0
     dry = _replay(cloud, d0)
     wet = _replay(cloud, data)
-    images = [dry.render(cam, brush=False).color, wet.render(cam, brush=False).color]
+    images = [_still(dry, cam, brush=False), _still(wet, cam, brush=False)]
     c = wet.cloud()
     S = wet.surface
     rows = S.visible_rows()
     thick = S.vw[rows] / S.area[rows]
     hi = float(thick.max())
-    vol = render(c.replace(colors=np.clip(map_colors(thick, 0.0, hi, "viridis"), 0, 1)), cam, shading="none").color
+    vol = render(c.replace(colors=np.clip(map_colors(thick, 0.0, hi, "viridis"), 0, 1)), cam, shading="none", supersample=K).color
     vol = draw_legend(vol, 0.0, hi, "viridis", "wet paint thickness")
     path = ctx.path("diffusion.png")
     save_image(path, _stacked([*images, vol]))
@@ -161,7 +177,7 @@ def paint_relief(ctx: ExampleContext) -> None:
     cam = Camera((0.02, 0.9, 0.55), (0.02, 0.0, 0.0), up=(0, 1, 0), width=size[0], height=size[1], fov=26)
     grazing = Shading(lights=(Light((-0.8, 0.6, -0.4), intensity=0.6), Light((0.3, 0.3, -1.0), intensity=0.2)),
                       ambient=0.2, specular=0.3, shininess=30.0)
-    img = s.render(cam, shading=grazing, brush=False).color
+    img = _still(s, cam, shading=grazing, brush=False)
     path = ctx.path("relief.png")
     save_image(path, img)
     ctx.image(path, "Left: oil paint with hair imprints along the strokes. Middle: beaten gold, small patches "
@@ -175,6 +191,7 @@ def paint_relief(ctx: ExampleContext) -> None:
          section="Painting")
 def paint_downsampling(ctx: ExampleContext) -> None:
     from unmesh.render import Camera, draw_legend, render, save_image
+    from unmesh.render.options import STILL_SUPERSAMPLE as K
 
     data = shipped_strokes("downsampling")
     cloud = model_for(data)
@@ -184,20 +201,20 @@ def paint_downsampling(ctx: ExampleContext) -> None:
     s.advance(3.0, downsample=False)  # the paint dries (opaque, uniform colour)
     size = (300, 225) if ctx.quick else (440, 330)
     cam = Camera.framing(cloud.bounds(), *size, direction=(0.0, 0.15, 1.0))
-    before = s.render(cam, brush=False).color
+    before = _still(s, cam, brush=False)
     n_before = len(s.cloud())
     dens_before, lo, hi = _density_colors(s)
     t = time.perf_counter()
     s.advance(0.0)  # drying, diffusion and downsampling; 0 s: only downsampling changes anything
     dt = time.perf_counter() - t
-    after = s.render(cam, brush=False).color
+    after = _still(s, cam, brush=False)
     dens_after, _, _ = _density_colors(s)
     from unmesh.render import map_colors
 
     c = dens_after.replace(colors=np.clip(map_colors(np.log10(1.0 / (np.pi * dens_after.radii ** 2)), lo, hi,
                                                      "magma"), 0, 1))
-    d0 = render(dens_before, cam, shading="none").color
-    d1 = draw_legend(render(c, cam, shading="none").color, lo, hi, "magma", "log10 surfels per unit area")
+    d0 = render(dens_before, cam, shading="none", supersample=K, splat=_closed()).color
+    d1 = draw_legend(render(c, cam, shading="none", supersample=K, splat=_closed()).color, lo, hi, "magma", "log10 surfels per unit area")
     path = ctx.path("downsampling.png")
     save_image(path, _stacked([_side_by_side([before, after]), _side_by_side([d0, d1])]))
     ctx.image(path, "Top: the painted blob before (left) and after (right) downsampling. Bottom: sampling "
@@ -212,6 +229,7 @@ def paint_downsampling(ctx: ExampleContext) -> None:
          section="Painting")
 def paint_art(ctx: ExampleContext) -> None:
     from unmesh.render import Camera, draw_legend, render, save_image
+    from unmesh.render.options import STILL_SUPERSAMPLE as K
 
     data = shipped_strokes("art")
     cloud = model_for(data)
@@ -221,9 +239,9 @@ def paint_art(ctx: ExampleContext) -> None:
     events = sum(len(st["samples"]) for st in data["strokes"][:2 if ctx.quick else None])
     size = (300, 225) if ctx.quick else (480, 360)
     cams = [Camera.framing(cloud.bounds(), *size, direction=d) for d in ((0.0, 0.15, 1.0), (0.8, 0.3, 0.7))]
-    views = [s.render(c, brush=False).color for c in cams]
+    views = [_still(s, c, brush=False) for c in cams]
     dens, lo, hi = _density_colors(s)
-    dmap = draw_legend(render(dens, cams[0], shading="none").color, lo, hi, "magma", "log10 surfels per unit area")
+    dmap = draw_legend(render(dens, cams[0], shading="none", supersample=K, splat=_closed()).color, lo, hi, "magma", "log10 surfels per unit area")
     path = ctx.path("art.png")
     save_image(path, _side_by_side([*views, dmap]))
     ctx.image(path, "A design painted on the bunny-like blob from the shipped stroke file: two views and the "
