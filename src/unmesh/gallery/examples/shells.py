@@ -155,14 +155,17 @@ def _sag_image(ctx: ExampleContext, outdir: Path, frame: int, size: int = 320) -
     and from the side, slightly above (looking along the clamped edge, the z axis), sag drawn 10x."""
     from unmesh import io
     from unmesh.render import Camera, render
-    from unmesh.surfels import estimate_normals
+    from unmesh.surfels import estimate_normals, estimate_radii
 
     cloud = io.load(sorted((outdir / "frames").glob("frame_*.ply"))[frame])
     sag = 1000.0 * (1.0 - cloud.positions[:, 1])
     cloud = cloud.replace(attributes={**dict(cloud.attributes), "sag_mm": sag})
     top = float(max(np.percentile(sag, 99.9), 1e-3))
     moved = cloud.positions - [0.0, 9.0 * 0.001, 0.0] * sag[:, None]  # sag drawn 10x
-    exaggerated = cloud.replace(positions=moved, normals=estimate_normals(moved, k=16))
+    normals = estimate_normals(moved, k=16)
+    # drawing the sag 10x stretches the sheet: splats sized for the drawn positions leave no gaps
+    exaggerated = cloud.replace(positions=moved, normals=normals,
+                                radii=np.maximum(cloud.radii, estimate_radii(moved, normals)))
     images = []
     for shown, direction in ((cloud, (0.0, 1.0, 0.35)), (exaggerated, (0.0, 0.4, 1.0))):
         cam = Camera.fit(shown.visible().positions, int(1.3 * size), size, direction=direction)
