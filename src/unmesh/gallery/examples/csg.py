@@ -307,16 +307,45 @@ def coplanar_limits(size: int = 200) -> np.ndarray:
     return side_by_side(*panels)
 
 
-@example("csg-limits", "Known limit: nearly coplanar clipping surfels (4.5)", section="CSG")
+def density_jump_limit(size: int = 320, fine: float = 0.05, coarse: float = 0.3, z_jump: float = 0.6) -> np.ndarray:
+    """A unit sphere (blue) united with a floor (red half-space ``y < 0``), seen from above the front:
+    left the sphere sampled evenly (spacing ``fine``), right sampled ``coarse`` where ``z >= z_jump``
+    and ``fine`` elsewhere (an abrupt change of density within one patch, Fig. 4.11). Two panels
+    (size, size) side by side."""
+    from unmesh.csg.model import Patch
+    from unmesh.render import Camera
+    from unmesh.shapes import Sphere
+    from unmesh.surfels import SurfelCloud
+
+    sphere = Sphere(radius=1.0)
+    a, b = sphere.surfels(fine), sphere.surfels(coarse)
+    keep_a, keep_b = a.positions[:, 2] < z_jump, b.positions[:, 2] >= z_jump
+    blue = (0.2, 0.35, 0.85)
+    jump = SurfelCloud(np.r_[a.positions[keep_a], b.positions[keep_b]], np.r_[a.normals[keep_a], b.normals[keep_b]],
+                       radii=np.r_[a.radii[keep_a], b.radii[keep_b]], colors=np.tile(blue, (keep_a.sum() + keep_b.sum(), 1)))
+    floor = Patch.halfspace((0, 0, 0), (0, 1, 0), extent=3.0, spacing=0.05, color=(0.85, 0.25, 0.2), name="floor")
+    cam = Camera((0.0, 1.6, 3.2), (0, 0, 0.5), width=size, height=size, fov=40)
+    return side_by_side(*(_still(Patch(c, name="ball") | floor, cam)
+                          for c in (Patch.from_shape(sphere, fine, color=blue).cloud, jump)))
+
+
+@example("csg-limits", "Known limits: nearly coplanar clipping surfels, abrupt density changes (4.5)", section="CSG")
 def limits_example(ctx: ExampleContext) -> None:
     """Two spheres united, crossing at shrinking angles: the edge is nearly straight at 17 degrees, wavy at 6,
-    and jagged with colour bleeding across it at 1.7 and 0.6 degrees (4.5)."""
+    and jagged with colour bleeding across it at 1.7 and 0.6 degrees (4.5). A sphere whose sampling becomes
+    6x coarser along a circle: holes and bleeding there (Fig. 4.11)."""
     from unmesh.render import save_image
 
     path = save_image(ctx.path("limits.png"), coplanar_limits(100 if ctx.quick else 200))
     ctx.image(path, "a red and a blue sphere united, seen along their crossing, unlit; centres 0.3, 0.1, 0.03 "
                     "and 0.01 apart (left to right): the edge between the colours is nearly straight, then wavy, "
                     "then jagged with colour bleeding across it as the spheres cross more shallowly")
+    path = save_image(ctx.path("density_jump.png"), density_jump_limit(160 if ctx.quick else 320))
+    ctx.image(path, "a blue sphere united with a red floor. Left: the sphere sampled evenly (spacing 0.05). Right: "
+                    "sampled at 0.3 where z >= 0.6 (towards the viewer): where the density jumps, the large tangent "
+                    "discs lift off the sphere and leave holes, and fragments of the floor inside the sphere are "
+                    "classified by the small surfels nearby instead of the large disc that covers them, so the "
+                    "floor shows through in red (the artifact of Fig. 4.11)")
 
 
 @example("csg-dynamic", "Dynamic CSG: a sphere carving a box, a rotating union", section="CSG")
