@@ -44,11 +44,14 @@ def run_examples(examples: list[Example], outdir: Path, quick: bool = False, pro
         if result.error is None:
             record(outdir, quick, {result.example.name: result.seconds})
         bar.update(weights[k])
-        bar.set_description_str(f"gallery {len(done)}/{len(examples)} (last: {result.example.name})")
+
+    def running(names: list[str]) -> None:
+        bar.set_description_str(f"gallery {len(done)}/{len(examples)} running {', '.join(names[:jobs])}")
+        bar.refresh()
 
     if jobs > 1 and len(examples) > 1:
         bar.set_description_str(f"gallery 0/{len(examples)} ({jobs} processes)")
-        run_in_workers(list(enumerate(examples)), weights, outdir, quick, jobs, finish)
+        run_in_workers(list(enumerate(examples)), weights, outdir, quick, jobs, finish, running)
     else:
         for k, ex in enumerate(examples):
             bar.set_description_str(f"gallery {k}/{len(examples)} {ex.name}")

@@ -53,7 +53,8 @@ def _init_worker(threads: int) -> None:
 
 
 def run_in_workers(items: Sequence[tuple[int, Example]], weights: Sequence[float], outdir: Path, quick: bool,
-                   jobs: int, on_done: Callable[[int, ExampleResult], None]) -> None:
+                   jobs: int, on_done: Callable[[int, ExampleResult], None],
+                   on_wait: Callable[[list[str]], None] | None = None) -> None:
     """Run ``items`` (``(index, example)``) in ``jobs`` processes; ``on_done(index, result)`` as each ends.
 
     Parameters
@@ -70,9 +71,12 @@ def run_in_workers(items: Sequence[tuple[int, Example]], weights: Sequence[float
         Worker processes (>= 1).
     on_done : callable
         Called in this process, in completion order.
+    on_wait : callable, optional
+        Called about once a second while examples run, with the names of those handed to a
+        worker and not finished (a progress bar's heartbeat).
     """
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     order = sorted(range(len(items)), key=lambda k: -weights[k])
@@ -80,14 +84,19 @@ def run_in_workers(items: Sequence[tuple[int, Example]], weights: Sequence[float
                                initializer=_init_worker, initargs=(threads_per_job(jobs),))
     try:
         futures = {pool.submit(run_one, items[k][1], outdir, quick, False): items[k] for k in order}
-        for fut in as_completed(futures):
-            index, ex = futures[fut]
-            try:
-                result = fut.result()
-            except BrokenProcessPool as exc:
-                ctx = ExampleContext(outdir=Path(outdir) / ex.name, root=Path(outdir), quick=quick, progress=False)
-                result = ExampleResult(ex, ctx, 0.0, f"the worker process running it died ({exc})")
-            on_done(index, result)
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
+            for fut in sorted(finished, key=lambda f: futures[f][0]):
+                index, ex = futures[fut]
+                try:
+                    result = fut.result()
+                except BrokenProcessPool as exc:
+                    ctx = ExampleContext(outdir=Path(outdir) / ex.name, root=Path(outdir), quick=quick, progress=False)
+                    result = ExampleResult(ex, ctx, 0.0, f"the worker process running it died ({exc})")
+                on_done(index, result)
+            if on_wait is not None and pending:
+                on_wait([futures[f][1].name for f in pending if f.running()])
     except BaseException:
         pool.shutdown(wait=False, cancel_futures=True)
         raise
