@@ -101,3 +101,17 @@ def test_jobs_must_be_positive(capsys):
 
     assert main(["gallery", "--only", "zz-test-ok", "--jobs", "0", "-o", "/nonexistent/x"]) == 1
     assert "--jobs" in capsys.readouterr().err
+
+
+@example("zz-crash-exit", "An example whose process dies", section="Tests")
+def _dies(ctx: ExampleContext):
+    import os
+
+    os._exit(3)
+
+
+def test_a_dying_worker_fails_only_its_own_example(tmp_path):
+    results = run_examples(select("zz-test-ok,zz-crash-exit"), tmp_path, quick=True, progress=False, jobs=2)
+    assert [r.example.name for r in results] == ["zz-test-ok", "zz-crash-exit"]
+    assert results[0].error is None and results[0].context.metrics == [("answer", 42.0, "units")]
+    assert "worker process running it died" in results[1].error

@@ -75,29 +75,43 @@ def run_in_workers(items: Sequence[tuple[int, Example]], weights: Sequence[float
         Called about once a second while examples run, with the names of those handed to a
         worker and not finished (a progress bar's heartbeat).
     """
+    order = sorted(range(len(items)), key=lambda k: -weights[k])
+    broken = _run_pool([items[k] for k in order], outdir, quick, jobs, on_done, on_wait)
+    # a worker died (a crash, out of memory) and took the pool with it: the examples it left
+    # unfinished run again one per process, so only the one that kills its process fails
+    for item in broken:
+        for index, ex in _run_pool([item], outdir, quick, 1, on_done, on_wait):
+            ctx = ExampleContext(outdir=Path(outdir) / ex.name, root=Path(outdir), quick=quick, progress=False)
+            on_done(index, ExampleResult(ex, ctx, 0.0, "the worker process running it died (a crash or out of memory)"))
+
+
+def _run_pool(items: Sequence[tuple[int, Example]], outdir: Path, quick: bool, jobs: int,
+              on_done: Callable[[int, ExampleResult], None],
+              on_wait: Callable[[list[str]], None] | None) -> list[tuple[int, Example]]:
+    """Run ``items`` in one pool of ``jobs`` processes, in the order given; the items a broken pool left."""
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    order = sorted(range(len(items)), key=lambda k: -weights[k])
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_init_worker, initargs=(threads_per_job(jobs),))
+    broken: list[tuple[int, Example]] = []
     try:
-        futures = {pool.submit(run_one, items[k][1], outdir, quick, False): items[k] for k in order}
+        futures = {pool.submit(run_one, ex, outdir, quick, False): (k, ex) for k, ex in items}
         pending = set(futures)
         while pending:
             finished, pending = wait(pending, timeout=1.0, return_when=FIRST_COMPLETED)
             for fut in sorted(finished, key=lambda f: futures[f][0]):
-                index, ex = futures[fut]
                 try:
                     result = fut.result()
-                except BrokenProcessPool as exc:
-                    ctx = ExampleContext(outdir=Path(outdir) / ex.name, root=Path(outdir), quick=quick, progress=False)
-                    result = ExampleResult(ex, ctx, 0.0, f"the worker process running it died ({exc})")
-                on_done(index, result)
+                except BrokenProcessPool:
+                    broken.append(futures[fut])
+                    continue
+                on_done(futures[fut][0], result)
             if on_wait is not None and pending:
                 on_wait([futures[f][1].name for f in pending if f.running()])
     except BaseException:
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     pool.shutdown(wait=True)
+    return sorted(broken, key=lambda item: item[0])
