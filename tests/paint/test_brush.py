@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from unmesh import SurfelCloud
-from unmesh.paint import Brush, PaintOptions, Sample, Session
-from unmesh.paint.brush import K_PENALTY, SPLIT_ANGLE, BrushState
+from unmesh.paint import Brush, Paint, PaintOptions, Sample, Session
+from unmesh.paint.brush import K_PENALTY, RESERVOIR, SPLIT_ANGLE, BrushState
 from unmesh.paint.collide import collide, force_shading
 from unmesh.paint.haptic import WINDOW, HapticLoop
 from unmesh.shapes import by_name
@@ -182,3 +182,37 @@ def test_haptic_process_publishes_the_force():
     finally:
         loop.stop()
     assert not loop.running
+
+
+def test_flat_brush_internal_surfaces_face_the_neighbouring_bundles():
+    """5.4.3: the faces between the flat brush's bundles are internal; a round brush has none."""
+    from unmesh.paint.brush import skeleton
+
+    sk = skeleton(Brush("flat", 0.02))
+    off = sk.body[:, 0] - sk.active[sk.owner, 0]
+    # the outer bundles' internal faces point to the middle, the middle bundle's to both sides
+    assert sk.internal.any()
+    assert np.all(off[sk.internal & (sk.owner == 0)] > 0) and np.all(off[sk.internal & (sk.owner == 2)] < 0)
+    assert np.all(np.abs(sk.bnormal[sk.internal, 0]) > np.cos(np.radians(45.0)))
+    # the brush's outer ends and its broad faces are never internal
+    assert not sk.internal[sk.body[:, 0] <= sk.body[:, 0].min() + 1e-12].any()
+    assert not sk.internal[np.abs(sk.bnormal[:, 1]) > 0.9].any()
+    assert not skeleton(Brush("round", 0.02)).internal.any()
+
+
+def test_internal_surfaces_exchange_paint_only_when_the_brush_is_split(plane_cloud):
+    """A whole flat brush paints with its outer surface only (internal surfels keep their paint,
+    the others exchange); a split brush's tips use their internal surfaces too."""
+    s = Session(plane_cloud, PaintOptions(haptics=False))
+    paint = Paint("oil", (0.9, 0.1, 0.1))
+    sid = s.begin_stroke(Brush("flat", 0.03), paint)
+    s.add_samples(sid, [Sample(0.05 * i, (-0.05 + 0.02 * i, 0.0, 0.0), 0.9) for i in range(6)])
+    b = s._last_brush
+    assert not b.split
+    loaded = RESERVOIR * paint.thickness * b.sk.spacing ** 2
+    assert np.all(b.vw[b.sk.internal] == loaded)
+    assert np.any(b.vw[~b.sk.internal] != loaded)
+    s.end_stroke(sid)
+    whole, tip0 = b.transfer_body(), b.transfer_body(0)
+    assert not np.intersect1d(whole, np.flatnonzero(b.sk.internal)).size
+    assert np.isin(np.flatnonzero(b.sk.internal & (b.sk.owner == 0)), tip0).all()

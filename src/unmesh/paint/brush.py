@@ -6,7 +6,10 @@ that end up inside the object are projected out along the force-shading directio
 slowed by friction; handle points inside give the penalty force ``K_p d N`` (5.6) and the
 friction force ``-eta d v_t`` (5.7) that the haptic loop displays. A brush with several active
 masses is *split* when the surface normals at its colliding masses differ by more than 60
-degrees (5.4.3); each tip then gets its own paint buffer (5.5.1).
+degrees (5.4.3); each tip then gets its own paint buffer (5.5.1). The flat brush's body is one
+cap of surfels per active mass (a bundle of bristles); the faces of a bundle that face a
+neighbouring bundle are the brush's *internal surfaces*: they take no part in paint transfer
+while the brush is whole and are activated when it splits (5.4.3), each with its own tip.
 
 Brush frame: the tip mass at the origin, the handle along +z. Bristles are ``3 * size`` long.
 The bristle body hangs ``c`` below each active mass (``c`` = the body's lower semi-axis), so a
@@ -38,6 +41,9 @@ SPLIT_ANGLE = 60.0
 #: Penalty stiffness K_p of (5.6) (force per unit depth) and Verlet velocity retention.
 K_PENALTY = 200.0
 DAMPING = 0.8
+#: A bundle's surfels whose normals are within 45 degrees of the direction to a neighbouring
+#: active mass form the brush's internal surfaces (5.4.3).
+INTERNAL_COS = float(np.cos(np.radians(45.0)))
 #: Paint a loaded brush surfel holds, in layers of the paint's thickness.
 RESERVOIR = 25.0
 
@@ -59,6 +65,8 @@ class Skeleton:
     body : (B, 3) float64
         Brush surfels (rest), ``owner`` (B,) the active mass each is skinned to, ``weight`` (B,)
         its skinning weight to that mass (1 at the tip, 0 at the ferrule), ``bnormal`` (B, 3).
+    internal : (B,) bool
+        Surfels of a bundle facing a neighbouring active mass (the internal surfaces of 5.4.3).
     lower : float
         Lower semi-axis ``c`` of the body below each active mass.
     spacing : float
@@ -73,6 +81,7 @@ class Skeleton:
     bnormal: np.ndarray
     owner: np.ndarray
     weight: np.ndarray
+    internal: np.ndarray
     lower: float
     spacing: float
 
@@ -137,8 +146,15 @@ def skeleton(brush: Brush) -> Skeleton:
         normals.append(nn)
         owner.append(np.full(len(p), a, np.int64))
         weight.append(np.clip(1.0 - (p[:, 2] - m[2]) / hz, 0.0, 1.0))
-    return Skeleton(active, handles, springs, rest, np.concatenate(bodies), np.concatenate(normals),
-                    np.concatenate(owner), np.concatenate(weight), float(lower), float(spacing))
+    body, own, bnormal = np.concatenate(bodies), np.concatenate(owner), np.concatenate(normals)
+    # internal surfaces: the faces of a mass's bundle that face a neighbouring mass (within 45 degrees)
+    internal = np.zeros(len(body), bool)
+    for a, b in springs[(springs[:, 0] < len(active)) & (springs[:, 1] < len(active))]:
+        ab = (active[b] - active[a]) / np.linalg.norm(active[b] - active[a])
+        internal |= (own == a) & (bnormal @ ab > INTERNAL_COS)
+        internal |= (own == b) & (bnormal @ -ab > INTERNAL_COS)
+    return Skeleton(active, handles, springs, rest, body, bnormal, own, np.concatenate(weight), internal,
+                    float(lower), float(spacing))
 
 
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -275,6 +291,16 @@ class BrushState:
         nn = self.contact_normals[idx]
         cosines = nn @ nn.T
         return bool(cosines.min() < np.cos(np.radians(SPLIT_ANGLE)))
+
+    def transfer_body(self, tip: int | None = None) -> np.ndarray:
+        """Indices of the brush surfels that exchange paint (5.4.3, 5.5.1), (K,) int64.
+
+        The whole brush (``tip`` None): every surfel but the internal surfaces. Tip ``tip`` of a
+        split brush: the surfels skinned to that active mass, its internal surfaces included.
+        """
+        if tip is None:
+            return np.flatnonzero(~self.sk.internal)
+        return np.flatnonzero(self.sk.owner == tip)
 
     def penalty(self) -> np.ndarray:
         """Penalty (5.6) plus friction (5.7) on the handle points, (3,)."""

@@ -222,10 +222,10 @@ class Session:
             if smp.pressure > 0 and dt > 0:
                 if b.split:
                     results = [paint_event(s, b, st.paint, smp.pressure, dt, move, tip=b.x[k],
-                                           body=np.flatnonzero(b.sk.owner == k), km=km)
+                                           body=b.transfer_body(k), km=km)
                                for k in range(len(b.x)) if b.colliding[k]]
                 else:
-                    results = [paint_event(s, b, st.paint, smp.pressure, dt, move, km=km)]
+                    results = [paint_event(s, b, st.paint, smp.pressure, dt, move, body=b.transfer_body(), km=km)]
                 for r in results:
                     st.added += len(r.added)
                     st.removed += len(r.removed)
