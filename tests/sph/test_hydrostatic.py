@@ -151,6 +151,8 @@ open_top = true
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue 22 item 2, open: the 3D tank gives R^2 0.94 and slope 1.19 rho0 g "
+                                       "(measured 2026-12-04); 2D passes")
 def test_hydrostatic_pressure_linear_3d_tank(tmp_path):
     """A 3D water column in a square tank (the 2D scene's water and filter): pressure linear in depth."""
     scene = tmp_path / "tank.toml"
