@@ -173,7 +173,7 @@ def _profile_arrays(masks: list[np.ndarray]) -> tuple[np.ndarray, ...]:
 
 
 def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, target: float = 0.9,
-         dh_frac: float = 0.05, best_fit: int = 16) -> Placement:
+         dh_frac: float = 0.05, best_fit: int = 16, slide: bool = True, holes: bool = True) -> Placement:
     """Pack patch footprints (Algorithm 6.1) into power-of-two pages.
 
     Parameters
@@ -215,7 +215,8 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
     def attempt(items: np.ndarray, edge: int, page: int) -> tuple[Placement, np.ndarray]:
         trial = _copy(out)
         rest = pack_page(items, heights, widths, lft, rgt, off, left_a, right_a, edge, float(dh_frac),
-                         int(best_fit), trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v, page)
+                         int(best_fit), trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v, page, slide, 0,
+                         holes)
         return trial, items[rest]
 
     while len(left):
