@@ -98,11 +98,11 @@ def _mark(grid, i, flip_h, flip_v, y0, x0, lft, rgt, off, h, w):
 
 
 @njit(cache=True)
-def first_fit(items, remaining, lo_h, hi_h, heights, widths, lft, rgt, off, grid, page_of, xs, ys, flip_hs,
+def first_fit(items, remaining, lo_s, hi_s, heights, widths, lft, rgt, off, grid, page_of, xs, ys, flip_hs,
               flip_vs, page):
     """Bottom-left first fit on the texel grid of a page (an extension of Algorithm 6.1).
 
-    Every unplaced item with ``lo_h <= height <= hi_h``, in the given order, goes to the first
+    Every unplaced item of size ``lo_s <= max(height, width) <= hi_s``, in the given order, goes to the first
     free position in raster order (row by row from the top, left to right) in any of its four
     orientations (unflipped, flipped horizontally, vertically, both; the first that fits). A
     position that did not fit a patch of a given (height, width) is not tried again for that
@@ -113,8 +113,8 @@ def first_fit(items, remaining, lo_h, hi_h, heights, widths, lft, rgt, off, grid
     items : (n,) int64
     remaining : (n,) bool
         Unplaced items; cleared for the placed ones.
-    lo_h, hi_h : int
-        Height range of the items placed here.
+    lo_s, hi_s : int
+        Size range (the larger of height and width) of the items placed here.
     heights, widths, lft, rgt, off
         As in :func:`pack_page`.
     grid : (E, E) bool
@@ -133,7 +133,7 @@ def first_fit(items, remaining, lo_h, hi_h, heights, widths, lft, rgt, off, grid
         i = items[k]
         h = heights[i]
         w = widths[i]
-        if not remaining[k] or h < lo_h or h > hi_h or h > edge or w > edge:
+        if not remaining[k] or max(h, w) < lo_s or max(h, w) > hi_s or h > edge or w > edge:
             continue
         pos = cursor[h, w]
         last = (edge - h) * edge + edge - w
@@ -191,7 +191,7 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
         Extension: every placed patch slides up, then left, while it stays free (into the gaps
         of the rows above it), and the next row starts below the lowest texel of the row.
     big : int
-        Extension: patches at least ``big`` texels tall (0: none) are placed first by
+        Extension: patches at least ``big`` texels tall or wide (0: none) are placed first by
         :func:`first_fit`, the rows of Algorithm 6.1 start below them.
     holes : bool
         Extension: when the rows are done, the patches left over go into the remaining holes by

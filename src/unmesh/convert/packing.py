@@ -172,7 +172,7 @@ def _profile_arrays(masks: list[np.ndarray]) -> tuple[np.ndarray, ...]:
     return heights, widths, lft, rgt, off
 
 
-def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, target: float = 0.9,
+def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
          dh_frac: float = 0.05, best_fit: int = 16, slide: bool = True, holes: bool = True) -> Placement:
     """Pack patch footprints (Algorithm 6.1) into power-of-two pages.
 
@@ -184,9 +184,6 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
         Base angles (left, right), :func:`base_angles`.
     page_size : int
         Largest page edge (a power of two).
-    target : float
-        Fill goal: the last page holds all remaining patches when they fill it to at least
-        ``target - 0.1`` or at least as well as a full page would be filled.
     dh_frac : float
         Height tolerance of a row (fraction of its height).
     best_fit : int
@@ -212,41 +209,57 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
     area = np.array([m.sum() for m in masks], np.float64)
     left = np.argsort(-heights, kind="stable").astype(np.int64)
 
-    def attempt(items: np.ndarray, edge: int, page: int) -> tuple[Placement, np.ndarray]:
-        trial = _copy(out)
+    def attempt(base: Placement, items: np.ndarray, edge: int, page: int) -> tuple[Placement, np.ndarray]:
+        trial = _copy(base)
         rest = pack_page(items, heights, widths, lft, rgt, off, left_a, right_a, edge, float(dh_frac),
-                         int(best_fit), trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v, page, slide, 0,
-                         holes)
+                         int(best_fit), trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v, page, slide,
+                         max(1, edge // 4) if holes else 0, holes)
         return trial, items[rest]
 
+    # A chain of full pages (B: the largest edge the remaining patches can fill), and at every
+    # link the smallest page that takes all the rest (A); the atlas is the chain up to the link
+    # whose A gives the smallest total page area.
+    chain: list[int] = []
+    best: tuple[int, int, Placement, int] | None = None  # total area, links used, placement, last edge
+    base = out
     while len(left):
         need = area[left].sum()
         big = int(max(heights[left].max(), widths[left].max()))
         smallest = max(16, 1 << int(np.ceil(np.log2(big))))
-        page = len(out.pages)
+        page = len(chain)
+        used = sum(e * e for e in chain)
+        if best is not None and used >= best[0]:
+            break
         # A: everything on the smallest page that holds it (at most page_size)
         edge_a = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.95))))))
-        trial_a, rest_a = attempt(left, edge_a, page)
-        if len(rest_a) and edge_a < page_size:
-            edge_a *= 2
-            trial_a, rest_a = attempt(left, edge_a, page)
-        # B: a full page of the largest edge the patches can fill
+        if need <= edge_a**2:
+            trial_a, rest_a = attempt(base, left, edge_a, page)
+            if len(rest_a) and edge_a < page_size:
+                edge_a *= 2
+                trial_a, rest_a = attempt(base, left, edge_a, page)
+            if len(rest_a) == 0 and (best is None or used + edge_a**2 < best[0]):
+                best = (used + edge_a**2, len(chain), trial_a, edge_a)
+            if len(rest_a) == 0 and edge_a <= min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need)))))):
+                break  # a full page B would be this page again
+        # B: a full page of the largest edge the patches can fill (full pages smaller than
+        # MIN_FULL_PAGE would split small atlases into many tiny pages)
         edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
-        trial_b, rest_b = (trial_a, rest_a) if edge_b == edge_a else attempt(left, edge_b, page)
-        fill_a = (need - area[rest_a].sum()) / edge_a**2
-        fill_b = (need - area[rest_b].sum()) / edge_b**2
-        # full pages smaller than MIN_FULL_PAGE would split small atlases into many tiny pages
-        small_b = edge_b < min(page_size, MIN_FULL_PAGE)
-        if len(rest_a) == 0 and (fill_a >= target - 0.1 or fill_a >= fill_b - 0.02 or small_b):
-            trial, rest, edge = trial_a, rest_a, edge_a
-        elif len(rest_b) < len(left):
-            trial, rest, edge = trial_b, rest_b, edge_b
-        else:
-            trial, rest, edge = trial_a, rest_a, edge_a
-        if len(rest) == len(left):
-            raise InputError(f"page_size: {page_size} is too small for the patches")
-        out.page, out.x, out.y, out.flip_h, out.flip_v = trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v
-        out.pages.append(edge)
-        out.fill.append(float((need - area[rest].sum()) / edge**2))
-        left = rest
-    return out
+        if edge_b < min(page_size, MIN_FULL_PAGE) and best is not None:
+            break
+        trial_b, rest_b = attempt(base, left, edge_b, page)
+        if len(rest_b) == len(left):
+            if best is None:
+                raise InputError(f"page_size: {page_size} is too small for the patches")
+            break
+        if len(rest_b) == 0:
+            if best is None or used + edge_b**2 < best[0]:
+                best = (used + edge_b**2, len(chain), trial_b, edge_b)
+            break
+        chain.append(edge_b)
+        base, left = trial_b, rest_b
+    assert best is not None  # the loop ends with every patch placed on some link
+    _, links, placed, last = best
+    placed.pages = [*chain[:links], last]
+    per_page = np.bincount(placed.page, weights=area, minlength=len(placed.pages))
+    placed.fill = [float(a / e**2) for a, e in zip(per_page, placed.pages, strict=True)]
+    return placed
