@@ -19,7 +19,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["first_fit", "pack_page"]
+__all__ = ["SCAN", "first_fit", "pack_page"]
+
+#: Candidates of a row compared for the next patch: the first SCAN in the given order (rows of
+#: thousands of equally tall tiny patches would otherwise cost a scan of all of them per patch).
+SCAN = 512
 
 
 @njit(cache=True, inline="always")
@@ -254,7 +258,7 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
             if best_fit == 0:
                 best = 0
                 bd = np.inf
-                for c in range(nc):
+                for c in range(min(nc, SCAN)):
                     i = items[cand[c]]
                     d = min(abs(left_angle[i] - beta), abs(right_angle[i] - beta))
                     if d < bd:
@@ -267,7 +271,7 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
             else:
                 # the best_fit candidates closest in angle (insertion into a short sorted list)
                 m = 0
-                for c in range(nc):
+                for c in range(min(nc, SCAN)):
                     i = items[cand[c]]
                     d = min(abs(left_angle[i] - beta), abs(right_angle[i] - beta))
                     if m < best_fit:

@@ -31,14 +31,15 @@ Example
 
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass
 
 import numpy as np
 
-from unmesh.convert._packing_kernels import pack_page
+from unmesh.convert._packing_kernels import SCAN, pack_page
 from unmesh.errors import InputError
 
-__all__ = ["Placement", "base_angles", "pack", "pack_page_reference"]
+__all__ = ["Placement", "base_angles", "first_fit_reference", "pack", "pack_page_reference"]
 
 #: Smallest edge of a page packed full before the rest goes on to further pages (the last page
 #: may be smaller): the quick gallery atlas (600 triangles) gets 6 pages instead of 9 at the
@@ -115,7 +116,7 @@ def pack_page_reference(items: list[int], masks: list[np.ndarray], angles: np.nd
                     break
                 h2 = int(heights[lower].max())
                 cand = np.flatnonzero(lower & (heights > h2 - max(1, int(dh_frac * h2))))
-            al = item_angles[cand]
+            al = item_angles[cand[:SCAN]]  # the first SCAN candidates, as the kernel
             dl = np.abs(al[:, 0] - beta)
             dr = np.abs(al[:, 1] - beta)
             best = int(np.argmin(np.minimum(dl, dr)))
@@ -145,6 +146,42 @@ def pack_page_reference(items: list[int], masks: list[np.ndarray], angles: np.nd
             mirror = not mirror
         ymin += hbar
     return [items[k] for k in np.flatnonzero(remaining)]
+
+
+def first_fit_reference(items: list[int], masks: list[np.ndarray], grid: np.ndarray, out: Placement,
+                        page: int) -> list[int]:
+    """Bottom-left first fit (plain numpy reference of
+    :func:`unmesh.convert._packing_kernels.first_fit` over all sizes): every item in order goes
+    to the first free position in raster order in the first of its orientations (unflipped,
+    flipped horizontally, vertically, both) that fits, skipping the positions that failed for
+    an earlier patch of the same size. ``grid`` (E, E) bool is updated; returns the items that
+    did not fit."""
+    edge = grid.shape[0]
+    cursor: dict[tuple[int, int], int] = {}
+    rest = []
+    for i in items:
+        h, w = masks[i].shape
+        orient = [masks[i], masks[i][:, ::-1], masks[i][::-1], masks[i][::-1, ::-1]]
+        pos = cursor.get((h, w), 0)
+        found = -1
+        while h <= edge and w <= edge and pos <= (edge - h) * edge + edge - w:
+            y, x = divmod(pos, edge)
+            if x + w > edge:
+                pos = (y + 1) * edge
+                continue
+            window = grid[y:y + h, x:x + w]
+            found = next((o for o, m in enumerate(orient) if not (window & m).any()), -1)
+            if found >= 0:
+                break
+            pos += 1
+        cursor[(h, w)] = pos
+        if found < 0:
+            rest.append(i)
+            continue
+        grid[y:y + h, x:x + w] |= orient[found]
+        out.page[i], out.x[i], out.y[i] = page, x, y
+        out.flip_h[i], out.flip_v[i] = found in (1, 3), found >= 2
+    return rest
 
 
 def _copy(p: Placement) -> Placement:
@@ -216,49 +253,55 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
                          max(1, edge // 4) if holes else 0, holes)
         return trial, items[rest]
 
-    # A chain of full pages (B: the largest edge the remaining patches can fill), and at every
-    # link the smallest page that takes all the rest (A); the atlas is the chain up to the link
-    # whose A gives the smallest total page area.
+    # A chain of full pages (B: the largest edge the remaining patches can fill); at every link,
+    # the smallest page that would take all the rest (A) is a candidate end of the atlas whose
+    # total page area is known before packing it. The candidates are packed in the order of their
+    # total area; the first one that takes all its patches wins (one that does not is tried again
+    # on a page of twice the edge). Full pages smaller than MIN_FULL_PAGE are not used: they would
+    # split small atlases into many tiny pages.
+    heap: list[tuple[int, int, int, int, Placement, np.ndarray]] = []  # area, tie, link, edge, base, items
+    finished: tuple[int, int, Placement, int] | None = None  # area, links, placement, last edge
     chain: list[int] = []
-    best: tuple[int, int, Placement, int] | None = None  # total area, links used, placement, last edge
-    base = out
-    while len(left):
-        need = area[left].sum()
-        big = int(max(heights[left].max(), widths[left].max()))
-        smallest = max(16, 1 << int(np.ceil(np.log2(big))))
-        page = len(chain)
-        used = sum(e * e for e in chain)
-        if best is not None and used >= best[0]:
+    base, used = out, 0
+    result = None
+    tried: set[tuple[int, int]] = set()  # (link, edge) of candidate ends packed already
+    while result is None:  # again from the end of the chain when every candidate end failed
+        while len(left):
+            need = area[left].sum()
+            big = int(max(heights[left].max(), widths[left].max()))
+            smallest = max(16, 1 << int(np.ceil(np.log2(big))))
+            edge_a = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.95))))))
+            edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
+            if need <= edge_a**2 and (len(chain), edge_a) not in tried:
+                heapq.heappush(heap, (used + edge_a**2, len(heap), len(chain), edge_a, base, left))
+            if heap and (edge_a <= edge_b or edge_b < min(page_size, MIN_FULL_PAGE) or used + edge_b**2 >= heap[0][0]):
+                break  # B would be A's page again, a tiny page, or no better than a candidate end
+            trial_b, rest_b = attempt(base, left, edge_b, len(chain))
+            if len(rest_b) == len(left):
+                if not heap:
+                    raise InputError(f"page_size: {page_size} is too small for the patches")
+                break
+            if len(rest_b) == 0:
+                finished = (used + edge_b**2, len(chain), trial_b, edge_b)
+                break
+            chain.append(edge_b)
+            used += edge_b**2
+            base, left = trial_b, rest_b
+        result = finished
+        while heap and (result is None or heap[0][0] < result[0]):
+            total, _, link, edge, base_k, items = heapq.heappop(heap)
+            tried.add((link, edge))
+            trial, rest = attempt(base_k, items, edge, link)
+            if len(rest) == 0:
+                result = (total, link, trial, edge)
+            elif edge < page_size:
+                grown = total - edge**2 + (2 * edge) ** 2
+                heapq.heappush(heap, (grown, len(heap) + 1_000_000, link, 2 * edge, base_k, items))
+        if result is None and not len(left):
             break
-        # A: everything on the smallest page that holds it (at most page_size)
-        edge_a = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.95))))))
-        if need <= edge_a**2:
-            trial_a, rest_a = attempt(base, left, edge_a, page)
-            if len(rest_a) and edge_a < page_size:
-                edge_a *= 2
-                trial_a, rest_a = attempt(base, left, edge_a, page)
-            if len(rest_a) == 0 and (best is None or used + edge_a**2 < best[0]):
-                best = (used + edge_a**2, len(chain), trial_a, edge_a)
-            if len(rest_a) == 0 and edge_a <= min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need)))))):
-                break  # a full page B would be this page again
-        # B: a full page of the largest edge the patches can fill (full pages smaller than
-        # MIN_FULL_PAGE would split small atlases into many tiny pages)
-        edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
-        if edge_b < min(page_size, MIN_FULL_PAGE) and best is not None:
-            break
-        trial_b, rest_b = attempt(base, left, edge_b, page)
-        if len(rest_b) == len(left):
-            if best is None:
-                raise InputError(f"page_size: {page_size} is too small for the patches")
-            break
-        if len(rest_b) == 0:
-            if best is None or used + edge_b**2 < best[0]:
-                best = (used + edge_b**2, len(chain), trial_b, edge_b)
-            break
-        chain.append(edge_b)
-        base, left = trial_b, rest_b
-    assert best is not None  # the loop ends with every patch placed on some link
-    _, links, placed, last = best
+    if result is None:
+        raise InputError(f"page_size: {page_size} is too small for the patches")
+    _, links, placed, last = result
     placed.pages = [*chain[:links], last]
     per_page = np.bincount(placed.page, weights=area, minlength=len(placed.pages))
     placed.fill = [float(a / e**2) for a, e in zip(per_page, placed.pages, strict=True)]
