@@ -13,11 +13,16 @@ patches (an extension: Algorithm 6.1 would start a new row, which wastes most of
 few patches share a height); when the tallest remaining patch no longer fits below the last
 row, the rows go on with the patches that do.
 
-Pages: when the remaining footprints fill the smallest power-of-two page that could hold them
-to at least ``target - 0.1`` and they all fit, that page ends the atlas; otherwise a page of the
-largest power-of-two edge they can fill completely (at most ``page_size``) is packed and the
-rest goes on. So every page but possibly the last is full, and the last is small. Fill is
-reported per page.
+Extensions (on by default, :func:`pack`): placed patches *slide* up and left into the gaps
+of the rows above; patches of at least a quarter of the page edge go first, and the patches
+left over when the rows are done go into the remaining holes, both by a bottom-left first fit
+on the page's texel grid (:func:`unmesh.convert._packing_kernels.first_fit`).
+
+Pages: a chain of full pages, each of the largest power-of-two edge (at most ``page_size``, at
+least :data:`MIN_FULL_PAGE`) the remaining footprints can fill; at every link the smallest page
+that would take all the rest is a candidate end of the atlas. The candidates are packed in the
+order of their total page area and the first that takes all its patches ends the atlas, so the
+atlas has the smallest total area among these ends. Fill is reported per page.
 
 Example
 -------
