@@ -21,8 +21,9 @@ on the page's texel grid (:func:`unmesh.convert._packing_kernels.first_fit`).
 Pages: a chain of full pages, each of the largest power-of-two edge (at most ``page_size``, at
 least :data:`MIN_FULL_PAGE`) the remaining footprints can fill; at every link the smallest page
 that would take all the rest is a candidate end of the atlas. The candidates are packed in the
-order of their total page area and the first that takes all its patches ends the atlas, so the
-atlas has the smallest total area among these ends. Fill is reported per page.
+order of their total page area and the first that takes all its patches ends the atlas (one that
+does not is followed by a page of twice the edge, or by itself full plus a page for the rest), so
+the atlas has the smallest total area among these ends. Fill is reported per page.
 
 Example
 -------
@@ -37,6 +38,7 @@ Example
 from __future__ import annotations
 
 import heapq
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -261,24 +263,35 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
     # A chain of full pages (B: the largest edge the remaining patches can fill); at every link,
     # the smallest page that would take all the rest (A) is a candidate end of the atlas whose
     # total page area is known before packing it. The candidates are packed in the order of their
-    # total area; the first one that takes all its patches wins (one that does not is tried again
-    # on a page of twice the edge). Full pages smaller than MIN_FULL_PAGE are not used: they would
-    # split small atlases into many tiny pages.
-    heap: list[tuple[int, int, int, int, Placement, np.ndarray]] = []  # area, tie, link, edge, base, items
-    finished: tuple[int, int, Placement, int] | None = None  # area, links, placement, last edge
+    # total area; the first one that takes all its patches wins (one that does not becomes two
+    # new candidates: a page of twice the edge, and that page full with the rest on a further
+    # page). The chain has no full pages smaller than MIN_FULL_PAGE: they would split small
+    # atlases into many tiny pages.
+    # heap entries: total area, tie-breaker, pages before, last edge, placement so far, patches left
+    heap: list[tuple[int, int, tuple[int, ...], int, Placement, np.ndarray]] = []
+    finished: tuple[int, tuple[int, ...], Placement] | None = None  # area, pages, placement
     chain: list[int] = []
     base, used = out, 0
     result = None
-    tried: set[tuple[int, int]] = set()  # (link, edge) of candidate ends packed already
+    tried: set[tuple[tuple[int, ...], int]] = set()  # candidate ends packed already
+    counter = itertools.count()
+
+    def end_edge(items: np.ndarray) -> int:
+        """The smallest page that could take all ``items`` (at 95 % fill)."""
+        need = area[items].sum()
+        big = int(max(heights[items].max(), widths[items].max()))
+        smallest = max(16, 1 << int(np.ceil(np.log2(big))))
+        return min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.95))))))
+
     while result is None:  # again from the end of the chain when every candidate end failed
         while len(left):
             need = area[left].sum()
             big = int(max(heights[left].max(), widths[left].max()))
             smallest = max(16, 1 << int(np.ceil(np.log2(big))))
-            edge_a = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.95))))))
+            edge_a = end_edge(left)
             edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
-            if need <= edge_a**2 and (len(chain), edge_a) not in tried:
-                heapq.heappush(heap, (used + edge_a**2, len(heap), len(chain), edge_a, base, left))
+            if need <= edge_a**2 and (tuple(chain), edge_a) not in tried:
+                heapq.heappush(heap, (used + edge_a**2, next(counter), tuple(chain), edge_a, base, left))
             if heap and (edge_a <= edge_b or edge_b < min(page_size, MIN_FULL_PAGE) or used + edge_b**2 >= heap[0][0]):
                 break  # B would be A's page again, a tiny page, or no better than a candidate end
             trial_b, rest_b = attempt(base, left, edge_b, len(chain))
@@ -287,27 +300,33 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
                     raise InputError(f"page_size: {page_size} is too small for the patches")
                 break
             if len(rest_b) == 0:
-                finished = (used + edge_b**2, len(chain), trial_b, edge_b)
+                finished = (used + edge_b**2, (*chain, edge_b), trial_b)
                 break
             chain.append(edge_b)
             used += edge_b**2
             base, left = trial_b, rest_b
         result = finished
         while heap and (result is None or heap[0][0] < result[0]):
-            total, _, link, edge, base_k, items = heapq.heappop(heap)
-            tried.add((link, edge))
-            trial, rest = attempt(base_k, items, edge, link)
+            total, _, before, edge, base_k, items = heapq.heappop(heap)
+            tried.add((before, edge))
+            trial, rest = attempt(base_k, items, edge, len(before))
             if len(rest) == 0:
-                result = (total, link, trial, edge)
-            elif edge < page_size:
-                grown = total - edge**2 + (2 * edge) ** 2
-                heapq.heappush(heap, (grown, len(heap) + 1_000_000, link, 2 * edge, base_k, items))
+                result = (total, (*before, edge), trial)
+                continue
+            # the candidate was too small: a page of twice the edge, or this page full and the
+            # rest on a further page
+            if edge < page_size:
+                heapq.heappush(heap, (total - edge**2 + (2 * edge) ** 2, next(counter), before, 2 * edge, base_k, items))
+            if len(rest) < len(items):
+                e2 = end_edge(rest)
+                if area[rest].sum() <= e2**2:
+                    heapq.heappush(heap, (total + e2**2, next(counter), (*before, edge), e2, trial, rest))
         if result is None and not len(left):
             break
     if result is None:
         raise InputError(f"page_size: {page_size} is too small for the patches")
-    _, links, placed, last = result
-    placed.pages = [*chain[:links], last]
+    _, pages, placed = result
+    placed.pages = list(pages)
     per_page = np.bincount(placed.page, weights=area, minlength=len(placed.pages))
     placed.fill = [float(a / e**2) for a, e in zip(per_page, placed.pages, strict=True)]
     return placed
