@@ -34,8 +34,8 @@ def test_obj_and_glb_load_in_trimesh_with_textures_and_give_the_same_pixels(conv
     assert {p.suffix for p in obj_files} == {".obj", ".mtl", ".png"}
     mtl = (tmp_path / "m.mtl").read_text()
     assert "map_Kd" in mtl and "norm " in mtl and "map_Bump" in mtl
-    a = trimesh.load(tmp_path / "m.obj")
-    b = trimesh.load(glb_files[0])
+    a = trimesh.load(tmp_path / "m.obj", force="scene")  # a scene also for one page
+    b = trimesh.load(glb_files[0], force="scene")
     assert len(a.geometry) == len(b.geometry) == len(tm.parts)
     for g in b.geometry.values():
         assert g.visual.material.baseColorTexture is not None and g.visual.material.normalTexture is not None

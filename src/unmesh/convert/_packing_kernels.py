@@ -19,7 +19,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["pack_page"]
+__all__ = ["SCAN", "first_fit", "pack_page"]
+
+#: Candidates of a row compared for the next patch: the first SCAN in the given order (rows of
+#: thousands of equally tall tiny patches would otherwise cost a scan of all of them per patch).
+SCAN = 512
 
 
 @njit(cache=True, inline="always")
@@ -55,8 +59,119 @@ def _fit(i, flip_h, mirror, hbar, lft, rgt, off, heights, widths, right_prof):
 
 
 @njit(cache=True)
+def _free(grid, i, flip_h, flip_v, y0, x0, lft, rgt, off, h, w):
+    """True when patch i (in the given orientation) at top-left (y0, x0) of the page touches no
+    used texel of ``grid`` and stays inside it."""
+    edge = grid.shape[0]
+    if y0 < 0 or x0 < 0 or y0 + h > edge or x0 + w > edge:
+        return False
+    for r in range(h):
+        row, lo, hi = _span(i, r, flip_h, flip_v, h, lft, rgt, off, h, w)
+        if row < 0:
+            continue
+        for c in range(x0 + lo, x0 + hi + 1):
+            if grid[y0 + row, c]:
+                return False
+    return True
+
+
+@njit(cache=True)
+def _slide(grid, i, flip_h, flip_v, y0, x0, lft, rgt, off, h, w):
+    """Slide a placed patch up, then left, as long as it stays free; repeated until it is stuck.
+    Returns the new (y0, x0)."""
+    moved = True
+    while moved:
+        moved = False
+        while _free(grid, i, flip_h, flip_v, y0 - 1, x0, lft, rgt, off, h, w):
+            y0 -= 1
+            moved = True
+        while _free(grid, i, flip_h, flip_v, y0, x0 - 1, lft, rgt, off, h, w):
+            x0 -= 1
+            moved = True
+    return y0, x0
+
+
+@njit(cache=True)
+def _mark(grid, i, flip_h, flip_v, y0, x0, lft, rgt, off, h, w):
+    """Mark the texels of patch i placed at (y0, x0) used."""
+    for r in range(h):
+        row, lo, hi = _span(i, r, flip_h, flip_v, h, lft, rgt, off, h, w)
+        if row >= 0:
+            for c in range(x0 + lo, x0 + hi + 1):
+                grid[y0 + row, c] = True
+
+
+@njit(cache=True)
+def first_fit(items, remaining, lo_s, hi_s, heights, widths, lft, rgt, off, grid, page_of, xs, ys, flip_hs,
+              flip_vs, page):
+    """Bottom-left first fit on the texel grid of a page (an extension of Algorithm 6.1).
+
+    Every unplaced item of size ``lo_s <= max(height, width) <= hi_s``, in the given order, goes to the first
+    free position in raster order (row by row from the top, left to right) in any of its four
+    orientations (unflipped, flipped horizontally, vertically, both; the first that fits). A
+    position that did not fit a patch of a given (height, width) is not tried again for that
+    size (the grid only fills up), so each size scans the page at most once.
+
+    Parameters
+    ----------
+    items : (n,) int64
+    remaining : (n,) bool
+        Unplaced items; cleared for the placed ones.
+    lo_s, hi_s : int
+        Size range (the larger of height and width) of the items placed here.
+    heights, widths, lft, rgt, off
+        As in :func:`pack_page`.
+    grid : (E, E) bool
+        Used texels of the page; updated.
+    page_of, xs, ys, flip_hs, flip_vs, page
+        As in :func:`pack_page`.
+    """
+    edge = grid.shape[0]
+    hmax = 1
+    wmax = 1
+    for k in range(len(items)):
+        hmax = max(hmax, heights[items[k]])
+        wmax = max(wmax, widths[items[k]])
+    cursor = np.zeros((hmax + 1, wmax + 1), np.int64)
+    for k in range(len(items)):
+        i = items[k]
+        h = heights[i]
+        w = widths[i]
+        if not remaining[k] or max(h, w) < lo_s or max(h, w) > hi_s or h > edge or w > edge:
+            continue
+        pos = cursor[h, w]
+        last = (edge - h) * edge + edge - w
+        found = -1
+        while pos <= last:
+            y = pos // edge
+            x = pos - y * edge
+            if x + w > edge:  # next row
+                pos = (y + 1) * edge
+                continue
+            for o in range(4):
+                if _free(grid, i, o == 1 or o == 3, o >= 2, y, x, lft, rgt, off, h, w):
+                    found = o
+                    break
+            if found >= 0:
+                break
+            pos += 1
+        cursor[h, w] = pos
+        if found < 0:
+            continue
+        fh = found == 1 or found == 3
+        fv = found >= 2
+        _mark(grid, i, fh, fv, y, x, lft, rgt, off, h, w)
+        page_of[i] = page
+        xs[i] = x
+        ys[i] = y
+        flip_hs[i] = fh
+        flip_vs[i] = fv
+        remaining[k] = False
+
+
+@njit(cache=True)
 def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, edge, dh_frac, best_fit,
-              page_of, xs, ys, flip_hs, flip_vs, page):
+              page_of, xs, ys, flip_hs, flip_vs, page, slide=False, big=0, holes=False):
     """Algorithm 6.1 on one ``edge`` x ``edge`` page.
 
     Parameters
@@ -76,6 +191,15 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
     page_of, xs, ys : (P,) int64, flip_hs, flip_vs : (P,) bool
         Written for the placed patches.
     page : int
+    slide : bool
+        Extension: every placed patch slides up, then left, while it stays free (into the gaps
+        of the rows above it), and the next row starts below the lowest texel of the row.
+    big : int
+        Extension: patches at least ``big`` texels tall or wide (0: none) are placed first by
+        :func:`first_fit`, the rows of Algorithm 6.1 start below them.
+    holes : bool
+        Extension: when the rows are done, the patches left over go into the remaining holes by
+        :func:`first_fit`.
 
     Returns
     -------
@@ -89,9 +213,16 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
         hs[k] = heights[items[k]]
     cand = np.empty(n, np.int64)
     right_prof = np.zeros(edge, np.int64)
+    grid = np.zeros((edge, edge), np.bool_)
     top_k = np.empty(max(best_fit, 1), np.int64)
     top_d = np.empty(max(best_fit, 1))
     ymin = 0
+    if big > 0:
+        first_fit(items, remaining, big, edge, heights, widths, lft, rgt, off, grid, page_of, xs, ys, flip_hs,
+                  flip_vs, page)
+        for k in range(n):
+            if not remaining[k]:
+                ymin = max(ymin, ys[items[k]] + hs[k])
     while True:
         hbar = -1
         for k in range(n):
@@ -110,6 +241,7 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
         beta = np.pi / 2
         mirror = False
         failures = 0
+        row_end = ymin
         while failures < 8:
             if nc == 0:
                 h2 = -1
@@ -126,7 +258,7 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
             if best_fit == 0:
                 best = 0
                 bd = np.inf
-                for c in range(nc):
+                for c in range(min(nc, SCAN)):
                     i = items[cand[c]]
                     d = min(abs(left_angle[i] - beta), abs(right_angle[i] - beta))
                     if d < bd:
@@ -139,7 +271,7 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
             else:
                 # the best_fit candidates closest in angle (insertion into a short sorted list)
                 m = 0
-                for c in range(nc):
+                for c in range(min(nc, SCAN)):
                     i = items[cand[c]]
                     d = min(abs(left_angle[i] - beta), abs(right_angle[i] - beta))
                     if m < best_fit:
@@ -186,17 +318,27 @@ def pack_page(items, heights, widths, lft, rgt, off, left_angle, right_angle, ed
                 continue
             h = heights[i]
             w = widths[i]
+            y0 = ymin + (0 if flip_v else hbar - h)
+            if slide:
+                y0, x0 = _slide(grid, i, flip_h, flip_v, y0, x0, lft, rgt, off, h, w)
+            _mark(grid, i, flip_h, flip_v, y0, x0, lft, rgt, off, h, w)
             for r in range(h):
-                row, _lo, hi = _span(i, r, flip_h, flip_v, hbar, lft, rgt, off, h, w)
-                if row >= 0:
-                    right_prof[row] = x0 + hi + 1
+                row, _lo, hi = _span(i, r, flip_h, flip_v, h, lft, rgt, off, h, w)
+                if row < 0:
+                    continue
+                if y0 + row >= ymin:
+                    right_prof[y0 + row - ymin] = max(right_prof[y0 + row - ymin], x0 + hi + 1)
+                row_end = max(row_end, y0 + row + 1)
             page_of[i] = page
             xs[i] = x0
-            ys[i] = ymin + (0 if flip_v else hbar - h)
+            ys[i] = y0
             flip_hs[i] = flip_h
             flip_vs[i] = flip_v
             remaining[ci] = False
             beta = left_angle[i] if flip_h else right_angle[i]
             mirror = not flip_v
-        ymin += hbar
+        ymin = row_end if slide and row_end > ymin else ymin + hbar
+    if holes:
+        first_fit(items, remaining, 0, edge, heights, widths, lft, rgt, off, grid, page_of, xs, ys, flip_hs,
+                  flip_vs, page)
     return remaining

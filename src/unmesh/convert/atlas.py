@@ -3,7 +3,8 @@
 Texel ``(r, c)`` of patch t (row 0 at the top, base edge along the bottom) goes to page texel
 ``(y_t + r', x_t + c')`` with ``r' = H - 1 - r`` when flipped vertically and ``c' = W - 1 - c``
 when flipped horizontally; only the patch's footprint texels are copied. A corner with local
-patch coordinates (x, y) gets the continuous texel position ``(1 + x s, H - 1 - y s)`` (s =
+patch coordinates (x, y) gets the continuous texel position ``(o + x s, H - o - y s)`` (o: the
+corner offset :attr:`~unmesh.convert.patches.Patches.offset`, 0.5 or 1; s =
 texels per unit; mirrored with the flips) and ``u = X / E``, ``v = 1 - Y / E`` on a page of
 edge E (uv origin bottom-left, as in OBJ and the rasteriser).
 
@@ -24,7 +25,7 @@ import numpy as np
 
 from unmesh.convert._patch_kernels import footprints
 from unmesh.convert.packing import Placement
-from unmesh.convert.patches import Patches, TriangleFrames
+from unmesh.convert.patches import CORNER_OFFSET, Patches, TriangleFrames
 from unmesh.convert.textured import TexturedMesh
 from unmesh.meshes import TriangleMesh
 from unmesh.render.raster import corner_normals
@@ -32,13 +33,15 @@ from unmesh.render.raster import corner_normals
 __all__ = ["assemble", "patch_corners", "patch_masks"]
 
 
-def patch_corners(frames: TriangleFrames, level: np.ndarray, height: np.ndarray) -> np.ndarray:
-    """Corners (F, 3, 2) of every triangle in its patch's texel coordinates (column, row), in face order."""
+def patch_corners(frames: TriangleFrames, level: np.ndarray, height: np.ndarray,
+                  offset: float = CORNER_OFFSET) -> np.ndarray:
+    """Corners (F, 3, 2) of every triangle in its patch's texel coordinates (column, row), in face
+    order; ``offset``: :attr:`unmesh.convert.patches.Patches.offset`."""
     s = 2.0**level / frames.length
     loc = frames.corners_local()
     out = np.empty_like(loc)
-    out[:, :, 0] = 1.0 + loc[:, :, 0] * s[:, None]
-    out[:, :, 1] = (height[:, None] - 1.0) - loc[:, :, 1] * s[:, None]
+    out[:, :, 0] = offset + loc[:, :, 0] * s[:, None]
+    out[:, :, 1] = (height[:, None] - offset) - loc[:, :, 1] * s[:, None]
     return out
 
 
@@ -55,7 +58,7 @@ def assemble(mesh: TriangleMesh, frames: TriangleFrames, patches: Patches, place
              normal_map: bool, mipmaps: bool = False) -> TexturedMesh:
     """Build the pages and the per-page meshes of a conversion."""
     w, h = patches.width, patches.height
-    corners = patch_corners(frames, patches.level, h)
+    corners = patch_corners(frames, patches.level, h, patches.offset)
     _, flat, offs = patch_masks(corners, w, h)
     # every footprint texel: its patch, row, column
     pix = np.flatnonzero(flat)
@@ -109,8 +112,8 @@ def _tangent_normals(part: TriangleMesh, on: np.ndarray, frames: TriangleFrames,
     rot = frames.rotation[t]
     cn_loc = np.einsum("pij,pkj->pki", rot, cn[row_of[t]])
     h = frames.length[t] / 2.0 ** patches.level[t]
-    lx = (c + 0.5 - 1.0) * h
-    ly = (patches.height[t] - 1.0 - (r + 0.5)) * h
+    lx = (c + 0.5 - patches.offset) * h
+    ly = (patches.height[t] - patches.offset - (r + 0.5)) * h
     loc = frames.corners_local()[t]  # (P, 3, 2) face order
     # barycentric coordinates in the face's corner order, clamped to the triangle
     a, b, cc = loc[:, 0], loc[:, 1], loc[:, 2]

@@ -13,11 +13,17 @@ patches (an extension: Algorithm 6.1 would start a new row, which wastes most of
 few patches share a height); when the tallest remaining patch no longer fits below the last
 row, the rows go on with the patches that do.
 
-Pages: when the remaining footprints fill the smallest power-of-two page that could hold them
-to at least ``target - 0.1`` and they all fit, that page ends the atlas; otherwise a page of the
-largest power-of-two edge they can fill completely (at most ``page_size``) is packed and the
-rest goes on. So every page but possibly the last is full, and the last is small. Fill is
-reported per page.
+Extensions (on by default, :func:`pack`): placed patches *slide* up and left into the gaps
+of the rows above; patches of at least a quarter of the page edge go first, and the patches
+left over when the rows are done go into the remaining holes, both by a bottom-left first fit
+on the page's texel grid (:func:`unmesh.convert._packing_kernels.first_fit`).
+
+Pages: a chain of full pages, each of the largest power-of-two edge (at most ``page_size``, at
+least :data:`MIN_FULL_PAGE`) the remaining footprints can fill; at every link the smallest page
+that would take all the rest is a candidate end of the atlas. The candidates are packed in the
+order of their total page area and the first that takes all its patches ends the atlas (one that
+does not is followed by a page of twice the edge, or by itself full plus a page for the rest), so
+the atlas has the smallest total area among these ends. Fill is reported per page.
 
 Example
 -------
@@ -31,14 +37,16 @@ Example
 
 from __future__ import annotations
 
+import heapq
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
 
-from unmesh.convert._packing_kernels import pack_page
+from unmesh.convert._packing_kernels import SCAN, pack_page
 from unmesh.errors import InputError
 
-__all__ = ["Placement", "base_angles", "pack", "pack_page_reference"]
+__all__ = ["Placement", "base_angles", "first_fit_reference", "pack", "pack_page_reference"]
 
 #: Smallest edge of a page packed full before the rest goes on to further pages (the last page
 #: may be smaller): the quick gallery atlas (600 triangles) gets 6 pages instead of 9 at the
@@ -115,7 +123,7 @@ def pack_page_reference(items: list[int], masks: list[np.ndarray], angles: np.nd
                     break
                 h2 = int(heights[lower].max())
                 cand = np.flatnonzero(lower & (heights > h2 - max(1, int(dh_frac * h2))))
-            al = item_angles[cand]
+            al = item_angles[cand[:SCAN]]  # the first SCAN candidates, as the kernel
             dl = np.abs(al[:, 0] - beta)
             dr = np.abs(al[:, 1] - beta)
             best = int(np.argmin(np.minimum(dl, dr)))
@@ -147,6 +155,42 @@ def pack_page_reference(items: list[int], masks: list[np.ndarray], angles: np.nd
     return [items[k] for k in np.flatnonzero(remaining)]
 
 
+def first_fit_reference(items: list[int], masks: list[np.ndarray], grid: np.ndarray, out: Placement,
+                        page: int) -> list[int]:
+    """Bottom-left first fit (plain numpy reference of
+    :func:`unmesh.convert._packing_kernels.first_fit` over all sizes): every item in order goes
+    to the first free position in raster order in the first of its orientations (unflipped,
+    flipped horizontally, vertically, both) that fits, skipping the positions that failed for
+    an earlier patch of the same size. ``grid`` (E, E) bool is updated; returns the items that
+    did not fit."""
+    edge = grid.shape[0]
+    cursor: dict[tuple[int, int], int] = {}
+    rest = []
+    for i in items:
+        h, w = masks[i].shape
+        orient = [masks[i], masks[i][:, ::-1], masks[i][::-1], masks[i][::-1, ::-1]]
+        pos = cursor.get((h, w), 0)
+        found = -1
+        while h <= edge and w <= edge and pos <= (edge - h) * edge + edge - w:
+            y, x = divmod(pos, edge)
+            if x + w > edge:
+                pos = (y + 1) * edge
+                continue
+            window = grid[y:y + h, x:x + w]
+            found = next((o for o, m in enumerate(orient) if not (window & m).any()), -1)
+            if found >= 0:
+                break
+            pos += 1
+        cursor[(h, w)] = pos
+        if found < 0:
+            rest.append(i)
+            continue
+        grid[y:y + h, x:x + w] |= orient[found]
+        out.page[i], out.x[i], out.y[i] = page, x, y
+        out.flip_h[i], out.flip_v[i] = found in (1, 3), found >= 2
+    return rest
+
+
 def _copy(p: Placement) -> Placement:
     return Placement(p.page.copy(), p.x.copy(), p.y.copy(), p.flip_h.copy(), p.flip_v.copy(), [], [])
 
@@ -172,8 +216,8 @@ def _profile_arrays(masks: list[np.ndarray]) -> tuple[np.ndarray, ...]:
     return heights, widths, lft, rgt, off
 
 
-def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, target: float = 0.9,
-         dh_frac: float = 0.05, best_fit: int = 16) -> Placement:
+def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
+         dh_frac: float = 0.05, best_fit: int = 16, slide: bool = True, holes: bool = True) -> Placement:
     """Pack patch footprints (Algorithm 6.1) into power-of-two pages.
 
     Parameters
@@ -184,9 +228,6 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
         Base angles (left, right), :func:`base_angles`.
     page_size : int
         Largest page edge (a power of two).
-    target : float
-        Fill goal: the last page holds all remaining patches when they fill it to at least
-        ``target - 0.1`` or at least as well as a full page would be filled.
     dh_frac : float
         Height tolerance of a row (fraction of its height).
     best_fit : int
@@ -212,40 +253,80 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048, tar
     area = np.array([m.sum() for m in masks], np.float64)
     left = np.argsort(-heights, kind="stable").astype(np.int64)
 
-    def attempt(items: np.ndarray, edge: int, page: int) -> tuple[Placement, np.ndarray]:
-        trial = _copy(out)
+    def attempt(base: Placement, items: np.ndarray, edge: int, page: int) -> tuple[Placement, np.ndarray]:
+        trial = _copy(base)
         rest = pack_page(items, heights, widths, lft, rgt, off, left_a, right_a, edge, float(dh_frac),
-                         int(best_fit), trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v, page)
+                         int(best_fit), trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v, page, slide,
+                         max(1, edge // 4) if holes else 0, holes)
         return trial, items[rest]
 
-    while len(left):
-        need = area[left].sum()
-        big = int(max(heights[left].max(), widths[left].max()))
+    # A chain of full pages (B: the largest edge the remaining patches can fill); at every link,
+    # the smallest page that would take all the rest (A) is a candidate end of the atlas whose
+    # total page area is known before packing it. The candidates are packed in the order of their
+    # total area; the first one that takes all its patches wins (one that does not becomes two
+    # new candidates: a page of twice the edge, and that page full with the rest on a further
+    # page). The chain has no full pages smaller than MIN_FULL_PAGE: they would split small
+    # atlases into many tiny pages.
+    # heap entries: total area, tie-breaker, pages before, last edge, placement so far, patches left
+    heap: list[tuple[int, int, tuple[int, ...], int, Placement, np.ndarray]] = []
+    finished: tuple[int, tuple[int, ...], Placement] | None = None  # area, pages, placement
+    chain: list[int] = []
+    base, used = out, 0
+    result = None
+    tried: set[tuple[tuple[int, ...], int]] = set()  # candidate ends packed already
+    counter = itertools.count()
+
+    def end_edge(items: np.ndarray) -> int:
+        """The smallest page that could take all ``items`` (at 95 % fill)."""
+        need = area[items].sum()
+        big = int(max(heights[items].max(), widths[items].max()))
         smallest = max(16, 1 << int(np.ceil(np.log2(big))))
-        page = len(out.pages)
-        # A: everything on the smallest page that holds it (at most page_size)
-        edge_a = min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.95))))))
-        trial_a, rest_a = attempt(left, edge_a, page)
-        if len(rest_a) and edge_a < page_size:
-            edge_a *= 2
-            trial_a, rest_a = attempt(left, edge_a, page)
-        # B: a full page of the largest edge the patches can fill
-        edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
-        trial_b, rest_b = (trial_a, rest_a) if edge_b == edge_a else attempt(left, edge_b, page)
-        fill_a = (need - area[rest_a].sum()) / edge_a**2
-        fill_b = (need - area[rest_b].sum()) / edge_b**2
-        # full pages smaller than MIN_FULL_PAGE would split small atlases into many tiny pages
-        small_b = edge_b < min(page_size, MIN_FULL_PAGE)
-        if len(rest_a) == 0 and (fill_a >= target - 0.1 or fill_a >= fill_b - 0.02 or small_b):
-            trial, rest, edge = trial_a, rest_a, edge_a
-        elif len(rest_b) < len(left):
-            trial, rest, edge = trial_b, rest_b, edge_b
-        else:
-            trial, rest, edge = trial_a, rest_a, edge_a
-        if len(rest) == len(left):
-            raise InputError(f"page_size: {page_size} is too small for the patches")
-        out.page, out.x, out.y, out.flip_h, out.flip_v = trial.page, trial.x, trial.y, trial.flip_h, trial.flip_v
-        out.pages.append(edge)
-        out.fill.append(float((need - area[rest].sum()) / edge**2))
-        left = rest
-    return out
+        return min(page_size, max(smallest, 1 << int(np.ceil(np.log2(np.sqrt(need / 0.95))))))
+
+    while result is None:  # again from the end of the chain when every candidate end failed
+        while len(left):
+            need = area[left].sum()
+            big = int(max(heights[left].max(), widths[left].max()))
+            smallest = max(16, 1 << int(np.ceil(np.log2(big))))
+            edge_a = end_edge(left)
+            edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
+            if need <= edge_a**2 and (tuple(chain), edge_a) not in tried:
+                heapq.heappush(heap, (used + edge_a**2, next(counter), tuple(chain), edge_a, base, left))
+            if heap and (edge_a <= edge_b or edge_b < min(page_size, MIN_FULL_PAGE) or used + edge_b**2 >= heap[0][0]):
+                break  # B would be A's page again, a tiny page, or no better than a candidate end
+            trial_b, rest_b = attempt(base, left, edge_b, len(chain))
+            if len(rest_b) == len(left):
+                if not heap:
+                    raise InputError(f"page_size: {page_size} is too small for the patches")
+                break
+            if len(rest_b) == 0:
+                finished = (used + edge_b**2, (*chain, edge_b), trial_b)
+                break
+            chain.append(edge_b)
+            used += edge_b**2
+            base, left = trial_b, rest_b
+        result = finished
+        while heap and (result is None or heap[0][0] < result[0]):
+            total, _, before, edge, base_k, items = heapq.heappop(heap)
+            tried.add((before, edge))
+            trial, rest = attempt(base_k, items, edge, len(before))
+            if len(rest) == 0:
+                result = (total, (*before, edge), trial)
+                continue
+            # the candidate was too small: a page of twice the edge, or this page full and the
+            # rest on a further page
+            if edge < page_size:
+                heapq.heappush(heap, (total - edge**2 + (2 * edge) ** 2, next(counter), before, 2 * edge, base_k, items))
+            if len(rest) < len(items):
+                e2 = end_edge(rest)
+                if area[rest].sum() <= e2**2:
+                    heapq.heappush(heap, (total + e2**2, next(counter), (*before, edge), e2, trial, rest))
+        if result is None and not len(left):
+            break
+    if result is None:
+        raise InputError(f"page_size: {page_size} is too small for the patches")
+    _, pages, placed = result
+    placed.pages = list(pages)
+    per_page = np.bincount(placed.page, weights=area, minlength=len(placed.pages))
+    placed.fill = [float(a / e**2) for a, e in zip(per_page, placed.pages, strict=True)]
+    return placed

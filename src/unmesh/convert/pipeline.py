@@ -138,7 +138,7 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
     t0 = time.perf_counter()
     bar.stage("packing")
     frames = triangle_frames(mesh)
-    corners = patch_corners(frames, patches.level, patches.height)
+    corners = patch_corners(frames, patches.level, patches.height, patches.offset)
     masks, _, _ = patch_masks(corners, patches.width, patches.height)
     place = pack(masks, base_angles(frames.length, frames.apex), opt.page_size)
     times["packing"] = time.perf_counter() - t0

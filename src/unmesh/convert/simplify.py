@@ -98,7 +98,9 @@ def simplify_to_error(mesh: TriangleMesh, cloud: SurfelCloud, bound: float, step
     """The coarsest QEM simplification within ``bound`` (absolute distance) of the surfels.
 
     Bisection over the face count on a log scale; every try simplifies the finest mesh known
-    to be within the bound (so all tries after the first success are cheap).
+    to be within the bound (so all tries after the first success are cheap). A try whose
+    topology is wrong (QEM can pinch a closed surface at one count and not at a slightly
+    larger one) is repeated at 1.15 and 1.3 times the count before the bisection moves up.
 
     A candidate must be edge-manifold with the boundary edges of the input and, when
     ``strict`` (default: when the input is closed), the same Euler characteristic.
@@ -132,7 +134,13 @@ def simplify_to_error(mesh: TriangleMesh, cloud: SurfelCloud, bound: float, step
             break
         cand = simplify_mesh(best, mid)  # from the finest good mesh so far: later tries are cheap
         tries += 1
-        good, _ = check(cand)
+        good, err = check(cand)
+        for grow in (1.15, 1.3):  # a topology failure at one count says little about its neighbours
+            if good or np.isfinite(err) or round(mid * grow) >= hi * 0.97:
+                break
+            cand = simplify_mesh(best, round(mid * grow))
+            tries += 1
+            good, err = check(cand)
         if good:
             hi, best = float(len(cand.faces)), cand
         else:

@@ -111,9 +111,10 @@ def resolutions_example(ctx: ExampleContext) -> None:
 
 @example("convert-atlas", "Packed texture atlas (Fig. 6.2)", section=SECTION)
 def atlas_example(ctx: ExampleContext) -> None:
-    """The colour pages of one conversion (Algorithm 6.1): triangular patches with one-texel
-    borders in rows of similar height, every second one upside down, pushed to the left. Page
-    edges are powers of two; the fill counts the texels the patches need (borders included)."""
+    """The colour pages of one conversion (Algorithm 6.1): triangular patches with their borders
+    in rows of similar height, every second one upside down, pushed to the left and up into the
+    gaps, left-over patches in the holes. Page edges are powers of two; the fill counts the
+    texels the patches need (borders included)."""
     from unmesh.render import save_image
 
     spacing = _spacing(ctx)
@@ -196,7 +197,7 @@ def painted_example(ctx: ExampleContext) -> None:
     mesh = res.mesh
     w, h = patch_size(triangle_frames(mesh), np.asarray(res.report["_levels"]))
     texels = (w * h).astype(float)
-    col = map_colors(np.log2(texels), np.log2(9.0), max(float(np.log2(texels.max())), 4.0), "viridis")
+    col = map_colors(np.log2(texels), np.log2(4.0), max(float(np.log2(texels.max())), 4.0), "viridis")
     split = TriangleMesh(mesh.vertices[mesh.faces].reshape(-1, 3), np.arange(3 * len(mesh.faces)).reshape(-1, 3),
                          vertex_colors=np.repeat(col, 3, axis=0))
     size = 200 if ctx.quick else 340
