@@ -7,8 +7,8 @@ conversion runs twice in this process: once to compile the numba kernels, then t
 stage timings, triangles, patch levels, atlas pages and fill, the mesh error, and PSNR/SSIM of
 the textured mesh against the splatted surfels from 6 views.
 
-Peer pipeline (Open3D Poisson + QEM + xatlas + per-vertex colour baking): not run. Open3D is
-a ~500 MB wheel and xatlas is not installed; the script says so and skips it.
+The peer pipeline (Open3D Poisson + QEM + xatlas + per-vertex colour baking) runs beside this
+conversion in ``bench_convert_peer.py`` (the ``peers`` extra).
 
 Timings on a shared or loaded machine are not trustworthy; the script prints the load average.
 
@@ -99,13 +99,7 @@ def main() -> None:
         ssim.append(structural_similarity(a.color, b.color, channel_axis=2, data_range=1.0))
     print(f"PSNR (pixels covered in both) {np.round(psnr, 1).tolist()} dB, SSIM {np.round(ssim, 3).tolist()}")
     print(f"PSNR (the same pixels but two pixels away from either silhouette) {np.round(psnr_inner, 1).tolist()} dB")
-    try:
-        import open3d  # noqa: F401
-        import xatlas  # noqa: F401
-
-        print("peer pipeline: open3d and xatlas found, but the comparison is not implemented")
-    except ImportError:
-        print("peer pipeline: skipped (open3d, ~500 MB, and xatlas are not installed)")
+    print("peer pipeline: python benchmarks/bench_convert_peer.py (needs the 'peers' extra)")
 
 
 if __name__ == "__main__":
