@@ -96,8 +96,8 @@ def main() -> None:
         ev.append(t1 - t0)
         upd.append(t2 - t1)
         counts.append(s._view.last_count)
-    # a render with nothing repainted: only the image composition of every frame (copies of
-    # the whole image's colour, depth and coverage, the brush and its shadow)
+    # a render with nothing repainted: only the image composition of every frame (the windows
+    # of the old and the new brush rewritten, the brush and its shadow drawn)
     comp = []
     for _ in range(5):
         t = time.perf_counter()

@@ -20,6 +20,7 @@ Example
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
@@ -58,6 +59,28 @@ def environment(directions: np.ndarray) -> np.ndarray:
     sky = np.where((y >= 0)[:, None], _SKY * (0.55 + 0.45 * np.clip(y, 0, 1))[:, None], _GROUND)
     stripe = 0.25 * (np.sin(6.0 * np.arctan2(directions[:, 2], directions[:, 0])) > 0.6)[:, None] * (y > 0)[:, None]
     return np.clip(sky * (1 - band) + _HORIZON * band + stripe, 0.0, 1.0)
+
+
+class _Probe:
+    pass
+
+
+def _refs(owner: Any, name: str) -> int:
+    """References to the array ``owner.<name>`` (less this function's own)."""
+    return sys.getrefcount(getattr(owner, name))
+
+
+_p = _Probe()
+_p.a = np.empty(0)
+#: :func:`_refs` of an array referred to by its owner's attribute only: more means a caller still
+#: holds it (a result handed out earlier, or a view derived from one: views refer to their base).
+_FREE = _refs(_p, "a")
+del _p
+
+
+def _held(owner: Any, name: str) -> bool:
+    """True when something besides ``owner`` refers to its array ``name``."""
+    return _refs(owner, name) > _FREE
 
 
 def same_camera(a: Camera | None, b: Camera) -> bool:
@@ -116,6 +139,12 @@ class PaintView:
         self._mark = 0
         self._g: GBuffer | None = None
         self._color = np.zeros((0, 0, 3))
+        # the composed image handed out by result(): the object with the brush and its shadow
+        self._out_color = np.zeros((0, 0, 3))
+        self._out_depth = np.zeros((0, 0))
+        self._out_cov = np.zeros((0, 0), bool)
+        # windows where the composed image is behind the object image (None: all of it)
+        self._stale: list[tuple[int, int, int, int]] | None = None
         self.shading: Any = "phong"
         self.background: Any = (1.0, 1.0, 1.0)
         self._style = (repr(self.shading), repr(self.background))
@@ -194,6 +223,8 @@ class PaintView:
             self._store(new, arr)
         win = self._window(touched) if touched else None
         if win is not None:
+            if any(_held(self._g, a) for a in ("albedo", "normal", "weight")):
+                self._g = self._g.copy()  # a caller keeps an earlier result's buffers
             self._resolve(win)
         self._partial[dirty] += 1
         self.last_update, self.last_count = "differential", int(len(old) + len(new))
@@ -232,6 +263,9 @@ class PaintView:
             self._g = GBuffer.empty(h, w)
             win = (0, h, 0, w)
             self._color = np.empty((h, w, 3))
+            self._stale = None
+        elif self._stale is not None:
+            self._stale.append(win)
         r.resolve_window(self._g, win)
         self._shade(win)
 
@@ -250,27 +284,51 @@ class PaintView:
             if self._g is not None:
                 h, w = self.camera.shape
                 self._shade((0, h, 0, w))
+                self._stale = None
 
     def result(self, brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RenderResult:
         """The shaded image; ``brush`` = (positions, normals, colours) is drawn with its shadow.
 
-        ``color``, ``depth`` and ``coverage`` are copies (with the brush); ``normal``, ``albedo``
-        and ``weight`` are read-only views of the object's G-buffer, valid until the next update
-        (copying them would cost more than a differential update)."""
+        The arrays are read-only views of the view's buffers, and a frame pays only for what
+        changed: the composed image (object, brush and shadow) is kept, and each call rewrites
+        the windows the last differential updates touched and those of the old and the new
+        brush. The buffers are never changed under a caller: when a result handed out earlier
+        (or any view of its arrays) is still referenced at the next update, the view continues
+        in fresh buffers (one copy of the image), so a kept result stays as it was.
+        """
         assert self._g is not None and self.camera is not None
         g = self._g
-        color = self._color.copy()
-        depth, cov = g.depth.copy(), g.coverage.copy()
+        h, w = self.camera.shape
+        names = ("_out_color", "_out_depth", "_out_cov")
+        if self._out_depth.shape != (h, w) or any(_held(self, a) for a in names):
+            self._out_color, self._out_depth = np.empty((h, w, 3)), np.empty((h, w))
+            self._out_cov = np.empty((h, w), bool)
+            self._stale = None
+        stale = [(0, h, 0, w)] if self._stale is None else self._stale
+        for r0, r1, c0, c1 in stale:
+            self._compose((slice(r0, r1), slice(c0, c1)))
+        self._stale = []
         if brush is not None and len(brush[0]):
-            _draw_brush(g, color, depth, cov, self.camera, brush, self)
-        views = []
-        for a in (g.normal, g.albedo, g.weight):
+            win = _draw_brush(g, self._out_color, self._out_depth, self._out_cov, self.camera, brush, self)
+            if win is not None:
+                self._stale.append(win)
+        out = []
+        for a in (self._out_color, self._out_depth, self._out_cov, g.normal, g.albedo, g.weight):
             v = a.view()
             v.flags.writeable = False
-            views.append(v)
+            out.append(v)
+        return RenderResult(color=out[0], depth=out[1], normal=out[3], coverage=out[2], weight=out[5],
+                            albedo=out[4], camera=self.camera)
+
+    def _compose(self, sl: tuple[slice, slice]) -> None:
+        """Copy the object image into the composed image within ``sl`` (depth ``inf`` where uncovered)."""
+        g = self._g
+        cov = g.coverage[sl]
+        self._out_color[sl] = self._color[sl]
+        self._out_cov[sl] = cov
+        depth = self._out_depth[sl]
+        depth[...] = g.depth[sl]
         np.copyto(depth, np.inf, where=~cov)
-        return RenderResult(color=color, depth=depth, normal=views[0], coverage=cov, weight=views[2],
-                            albedo=views[1], camera=self.camera)
 
 
 def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -285,11 +343,13 @@ def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) ->
 
 
 def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.ndarray, camera: Camera,
-                brush: tuple[np.ndarray, np.ndarray, np.ndarray], view: PaintView) -> None:
+                brush: tuple[np.ndarray, np.ndarray, np.ndarray], view: PaintView
+                ) -> tuple[int, int, int, int] | None:
     """Brush surfels over the object (nearest wins) and the brush's shadow on the object, from a
     light straight above the brush (a shadow map along the brush's mean normal), in the window
-    around the brush only; that window of ``color``, ``depth``, ``coverage`` is rewritten (the
-    object G-buffer ``g`` is not changed)."""
+    around the brush only; that window ``(r0, r1, c0, c1)`` of ``color``, ``depth``, ``coverage``
+    is rewritten and returned (None: the brush is not in view; the object G-buffer ``g`` is not
+    changed)."""
     pos, nrm, col = brush
     n = len(pos)
     ext = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
@@ -297,7 +357,7 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
     row, cl, z = camera.project(pos)
     ok = np.isfinite(row) & np.isfinite(cl) & (z > 0)
     if not ok.any():
-        return
+        return None
     h, w = camera.shape
     f = camera.pixels_per_unit
     rpx = rad * (np.full(int(ok.sum()), f) if camera.is_ortho else f / z[ok])
@@ -307,7 +367,7 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
     r0, r1 = int(max(0, row[ok].min() - pad)), int(min(h, row[ok].max() + pad + 1))
     c0, c1 = int(max(0, cl[ok].min() - pad)), int(min(w, cl[ok].max() + pad + 1))
     if r0 >= r1 or c0 >= c1:
-        return
+        return None
     sl = (slice(r0, r1), slice(c0, c1))
     win = GBuffer(g.albedo[sl].copy(), g.normal[sl].copy(), g.depth[sl].copy(), g.coverage[sl].copy(),
                   g.weight[sl].copy())
@@ -364,4 +424,6 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
         view._g, view._color = saved_g, saved_c
     color[sl] = out
     depth[sl] = win.depth
+    np.copyto(depth[sl], np.inf, where=~win.coverage)
     coverage[sl] = win.coverage
+    return r0, r1, c0, c1
