@@ -104,7 +104,7 @@ def test_frame_composition_equals_whole_image_composition(fine_plane):
     s.render(CAM)
     sid = s.begin_stroke(ROUND, RED)
     bases, kinds = set(), []
-    for k, smp in enumerate(line(n=6, x0=-0.1, x1=0.1) + [None, None]):
+    for k, smp in enumerate([*line(n=6, x0=-0.1, x1=0.1), None, None]):
         if smp is not None:
             s.add_samples(sid, [smp])
         drawn = k % 3 != 2 and k != 7  # the last frame: nothing repainted, the brush removed
@@ -144,3 +144,22 @@ def test_kept_results_are_not_changed_by_later_frames(fine_plane):
     s.render(CAM, brush=False)
     assert s.last_update == "differential"
     assert np.array_equal(albedo_view, before)
+
+
+def test_shadow_map_against_brute_force():
+    """A point is in the brush's shadow iff a brush surfel whose map cell is within 4 cells of
+    the point's is above it (brute force over all pairs)."""
+    from unmesh.paint.view import shadow_test
+
+    rng = np.random.default_rng(3)
+    rad = 0.05
+    brush = np.column_stack([rng.normal(0, 0.2, (300, 2)), rng.uniform(0.0, 0.3, 300)])
+    pts = np.column_stack([rng.uniform(-1, 1, (4000, 2)), rng.uniform(-0.1, 0.4, 4000)])
+    got = shadow_test(brush, pts, rad)
+    lo = brush[:, :2].min(axis=0) - 4.5 * 0.5 * rad
+    cb = np.floor((brush[:, :2] - lo) / (0.5 * rad))
+    cp = np.floor((pts[:, :2] - lo) / (0.5 * rad))
+    near = ((cp[:, None, :] - cb[None, :, :]) ** 2).sum(axis=2) <= 16
+    want = (near & (brush[None, :, 2] > pts[:, None, 2] + 1e-9)).any(axis=1)
+    assert np.array_equal(got, want)
+    assert 200 < want.sum() < 3800

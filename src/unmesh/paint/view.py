@@ -31,10 +31,8 @@ from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.render.splat import SurfelArrays
-from unmesh.spatial import KDTree
-from unmesh.surfels import tangent_frame
 
-__all__ = ["FULL_FRACTION", "MAX_PARTIAL", "PaintView", "environment", "same_camera"]
+__all__ = ["FULL_FRACTION", "MAX_PARTIAL", "PaintView", "environment", "same_camera", "shadow_test"]
 
 FULL_FRACTION = 0.4
 MAX_PARTIAL = 64
@@ -342,6 +340,51 @@ def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) ->
     return cam.eye + pc @ cam.rotation
 
 
+#: Reach (in map cells of half a brush surfel radius) of a brush surfel's shadow, and its disc
+#: of cell offsets (du, dv).
+_SHADOW_REACH = 4
+_SHADOW_STENCIL = tuple(a[np.hypot(*np.mgrid[-4:5, -4:5]).ravel() <= _SHADOW_REACH]
+                        for a in (np.mgrid[-4:5, -4:5][0].ravel(), np.mgrid[-4:5, -4:5][1].ravel()))
+
+
+def shadow_test(brush: np.ndarray, points: np.ndarray, rad: float) -> np.ndarray:
+    """A shadow map of the brush along the light (the local z axis): which ``points`` lie in shadow.
+
+    The map has cells of ``rad / 2`` in local (x, y); each brush surfel raises the cells within
+    4 cells of its own (a disc: its shadow reaches about 2 ``rad``, as the brush's splats) to its
+    height; a point is shadowed where the map is above it.
+
+    Parameters
+    ----------
+    brush, points : (N, 3), (M, 3) float64
+        Brush surfels and surface points in the light frame (x, y across, z towards the light).
+    rad : float
+        Brush surfel radius.
+
+    Returns
+    -------
+    (M,) bool
+
+    Example
+    -------
+    >>> shadow_test(np.array([[0.0, 0, 1]]), np.array([[0.0, 0, 0], [0, 0, 2], [1, 0, 0]]), 0.1).tolist()
+    [True, False, False]
+    """
+    cell = 0.5 * rad
+    lo = brush[:, :2].min(axis=0) - (_SHADOW_REACH + 0.5) * cell
+    cells = np.floor((brush[:, :2] - lo) / cell).astype(np.int64)
+    nu, nv = (int(v) + _SHADOW_REACH + 1 for v in cells.max(axis=0))
+    du, dv = _SHADOW_STENCIL
+    flat = ((cells[:, 0, None] + du) * nv + (cells[:, 1, None] + dv)).ravel()
+    smap = np.full(nu * nv, -np.inf)
+    np.maximum.at(smap, flat, np.repeat(brush[:, 2], len(du)))
+    pc = np.floor((points[:, :2] - lo) / cell).astype(np.int64)
+    inside = (pc[:, 0] >= 0) & (pc[:, 1] >= 0) & (pc[:, 0] < nu) & (pc[:, 1] < nv)
+    out = np.zeros(len(points), bool)
+    out[inside] = smap[pc[inside, 0] * nv + pc[inside, 1]] > points[inside, 2] + 1e-9
+    return out
+
+
 def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.ndarray, camera: Camera,
                 brush: tuple[np.ndarray, np.ndarray, np.ndarray], view: PaintView
                 ) -> tuple[int, int, int, int] | None:
@@ -378,21 +421,14 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
         world = unproject(camera, rr + r0, cc + c0, win.depth[cov])
         up = nrm.mean(axis=0)
         up = up / max(np.linalg.norm(up), 1e-12)
-        t1, t2 = tangent_frame(up[None])
+        e = np.zeros(3)
+        e[np.argmin(np.abs(up))] = 1.0
+        t1 = np.cross(e, up)
+        t1 /= np.linalg.norm(t1)
+        frame = np.stack([t1, np.cross(up, t1), up])  # light frame: rows t1, t2, up
         centre = pos.mean(axis=0)
-        rel_b = pos - centre
-        bu = np.stack([rel_b @ t1[0], rel_b @ t2[0]], axis=1)
-        bh = rel_b @ up
-        rel = world - centre
-        pu = np.stack([rel @ t1[0], rel @ t2[0]], axis=1)
-        near = np.abs(pu).max(axis=1) < np.abs(bu).max() + 2 * rad
-        if near.any():
-            dist, idx = KDTree(bu).knn(pu[near], 1)
-            shadow = np.zeros(len(pu), bool)
-            shadow[near] = (dist[:, 0] < 2.0 * rad) & (bh[idx[:, 0]] > (rel[near] @ up) + 1e-9)
-            sub = win.albedo[cov]
-            sub[shadow] *= 0.55
-            win.albedo[cov] = sub
+        shadow = shadow_test((pos - centre) @ frame.T, (world - centre) @ frame.T, rad)
+        win.albedo[rr[shadow], cc[shadow]] *= 0.55
     # brush surfels as small discs with a z-test
     R = int(np.ceil(rpx.max()))
     oy, ox = np.mgrid[-R:R + 1, -R:R + 1]
@@ -403,12 +439,10 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
     src = np.broadcast_to(np.flatnonzero(ok)[:, None], pr.shape)[inside]
     flat = (pr[inside] - r0) * (c1 - c0) + (pc[inside] - c0)
     zz = z[src]
-    order = np.lexsort((zz, flat))  # nearest fragment first per pixel
-    flat, src, zz = flat[order], src[order], zz[order]
-    first = np.ones(len(flat), bool)
-    first[1:] = flat[1:] != flat[:-1]
-    flat, src, zz = flat[first], src[first], zz[first]
-    front = zz < win.depth.reshape(-1)[flat]
+    # nearest fragment per pixel (a z-buffer), in front of the object
+    zb = np.full((r1 - r0) * (c1 - c0), np.inf)
+    np.minimum.at(zb, flat, zz)
+    front = (zz == zb[flat]) & (zz < win.depth.reshape(-1)[flat])
     flat, src, zz = flat[front], src[front], zz[front]
     win.albedo.reshape(-1, 3)[flat] = col[src]
     win.normal.reshape(-1, 3)[flat] = nrm[src]
