@@ -86,43 +86,48 @@ def main() -> None:
         t_full.append(time.perf_counter() - t)
 
     sid = s.begin_stroke(brush, Paint("oil", (0.1, 0.3, 0.8)))
-    ev, upd, counts = [], [], []
+    ev, upd, upd_cpu, counts = [], [], [], []
     for k, p in enumerate(pts[1:args.events + 1]):
         t0 = time.perf_counter()
         s.add_samples(sid, [Sample(0.02 * (k + 1), tuple(p), 0.7)])
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), time.process_time()
         s.render(cam)
         t2 = time.perf_counter()
+        upd_cpu.append(time.process_time() - c1)
         ev.append(t1 - t0)
         upd.append(t2 - t1)
         counts.append(s._view.last_count)
-    # a render with nothing repainted: only the image composition of every frame (copies of
-    # the whole image's colour, depth and coverage, the brush and its shadow)
-    comp = []
+    # a render with nothing repainted: only the image composition of every frame (the windows
+    # of the old and the new brush rewritten, the brush and its shadow drawn)
+    comp, comp_cpu = [], []
     for _ in range(5):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         s.render(cam)
         comp.append(time.perf_counter() - t)
+        comp_cpu.append(time.process_time() - c)
     s.end_stroke(sid)
     ev_a, upd_a = np.array(ev), np.array(upd)
     print(f"paint events: {len(ev)}; event alone {1e3 * np.median(ev_a):.1f} ms median; with the differential "
           f"update {1.0 / np.median(ev_a + upd_a):.1f} events/s (median), {len(ev) / (ev_a + upd_a).sum():.1f} events/s (mean)")
     print(f"differential updates per event: {int(np.median(counts))} surfels median, {1e3 * np.median(upd_a):.1f} ms "
-          f"median (unsplat/splat, normalising and shading their window, and the image composition: "
-          f"{1e3 * np.median(comp):.1f} ms median with nothing repainted)")
+          f"median, {1e3 * np.median(upd_cpu):.1f} ms CPU (unsplat/splat, normalising and shading their window, and "
+          f"the image composition: {1e3 * np.median(comp):.1f} ms median, {1e3 * np.median(comp_cpu):.1f} ms CPU, "
+          f"with nothing repainted)")
 
     # a differential update of 5,000 surfels: unsplat + splat of the same 5,000 visible rows
     r = s._view.renderer
     rows = s.surface.visible_rows()[:2500]
     arr = SurfelArrays(np.ascontiguousarray(s.surface.pos[rows]), np.ascontiguousarray(s.surface.nrm[rows]),
                        np.ascontiguousarray(s.surface.rad[rows]), None, s.surface.colors(rows))
-    times = []
+    times, cpu = [], []
     for _ in range(10):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         r.unsplat(arr)
         r.splat(arr)
         times.append(time.perf_counter() - t)
-    print(f"differential update of 5,000 surfels (2,500 unsplat + 2,500 splat): {1e3 * np.median(times):.2f} ms median")
+        cpu.append(time.process_time() - c)
+    print(f"differential update of 5,000 surfels (2,500 unsplat + 2,500 splat): {1e3 * np.median(times):.2f} ms median, "
+          f"{1e3 * np.median(cpu):.2f} ms CPU")
     t = time.perf_counter()
     r.gbuffer()
     print(f"  normalising the {w}x{h} G-buffer after it: {1e3 * (time.perf_counter() - t):.1f} ms")

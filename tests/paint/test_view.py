@@ -1,9 +1,11 @@
 """Rendering (5.7): differential updates equal full re-renders where the depth is unchanged."""
 
 import numpy as np
+import pytest
 
 from tests.paint.conftest import RED, ROUND, line
 from unmesh.paint import Brush, Paint, PaintOptions, Sample, Session
+from unmesh.paint.session import _BRISTLE
 from unmesh.paint.view import PaintView
 from unmesh.render import Camera
 from unmesh.shapes import by_name
@@ -76,3 +78,88 @@ def test_brush_is_drawn(session):
     without = session.render(CAM, brush=False)
     session.end_stroke(sid)
     assert np.abs(with_brush.color - without.color).max() > 0.1
+
+
+def _composed(view, brush):
+    """Reference composition: whole-image copies of the object image with the brush drawn in."""
+    from unmesh.paint.view import _draw_brush
+
+    g = view._g
+    color, depth, cov = view._color.copy(), g.depth.copy(), g.coverage.copy()
+    np.copyto(depth, np.inf, where=~cov)
+    if brush is not None:
+        _draw_brush(g, color, depth, cov, view.camera, brush, view)
+    return color, depth, cov
+
+
+@pytest.fixture(scope="module")
+def fine_plane():
+    return by_name("plane", size=1.0).surfels(0.02)
+
+
+def test_frame_composition_equals_whole_image_composition(fine_plane):
+    """Dirty windows only: after paint events with a moving brush (and frames without it), every
+    frame equals the composition of whole-image copies; a dropped result's buffers are reused."""
+    s = Session(fine_plane, PaintOptions(haptics=False))
+    s.render(CAM)
+    sid = s.begin_stroke(ROUND, RED)
+    bases, kinds = set(), []
+    for k, smp in enumerate([*line(n=6, x0=-0.1, x1=0.1), None, None]):
+        if smp is not None:
+            s.add_samples(sid, [smp])
+        drawn = k % 3 != 2 and k != 7  # the last frame: nothing repainted, the brush removed
+        res = s.render(CAM, brush=drawn)
+        assert not res.color.flags.writeable and not res.depth.flags.writeable
+        b = s._last_brush
+        pos, nrm = b.surfels()
+        brush = (pos, nrm, np.where(b.vw[:, None] > 0, b.wet, _BRISTLE)) if drawn else None
+        color, depth, cov = _composed(s._view, brush)
+        assert np.array_equal(res.coverage, cov)
+        assert np.array_equal(res.depth, depth)
+        np.testing.assert_allclose(res.color, color, rtol=0, atol=1e-12)
+        bases.add(id(res.color.base))
+        kinds.append(s.last_update)
+        del res
+    s.end_stroke(sid)
+    assert kinds.count("differential") >= 5
+    assert len(bases) == 1  # nothing held: one set of buffers, windows rewritten in place
+
+
+def test_kept_results_are_not_changed_by_later_frames(fine_plane):
+    s = Session(fine_plane, PaintOptions(haptics=False))
+    first = s.render(CAM, brush=False)
+    keep = {k: np.array(getattr(first, k)) for k in ("color", "depth", "coverage", "albedo", "normal", "weight")}
+    albedo_view = first.albedo[10:50]  # a view of a kept result's buffer keeps it too
+    before = albedo_view.copy()
+    sid = s.begin_stroke(ROUND, RED)
+    s.add_samples(sid, line(n=2, x0=-0.03, x1=0.03))
+    second = s.render(CAM)
+    s.end_stroke(sid)
+    assert s.last_update == "differential"
+    assert np.abs(second.color - first.color).max() > 0.1
+    for k, v in keep.items():
+        assert np.array_equal(getattr(first, k), v), k
+    del first
+    s.stroke(line(n=2, z=0.1, x0=-0.03, x1=0.03), brush=ROUND, paint=RED)
+    s.render(CAM, brush=False)
+    assert s.last_update == "differential"
+    assert np.array_equal(albedo_view, before)
+
+
+def test_shadow_map_against_brute_force():
+    """A point is in the brush's shadow iff a brush surfel whose map cell is within 4 cells of
+    the point's is above it (brute force over all pairs)."""
+    from unmesh.paint.view import shadow_test
+
+    rng = np.random.default_rng(3)
+    rad = 0.05
+    brush = np.column_stack([rng.normal(0, 0.2, (300, 2)), rng.uniform(0.0, 0.3, 300)])
+    pts = np.column_stack([rng.uniform(-1, 1, (4000, 2)), rng.uniform(-0.1, 0.4, 4000)])
+    got = shadow_test(brush, pts, rad)
+    lo = brush[:, :2].min(axis=0) - 4.5 * 0.5 * rad
+    cb = np.floor((brush[:, :2] - lo) / (0.5 * rad))
+    cp = np.floor((pts[:, :2] - lo) / (0.5 * rad))
+    near = ((cp[:, None, :] - cb[None, :, :]) ** 2).sum(axis=2) <= 16
+    want = (near & (brush[None, :, 2] > pts[:, None, 2] + 1e-9)).any(axis=1)
+    assert np.array_equal(got, want)
+    assert 200 < want.sum() < 3800

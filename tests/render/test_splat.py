@@ -361,3 +361,19 @@ def test_backface_culling_drops_only_the_far_side():
     assert b.coverage.sum() >= 0.98 * a.coverage.sum()
     persp = Camera((0, 0, 3), (0, 0, 0), width=48, height=48, fov=50)
     assert render(sphere, persp, splat=cull).coverage.sum() >= 0.98 * render(sphere, persp).coverage.sum()
+
+
+def test_work_buffers_do_not_grow_when_precisions_alternate():
+    """The thread's work buffers are kept per dtype: renderers of both precisions in turn (paint
+    view and render() in one session) reuse them instead of growing them on every switch."""
+    from unmesh.render import splat as splat_module
+
+    cam = CAMERAS["perspective"]
+    cloud = fibonacci_sphere(500)
+    renderers = [SplatRenderer(cam, SplatOptions(precision=p)) for p in ("single", "double")]
+    sizes = []
+    for _ in range(6):
+        for r in renderers:
+            r.render(cloud)
+        sizes.append(sum(b.nbytes for b in splat_module._SCRATCH.buffers.values()))
+    assert sizes[-1] == sizes[1]

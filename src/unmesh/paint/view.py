@@ -20,6 +20,7 @@ Example
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
@@ -30,10 +31,8 @@ from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.render.splat import SurfelArrays
-from unmesh.spatial import KDTree
-from unmesh.surfels import tangent_frame
 
-__all__ = ["FULL_FRACTION", "MAX_PARTIAL", "PaintView", "environment", "same_camera"]
+__all__ = ["FULL_FRACTION", "MAX_PARTIAL", "PaintView", "environment", "same_camera", "shadow_test"]
 
 FULL_FRACTION = 0.4
 MAX_PARTIAL = 64
@@ -58,6 +57,28 @@ def environment(directions: np.ndarray) -> np.ndarray:
     sky = np.where((y >= 0)[:, None], _SKY * (0.55 + 0.45 * np.clip(y, 0, 1))[:, None], _GROUND)
     stripe = 0.25 * (np.sin(6.0 * np.arctan2(directions[:, 2], directions[:, 0])) > 0.6)[:, None] * (y > 0)[:, None]
     return np.clip(sky * (1 - band) + _HORIZON * band + stripe, 0.0, 1.0)
+
+
+class _Probe:
+    pass
+
+
+def _refs(owner: Any, name: str) -> int:
+    """References to the array ``owner.<name>`` (less this function's own)."""
+    return sys.getrefcount(getattr(owner, name))
+
+
+_p = _Probe()
+_p.a = np.empty(0)
+#: :func:`_refs` of an array referred to by its owner's attribute only: more means a caller still
+#: holds it (a result handed out earlier, or a view derived from one: views refer to their base).
+_FREE = _refs(_p, "a")
+del _p
+
+
+def _held(owner: Any, name: str) -> bool:
+    """True when something besides ``owner`` refers to its array ``name``."""
+    return _refs(owner, name) > _FREE
 
 
 def same_camera(a: Camera | None, b: Camera) -> bool:
@@ -116,6 +137,12 @@ class PaintView:
         self._mark = 0
         self._g: GBuffer | None = None
         self._color = np.zeros((0, 0, 3))
+        # the composed image handed out by result(): the object with the brush and its shadow
+        self._out_color = np.zeros((0, 0, 3))
+        self._out_depth = np.zeros((0, 0))
+        self._out_cov = np.zeros((0, 0), bool)
+        # windows where the composed image is behind the object image (None: all of it)
+        self._stale: list[tuple[int, int, int, int]] | None = None
         self.shading: Any = "phong"
         self.background: Any = (1.0, 1.0, 1.0)
         self._style = (repr(self.shading), repr(self.background))
@@ -194,6 +221,8 @@ class PaintView:
             self._store(new, arr)
         win = self._window(touched) if touched else None
         if win is not None:
+            if any(_held(self._g, a) for a in ("albedo", "normal", "weight")):
+                self._g = self._g.copy()  # a caller keeps an earlier result's buffers
             self._resolve(win)
         self._partial[dirty] += 1
         self.last_update, self.last_count = "differential", int(len(old) + len(new))
@@ -232,6 +261,9 @@ class PaintView:
             self._g = GBuffer.empty(h, w)
             win = (0, h, 0, w)
             self._color = np.empty((h, w, 3))
+            self._stale = None
+        elif self._stale is not None:
+            self._stale.append(win)
         r.resolve_window(self._g, win)
         self._shade(win)
 
@@ -250,27 +282,51 @@ class PaintView:
             if self._g is not None:
                 h, w = self.camera.shape
                 self._shade((0, h, 0, w))
+                self._stale = None
 
     def result(self, brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RenderResult:
         """The shaded image; ``brush`` = (positions, normals, colours) is drawn with its shadow.
 
-        ``color``, ``depth`` and ``coverage`` are copies (with the brush); ``normal``, ``albedo``
-        and ``weight`` are read-only views of the object's G-buffer, valid until the next update
-        (copying them would cost more than a differential update)."""
+        The arrays are read-only views of the view's buffers, and a frame pays only for what
+        changed: the composed image (object, brush and shadow) is kept, and each call rewrites
+        the windows the last differential updates touched and those of the old and the new
+        brush. The buffers are never changed under a caller: when a result handed out earlier
+        (or any view of its arrays) is still referenced at the next update, the view continues
+        in fresh buffers (one copy of the image), so a kept result stays as it was.
+        """
         assert self._g is not None and self.camera is not None
         g = self._g
-        color = self._color.copy()
-        depth, cov = g.depth.copy(), g.coverage.copy()
+        h, w = self.camera.shape
+        names = ("_out_color", "_out_depth", "_out_cov")
+        if self._out_depth.shape != (h, w) or any(_held(self, a) for a in names):
+            self._out_color, self._out_depth = np.empty((h, w, 3)), np.empty((h, w))
+            self._out_cov = np.empty((h, w), bool)
+            self._stale = None
+        stale = [(0, h, 0, w)] if self._stale is None else self._stale
+        for r0, r1, c0, c1 in stale:
+            self._compose((slice(r0, r1), slice(c0, c1)))
+        self._stale = []
         if brush is not None and len(brush[0]):
-            _draw_brush(g, color, depth, cov, self.camera, brush, self)
-        views = []
-        for a in (g.normal, g.albedo, g.weight):
+            win = _draw_brush(g, self._out_color, self._out_depth, self._out_cov, self.camera, brush, self)
+            if win is not None:
+                self._stale.append(win)
+        out = []
+        for a in (self._out_color, self._out_depth, self._out_cov, g.normal, g.albedo, g.weight):
             v = a.view()
             v.flags.writeable = False
-            views.append(v)
+            out.append(v)
+        return RenderResult(color=out[0], depth=out[1], normal=out[3], coverage=out[2], weight=out[5],
+                            albedo=out[4], camera=self.camera)
+
+    def _compose(self, sl: tuple[slice, slice]) -> None:
+        """Copy the object image into the composed image within ``sl`` (depth ``inf`` where uncovered)."""
+        g = self._g
+        cov = g.coverage[sl]
+        self._out_color[sl] = self._color[sl]
+        self._out_cov[sl] = cov
+        depth = self._out_depth[sl]
+        depth[...] = g.depth[sl]
         np.copyto(depth, np.inf, where=~cov)
-        return RenderResult(color=color, depth=depth, normal=views[0], coverage=cov, weight=views[2],
-                            albedo=views[1], camera=self.camera)
 
 
 def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -284,12 +340,59 @@ def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) ->
     return cam.eye + pc @ cam.rotation
 
 
+#: Reach (in map cells of half a brush surfel radius) of a brush surfel's shadow, and its disc
+#: of cell offsets (du, dv).
+_SHADOW_REACH = 4
+_SHADOW_STENCIL = tuple(a[np.hypot(*np.mgrid[-4:5, -4:5]).ravel() <= _SHADOW_REACH]
+                        for a in (np.mgrid[-4:5, -4:5][0].ravel(), np.mgrid[-4:5, -4:5][1].ravel()))
+
+
+def shadow_test(brush: np.ndarray, points: np.ndarray, rad: float) -> np.ndarray:
+    """A shadow map of the brush along the light (the local z axis): which ``points`` lie in shadow.
+
+    The map has cells of ``rad / 2`` in local (x, y); each brush surfel raises the cells within
+    4 cells of its own (a disc: its shadow reaches about 2 ``rad``, as the brush's splats) to its
+    height; a point is shadowed where the map is above it.
+
+    Parameters
+    ----------
+    brush, points : (N, 3), (M, 3) float64
+        Brush surfels and surface points in the light frame (x, y across, z towards the light).
+    rad : float
+        Brush surfel radius.
+
+    Returns
+    -------
+    (M,) bool
+
+    Example
+    -------
+    >>> shadow_test(np.array([[0.0, 0, 1]]), np.array([[0.0, 0, 0], [0, 0, 2], [1, 0, 0]]), 0.1).tolist()
+    [True, False, False]
+    """
+    cell = 0.5 * rad
+    lo = brush[:, :2].min(axis=0) - (_SHADOW_REACH + 0.5) * cell
+    cells = np.floor((brush[:, :2] - lo) / cell).astype(np.int64)
+    nu, nv = (int(v) + _SHADOW_REACH + 1 for v in cells.max(axis=0))
+    du, dv = _SHADOW_STENCIL
+    flat = ((cells[:, 0, None] + du) * nv + (cells[:, 1, None] + dv)).ravel()
+    smap = np.full(nu * nv, -np.inf)
+    np.maximum.at(smap, flat, np.repeat(brush[:, 2], len(du)))
+    pc = np.floor((points[:, :2] - lo) / cell).astype(np.int64)
+    inside = (pc[:, 0] >= 0) & (pc[:, 1] >= 0) & (pc[:, 0] < nu) & (pc[:, 1] < nv)
+    out = np.zeros(len(points), bool)
+    out[inside] = smap[pc[inside, 0] * nv + pc[inside, 1]] > points[inside, 2] + 1e-9
+    return out
+
+
 def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.ndarray, camera: Camera,
-                brush: tuple[np.ndarray, np.ndarray, np.ndarray], view: PaintView) -> None:
+                brush: tuple[np.ndarray, np.ndarray, np.ndarray], view: PaintView
+                ) -> tuple[int, int, int, int] | None:
     """Brush surfels over the object (nearest wins) and the brush's shadow on the object, from a
     light straight above the brush (a shadow map along the brush's mean normal), in the window
-    around the brush only; that window of ``color``, ``depth``, ``coverage`` is rewritten (the
-    object G-buffer ``g`` is not changed)."""
+    around the brush only; that window ``(r0, r1, c0, c1)`` of ``color``, ``depth``, ``coverage``
+    is rewritten and returned (None: the brush is not in view; the object G-buffer ``g`` is not
+    changed)."""
     pos, nrm, col = brush
     n = len(pos)
     ext = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
@@ -297,7 +400,7 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
     row, cl, z = camera.project(pos)
     ok = np.isfinite(row) & np.isfinite(cl) & (z > 0)
     if not ok.any():
-        return
+        return None
     h, w = camera.shape
     f = camera.pixels_per_unit
     rpx = rad * (np.full(int(ok.sum()), f) if camera.is_ortho else f / z[ok])
@@ -307,7 +410,7 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
     r0, r1 = int(max(0, row[ok].min() - pad)), int(min(h, row[ok].max() + pad + 1))
     c0, c1 = int(max(0, cl[ok].min() - pad)), int(min(w, cl[ok].max() + pad + 1))
     if r0 >= r1 or c0 >= c1:
-        return
+        return None
     sl = (slice(r0, r1), slice(c0, c1))
     win = GBuffer(g.albedo[sl].copy(), g.normal[sl].copy(), g.depth[sl].copy(), g.coverage[sl].copy(),
                   g.weight[sl].copy())
@@ -318,21 +421,14 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
         world = unproject(camera, rr + r0, cc + c0, win.depth[cov])
         up = nrm.mean(axis=0)
         up = up / max(np.linalg.norm(up), 1e-12)
-        t1, t2 = tangent_frame(up[None])
+        e = np.zeros(3)
+        e[np.argmin(np.abs(up))] = 1.0
+        t1 = np.cross(e, up)
+        t1 /= np.linalg.norm(t1)
+        frame = np.stack([t1, np.cross(up, t1), up])  # light frame: rows t1, t2, up
         centre = pos.mean(axis=0)
-        rel_b = pos - centre
-        bu = np.stack([rel_b @ t1[0], rel_b @ t2[0]], axis=1)
-        bh = rel_b @ up
-        rel = world - centre
-        pu = np.stack([rel @ t1[0], rel @ t2[0]], axis=1)
-        near = np.abs(pu).max(axis=1) < np.abs(bu).max() + 2 * rad
-        if near.any():
-            dist, idx = KDTree(bu).knn(pu[near], 1)
-            shadow = np.zeros(len(pu), bool)
-            shadow[near] = (dist[:, 0] < 2.0 * rad) & (bh[idx[:, 0]] > (rel[near] @ up) + 1e-9)
-            sub = win.albedo[cov]
-            sub[shadow] *= 0.55
-            win.albedo[cov] = sub
+        shadow = shadow_test((pos - centre) @ frame.T, (world - centre) @ frame.T, rad)
+        win.albedo[rr[shadow], cc[shadow]] *= 0.55
     # brush surfels as small discs with a z-test
     R = int(np.ceil(rpx.max()))
     oy, ox = np.mgrid[-R:R + 1, -R:R + 1]
@@ -343,12 +439,10 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
     src = np.broadcast_to(np.flatnonzero(ok)[:, None], pr.shape)[inside]
     flat = (pr[inside] - r0) * (c1 - c0) + (pc[inside] - c0)
     zz = z[src]
-    order = np.lexsort((zz, flat))  # nearest fragment first per pixel
-    flat, src, zz = flat[order], src[order], zz[order]
-    first = np.ones(len(flat), bool)
-    first[1:] = flat[1:] != flat[:-1]
-    flat, src, zz = flat[first], src[first], zz[first]
-    front = zz < win.depth.reshape(-1)[flat]
+    # nearest fragment per pixel (a z-buffer), in front of the object
+    zb = np.full((r1 - r0) * (c1 - c0), np.inf)
+    np.minimum.at(zb, flat, zz)
+    front = (zz == zb[flat]) & (zz < win.depth.reshape(-1)[flat])
     flat, src, zz = flat[front], src[front], zz[front]
     win.albedo.reshape(-1, 3)[flat] = col[src]
     win.normal.reshape(-1, 3)[flat] = nrm[src]
@@ -364,4 +458,6 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
         view._g, view._color = saved_g, saved_c
     color[sl] = out
     depth[sl] = win.depth
+    np.copyto(depth[sl], np.inf, where=~win.coverage)
     coverage[sl] = win.coverage
+    return r0, r1, c0, c1

@@ -941,71 +941,79 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
     invf = 1.0 / f
     inv_rf2 = 1.0 / (rfilter * rfilter) if rfilter > 0.0 else np.inf
     rmax = 0 if clip_tree is None else max_rows(clip_offsets)
+    # a thin parallel loop over a plain function: the tile body is typed and optimised once, not
+    # as part of the parfor (its array allocations would each become a parfor of their own)
     for kk in prange(order.shape[0]):
-        t = order[kk]
-        a = offsets[t]
-        b = offsets[t + 1]
-        if a == b:
-            continue
-        x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
-        m = tw * th
-        lz = load_tile(zvis, x0, y0, tw, th)
-        lw = np.zeros(m)
-        lc = np.zeros((m, 3))
-        ln = np.zeros((m, 3))
-        ld = np.zeros(m)
-        lcount = np.zeros(m, dtype=np.int32)
-        if clip_tree is None:
-            work = np.empty((1, WORK_COLUMNS))
-        else:
-            work = clip_work(clip_tree.shape[0], rmax)
-        if visibility:
-            cap = 0
-            for k in range(a, b):
-                w_ = min(int(Pt[k, 20]), x0 + tw - 1) - max(int(Pt[k, 19]), x0) + 1
-                h_ = min(int(Pt[k, 22]), y0 + th - 1) - max(int(Pt[k, 21]), y0) + 1
-                if w_ > 0 and h_ > 0:
-                    cap += w_ * h_
-            frag_q = np.empty(cap, dtype=np.int32)
-            frag_k = np.empty(cap, dtype=np.int64)
-            frag_rho = np.empty(cap)
-            frag_z = np.empty(cap)
-            nrec = _tile_pass(0, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
-                              eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
-                              clip_leaf, work, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
-            for i in range(th):
-                for j in range(tw):
-                    zvis[y0 + i, x0 + j] = lz[i * tw + j]
-            _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
-        else:
-            dummy_i = np.empty(0, dtype=np.int32)
-            dummy_k = np.empty(0, dtype=np.int64)
-            dummy_f = np.empty(0)
-            _tile_pass(1, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
-                       eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf,
-                       work, lz, lw, lc, ln, ld, lcount, dummy_i, dummy_k, dummy_f, dummy_f)
+        _splat_tile(order[kk], Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa,
+                    eps_factor, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, rmax,
+                    visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z, count)
+
+
+@njit(cache=True)
+def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa, eps_factor, has_clip,
+                eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, rmax, visibility, sign, zvis,
+                acc_w, acc_c, acc_n, acc_z, count):
+    """One tile of :func:`splat_tiles` (tile ``t``; it owns its pixels)."""
+    a = offsets[t]
+    b = offsets[t + 1]
+    if a == b:
+        return
+    x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
+    m = tw * th
+    lz = load_tile(zvis, x0, y0, tw, th)
+    lw = np.zeros(m)
+    lc = np.zeros((m, 3))
+    ln = np.zeros((m, 3))
+    ld = np.zeros(m)
+    lcount = np.zeros(m, dtype=np.int32)
+    if clip_tree is None:
+        work = np.empty((1, WORK_COLUMNS))
+    else:
+        work = clip_work(clip_tree.shape[0], rmax)
+    # one call site of _tile_pass with a run-time mode: one compiled body, not one per literal mode
+    cap = 0
+    mode = 1
+    if visibility:
+        mode = 0
+        for k in range(a, b):
+            w_ = min(int(Pt[k, 20]), x0 + tw - 1) - max(int(Pt[k, 19]), x0) + 1
+            h_ = min(int(Pt[k, 22]), y0 + th - 1) - max(int(Pt[k, 21]), y0) + 1
+            if w_ > 0 and h_ > 0:
+                cap += w_ * h_
+    frag_q = np.empty(cap, dtype=np.int32)
+    frag_k = np.empty(cap, dtype=np.int64)
+    frag_rho = np.empty(cap)
+    frag_z = np.empty(cap)
+    nrec = _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
+                      eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
+                      clip_leaf, work, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
+    if visibility:
         for i in range(th):
             for j in range(tw):
-                q = i * tw + j
-                if lcount[q] == 0:
-                    continue
-                gy = y0 + i
-                gx = x0 + j
-                c = count[gy, gx] + (lcount[q] if sign > 0 else -lcount[q])
-                count[gy, gx] = c
-                if c <= 0:
-                    count[gy, gx] = 0
-                    acc_w[gy, gx] = 0.0
-                    acc_z[gy, gx] = 0.0
-                    for k3 in range(3):
-                        acc_c[gy, gx, k3] = 0.0
-                        acc_n[gy, gx, k3] = 0.0
-                    continue
-                acc_w[gy, gx] += lw[q]
-                acc_z[gy, gx] += ld[q]
+                zvis[y0 + i, x0 + j] = lz[i * tw + j]
+        _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
+    for i in range(th):
+        for j in range(tw):
+            q = i * tw + j
+            if lcount[q] == 0:
+                continue
+            gy = y0 + i
+            gx = x0 + j
+            c = count[gy, gx] + (lcount[q] if sign > 0 else -lcount[q])
+            count[gy, gx] = c
+            if c <= 0:
+                count[gy, gx] = 0
+                acc_w[gy, gx] = 0.0
+                acc_z[gy, gx] = 0.0
                 for k3 in range(3):
-                    acc_c[gy, gx, k3] += lc[q, k3]
-                    acc_n[gy, gx, k3] += ln[q, k3]
+                    acc_c[gy, gx, k3] = 0.0
+                    acc_n[gy, gx, k3] = 0.0
+                continue
+            acc_w[gy, gx] += lw[q]
+            acc_z[gy, gx] += ld[q]
+            for k3 in range(3):
+                acc_c[gy, gx, k3] += lc[q, k3]
+                acc_n[gy, gx, k3] += ln[q, k3]
 
 
 @njit(cache=True, parallel=True)

@@ -545,10 +545,11 @@ class SplatRenderer:
         buffers = getattr(_SCRATCH, "buffers", None)
         if buffers is None:
             buffers = _SCRATCH.buffers = {}
-        buf = buffers.get(name)
-        if buf is None or buf.dtype != np.dtype(dtype) or buf.size < size:
+        key = (name, np.dtype(dtype).str)  # one buffer per dtype: renderers of both precisions alternate
+        buf = buffers.get(key)
+        if buf is None or buf.size < size:
             buf = np.empty(max(size, int(1.25 * buf.size) if buf is not None else size), dtype=dtype)
-            buffers[name] = buf
+            buffers[key] = buf
         return buf[:size].reshape(shape)
 
     # -- results -------------------------------------------------------------------------
