@@ -27,7 +27,6 @@ from unmesh.shells._force_kernels import SCRATCH, chunk_forces, sum_chunks, touc
 #: for planes and (center, radius, -, -, restitution, friction) for spheres.
 PLANE = 0
 SPHERE = 1
-_NO_MASK = np.zeros(0, dtype=np.bool_)
 
 
 @njit(cache=True, inline="always")
@@ -170,10 +169,15 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
     folds = 0
     bad = 0
     span = np.zeros((chunks, 2), dtype=np.int64)
+    # the arguments of force_chunks' call of chunk_forces (a writable empty mask, a run-time flag), so
+    # that one compiled chunk_forces serves both kernels (a constant True or a global array would be a
+    # second signature and a second compile of the force pass)
+    nomask = np.zeros(0, dtype=np.bool_)
+    scatter = chunks > 0
     for c in prange(chunks):
         b = buf[c]
         lo, hi = touched_range(c * n // chunks, (c + 1) * n // chunks, pairs, pstart, pcount, fibers, fstart, fcount,
-                               _NO_MASK)
+                               nomask)
         span[c, 0] = lo
         span[c, 1] = hi
         b[lo:hi, :] = 0.0
@@ -181,7 +185,7 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
         scr = np.empty((max(cap, 1), SCRATCH))
         fo, bd = chunk_forces(c * n // chunks, (c + 1) * n // chunks, x, pairs, pstart, pcount, soft, fibers, fstart,
                               fcount, lorig, lplast, aorig, aplast, sscale, bscale, ks, kb, gram, ref, offs, b, blk,
-                              scr, out_len, out_ang, out_s, out_normal, out_node, out_es, out_eb, _NO_MASK, True,
+                              scr, out_len, out_ang, out_s, out_normal, out_node, out_es, out_eb, nomask, scatter,
                               degenerate)
         folds += fo
         bad += bd
