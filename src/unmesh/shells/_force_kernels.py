@@ -256,7 +256,7 @@ def chunk_forces(lo, hi, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
     return folds, bad
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def touched_range(lo, hi, pairs, pstart, pcount, fibers, fstart, fcount, only):
     """Smallest node range ``[a, b)`` holding every node the forces of nodes ``lo .. hi-1`` touch
     (their fibers' ends and umbrella pairs): the part of a chunk buffer that is not zero. With
@@ -291,6 +291,14 @@ def touched_range(lo, hi, pairs, pstart, pcount, fibers, fstart, fcount, only):
 
 
 @njit(cache=True, inline="always")
+def _clear_rows(b, lo, hi):
+    """``b[lo:hi, :] = 0`` as a loop (an array expression in a parallel kernel is a parallel loop of its own)."""
+    for i in range(lo, hi):
+        for d in range(b.shape[1]):
+            b[i, d] = 0.0
+
+
+@njit(cache=True, inline="always")
 def sum_chunks(i, chunks, buf, span):
     """Force on node ``i``: the sum over the chunk buffers that can hold a contribution (fixed order)."""
     f0 = 0.0
@@ -318,19 +326,28 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
     contributions summed; ``scatter`` False computes measures, node terms and energies only.
     """
     n = x.shape[0]
-    span = np.zeros((chunks, 2), dtype=np.int64)
+    # plain loops, no array expressions: in a parallel kernel each would be a parallel loop of its own
+    # (a separate compile)
+    span = np.empty((chunks, 2), dtype=np.int64)
+    for c in range(chunks):
+        span[c, 0] = 0
+        span[c, 1] = 0
     masked = only.shape[0] > 0
     for c in prange(chunks):
         b = buf[c]
         c0 = c * n // chunks
         c1 = (c + 1) * n // chunks
-        if masked and not only[c0:c1].any():
-            continue
+        if masked:
+            listed = False
+            for i in range(c0, c1):
+                listed |= only[i]
+            if not listed:
+                continue
         if scatter:
             lo, hi = touched_range(c0, c1, pairs, pstart, pcount, fibers, fstart, fcount, only)
             span[c, 0] = lo
             span[c, 1] = hi
-            b[lo:hi, :] = 0.0
+            _clear_rows(b, lo, hi)
         blk = np.empty(ROWS * BLK)
         scr = np.empty((max(cap, 1), SCRATCH))
         chunk_forces(c0, c1, x, pairs, pstart, pcount, soft, fibers, fstart, fcount, lorig, lplast, aorig, aplast,
@@ -339,15 +356,7 @@ def force_chunks(chunks, x, pairs, pstart, pcount, soft, fibers, fstart, fcount,
     if not scatter:
         return
     # nodes outside every chunk's range get no contribution: zero (the sum of zeros)
-    first = n
-    last = 0
-    for c in range(chunks):
-        if span[c, 1] > span[c, 0]:
-            first = min(first, span[c, 0])
-            last = max(last, span[c, 1])
-    out_force[:first, :] = 0.0
-    out_force[max(last, first):, :] = 0.0
-    for i in prange(first, max(last, first)):
+    for i in prange(n):
         f0, f1, f2 = sum_chunks(i, chunks, buf, span)
         out_force[i, 0] = f0
         out_force[i, 1] = f1

@@ -208,7 +208,7 @@ SROWS = 13
 _CNT, _NSUM, _COV, _M = 0, 1, 4, 10
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model="numpy", inline="always")
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes, orient, rest, blk, out_points,
                   out_normals, out_radii):
     """:func:`deform` of the surfels ``s0 .. s0 + nb`` (nb <= SBLK): node sums per surfel (one pass,

@@ -21,13 +21,12 @@ from numba import njit, prange
 
 from unmesh.shells._block_kernels import BLK, ROWS
 from unmesh.shells._fiber_kernels import FASTMATH
-from unmesh.shells._force_kernels import SCRATCH, chunk_forces, sum_chunks, touched_range
+from unmesh.shells._force_kernels import SCRATCH, _clear_rows, chunk_forces, sum_chunks, touched_range
 
 #: Collider kinds in ``col_type``; ``col_data`` rows are (point, normal, restitution, friction)
 #: for planes and (center, radius, -, -, restitution, friction) for spheres.
 PLANE = 0
 SPHERE = 1
-_NO_MASK = np.zeros(0, dtype=np.bool_)
 
 
 @njit(cache=True, inline="always")
@@ -61,7 +60,7 @@ def _friction(i, n0, n1, n2, e, mu, v):
     v[i, 2] = t2 * keep + new_vn * n2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _collide(i, col_type, col_data, x, v):
     """Resolve node ``i`` against every collider in order (PlaneCollider / SphereCollider.resolve)."""
     for c in range(col_type.shape[0]):
@@ -169,19 +168,24 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
     # elastic forces: every node range scatters into its own buffer (and counts degenerate fibers)
     folds = 0
     bad = 0
-    span = np.zeros((chunks, 2), dtype=np.int64)
+    span = np.empty((chunks, 2), dtype=np.int64)  # plain loops (an array expression would be a parfor)
+    # the arguments of force_chunks' call of chunk_forces (a writable empty mask, a run-time flag), so
+    # that one compiled chunk_forces serves both kernels (a constant True or a global array would be a
+    # second signature and a second compile of the force pass)
+    nomask = np.empty(0, dtype=np.bool_)
+    scatter = chunks > 0
     for c in prange(chunks):
         b = buf[c]
         lo, hi = touched_range(c * n // chunks, (c + 1) * n // chunks, pairs, pstart, pcount, fibers, fstart, fcount,
-                               _NO_MASK)
+                               nomask)
         span[c, 0] = lo
         span[c, 1] = hi
-        b[lo:hi, :] = 0.0
+        _clear_rows(b, lo, hi)
         blk = np.empty(ROWS * BLK)
         scr = np.empty((max(cap, 1), SCRATCH))
         fo, bd = chunk_forces(c * n // chunks, (c + 1) * n // chunks, x, pairs, pstart, pcount, soft, fibers, fstart,
                               fcount, lorig, lplast, aorig, aplast, sscale, bscale, ks, kb, gram, ref, offs, b, blk,
-                              scr, out_len, out_ang, out_s, out_normal, out_node, out_es, out_eb, _NO_MASK, True,
+                              scr, out_len, out_ang, out_s, out_normal, out_node, out_es, out_eb, nomask, scatter,
                               degenerate)
         folds += fo
         bad += bd
@@ -226,7 +230,8 @@ def shell_step(chunks, dt, x, v, acc, rest, mass, area, kin_handle, hdisp, hvel,
                 acc[i, 2] = (f2 + e2) / m
                 for d in range(3):
                     v[i, d] += half * acc[i, d]
-            _collide(i, col_type, col_data, x, v)
+            if col_type.shape[0] > 0:  # an ordinary call (inlined, it is compiled again with the parallel loop)
+                _collide(i, col_type, col_data, x, v)
     for k in range(crumbs.shape[0]):
         j = crumbs[k]
         a = anchors[k]
