@@ -143,10 +143,12 @@ def element_stiffness(node_off, sample_off, grad_off, weights, grads, lam, mu, k
     ``lam``, ``mu`` are per element.
     """
     ne = node_off.shape[0] - 1
-    out = np.zeros(k_off[ne])
+    out = np.empty(k_off[ne])  # zeroed per element below (np.zeros here would be a parfor)
     for e in prange(ne):
         n = node_off[e + 1] - node_off[e]
         base = k_off[e]
+        for k in range(base, k_off[e + 1]):
+            out[k] = 0.0
         la = lam[e]
         mm = mu[e]
         for q in range(sample_off[e], sample_off[e + 1]):
@@ -292,6 +294,37 @@ def rotated_blocks(node_off, k_off, ke, rots):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _warped_element(e, points_rest, x, node_off, nodes, k_off, ke, rots, fe, energy):
+    """Warped force rows and energy of element ``e`` (body of :func:`warped_forces`)."""
+    n = node_off[e + 1] - node_off[e]
+    n0 = node_off[e]
+    R = rots[e]
+    dl = np.empty((n, 3))
+    for a in range(n):
+        p = nodes[n0 + a]
+        for i in range(3):
+            dl[a, i] = R[0, i] * x[p, 0] + R[1, i] * x[p, 1] + R[2, i] * x[p, 2] - points_rest[p, i]
+    # remove the mean so round-off of large translations does not enter
+    mean = np.zeros(3)
+    for a in range(n):
+        mean += dl[a]
+    mean /= n
+    for a in range(n):
+        dl[a] -= mean
+    en = 0.0
+    for a in range(n):
+        fa = np.zeros(3)
+        for b in range(n):
+            o = k_off[e] + (a * n + b) * 9
+            for i in range(3):
+                fa[i] += ke[o + i * 3] * dl[b, 0] + ke[o + i * 3 + 1] * dl[b, 1] + ke[o + i * 3 + 2] * dl[b, 2]
+        en += 0.5 * (fa[0] * dl[a, 0] + fa[1] * dl[a, 1] + fa[2] * dl[a, 2])
+        for i in range(3):
+            fe[n0 + a, i] = -(R[i, 0] * fa[0] + R[i, 1] * fa[1] + R[i, 2] * fa[2])
+    energy[e] = en
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def warped_forces(points_rest, x, node_off, nodes, k_off, ke, rots, n_nodes):
     """Per-element warped elastic forces f_e = -R K_e (Rᵀ x_e - X_e) and energies.
@@ -299,36 +332,12 @@ def warped_forces(points_rest, x, node_off, nodes, k_off, ke, rots, n_nodes):
     Returns (element forces (Σn,3), element energies (E,)). Summing the
     element forces per node gives the global elastic force.
     """
+    # a thin prange loop over a serial body (array expressions here would be parfors)
     ne = node_off.shape[0] - 1
-    fe = np.zeros((nodes.shape[0], 3))
-    energy = np.zeros(ne)
+    fe = np.empty((nodes.shape[0], 3))  # every row is written by its element
+    energy = np.empty(ne)
     for e in prange(ne):
-        n = node_off[e + 1] - node_off[e]
-        n0 = node_off[e]
-        R = rots[e]
-        dl = np.empty((n, 3))
-        for a in range(n):
-            p = nodes[n0 + a]
-            for i in range(3):
-                dl[a, i] = R[0, i] * x[p, 0] + R[1, i] * x[p, 1] + R[2, i] * x[p, 2] - points_rest[p, i]
-        # remove the mean so round-off of large translations does not enter
-        mean = np.zeros(3)
-        for a in range(n):
-            mean += dl[a]
-        mean /= n
-        for a in range(n):
-            dl[a] -= mean
-        en = 0.0
-        for a in range(n):
-            fa = np.zeros(3)
-            for b in range(n):
-                o = k_off[e] + (a * n + b) * 9
-                for i in range(3):
-                    fa[i] += ke[o + i * 3] * dl[b, 0] + ke[o + i * 3 + 1] * dl[b, 1] + ke[o + i * 3 + 2] * dl[b, 2]
-            en += 0.5 * (fa[0] * dl[a, 0] + fa[1] * dl[a, 1] + fa[2] * dl[a, 2])
-            for i in range(3):
-                fe[n0 + a, i] = -(R[i, 0] * fa[0] + R[i, 1] * fa[1] + R[i, 2] * fa[2])
-        energy[e] = en
+        _warped_element(np.int64(e), points_rest, x, node_off, nodes, k_off, ke, rots, fe, energy)
     return fe, energy
 
 
