@@ -103,7 +103,7 @@ def test_knn_finish_and_gather_vs_reference(rng):
     K.knn_finish(x, q, idx, dist)
     np.testing.assert_array_equal(idx, want_i)
     np.testing.assert_array_equal(dist, want_d)
-    np.testing.assert_array_equal(K.gather_rows(x, idx[:, 0]), x[idx[:, 0]])
+    np.testing.assert_array_equal(K.gather_rows(x, np.ascontiguousarray(idx[:, 0])), x[idx[:, 0]])
 
 
 def test_empty_grid_and_errors():
@@ -187,7 +187,7 @@ def test_half_stencil_pair_kernels_vs_reference(rng, dim):
     np.add.at(per_cell, cell_of[np.minimum(g.rank[pairs[:, 0]], g.rank[pairs[:, 1]])], 1)
     np.testing.assert_array_equal(counts, per_cell)
     # a subset of cells
-    sub = cells[::3]
+    sub = np.ascontiguousarray(cells[::3])  # the C layout of every caller: no test-only compile
     np.testing.assert_array_equal(PK.half_count(*base, sub), per_cell[sub])
     # rows from segments: counting sort + row sort give the brute-force CSR
     n = len(x)

@@ -22,7 +22,7 @@ def test_kernel_matches_the_reference(rng):
     _, idx = knn(pts, 9)
     clip = np.full(len(pts), 0.4)
     for oriented in (True, False):
-        r, o = voronoi_radii(pts, nrm, idx, clip, oriented, 0.25)
+        r, o = voronoi_radii(pts, nrm, idx, clip, oriented, 0.25, 0.0)
         r_ref, o_ref = voronoi_radii_reference(pts, nrm, idx, clip, oriented, 0.25, rows=range(120))
         np.testing.assert_allclose(r[sub], r_ref[sub], rtol=1e-9)
         np.testing.assert_array_equal(o[sub], o_ref[sub])

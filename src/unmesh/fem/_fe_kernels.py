@@ -30,6 +30,88 @@ def sample_counts(node_off, tri_off):
     return out
 
 
+@njit(cache=True)
+def _zeros_integration(ne, n_nodes, n_samples, n_grads):
+    """Zeroed outputs of :func:`integrate` (allocated outside the parallel function: no parfors)."""
+    return (np.zeros(ne), np.zeros(n_nodes), np.zeros(n_samples), np.zeros((n_samples, 3)),
+            np.zeros((n_grads, 3)))
+
+
+@njit(cache=True)
+def _integrate_element(e, points, node_off, nodes, tri_off, tris_local, sample_off, grad_off, correction,
+                       vols, mu, weights, samples, grads):
+    """Quadrature of element ``e`` (9.17–9.19) into the outputs of :func:`integrate`."""
+    n = node_off[e + 1] - node_off[e]
+    n0 = node_off[e]
+    t0 = tri_off[e]
+    m = tri_off[e + 1] - t0
+    verts = np.empty((n, 3))
+    for k in range(n):
+        verts[k] = points[nodes[n0 + k]]
+    c = np.zeros(3)
+    for k in range(n):
+        c += verts[k]
+    c /= n
+    tris = tris_local[t0:t0 + m]
+    # cone volumes of the triangles to the centre (9.17)-(9.18) and exact boundary integrals
+    tv = np.empty(m)
+    exact = np.zeros((n, 3))
+    V = 0.0
+    for t in range(m):
+        a = tris[t, 0]
+        b = tris[t, 1]
+        cc = tris[t, 2]
+        cr = _tri_cross(verts, a, b, cc)
+        tv[t] = ((verts[a] - c) * cr).sum() / 6.0
+        V += tv[t]
+        for r in range(3):
+            exact[tris[t, r]] += cr / 6.0
+    vols[e] = V
+    for t in range(m):
+        for r in range(3):
+            mu[n0 + tris[t, r]] += tv[t] / (3.0 * V)
+    s0 = sample_off[e]
+    g0 = grad_off[e]
+    if n == 4 and m == 4:
+        # linear tetrahedron: one sample, constant barycentric gradients
+        weights[s0] = V
+        samples[s0] = c
+        for t in range(m):
+            opp = 6 - tris[t, 0] - tris[t, 1] - tris[t, 2]
+            cr = _tri_cross(verts, tris[t, 0], tris[t, 1], tris[t, 2])
+            grads[g0 + opp] = -cr / (6.0 * V)
+        return
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for k in range(3):
+        lo[k] = verts[:, k].min()
+        hi[k] = verts[:, k].max()
+    scale = np.sqrt(((hi - lo) ** 2).sum())
+    phi = np.empty(n)
+    for i in range(n):
+        samples[s0 + i] = 0.8 * verts[i] + 0.2 * c
+        weights[s0 + i] = V * mu[n0 + i] / 2.0
+    for t in range(m):
+        cf = (verts[tris[t, 0]] + verts[tris[t, 1]] + verts[tris[t, 2]]) / 3.0
+        samples[s0 + n + t] = 0.9 * cf + 0.1 * c
+        weights[s0 + n + t] = tv[t] / 2.0
+    q = n + m
+    # a run-time bool (always true here), not the literal True: one compiled mvc_point serves
+    # this caller and mvc_many's run-time want_grad alike
+    want_grad = q > 0
+    for k in range(q):
+        base = g0 + k * n
+        mvc_point(verts, tris, samples[s0 + k], scale, phi, grads[base:base + n], want_grad)
+    if correction:
+        for i in range(n):
+            acc = np.zeros(3)
+            for k in range(q):
+                acc += weights[s0 + k] * grads[g0 + k * n + i]
+            fix = (exact[i] - acc) / V
+            for k in range(q):
+                grads[g0 + k * n + i] += fix
+
+
 @njit(cache=True, parallel=True)
 def integrate(points, node_off, nodes, tri_off, tris_local, sample_off, grad_off, correction):
     """Quadrature of every element (9.17–9.19) with MVC gradients at the samples.
@@ -42,79 +124,14 @@ def integrate(points, node_off, nodes, tri_off, tris_local, sample_off, grad_off
     With ``correction``, grads get the consistency correction so that
     Σ_q w_q ∇φ_i(p_q) = ∮ φ_i n dA exactly.
     """
+    # A thin prange loop over a serial element body: array expressions in a parallel
+    # function become parfors of their own, which multiplied its compile time.
     ne = node_off.shape[0] - 1
-    vols = np.zeros(ne)
-    mu = np.zeros(nodes.shape[0])
-    weights = np.zeros(sample_off[ne])
-    samples = np.zeros((sample_off[ne], 3))
-    grads = np.zeros((grad_off[ne], 3))
+    vols, mu, weights, samples, grads = _zeros_integration(ne, nodes.shape[0], sample_off[ne], grad_off[ne])
     for e in prange(ne):
-        n = node_off[e + 1] - node_off[e]
-        n0 = node_off[e]
-        t0 = tri_off[e]
-        m = tri_off[e + 1] - t0
-        verts = np.empty((n, 3))
-        for k in range(n):
-            verts[k] = points[nodes[n0 + k]]
-        c = np.zeros(3)
-        for k in range(n):
-            c += verts[k]
-        c /= n
-        tris = tris_local[t0:t0 + m]
-        # cone volumes of the triangles to the centre (9.17)-(9.18) and exact boundary integrals
-        tv = np.empty(m)
-        exact = np.zeros((n, 3))
-        V = 0.0
-        for t in range(m):
-            a = tris[t, 0]
-            b = tris[t, 1]
-            cc = tris[t, 2]
-            cr = _tri_cross(verts, a, b, cc)
-            tv[t] = ((verts[a] - c) * cr).sum() / 6.0
-            V += tv[t]
-            for r in range(3):
-                exact[tris[t, r]] += cr / 6.0
-        vols[e] = V
-        for t in range(m):
-            for r in range(3):
-                mu[n0 + tris[t, r]] += tv[t] / (3.0 * V)
-        s0 = sample_off[e]
-        g0 = grad_off[e]
-        if n == 4 and m == 4:
-            # linear tetrahedron: one sample, constant barycentric gradients
-            weights[s0] = V
-            samples[s0] = c
-            for t in range(m):
-                opp = 6 - tris[t, 0] - tris[t, 1] - tris[t, 2]
-                cr = _tri_cross(verts, tris[t, 0], tris[t, 1], tris[t, 2])
-                grads[g0 + opp] = -cr / (6.0 * V)
-            continue
-        lo = np.empty(3)
-        hi = np.empty(3)
-        for k in range(3):
-            lo[k] = verts[:, k].min()
-            hi[k] = verts[:, k].max()
-        scale = np.sqrt(((hi - lo) ** 2).sum())
-        phi = np.empty(n)
-        for i in range(n):
-            samples[s0 + i] = 0.8 * verts[i] + 0.2 * c
-            weights[s0 + i] = V * mu[n0 + i] / 2.0
-        for t in range(m):
-            cf = (verts[tris[t, 0]] + verts[tris[t, 1]] + verts[tris[t, 2]]) / 3.0
-            samples[s0 + n + t] = 0.9 * cf + 0.1 * c
-            weights[s0 + n + t] = tv[t] / 2.0
-        q = n + m
-        for k in range(q):
-            base = g0 + k * n
-            mvc_point(verts, tris, samples[s0 + k], scale, phi, grads[base:base + n], True)
-        if correction:
-            for i in range(n):
-                acc = np.zeros(3)
-                for k in range(q):
-                    acc += weights[s0 + k] * grads[g0 + k * n + i]
-                fix = (exact[i] - acc) / V
-                for k in range(q):
-                    grads[g0 + k * n + i] += fix
+        # np.int64: the parfor's own index is unsigned, a second signature of the body otherwise
+        _integrate_element(np.int64(e), points, node_off, nodes, tri_off, tris_local, sample_off, grad_off, correction,
+                           vols, mu, weights, samples, grads)
     return vols, mu, weights, samples, grads
 
 
@@ -126,10 +143,12 @@ def element_stiffness(node_off, sample_off, grad_off, weights, grads, lam, mu, k
     ``lam``, ``mu`` are per element.
     """
     ne = node_off.shape[0] - 1
-    out = np.zeros(k_off[ne])
+    out = np.empty(k_off[ne])  # zeroed per element below (np.zeros here would be a parfor)
     for e in prange(ne):
         n = node_off[e + 1] - node_off[e]
         base = k_off[e]
+        for k in range(base, k_off[e + 1]):
+            out[k] = 0.0
         la = lam[e]
         mm = mu[e]
         for q in range(sample_off[e], sample_off[e + 1]):
@@ -275,6 +294,37 @@ def rotated_blocks(node_off, k_off, ke, rots):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _warped_element(e, points_rest, x, node_off, nodes, k_off, ke, rots, fe, energy):
+    """Warped force rows and energy of element ``e`` (body of :func:`warped_forces`)."""
+    n = node_off[e + 1] - node_off[e]
+    n0 = node_off[e]
+    R = rots[e]
+    dl = np.empty((n, 3))
+    for a in range(n):
+        p = nodes[n0 + a]
+        for i in range(3):
+            dl[a, i] = R[0, i] * x[p, 0] + R[1, i] * x[p, 1] + R[2, i] * x[p, 2] - points_rest[p, i]
+    # remove the mean so round-off of large translations does not enter
+    mean = np.zeros(3)
+    for a in range(n):
+        mean += dl[a]
+    mean /= n
+    for a in range(n):
+        dl[a] -= mean
+    en = 0.0
+    for a in range(n):
+        fa = np.zeros(3)
+        for b in range(n):
+            o = k_off[e] + (a * n + b) * 9
+            for i in range(3):
+                fa[i] += ke[o + i * 3] * dl[b, 0] + ke[o + i * 3 + 1] * dl[b, 1] + ke[o + i * 3 + 2] * dl[b, 2]
+        en += 0.5 * (fa[0] * dl[a, 0] + fa[1] * dl[a, 1] + fa[2] * dl[a, 2])
+        for i in range(3):
+            fe[n0 + a, i] = -(R[i, 0] * fa[0] + R[i, 1] * fa[1] + R[i, 2] * fa[2])
+    energy[e] = en
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def warped_forces(points_rest, x, node_off, nodes, k_off, ke, rots, n_nodes):
     """Per-element warped elastic forces f_e = -R K_e (Rᵀ x_e - X_e) and energies.
@@ -282,36 +332,12 @@ def warped_forces(points_rest, x, node_off, nodes, k_off, ke, rots, n_nodes):
     Returns (element forces (Σn,3), element energies (E,)). Summing the
     element forces per node gives the global elastic force.
     """
+    # a thin prange loop over a serial body (array expressions here would be parfors)
     ne = node_off.shape[0] - 1
-    fe = np.zeros((nodes.shape[0], 3))
-    energy = np.zeros(ne)
+    fe = np.empty((nodes.shape[0], 3))  # every row is written by its element
+    energy = np.empty(ne)
     for e in prange(ne):
-        n = node_off[e + 1] - node_off[e]
-        n0 = node_off[e]
-        R = rots[e]
-        dl = np.empty((n, 3))
-        for a in range(n):
-            p = nodes[n0 + a]
-            for i in range(3):
-                dl[a, i] = R[0, i] * x[p, 0] + R[1, i] * x[p, 1] + R[2, i] * x[p, 2] - points_rest[p, i]
-        # remove the mean so round-off of large translations does not enter
-        mean = np.zeros(3)
-        for a in range(n):
-            mean += dl[a]
-        mean /= n
-        for a in range(n):
-            dl[a] -= mean
-        en = 0.0
-        for a in range(n):
-            fa = np.zeros(3)
-            for b in range(n):
-                o = k_off[e] + (a * n + b) * 9
-                for i in range(3):
-                    fa[i] += ke[o + i * 3] * dl[b, 0] + ke[o + i * 3 + 1] * dl[b, 1] + ke[o + i * 3 + 2] * dl[b, 2]
-            en += 0.5 * (fa[0] * dl[a, 0] + fa[1] * dl[a, 1] + fa[2] * dl[a, 2])
-            for i in range(3):
-                fe[n0 + a, i] = -(R[i, 0] * fa[0] + R[i, 1] * fa[1] + R[i, 2] * fa[2])
-        energy[e] = en
+        _warped_element(np.int64(e), points_rest, x, node_off, nodes, k_off, ke, rots, fe, energy)
     return fe, energy
 
 

@@ -134,87 +134,99 @@ def convexity_violation(mesh: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                       mesh.elem_offsets, off, nodes)
 
 
+@njit(cache=True)
+def _convexity_element(e, points, face_nodes, face_offsets, elem_faces, elem_signs, elem_offsets, node_off, nodes,
+                       worst, kind, wface):
+    """Worst convexity violation of element ``e`` (body of :func:`_convexity`)."""
+    worst[e] = 0.0
+    kind[e] = 0
+    wface[e] = 0
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for k in range(node_off[e], node_off[e + 1]):
+        for d in range(3):
+            lo[d] = min(lo[d], points[nodes[k], d])
+            hi[d] = max(hi[d], points[nodes[k], d])
+    diam = np.sqrt(((hi - lo) ** 2).sum())
+    if diam <= 0.0:
+        worst[e] = np.inf
+        return
+    for j in range(elem_offsets[e], elem_offsets[e + 1]):
+        f = elem_faces[j]
+        s = elem_signs[j]
+        a0 = face_offsets[f]
+        a1 = face_offsets[f + 1]
+        m = a1 - a0
+        nx = 0.0
+        ny = 0.0
+        nz = 0.0
+        cx = 0.0
+        cy = 0.0
+        cz = 0.0
+        for k in range(a0, a1):
+            p = face_nodes[k]
+            q = face_nodes[a0 + (k - a0 + 1) % m]
+            nx += (points[p, 1] - points[q, 1]) * (points[p, 2] + points[q, 2])
+            ny += (points[p, 2] - points[q, 2]) * (points[p, 0] + points[q, 0])
+            nz += (points[p, 0] - points[q, 0]) * (points[p, 1] + points[q, 1])
+            cx += points[p, 0]
+            cy += points[p, 1]
+            cz += points[p, 2]
+        nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if nn <= 0.0:
+            worst[e] = np.inf
+            kind[e] = 1
+            wface[e] = j - elem_offsets[e]
+            continue
+        nx *= s / nn
+        ny *= s / nn
+        nz *= s / nn
+        cx /= m
+        cy /= m
+        cz /= m
+        for k in range(node_off[e], node_off[e + 1]):
+            p = nodes[k]
+            d = ((points[p, 0] - cx) * nx + (points[p, 1] - cy) * ny + (points[p, 2] - cz) * nz) / diam
+            if d > worst[e]:
+                worst[e] = d
+                kind[e] = 0
+                wface[e] = j - elem_offsets[e]
+        for k in range(a0, a1):
+            p = face_nodes[k]
+            d = abs((points[p, 0] - cx) * nx + (points[p, 1] - cy) * ny + (points[p, 2] - cz) * nz) / diam
+            if d > worst[e]:
+                worst[e] = d
+                kind[e] = 1
+                wface[e] = j - elem_offsets[e]
+            # turn at p: (p - prev) x (next - p) . n must be >= 0
+            pr = face_nodes[a0 + (k - a0 - 1) % m]
+            nx2 = face_nodes[a0 + (k - a0 + 1) % m]
+            ux = points[p, 0] - points[pr, 0]
+            uy = points[p, 1] - points[pr, 1]
+            uz = points[p, 2] - points[pr, 2]
+            vx = points[nx2, 0] - points[p, 0]
+            vy = points[nx2, 1] - points[p, 1]
+            vz = points[nx2, 2] - points[p, 2]
+            t = ((uy * vz - uz * vy) * nx + (uz * vx - ux * vz) * ny + (ux * vy - uy * vx) * nz) * s
+            lu = np.sqrt(ux * ux + uy * uy + uz * uz)
+            lv = np.sqrt(vx * vx + vy * vy + vz * vz)
+            if lu > 0.0 and lv > 0.0:
+                # distance of p from the chord prev-next, relative to the element size
+                dd = -t / max(lu, lv) / diam
+                if dd > worst[e]:
+                    worst[e] = dd
+                    kind[e] = 2
+                    wface[e] = j - elem_offsets[e]
+
+
 @njit(cache=True, parallel=True)
 def _convexity(points, face_nodes, face_offsets, elem_faces, elem_signs, elem_offsets, node_off, nodes):
     ne = elem_offsets.shape[0] - 1
-    worst = np.zeros(ne)
-    kind = np.zeros(ne, dtype=np.int64)
-    wface = np.zeros(ne, dtype=np.int64)
+    # a thin prange loop over a serial body (no parfors; the body is typed once)
+    worst = np.empty(ne)
+    kind = np.empty(ne, dtype=np.int64)
+    wface = np.empty(ne, dtype=np.int64)
     for e in prange(ne):
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
-        for k in range(node_off[e], node_off[e + 1]):
-            for d in range(3):
-                lo[d] = min(lo[d], points[nodes[k], d])
-                hi[d] = max(hi[d], points[nodes[k], d])
-        diam = np.sqrt(((hi - lo) ** 2).sum())
-        if diam <= 0.0:
-            worst[e] = np.inf
-            continue
-        for j in range(elem_offsets[e], elem_offsets[e + 1]):
-            f = elem_faces[j]
-            s = elem_signs[j]
-            a0 = face_offsets[f]
-            a1 = face_offsets[f + 1]
-            m = a1 - a0
-            nx = 0.0
-            ny = 0.0
-            nz = 0.0
-            cx = 0.0
-            cy = 0.0
-            cz = 0.0
-            for k in range(a0, a1):
-                p = face_nodes[k]
-                q = face_nodes[a0 + (k - a0 + 1) % m]
-                nx += (points[p, 1] - points[q, 1]) * (points[p, 2] + points[q, 2])
-                ny += (points[p, 2] - points[q, 2]) * (points[p, 0] + points[q, 0])
-                nz += (points[p, 0] - points[q, 0]) * (points[p, 1] + points[q, 1])
-                cx += points[p, 0]
-                cy += points[p, 1]
-                cz += points[p, 2]
-            nn = np.sqrt(nx * nx + ny * ny + nz * nz)
-            if nn <= 0.0:
-                worst[e] = np.inf
-                kind[e] = 1
-                wface[e] = j - elem_offsets[e]
-                continue
-            nx *= s / nn
-            ny *= s / nn
-            nz *= s / nn
-            cx /= m
-            cy /= m
-            cz /= m
-            for k in range(node_off[e], node_off[e + 1]):
-                p = nodes[k]
-                d = ((points[p, 0] - cx) * nx + (points[p, 1] - cy) * ny + (points[p, 2] - cz) * nz) / diam
-                if d > worst[e]:
-                    worst[e] = d
-                    kind[e] = 0
-                    wface[e] = j - elem_offsets[e]
-            for k in range(a0, a1):
-                p = face_nodes[k]
-                d = abs((points[p, 0] - cx) * nx + (points[p, 1] - cy) * ny + (points[p, 2] - cz) * nz) / diam
-                if d > worst[e]:
-                    worst[e] = d
-                    kind[e] = 1
-                    wface[e] = j - elem_offsets[e]
-                # turn at p: (p - prev) x (next - p) . n must be >= 0
-                pr = face_nodes[a0 + (k - a0 - 1) % m]
-                nx2 = face_nodes[a0 + (k - a0 + 1) % m]
-                ux = points[p, 0] - points[pr, 0]
-                uy = points[p, 1] - points[pr, 1]
-                uz = points[p, 2] - points[pr, 2]
-                vx = points[nx2, 0] - points[p, 0]
-                vy = points[nx2, 1] - points[p, 1]
-                vz = points[nx2, 2] - points[p, 2]
-                t = ((uy * vz - uz * vy) * nx + (uz * vx - ux * vz) * ny + (ux * vy - uy * vx) * nz) * s
-                lu = np.sqrt(ux * ux + uy * uy + uz * uz)
-                lv = np.sqrt(vx * vx + vy * vy + vz * vz)
-                if lu > 0.0 and lv > 0.0:
-                    # distance of p from the chord prev-next, relative to the element size
-                    dd = -t / max(lu, lv) / diam
-                    if dd > worst[e]:
-                        worst[e] = dd
-                        kind[e] = 2
-                        wface[e] = j - elem_offsets[e]
+        _convexity_element(np.int64(e), points, face_nodes, face_offsets, elem_faces, elem_signs, elem_offsets,
+                           node_off, nodes, worst, kind, wface)
     return worst, kind, wface

@@ -121,20 +121,27 @@ def _triangle_terms(pa, pb, pc, x, N, gN, nrm, want_grad):
 
 @njit(cache=True)
 def _on_triangle(pa, pb, pc, x, eps):
-    """Barycentric coordinates if x lies on triangle (pa, pb, pc) within eps, else bary[0] = nan."""
-    e1 = pb - pa
-    e2 = pc - pa
-    n = np.cross(e1, e2)
-    nn = np.sqrt((n * n).sum())
+    """Barycentric coordinates if x lies on triangle (pa, pb, pc) within eps, else bary[0] = nan.
+
+    Scalar arithmetic (the cross products of ``np.cross`` written out, same operation order):
+    array expressions and ``np.cross`` cost more to compile than the whole test.
+    """
     bary = np.full(3, np.nan)
+    e1x, e1y, e1z = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
+    e2x, e2y, e2z = pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    nn = np.sqrt(nx * nx + ny * ny + nz * nz)
     if nn == 0.0:
         return bary
-    r = x - pa
-    dist = abs((r * n).sum()) / nn
+    rx, ry, rz = x[0] - pa[0], x[1] - pa[1], x[2] - pa[2]
+    dist = abs(rx * nx + ry * ny + rz * nz) / nn
     if dist > eps:
         return bary
-    l1 = (np.cross(r, e2) * n).sum() / (nn * nn)
-    l2 = (np.cross(e1, r) * n).sum() / (nn * nn)
+    # (r × e2) · n and (e1 × r) · n
+    l1 = ((ry * e2z - rz * e2y) * nx + (rz * e2x - rx * e2z) * ny + (rx * e2y - ry * e2x) * nz) / (nn * nn)
+    l2 = ((e1y * rz - e1z * ry) * nx + (e1z * rx - e1x * rz) * ny + (e1x * ry - e1y * rx) * nz) / (nn * nn)
     l0 = 1.0 - l1 - l2
     lim = -eps / np.sqrt(nn)
     if l0 >= lim and l1 >= lim and l2 >= lim:
@@ -187,10 +194,13 @@ def mvc_point(verts, tris, x, scale, phi, grad, want_grad):
         a = tris[t, 0]
         b = tris[t, 1]
         c2 = tris[t, 2]
-        e1 = verts[b] - verts[a]
-        e2 = verts[c2] - verts[a]
-        cr = np.cross(e1, e2)
-        if np.sqrt((cr * cr).sum()) <= 1e-14 * ((e1 * e1).sum() + (e2 * e2).sum()):
+        e1x, e1y, e1z = verts[b, 0] - verts[a, 0], verts[b, 1] - verts[a, 1], verts[b, 2] - verts[a, 2]
+        e2x, e2y, e2z = verts[c2, 0] - verts[a, 0], verts[c2, 1] - verts[a, 1], verts[c2, 2] - verts[a, 2]
+        crx = e1y * e2z - e1z * e2y
+        cry = e1z * e2x - e1x * e2z
+        crz = e1x * e2y - e1y * e2x
+        if np.sqrt(crx * crx + cry * cry + crz * crz) <= 1e-14 * (
+                (e1x * e1x + e1y * e1y + e1z * e1z) + (e2x * e2x + e2y * e2y + e2z * e2z)):
             continue  # zero-area triangle: no net contribution
         D = _triangle_terms(verts[a], verts[b], verts[c2], xe, Nt[t], gNt[t], nt[t], want_grad)
         if D == 0.0:
@@ -293,22 +303,64 @@ def mvc_point(verts, tris, x, scale, phi, grad, want_grad):
                 grad[k, j] = (gw[k, j] - pk * gW[j]) / W
 
 
+@njit(cache=True)
+def _scale(verts):
+    """Diagonal of the bounding box of ``verts`` (n, 3)."""
+    s2 = 0.0
+    for k in range(3):
+        lo = verts[0, k]
+        hi = verts[0, k]
+        for i in range(1, verts.shape[0]):
+            lo = min(lo, verts[i, k])
+            hi = max(hi, verts[i, k])
+        s2 += (hi - lo) ** 2
+    return np.sqrt(s2)
+
+
 @njit(cache=True, parallel=True)
 def mvc_many(verts, tris, points, want_grad):
     """Coordinates of many points in one polyhedron: phi (P,n), grad (P,n,3)."""
+    # A thin prange loop (no array expressions in the parallel function: each would be a parfor).
     n = verts.shape[0]
     P = points.shape[0]
-    phi = np.zeros((P, n))
-    grad = np.zeros((P, n, 3))
-    lo = np.empty(3)
-    hi = np.empty(3)
-    for k in range(3):
-        lo[k] = verts[:, k].min()
-        hi[k] = verts[:, k].max()
-    scale = np.sqrt(((hi - lo) ** 2).sum())
+    phi = np.empty((P, n))
+    grad = np.empty((P, n, 3))
+    scale = _scale(verts)
     for p in prange(P):
+        _zero_grad(grad[p])
         mvc_point(verts, tris, points[p], scale, phi[p], grad[p], want_grad)
     return phi, grad
+
+
+@njit(cache=True)
+def _zero_grad(grad):
+    for i in range(grad.shape[0]):
+        for j in range(3):
+            grad[i, j] = 0.0
+
+
+@njit(cache=True)
+def _element_gradients(e, points, node_off, nodes, tri_off, tris_local, sample_off, samples, gofs, phi, grad):
+    """Shape functions and gradients at the samples of element ``e`` (body of :func:`mvc_elements`)."""
+    n = node_off[e + 1] - node_off[e]
+    verts = np.empty((n, 3))
+    for k in range(n):
+        verts[k] = points[nodes[node_off[e] + k]]
+    tris = tris_local[tri_off[e]:tri_off[e + 1]]
+    scale = _scale(verts)
+    want_grad = n > 0  # a run-time bool (always true): the same compiled mvc_point as mvc_many's
+    for q in range(sample_off[e], sample_off[e + 1]):
+        base = gofs[e] + (q - sample_off[e]) * n
+        mvc_point(verts, tris, samples[q], scale, phi[base:base + n], grad[base:base + n], want_grad)
+
+
+@njit(cache=True)
+def _gradient_offsets(node_off, sample_off):
+    ne = node_off.shape[0] - 1
+    gofs = np.zeros(ne + 1, dtype=np.int64)
+    for e in range(ne):
+        gofs[e + 1] = gofs[e] + (node_off[e + 1] - node_off[e]) * (sample_off[e + 1] - sample_off[e])
+    return gofs, np.zeros(gofs[ne]), np.zeros((gofs[ne], 3))
 
 
 @njit(cache=True, parallel=True)
@@ -321,24 +373,7 @@ def mvc_elements(points, node_off, nodes, tri_off, tris_local, sample_off, sampl
     Returns (phi_flat, grad_flat (·,3), gofs (E+1,)).
     """
     ne = node_off.shape[0] - 1
-    gofs = np.zeros(ne + 1, dtype=np.int64)
-    for e in range(ne):
-        gofs[e + 1] = gofs[e] + (node_off[e + 1] - node_off[e]) * (sample_off[e + 1] - sample_off[e])
-    phi = np.zeros(gofs[ne])
-    grad = np.zeros((gofs[ne], 3))
+    gofs, phi, grad = _gradient_offsets(node_off, sample_off)
     for e in prange(ne):
-        n = node_off[e + 1] - node_off[e]
-        verts = np.empty((n, 3))
-        for k in range(n):
-            verts[k] = points[nodes[node_off[e] + k]]
-        tris = tris_local[tri_off[e]:tri_off[e + 1]]
-        lo = np.empty(3)
-        hi = np.empty(3)
-        for k in range(3):
-            lo[k] = verts[:, k].min()
-            hi[k] = verts[:, k].max()
-        scale = np.sqrt(((hi - lo) ** 2).sum())
-        for q in range(sample_off[e], sample_off[e + 1]):
-            base = gofs[e] + (q - sample_off[e]) * n
-            mvc_point(verts, tris, samples[q], scale, phi[base:base + n], grad[base:base + n], True)
+        _element_gradients(np.int64(e), points, node_off, nodes, tri_off, tris_local, sample_off, samples, gofs, phi, grad)
     return phi, grad, gofs

@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from unmesh._linalg_kernels import inv3
+
 
 @njit(cache=True)
 def _block_row(indptr, indices, blocks, x, i):
@@ -38,9 +40,10 @@ def _block_row(indptr, indices, blocks, x, i):
 def bsr_matvec(indptr, indices, blocks, x):
     """y = A x for a 3×3-block CSR matrix; x, y of shape (n, 3)."""
     n = indptr.shape[0] - 1
-    y = np.zeros((n, 3))
+    y = np.empty((n, 3))  # every row written; np.zeros would be a parfor of its own
     for i in prange(n):
-        y[i, 0], y[i, 1], y[i, 2] = _block_row(indptr, indices, blocks, x, i)
+        # np.int64: the parfor's own index is unsigned, a second signature of _block_row otherwise
+        y[i, 0], y[i, 1], y[i, 2] = _block_row(indptr, indices, blocks, x, np.int64(i))
     return y
 
 
@@ -90,16 +93,20 @@ def _precond(pinv, r):
 
 @njit(cache=True)
 def block_jacobi(blocks, diag):
-    """Inverses of the diagonal 3×3 blocks (identity where a block is singular)."""
+    """Inverses of the diagonal 3×3 blocks (identity where a block is singular).
+
+    Closed-form cofactor inverse (:func:`unmesh._linalg_kernels.inv3`): ``np.linalg.det`` /
+    ``inv`` brought LAPACK wrappers that cost more to compile than the whole kernel.
+    """
     n = diag.shape[0]
     out = np.empty((n, 3, 3))
     for i in range(n):
         B = blocks[diag[i]].reshape(3, 3)
-        det = np.linalg.det(B)
-        if abs(det) > 1e-300:
-            out[i] = np.linalg.inv(B)
-        else:
-            out[i] = np.eye(3)
+        det = inv3(B, out[i])
+        if not abs(det) > 1e-300:
+            for a in range(3):
+                for b in range(3):
+                    out[i, a, b] = 1.0 if a == b else 0.0
     return out
 
 

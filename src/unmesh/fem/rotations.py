@@ -75,88 +75,96 @@ def quaternion_to_matrix(q):
 _CHUNK = 256
 
 
+@njit(cache=True, nogil=True)
+def _horn_chunk(ch, rest, cur, node_off, nodes, weights, out):
+    """Rotations of the elements of chunk ``ch`` (body of :func:`_horn_all`)."""
+    ne = node_off.shape[0] - 1
+    N = np.empty((4, 4))
+    V = np.empty((4, 4))
+    q = np.empty(4)
+    for e in range(ch * _CHUNK, min(ne, (ch + 1) * _CHUNK)):
+        a0 = node_off[e]
+        a1 = node_off[e + 1]
+        wsum = 0.0
+        cX0 = cX1 = cX2 = 0.0
+        cx0 = cx1 = cx2 = 0.0
+        for k in range(a0, a1):
+            w = weights[k]
+            i = nodes[k]
+            wsum += w
+            cX0 += w * rest[i, 0]
+            cX1 += w * rest[i, 1]
+            cX2 += w * rest[i, 2]
+            cx0 += w * cur[i, 0]
+            cx1 += w * cur[i, 1]
+            cx2 += w * cur[i, 2]
+        cX0 /= wsum
+        cX1 /= wsum
+        cX2 /= wsum
+        cx0 /= wsum
+        cx1 /= wsum
+        cx2 /= wsum
+        Sxx = Sxy = Sxz = Syx = Syy = Syz = Szx = Szy = Szz = 0.0
+        for k in range(a0, a1):
+            w = weights[k]
+            i = nodes[k]
+            X0 = w * (rest[i, 0] - cX0)
+            X1 = w * (rest[i, 1] - cX1)
+            X2 = w * (rest[i, 2] - cX2)
+            x0 = cur[i, 0] - cx0
+            x1 = cur[i, 1] - cx1
+            x2 = cur[i, 2] - cx2
+            Sxx += X0 * x0
+            Sxy += X0 * x1
+            Sxz += X0 * x2
+            Syx += X1 * x0
+            Syy += X1 * x1
+            Syz += X1 * x2
+            Szx += X2 * x0
+            Szy += X2 * x1
+            Szz += X2 * x2
+        # Horn's matrix (as :func:`horn_matrix`), written into the chunk's work array
+        N[0, 0] = Sxx + Syy + Szz
+        N[0, 1] = N[1, 0] = Syz - Szy
+        N[0, 2] = N[2, 0] = Szx - Sxz
+        N[0, 3] = N[3, 0] = Sxy - Syx
+        N[1, 1] = Sxx - Syy - Szz
+        N[1, 2] = N[2, 1] = Sxy + Syx
+        N[1, 3] = N[3, 1] = Szx + Sxz
+        N[2, 2] = -Sxx + Syy - Szz
+        N[2, 3] = N[3, 2] = Syz + Szy
+        N[3, 3] = -Sxx - Syy + Szz
+        jacobi_eigh(N, V)
+        best = 0
+        for i in range(1, 4):
+            if N[i, i] > N[best, best]:
+                best = i
+        nq = 0.0
+        for i in range(4):
+            q[i] = V[i, best]
+            nq += q[i] * q[i]
+        nq = np.sqrt(nq)
+        q0, q1, q2, q3 = q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq
+        # as :func:`quaternion_to_matrix`
+        out[e, 0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
+        out[e, 0, 1] = 2 * (q1 * q2 - q0 * q3)
+        out[e, 0, 2] = 2 * (q1 * q3 + q0 * q2)
+        out[e, 1, 0] = 2 * (q2 * q1 + q0 * q3)
+        out[e, 1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
+        out[e, 1, 2] = 2 * (q2 * q3 - q0 * q1)
+        out[e, 2, 0] = 2 * (q3 * q1 - q0 * q2)
+        out[e, 2, 1] = 2 * (q3 * q2 + q0 * q1)
+        out[e, 2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def _horn_all(rest, cur, node_off, nodes, weights):
     ne = node_off.shape[0] - 1
     out = np.empty((ne, 3, 3))
     nchunk = (ne + _CHUNK - 1) // _CHUNK
+    # a thin prange loop over a serial body (typed once, not again inside the parfor)
     for ch in prange(nchunk):
-        N = np.empty((4, 4))
-        V = np.empty((4, 4))
-        q = np.empty(4)
-        for e in range(ch * _CHUNK, min(ne, (ch + 1) * _CHUNK)):
-            a0 = node_off[e]
-            a1 = node_off[e + 1]
-            wsum = 0.0
-            cX0 = cX1 = cX2 = 0.0
-            cx0 = cx1 = cx2 = 0.0
-            for k in range(a0, a1):
-                w = weights[k]
-                i = nodes[k]
-                wsum += w
-                cX0 += w * rest[i, 0]
-                cX1 += w * rest[i, 1]
-                cX2 += w * rest[i, 2]
-                cx0 += w * cur[i, 0]
-                cx1 += w * cur[i, 1]
-                cx2 += w * cur[i, 2]
-            cX0 /= wsum
-            cX1 /= wsum
-            cX2 /= wsum
-            cx0 /= wsum
-            cx1 /= wsum
-            cx2 /= wsum
-            Sxx = Sxy = Sxz = Syx = Syy = Syz = Szx = Szy = Szz = 0.0
-            for k in range(a0, a1):
-                w = weights[k]
-                i = nodes[k]
-                X0 = w * (rest[i, 0] - cX0)
-                X1 = w * (rest[i, 1] - cX1)
-                X2 = w * (rest[i, 2] - cX2)
-                x0 = cur[i, 0] - cx0
-                x1 = cur[i, 1] - cx1
-                x2 = cur[i, 2] - cx2
-                Sxx += X0 * x0
-                Sxy += X0 * x1
-                Sxz += X0 * x2
-                Syx += X1 * x0
-                Syy += X1 * x1
-                Syz += X1 * x2
-                Szx += X2 * x0
-                Szy += X2 * x1
-                Szz += X2 * x2
-            # Horn's matrix (as :func:`horn_matrix`), written into the chunk's work array
-            N[0, 0] = Sxx + Syy + Szz
-            N[0, 1] = N[1, 0] = Syz - Szy
-            N[0, 2] = N[2, 0] = Szx - Sxz
-            N[0, 3] = N[3, 0] = Sxy - Syx
-            N[1, 1] = Sxx - Syy - Szz
-            N[1, 2] = N[2, 1] = Sxy + Syx
-            N[1, 3] = N[3, 1] = Szx + Sxz
-            N[2, 2] = -Sxx + Syy - Szz
-            N[2, 3] = N[3, 2] = Syz + Szy
-            N[3, 3] = -Sxx - Syy + Szz
-            jacobi_eigh(N, V)
-            best = 0
-            for i in range(1, 4):
-                if N[i, i] > N[best, best]:
-                    best = i
-            nq = 0.0
-            for i in range(4):
-                q[i] = V[i, best]
-                nq += q[i] * q[i]
-            nq = np.sqrt(nq)
-            q0, q1, q2, q3 = q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq
-            # as :func:`quaternion_to_matrix`
-            out[e, 0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
-            out[e, 0, 1] = 2 * (q1 * q2 - q0 * q3)
-            out[e, 0, 2] = 2 * (q1 * q3 + q0 * q2)
-            out[e, 1, 0] = 2 * (q2 * q1 + q0 * q3)
-            out[e, 1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
-            out[e, 1, 2] = 2 * (q2 * q3 - q0 * q1)
-            out[e, 2, 0] = 2 * (q3 * q1 - q0 * q2)
-            out[e, 2, 1] = 2 * (q3 * q2 + q0 * q1)
-            out[e, 2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+        _horn_chunk(np.int64(ch), rest, cur, node_off, nodes, weights, out)
     return out
 
 

@@ -355,6 +355,56 @@ def local_fit(x, kernel, normal_mode, degree, cbuf, ncand, nbuf, A, rhs, res):
     return True
 
 
+@njit(cache=True)
+def _project_block(blk, queries, gpack, kernel, normal_mode, degree, margin, lv_origin, lv_inv, lv_dims,
+                   lv_koff, lv_keys, lv_start, max_iter, tol, out_p, out_n, status, nq):
+    """Queries of block ``blk`` (body of :func:`project_kernel`)."""
+    ranges = np.empty((9, 2), np.int64)
+    A = np.empty((6, 6))
+    rhs = np.empty(6)
+    res = np.empty(12)
+    cand, cbuf, nbuf = work_buffers(np.int64(_CAP))  # int64, not a literal: one signature
+    centre = np.empty(3)
+    meta = np.zeros(2, np.int64)
+    y = np.empty(3)
+    for qi in range(blk * _BLOCK, min(nq, (blk + 1) * _BLOCK)):
+        x0, x1, x2 = queries[qi, 0], queries[qi, 1], queries[qi, 2]
+        y[0] = x0
+        y[1] = x1
+        y[2] = x2
+        st = NOT_CONVERGED
+        nx = ny = nz = math.nan
+        for it in range(max_iter):
+            cand, cbuf, nbuf = refresh(y, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys,
+                                       lv_start, ranges, cand, cbuf, nbuf, centre, meta)
+            ok = local_fit(y, kernel, normal_mode, degree, cbuf, meta[0], nbuf, A, rhs, res)
+            if not ok:
+                st = NO_NEIGHBORS if it == 0 else LOST
+                break
+            nx, ny, nz = res[3], res[4], res[5]
+            dist = nx * (x0 - res[0]) + ny * (x1 - res[1]) + nz * (x2 - res[2])
+            y0, y1, y2 = x0 - dist * nx, x1 - dist * ny, x2 - dist * nz
+            step = math.sqrt((y0 - y[0]) ** 2 + (y1 - y[1]) ** 2 + (y2 - y[2]) ** 2)
+            y[0] = y0
+            y[1] = y1
+            y[2] = y2
+            if step <= tol * res[10]:
+                st = CONVERGED
+                break
+        status[qi] = st
+        if st == NO_NEIGHBORS or st == LOST:
+            for t in range(3):
+                out_p[qi, t] = math.nan
+                out_n[qi, t] = math.nan
+        else:
+            out_p[qi, 0] = y[0]
+            out_p[qi, 1] = y[1]
+            out_p[qi, 2] = y[2]
+            out_n[qi, 0] = nx
+            out_n[qi, 1] = ny
+            out_n[qi, 2] = nz
+
+
 @njit(cache=True, parallel=True)
 def project_kernel(queries, gpack, kernel, normal_mode, degree, margin,
                    lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, max_iter, tol,
@@ -369,51 +419,44 @@ def project_kernel(queries, gpack, kernel, normal_mode, degree, margin,
     """
     nq = queries.shape[0]
     nblk = (nq + _BLOCK - 1) // _BLOCK
+    # a thin prange loop over a serial block body (typed once, not again inside the parfor)
     for blk in prange(nblk):
-        ranges = np.empty((9, 2), np.int64)
-        A = np.empty((6, 6))
-        rhs = np.empty(6)
-        res = np.empty(12)
-        cand, cbuf, nbuf = work_buffers(_CAP)
-        centre = np.empty(3)
-        meta = np.zeros(2, np.int64)
-        y = np.empty(3)
-        for qi in range(blk * _BLOCK, min(nq, (blk + 1) * _BLOCK)):
-            x0, x1, x2 = queries[qi, 0], queries[qi, 1], queries[qi, 2]
-            y[0] = x0
-            y[1] = x1
-            y[2] = x2
-            st = NOT_CONVERGED
-            nx = ny = nz = math.nan
-            for it in range(max_iter):
-                cand, cbuf, nbuf = refresh(y, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys,
-                                           lv_start, ranges, cand, cbuf, nbuf, centre, meta)
-                ok = local_fit(y, kernel, normal_mode, degree, cbuf, meta[0], nbuf, A, rhs, res)
-                if not ok:
-                    st = NO_NEIGHBORS if it == 0 else LOST
-                    break
-                nx, ny, nz = res[3], res[4], res[5]
-                dist = nx * (x0 - res[0]) + ny * (x1 - res[1]) + nz * (x2 - res[2])
-                y0, y1, y2 = x0 - dist * nx, x1 - dist * ny, x2 - dist * nz
-                step = math.sqrt((y0 - y[0]) ** 2 + (y1 - y[1]) ** 2 + (y2 - y[2]) ** 2)
-                y[0] = y0
-                y[1] = y1
-                y[2] = y2
-                if step <= tol * res[10]:
-                    st = CONVERGED
-                    break
-            status[qi] = st
-            if st == NO_NEIGHBORS or st == LOST:
-                for t in range(3):
-                    out_p[qi, t] = math.nan
-                    out_n[qi, t] = math.nan
-            else:
-                out_p[qi, 0] = y[0]
-                out_p[qi, 1] = y[1]
-                out_p[qi, 2] = y[2]
-                out_n[qi, 0] = nx
-                out_n[qi, 1] = ny
-                out_n[qi, 2] = nz
+        _project_block(np.int64(blk), queries, gpack, kernel, normal_mode, degree, margin, lv_origin,
+                       lv_inv, lv_dims, lv_koff, lv_keys, lv_start, max_iter, tol, out_p, out_n, status,
+                       nq)
+
+
+@njit(cache=True)
+def _interpolate_block(blk, points, values, gpack, kernel, margin, lv_origin, lv_inv, lv_dims, lv_koff,
+                       lv_keys, lv_start, out, found, nq, nk):
+    """Points of block ``blk`` (body of :func:`interpolate_kernel`)."""
+    ranges = np.empty((9, 2), np.int64)
+    cand, cbuf, nbuf = work_buffers(np.int64(_CAP))  # int64, not a literal: one signature
+    centre = np.empty(3)
+    meta = np.zeros(2, np.int64)
+    acc = np.empty(nk)
+    for qi in range(blk * _BLOCK, min(nq, (blk + 1) * _BLOCK)):
+        x = points[qi]
+        cand, cbuf, nbuf = refresh(x, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys,
+                                   lv_start, ranges, cand, cbuf, nbuf, centre, meta)
+        for t in range(nk):
+            acc[t] = 0.0
+        wsum = 0.0
+        for m in range(meta[0]):
+            dx = cbuf[m, 0] - x[0]
+            dy = cbuf[m, 1] - x[1]
+            dz = cbuf[m, 2] - x[2]
+            w = _wrow(dx * dx + dy * dy + dz * dz, cbuf[m, 6], cbuf[m, 7], kernel)
+            if w <= 0.0:
+                continue
+            a = cand[m]
+            wsum += w
+            for t in range(nk):
+                acc[t] += w * values[a, t]
+        ok = wsum > 0.0
+        found[qi] = ok
+        for t in range(nk):
+            out[qi, t] = acc[t] / wsum if ok else 0.0
 
 
 @njit(cache=True, parallel=True)
@@ -427,31 +470,7 @@ def interpolate_kernel(points, values, gpack, kernel, margin,
     nq = points.shape[0]
     nk = values.shape[1]
     nblk = (nq + _BLOCK - 1) // _BLOCK
+    # a thin prange loop over a serial block body (typed once, not again inside the parfor)
     for blk in prange(nblk):
-        ranges = np.empty((9, 2), np.int64)
-        cand, cbuf, nbuf = work_buffers(_CAP)
-        centre = np.empty(3)
-        meta = np.zeros(2, np.int64)
-        acc = np.empty(nk)
-        for qi in range(blk * _BLOCK, min(nq, (blk + 1) * _BLOCK)):
-            x = points[qi]
-            cand, cbuf, nbuf = refresh(x, margin, gpack, lv_origin, lv_inv, lv_dims, lv_koff, lv_keys,
-                                       lv_start, ranges, cand, cbuf, nbuf, centre, meta)
-            for t in range(nk):
-                acc[t] = 0.0
-            wsum = 0.0
-            for m in range(meta[0]):
-                dx = cbuf[m, 0] - x[0]
-                dy = cbuf[m, 1] - x[1]
-                dz = cbuf[m, 2] - x[2]
-                w = _wrow(dx * dx + dy * dy + dz * dz, cbuf[m, 6], cbuf[m, 7], kernel)
-                if w <= 0.0:
-                    continue
-                a = cand[m]
-                wsum += w
-                for t in range(nk):
-                    acc[t] += w * values[a, t]
-            ok = wsum > 0.0
-            found[qi] = ok
-            for t in range(nk):
-                out[qi, t] = acc[t] / wsum if ok else 0.0
+        _interpolate_block(np.int64(blk), points, values, gpack, kernel, margin, lv_origin, lv_inv,
+                           lv_dims, lv_koff, lv_keys, lv_start, out, found, nq, nk)

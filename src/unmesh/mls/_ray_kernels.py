@@ -241,6 +241,64 @@ def ray_iterate(o, d, t0, gpack, kernel, normal_mode, degree, margin,
     return False, t, cand, cbuf, nbuf
 
 
+@njit(cache=True)
+def _intersect_block(blk, origins, dirs, tmax, gpack, kernel, normal_mode, degree, margin, lv_origin, lv_inv,
+                     lv_dims, lv_koff, lv_keys, lv_start, grho, rho_max, reach_len, r_origin, r_cell, r_dims,
+                     r_koff, r_keys, r_start, r_items, r_skoff, r_skip, r_use_skip, max_iter, tol, eps2,
+                     max_attempts, out_t, out_hit, out_n, nr):
+    """Rays of block ``blk`` (body of :func:`intersect_kernel`)."""
+    ranges = np.empty((9, 2), np.int64)
+    A = np.empty((6, 6))
+    rhs = np.empty(6)
+    res = np.empty(12)
+    cand, cbuf, nbuf = work_buffers(np.int64(_CAP))  # int64, not a literal: one signature
+    centre = np.empty(3)
+    meta = np.zeros(2, np.int64)
+    x = np.empty(3)
+    best = np.empty(2)
+    o = np.empty(3)
+    d = np.empty(3)
+    for ri in range(blk * _BLOCK, min(nr, (blk + 1) * _BLOCK)):
+        out_t[ri] = math.inf
+        out_hit[ri] = False
+        for ax in range(3):
+            out_n[ri, ax] = math.nan
+            o[ax] = origins[ri, ax]
+            d[ax] = dirs[ri, ax]
+        dn = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        # a disc may be hit slightly behind the origin with the surface in front of it
+        t0 = -rho_max / dn
+        t1 = tmax[ri]
+        tlo = t0
+        for _ in range(max_attempts):
+            if not first_disc(o, d, tlo, t1, gpack, grho, r_origin, r_cell, r_dims, r_koff, r_keys, r_start,
+                              r_items, r_skoff, r_skip, r_use_skip, best):
+                break
+            th = best[0]
+            j = int(best[1])
+            ok, tc, cand, cbuf, nbuf = ray_iterate(o, d, th, gpack, kernel, normal_mode, degree, margin,
+                                                   lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start,
+                                                   max_iter, tol, reach_len, ranges, A, rhs, res, cand, cbuf,
+                                                   nbuf, centre, meta, x)
+            if ok and tc > 0.0:
+                if tc > tmax[ri]:
+                    break
+                # line 6 of Algorithm 3.1, with the fit of the last iterate (within tol·σ of x)
+                e = 0.0
+                for ax in range(3):
+                    e += (res[6 + ax] - (o[ax] + tc * d[ax])) ** 2
+                if math.sqrt(e) < eps2 * res[10]:
+                    out_t[ri] = tc
+                    out_hit[ri] = True
+                    out_n[ri, 0] = res[3]
+                    out_n[ri, 1] = res[4]
+                    out_n[ri, 2] = res[5]
+                    break
+            tlo = th + grho[j] / dn
+            if tlo > t1:
+                break
+
+
 @njit(cache=True, parallel=True)
 def intersect_kernel(origins, dirs, tmax, gpack, kernel, normal_mode, degree, margin,
                      lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, grho, rho_max, reach_len,
@@ -256,54 +314,9 @@ def intersect_kernel(origins, dirs, tmax, gpack, kernel, normal_mode, degree, ma
     """
     nr = origins.shape[0]
     nblk = (nr + _BLOCK - 1) // _BLOCK
+    # a thin prange loop over a serial block body (typed once, not again inside the parfor)
     for blk in prange(nblk):
-        ranges = np.empty((9, 2), np.int64)
-        A = np.empty((6, 6))
-        rhs = np.empty(6)
-        res = np.empty(12)
-        cand, cbuf, nbuf = work_buffers(_CAP)
-        centre = np.empty(3)
-        meta = np.zeros(2, np.int64)
-        x = np.empty(3)
-        best = np.empty(2)
-        o = np.empty(3)
-        d = np.empty(3)
-        for ri in range(blk * _BLOCK, min(nr, (blk + 1) * _BLOCK)):
-            out_t[ri] = math.inf
-            out_hit[ri] = False
-            for ax in range(3):
-                out_n[ri, ax] = math.nan
-                o[ax] = origins[ri, ax]
-                d[ax] = dirs[ri, ax]
-            dn = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-            # a disc may be hit slightly behind the origin with the surface in front of it
-            t0 = -rho_max / dn
-            t1 = tmax[ri]
-            tlo = t0
-            for _ in range(max_attempts):
-                if not first_disc(o, d, tlo, t1, gpack, grho, r_origin, r_cell, r_dims, r_koff, r_keys, r_start,
-                                  r_items, r_skoff, r_skip, r_use_skip, best):
-                    break
-                th = best[0]
-                j = int(best[1])
-                ok, tc, cand, cbuf, nbuf = ray_iterate(o, d, th, gpack, kernel, normal_mode, degree, margin,
-                                                       lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start,
-                                                       max_iter, tol, reach_len, ranges, A, rhs, res, cand, cbuf,
-                                                       nbuf, centre, meta, x)
-                if ok and tc > 0.0:
-                    if tc > tmax[ri]:
-                        break
-                    # line 6 of Algorithm 3.1, with the fit of the last iterate (within tol·σ of x)
-                    e = 0.0
-                    for ax in range(3):
-                        e += (res[6 + ax] - (o[ax] + tc * d[ax])) ** 2
-                    if math.sqrt(e) < eps2 * res[10]:
-                        out_t[ri] = tc
-                        out_hit[ri] = True
-                        out_n[ri, 0] = res[3]
-                        out_n[ri, 1] = res[4]
-                        out_n[ri, 2] = res[5]
-                        break
-                tlo = th + grho[j] / dn
-                if tlo > t1:
-                    break
+        _intersect_block(np.int64(blk), origins, dirs, tmax, gpack, kernel, normal_mode, degree, margin,
+                         lv_origin, lv_inv, lv_dims, lv_koff, lv_keys, lv_start, grho, rho_max, reach_len,
+                         r_origin, r_cell, r_dims, r_koff, r_keys, r_start, r_items, r_skoff, r_skip,
+                         r_use_skip, max_iter, tol, eps2, max_attempts, out_t, out_hit, out_n, nr)

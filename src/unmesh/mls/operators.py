@@ -298,8 +298,9 @@ def intersect(
     r = max(len(o), len(d))
     if len(o) not in (1, r) or len(d) not in (1, r):
         raise InputError(f"origins, directions: expected the same number of rays, got {len(o)} and {len(d)}")
-    o = np.ascontiguousarray(np.broadcast_to(o, (r, 3)))
-    d = np.ascontiguousarray(np.broadcast_to(d, (r, 3)))
+    # writable C copies: a read-only view (broadcast_to) would compile a second kernel signature
+    o = np.require(np.broadcast_to(o, (r, 3)), np.float64, ["C", "W"])
+    d = np.require(np.broadcast_to(d, (r, 3)), np.float64, ["C", "W"])
     dl = np.linalg.norm(d, axis=1)
     if (dl <= 0).any():
         raise InputError(f"directions: expected non-zero vectors, got a zero vector at index {int(np.argmin(dl))}")

@@ -242,6 +242,65 @@ def closest_on_triangle(p, a, b, c):  # pragma: no cover - numba
     return a + ab * v + ac * w, 1.0 - v - w, v, w
 
 
+@njit(cache=True)
+def _closest_one(qi, queries, vertices, faces, order, lo, hi, left, right, start, count,
+                 dist, pts, face, bary):  # pragma: no cover - numba
+    """Closest point of query ``qi`` into row ``qi`` of the outputs (body of :func:`bvh_closest`)."""
+    p = queries[qi].copy()
+    best = np.inf
+    bface = -1
+    bp = np.zeros(3)
+    bw = np.full(3, np.nan)
+    stack = np.empty(256, np.int64)
+    sp = 1
+    stack[0] = 0
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        d2 = 0.0
+        for k in range(3):
+            if p[k] < lo[node, k]:
+                d2 += (lo[node, k] - p[k]) ** 2
+            elif p[k] > hi[node, k]:
+                d2 += (p[k] - hi[node, k]) ** 2
+        if d2 >= best:
+            continue
+        if left[node] < 0:
+            for i in range(start[node], start[node] + count[node]):
+                t = order[i]
+                x, w0, w1, w2 = closest_on_triangle(p, vertices[faces[t, 0]], vertices[faces[t, 1]], vertices[faces[t, 2]])
+                dd = (x[0] - p[0]) ** 2 + (x[1] - p[1]) ** 2 + (x[2] - p[2]) ** 2
+                if dd < best or (dd == best and t < bface):
+                    best = dd
+                    bface = t
+                    bp[:] = x
+                    bw[0] = w0
+                    bw[1] = w1
+                    bw[2] = w2
+        else:
+            # Push the farther child first so the nearer one is searched first.
+            lc = left[node]
+            rc = right[node]
+            dl = 0.0
+            dr = 0.0
+            for k in range(3):
+                c1 = 0.5 * (lo[lc, k] + hi[lc, k]) - p[k]
+                c2 = 0.5 * (lo[rc, k] + hi[rc, k]) - p[k]
+                dl += c1 * c1
+                dr += c2 * c2
+            if dl <= dr:
+                stack[sp] = rc
+                stack[sp + 1] = lc
+            else:
+                stack[sp] = lc
+                stack[sp + 1] = rc
+            sp += 2
+    dist[qi] = math.sqrt(best)
+    pts[qi] = bp
+    face[qi] = bface
+    bary[qi] = bw
+
+
 @njit(cache=True, parallel=True)
 def bvh_closest(queries, vertices, faces, order, lo, hi, left, right, start, count):  # pragma: no cover - numba
     """Closest point on the mesh: distances (Q,), points (Q,3), face index (Q,), barycentrics (Q,3).
@@ -249,65 +308,16 @@ def bvh_closest(queries, vertices, faces, order, lo, hi, left, right, start, cou
     On exact ties the lowest face index among the visited leaves wins (boxes exactly as far as the
     best distance are pruned); with no triangles the distance is inf and the face -1.
     """
+    # a thin prange loop over a serial body: array expressions in a parallel function are
+    # parfors of their own, which multiplied its compile time (int64 index: one body signature)
     nq = queries.shape[0]
     dist = np.empty(nq)
     pts = np.empty((nq, 3))
     face = np.empty(nq, np.int64)
-    bary = np.full((nq, 3), np.nan)
+    bary = np.empty((nq, 3))
     for qi in prange(nq):
-        p = queries[qi].copy()
-        best = np.inf
-        bface = -1
-        bp = np.zeros(3)
-        bw = np.full(3, np.nan)
-        stack = np.empty(256, np.int64)
-        sp = 1
-        stack[0] = 0
-        while sp > 0:
-            sp -= 1
-            node = stack[sp]
-            d2 = 0.0
-            for k in range(3):
-                if p[k] < lo[node, k]:
-                    d2 += (lo[node, k] - p[k]) ** 2
-                elif p[k] > hi[node, k]:
-                    d2 += (p[k] - hi[node, k]) ** 2
-            if d2 >= best:
-                continue
-            if left[node] < 0:
-                for i in range(start[node], start[node] + count[node]):
-                    t = order[i]
-                    x, w0, w1, w2 = closest_on_triangle(p, vertices[faces[t, 0]], vertices[faces[t, 1]], vertices[faces[t, 2]])
-                    dd = (x[0] - p[0]) ** 2 + (x[1] - p[1]) ** 2 + (x[2] - p[2]) ** 2
-                    if dd < best or (dd == best and t < bface):
-                        best = dd
-                        bface = t
-                        bp[:] = x
-                        bw[0] = w0
-                        bw[1] = w1
-                        bw[2] = w2
-            else:
-                # Push the farther child first so the nearer one is searched first.
-                lc = left[node]
-                rc = right[node]
-                dl = 0.0
-                dr = 0.0
-                for k in range(3):
-                    c1 = 0.5 * (lo[lc, k] + hi[lc, k]) - p[k]
-                    c2 = 0.5 * (lo[rc, k] + hi[rc, k]) - p[k]
-                    dl += c1 * c1
-                    dr += c2 * c2
-                if dl <= dr:
-                    stack[sp] = rc
-                    stack[sp + 1] = lc
-                else:
-                    stack[sp] = lc
-                    stack[sp + 1] = rc
-                sp += 2
-        dist[qi] = math.sqrt(best)
-        pts[qi] = bp
-        face[qi] = bface
-        bary[qi] = bw
+        _closest_one(np.int64(qi), queries, vertices, faces, order, lo, hi, left, right, start, count,
+                     dist, pts, face, bary)
     return dist, pts, face, bary
 
 
@@ -330,6 +340,35 @@ def triangle_solid_angle(p, a, b, c):  # pragma: no cover - numba
     return 2.0 * math.atan2(det, den)
 
 
+@njit(cache=True)
+def _winding_one(qi, queries, vertices, faces, order, left, right, start, count, avec, ctr, rad, beta,
+                 out):  # pragma: no cover - numba
+    """Winding number of query ``qi`` into ``out[qi]`` (body of :func:`bvh_winding`)."""
+    p = queries[qi].copy()
+    total = 0.0
+    stack = np.empty(256, np.int64)
+    sp = 1
+    stack[0] = 0
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        dx = ctr[node, 0] - p[0]
+        dy = ctr[node, 1] - p[1]
+        dz = ctr[node, 2] - p[2]
+        r = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if r > beta * rad[node] and r > 0.0:
+            total += (avec[node, 0] * dx + avec[node, 1] * dy + avec[node, 2] * dz) / (r * r * r)
+        elif left[node] < 0:
+            for i in range(start[node], start[node] + count[node]):
+                t = order[i]
+                total += triangle_solid_angle(p, vertices[faces[t, 0]], vertices[faces[t, 1]], vertices[faces[t, 2]])
+        else:
+            stack[sp] = left[node]
+            stack[sp + 1] = right[node]
+            sp += 2
+    out[qi] = total / (4.0 * math.pi)
+
+
 @njit(cache=True, parallel=True)
 def bvh_winding(queries, vertices, faces, order, left, right, start, count, avec, ctr, rad, beta):  # pragma: no cover
     """Generalized winding numbers (Q,) (Jacobson et al. 2013).
@@ -341,29 +380,8 @@ def bvh_winding(queries, vertices, faces, order, left, right, start, count, avec
     nq = queries.shape[0]
     out = np.empty(nq)
     for qi in prange(nq):
-        p = queries[qi].copy()
-        total = 0.0
-        stack = np.empty(256, np.int64)
-        sp = 1
-        stack[0] = 0
-        while sp > 0:
-            sp -= 1
-            node = stack[sp]
-            dx = ctr[node, 0] - p[0]
-            dy = ctr[node, 1] - p[1]
-            dz = ctr[node, 2] - p[2]
-            r = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if r > beta * rad[node] and r > 0.0:
-                total += (avec[node, 0] * dx + avec[node, 1] * dy + avec[node, 2] * dz) / (r * r * r)
-            elif left[node] < 0:
-                for i in range(start[node], start[node] + count[node]):
-                    t = order[i]
-                    total += triangle_solid_angle(p, vertices[faces[t, 0]], vertices[faces[t, 1]], vertices[faces[t, 2]])
-            else:
-                stack[sp] = left[node]
-                stack[sp + 1] = right[node]
-                sp += 2
-        out[qi] = total / (4.0 * math.pi)
+        _winding_one(np.int64(qi), queries, vertices, faces, order, left, right, start, count, avec, ctr, rad, beta,
+                     out)
     return out
 
 
@@ -437,6 +455,70 @@ def _ray_box(o, d, lo, hi, node, tmax):  # pragma: no cover - numba
     return t0
 
 
+@njit(cache=True)
+def _ray_first_one(r, origins, directions, vertices, faces, order, lo, hi, left, right, start, count,
+                   tout, fout, bout):  # pragma: no cover - numba
+    """Nearest hit of ray ``r`` into row ``r`` of the outputs (body of :func:`bvh_ray_first`)."""
+    o = origins[r]
+    d = directions[r]
+    best = np.inf
+    bface = -1
+    bu = 0.0
+    bv = 0.0
+    stack = np.empty(256, np.int64)
+    sp = 0
+    if _ray_box(o, d, lo, hi, 0, best) >= 0.0:
+        stack[0] = 0
+        sp = 1
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        if _ray_box(o, d, lo, hi, node, best) < 0.0:
+            continue
+        if left[node] < 0:
+            for i in range(start[node], start[node] + count[node]):
+                t = order[i]
+                hit, th, u, v = ray_triangle(o, d, vertices[faces[t, 0]], vertices[faces[t, 1]],
+                                             vertices[faces[t, 2]])
+                if hit and (th < best or (th == best and t < bface)):
+                    best = th
+                    bface = t
+                    bu = u
+                    bv = v
+        else:
+            lc = left[node]
+            rc = right[node]
+            tl = _ray_box(o, d, lo, hi, lc, best)
+            tr = _ray_box(o, d, lo, hi, rc, best)
+            # the nearer child goes on top of the stack
+            if tl >= 0.0 and tr >= 0.0:
+                if tl <= tr:
+                    stack[sp] = rc
+                    stack[sp + 1] = lc
+                else:
+                    stack[sp] = lc
+                    stack[sp + 1] = rc
+                sp += 2
+            elif tl >= 0.0:
+                stack[sp] = lc
+                sp += 1
+            elif tr >= 0.0:
+                stack[sp] = rc
+                sp += 1
+    if bface >= 0:
+        tout[r] = best
+        fout[r] = bface
+        bout[r, 0] = 1.0 - bu - bv
+        bout[r, 1] = bu
+        bout[r, 2] = bv
+    else:
+        tout[r] = np.inf
+        fout[r] = -1
+        bout[r, 0] = np.nan
+        bout[r, 1] = np.nan
+        bout[r, 2] = np.nan
+
+
 @njit(cache=True, parallel=True)
 def bvh_ray_first(origins, directions, vertices, faces, order, lo, hi, left, right, start, count):  # pragma: no cover
     """Nearest hit of every ray: t (R,) (inf if none), face (R,) (-1), barycentrics (R,3) (NaN).
@@ -444,66 +526,16 @@ def bvh_ray_first(origins, directions, vertices, faces, order, lo, hi, left, rig
     Ties in ``t`` go to the lowest face index.
     """
     nr = origins.shape[0]
-    tout = np.full(nr, np.inf)
-    fout = np.full(nr, -1, np.int64)
-    bout = np.full((nr, 3), np.nan)
+    tout = np.empty(nr)  # every row written by the body (np.full here would be a parfor)
+    fout = np.empty(nr, np.int64)
+    bout = np.empty((nr, 3))
     for r in prange(nr):
-        o = origins[r]
-        d = directions[r]
-        best = np.inf
-        bface = -1
-        bu = 0.0
-        bv = 0.0
-        stack = np.empty(256, np.int64)
-        sp = 0
-        if _ray_box(o, d, lo, hi, 0, best) >= 0.0:
-            stack[0] = 0
-            sp = 1
-        while sp > 0:
-            sp -= 1
-            node = stack[sp]
-            if _ray_box(o, d, lo, hi, node, best) < 0.0:
-                continue
-            if left[node] < 0:
-                for i in range(start[node], start[node] + count[node]):
-                    t = order[i]
-                    hit, th, u, v = ray_triangle(o, d, vertices[faces[t, 0]], vertices[faces[t, 1]],
-                                                 vertices[faces[t, 2]])
-                    if hit and (th < best or (th == best and t < bface)):
-                        best = th
-                        bface = t
-                        bu = u
-                        bv = v
-            else:
-                lc = left[node]
-                rc = right[node]
-                tl = _ray_box(o, d, lo, hi, lc, best)
-                tr = _ray_box(o, d, lo, hi, rc, best)
-                # the nearer child goes on top of the stack
-                if tl >= 0.0 and tr >= 0.0:
-                    if tl <= tr:
-                        stack[sp] = rc
-                        stack[sp + 1] = lc
-                    else:
-                        stack[sp] = lc
-                        stack[sp + 1] = rc
-                    sp += 2
-                elif tl >= 0.0:
-                    stack[sp] = lc
-                    sp += 1
-                elif tr >= 0.0:
-                    stack[sp] = rc
-                    sp += 1
-        if bface >= 0:
-            tout[r] = best
-            fout[r] = bface
-            bout[r, 0] = 1.0 - bu - bv
-            bout[r, 1] = bu
-            bout[r, 2] = bv
+        _ray_first_one(np.int64(r), origins, directions, vertices, faces, order, lo, hi, left, right, start, count,
+                       tout, fout, bout)
     return tout, fout, bout
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _ray_all(o, d, vertices, faces, order, lo, hi, left, right, start, count, tb, fb, bb, pos):  # pragma: no cover
     """Visit every hit of one ray; write them from ``pos`` when ``tb`` is non-empty; returns the count."""
     n = 0
@@ -539,13 +571,13 @@ def _ray_all(o, d, vertices, faces, order, lo, hi, left, right, start, count, tb
 def bvh_ray_count(origins, directions, vertices, faces, order, lo, hi, left, right, start, count):  # pragma: no cover
     """Number of hits (R,) of every ray (all ``t >= 0``)."""
     nr = origins.shape[0]
-    out = np.zeros(nr, np.int64)
+    out = np.empty(nr, np.int64)  # every entry written (np.zeros would be a parfor)
     empty_t = np.empty(0)
     empty_f = np.empty(0, np.int64)
     empty_b = np.empty((0, 3))
     for r in prange(nr):
         out[r] = _ray_all(origins[r], directions[r], vertices, faces, order, lo, hi, left, right, start, count,
-                          empty_t, empty_f, empty_b, 0)
+                          empty_t, empty_f, empty_b, np.int64(0))  # not a literal 0: one _ray_all
     return out
 
 

@@ -256,6 +256,57 @@ def _query_box(qc, reach, half, dim):
     return lo, hi
 
 
+@njit(cache=True)
+def _query_group(g, queries, qorder, group_start, qcells, r2, reach, half, dim, slot_cell, slot_used, slot_head,
+                 slot_count, pos, nxt, counts, offsets, indices, fill):
+    """Queries of group ``g`` (body of :func:`hash_query`)."""
+    lo, hi = _query_box(qcells[g], reach, half, dim)
+    tot = 0
+    for ii in range(lo[0], hi[0] + 1):
+        for jj in range(lo[1], hi[1] + 1):
+            for kk in range(lo[2], hi[2] + 1):
+                h = find_slot(ii, jj, kk, slot_cell, slot_used)
+                if h >= 0:
+                    tot += slot_count[h]
+    cid = np.empty(tot, np.int64)
+    cpos = np.empty((tot, 3), np.float64)
+    w = 0
+    for ii in range(lo[0], hi[0] + 1):
+        for jj in range(lo[1], hi[1] + 1):
+            for kk in range(lo[2], hi[2] + 1):
+                h = find_slot(ii, jj, kk, slot_cell, slot_used)
+                if h < 0:
+                    continue
+                a = slot_head[h]
+                while a >= 0:
+                    cid[w] = a
+                    for t in range(dim):
+                        cpos[w, t] = pos[a, t]
+                    w += 1
+                    a = nxt[a]
+    hits = np.empty(tot, np.int64)
+    for t in range(group_start[g], group_start[g + 1]):
+        b = qorder[t]
+        nb = 0
+        qx = queries[b, 0]
+        qy = queries[b, 1]
+        qz = queries[b, 2] if dim == 3 else 0.0
+        for c in range(tot):
+            dx = cpos[c, 0] - qx
+            s2 = dx * dx
+            dx = cpos[c, 1] - qy
+            s2 = s2 + dx * dx
+            if dim == 3:
+                dx = cpos[c, 2] - qz
+                s2 = s2 + dx * dx
+            hits[nb] = cid[c]
+            nb += s2 <= r2
+        if fill:
+            _rank_sort_into(hits, nb, indices, offsets[b])
+        else:
+            counts[b] = nb
+
+
 @njit(cache=True, parallel=True)
 def hash_query(queries, qorder, group_start, qcells, radius, reach, half, slot_cell, slot_used, slot_head,
                slot_count, pos, nxt, counts, offsets, indices, fill):
@@ -266,54 +317,12 @@ def hash_query(queries, qorder, group_start, qcells, radius, reach, half, slot_c
     see :func:`_query_box`) ``qcells[g]``; the ids and positions of the cells to
     search are gathered once per group into contiguous scratch arrays, then scanned
     branch-free."""
+    # a thin prange loop over a serial body (compiled once, not typed again inside the parfor)
     r2 = radius * radius
     dim = pos.shape[1]
     for g in prange(group_start.shape[0] - 1):
-        lo, hi = _query_box(qcells[g], reach, half, dim)
-        tot = 0
-        for ii in range(lo[0], hi[0] + 1):
-            for jj in range(lo[1], hi[1] + 1):
-                for kk in range(lo[2], hi[2] + 1):
-                    h = find_slot(ii, jj, kk, slot_cell, slot_used)
-                    if h >= 0:
-                        tot += slot_count[h]
-        cid = np.empty(tot, np.int64)
-        cpos = np.empty((tot, 3), np.float64)
-        w = 0
-        for ii in range(lo[0], hi[0] + 1):
-            for jj in range(lo[1], hi[1] + 1):
-                for kk in range(lo[2], hi[2] + 1):
-                    h = find_slot(ii, jj, kk, slot_cell, slot_used)
-                    if h < 0:
-                        continue
-                    a = slot_head[h]
-                    while a >= 0:
-                        cid[w] = a
-                        for t in range(dim):
-                            cpos[w, t] = pos[a, t]
-                        w += 1
-                        a = nxt[a]
-        hits = np.empty(tot, np.int64)
-        for t in range(group_start[g], group_start[g + 1]):
-            b = qorder[t]
-            nb = 0
-            qx = queries[b, 0]
-            qy = queries[b, 1]
-            qz = queries[b, 2] if dim == 3 else 0.0
-            for c in range(tot):
-                dx = cpos[c, 0] - qx
-                s2 = dx * dx
-                dx = cpos[c, 1] - qy
-                s2 = s2 + dx * dx
-                if dim == 3:
-                    dx = cpos[c, 2] - qz
-                    s2 = s2 + dx * dx
-                hits[nb] = cid[c]
-                nb += s2 <= r2
-            if fill:
-                _rank_sort_into(hits, nb, indices, offsets[b])
-            else:
-                counts[b] = nb
+        _query_group(np.int64(g), queries, qorder, group_start, qcells, r2, reach, half, dim, slot_cell, slot_used,
+                     slot_head, slot_count, pos, nxt, counts, offsets, indices, fill)
 
 
 @njit(cache=True, parallel=True)

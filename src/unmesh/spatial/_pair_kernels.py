@@ -48,6 +48,58 @@ def _cell_stencil(c, cell_keys, cell_start, dims, reach, ranges):
     return ns, tot
 
 
+@njit(cache=True)
+def _count_cell(c, sp, cell_keys, cell_start, dims, reach, r2):
+    """Pairs ``a < b`` with ``a`` in cell ``c`` (body of :func:`half_count`)."""
+    m = 2 * reach + 1
+    ranges = np.empty((m * m, 2), np.int64)
+    ns, tot = _cell_stencil(c, cell_keys, cell_start, dims, reach, ranges)
+    buf = np.empty(tot, np.int64)
+    cnt = 0
+    for a in range(cell_start[c], cell_start[c + 1]):
+        cnt += _half_hits(sp, a, ranges, ns, r2, buf)
+    return cnt
+
+
+@njit(cache=True)
+def _fill_cell(c, w, sp, order, cell_keys, cell_start, dims, reach, r2, plo, phi):
+    """Write the pairs of cell ``c`` from ``w`` on (body of :func:`half_fill`)."""
+    m = 2 * reach + 1
+    ranges = np.empty((m * m, 2), np.int64)
+    ns, tot = _cell_stencil(c, cell_keys, cell_start, dims, reach, ranges)
+    buf = np.empty(tot, np.int64)
+    for a in range(cell_start[c], cell_start[c + 1]):
+        nb = _half_hits(sp, a, ranges, ns, r2, buf)
+        w = _write_pairs(order, a, buf, nb, plo, phi, w)
+
+
+@njit(cache=True)
+def _fill_chunk(t, sp, order, cell_keys, cell_start, dims, reach, r2, chunk_cells, chunk_base, plo, phi,
+                lengths, stops):
+    """Chunk ``t`` of :func:`half_fill_chunks` (its body)."""
+    m = 2 * reach + 1
+    w = chunk_base[t]
+    cap = chunk_base[t + 1]
+    stops[t] = chunk_cells[t + 1]
+    ranges = np.empty((m * m, 2), np.int64)
+    for c in range(chunk_cells[t], chunk_cells[t + 1]):
+        ns, tot = _cell_stencil(c, cell_keys, cell_start, dims, reach, ranges)
+        buf = np.empty(tot, np.int64)
+        w_cell = w
+        full = False
+        for a in range(cell_start[c], cell_start[c + 1]):
+            nb = _half_hits(sp, a, ranges, ns, r2, buf)
+            if w + nb > cap:
+                full = True
+                break
+            w = _write_pairs(order, a, buf, nb, plo, phi, w)
+        if full:
+            w = w_cell
+            stops[t] = c
+            break
+    lengths[t] = w - chunk_base[t]
+
+
 @njit(cache=True, parallel=True)
 def half_count(sp, cell_keys, cell_start, dims, reach, radius, cells):
     """Pairs ``a < b`` (sorted positions) within ``radius`` with ``a`` in each of the
@@ -55,18 +107,12 @@ def half_count(sp, cell_keys, cell_start, dims, reach, radius, cells):
 
     The stencil relation is symmetric, so scanning only ``b > a`` finds every pair
     exactly once."""
-    counts = np.zeros(cells.shape[0], np.int64)
+    # thin prange loops over serial per-cell bodies in these kernels: a body inside the
+    # parfor is typed and lowered twice, and np.zeros there is a parfor of its own
+    counts = np.empty(cells.shape[0], np.int64)
     r2 = radius * radius
-    m = 2 * reach + 1
     for t in prange(cells.shape[0]):
-        c = cells[t]
-        ranges = np.empty((m * m, 2), np.int64)
-        ns, tot = _cell_stencil(c, cell_keys, cell_start, dims, reach, ranges)
-        buf = np.empty(tot, np.int64)
-        cnt = 0
-        for a in range(cell_start[c], cell_start[c + 1]):
-            cnt += _half_hits(sp, a, ranges, ns, r2, buf)
-        counts[t] = cnt
+        counts[t] = _count_cell(cells[t], sp, cell_keys, cell_start, dims, reach, r2)
     return counts
 
 
@@ -90,16 +136,8 @@ def half_fill(sp, order, cell_keys, cell_start, dims, reach, radius, cells, offs
     """Write the pairs counted by :func:`half_count` for ``cells`` as original
     indices ``plo < phi``; the pairs of ``cells[t]`` go to ``offsets[t]:offsets[t+1]``."""
     r2 = radius * radius
-    m = 2 * reach + 1
     for t in prange(cells.shape[0]):
-        c = cells[t]
-        ranges = np.empty((m * m, 2), np.int64)
-        ns, tot = _cell_stencil(c, cell_keys, cell_start, dims, reach, ranges)
-        buf = np.empty(tot, np.int64)
-        w = offsets[t]
-        for a in range(cell_start[c], cell_start[c + 1]):
-            nb = _half_hits(sp, a, ranges, ns, r2, buf)
-            w = _write_pairs(order, a, buf, nb, plo, phi, w)
+        _fill_cell(cells[t], offsets[t], sp, order, cell_keys, cell_start, dims, reach, r2, plo, phi)
 
 
 @njit(cache=True, parallel=True)
@@ -111,31 +149,12 @@ def half_fill_chunks(sp, order, cell_keys, cell_start, dims, reach, radius, chun
     and the chunk stops there.  Returns ``(lengths, stops)``: pairs written per chunk
     and the first cell of each chunk left undone (``chunk_cells[t+1]`` if none)."""
     nch = chunk_cells.shape[0] - 1
-    lengths = np.zeros(nch, np.int64)
+    lengths = np.empty(nch, np.int64)
     stops = np.empty(nch, np.int64)
     r2 = radius * radius
-    m = 2 * reach + 1
     for t in prange(nch):
-        w = chunk_base[t]
-        cap = chunk_base[t + 1]
-        stops[t] = chunk_cells[t + 1]
-        ranges = np.empty((m * m, 2), np.int64)
-        for c in range(chunk_cells[t], chunk_cells[t + 1]):
-            ns, tot = _cell_stencil(c, cell_keys, cell_start, dims, reach, ranges)
-            buf = np.empty(tot, np.int64)
-            w_cell = w
-            full = False
-            for a in range(cell_start[c], cell_start[c + 1]):
-                nb = _half_hits(sp, a, ranges, ns, r2, buf)
-                if w + nb > cap:
-                    full = True
-                    break
-                w = _write_pairs(order, a, buf, nb, plo, phi, w)
-            if full:
-                w = w_cell
-                stops[t] = c
-                break
-        lengths[t] = w - chunk_base[t]
+        _fill_chunk(np.int64(t), sp, order, cell_keys, cell_start, dims, reach, r2, chunk_cells, chunk_base, plo, phi,
+                    lengths, stops)
     return lengths, stops
 
 

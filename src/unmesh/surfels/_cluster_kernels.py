@@ -99,7 +99,8 @@ def _split(points, normals, perm, s0, s1, axis, c, by_normal, tmp):  # pragma: n
         if _side(points, normals, perm[a], c, axis, by_normal):
             left += 1
     if by_normal and min(left, n - left) < MIN_NORMAL_SHARE * n:
-        _, axis, _, c, _ = _cluster_stats(points, normals, False, perm, s0, s1)
+        # not by_normal (False here), a run-time bool: the literal False compiled a second _cluster_stats
+        _, axis, _, c, _ = _cluster_stats(points, normals, not by_normal, perm, s0, s1)
         by_normal = False
     left = 0
     for a in range(s0, s1):
@@ -190,10 +191,10 @@ def cluster_split(points, normals, use_normals, target, max_size, max_variation)
     if target > 0:
         keys = np.empty(max(n, 1))
         ids = np.empty(max(n, 1), np.int64)
-        lam0, _, _, _, spread0 = _cluster_stats(points, normals, use_normals, perm, 0, n)
-        size = 0
+        lam0, _, _, _, spread0 = _cluster_stats(points, normals, use_normals, perm, np.int64(0), n)
+        size = np.int64(0)  # int64, not literals: one signature of the heap helpers
         key = lam0 * n * (SPREAD_WEIGHT if spread0 else 1.0) if n > 1 else -1.0
-        size = _heap_push(keys, ids, size, key, 0)
+        size = _heap_push(keys, ids, size, key, np.int64(0))
         while count < target and size > 0:
             cid, size = _heap_pop(keys, ids, size)
             s0 = starts[cid]

@@ -34,7 +34,7 @@ def _clip(px, py, n, ax, ay, c, qx, qy):  # pragma: no cover - numba
 
 
 @njit(cache=True, parallel=True)
-def voronoi_radii(points, normals, nbrs, clip, oriented, min_dot, reach=0.0):  # pragma: no cover - numba
+def voronoi_radii(points, normals, nbrs, clip, oriented, min_dot, reach):  # pragma: no cover - numba
     """Farthest vertex distance (N,) of each point's restricted Voronoi cell in its tangent plane.
 
     The cell of point i is the set of points p of its tangent plane that are
@@ -45,7 +45,7 @@ def voronoi_radii(points, normals, nbrs, clip, oriented, min_dot, reach=0.0):  #
     ``n_i . n_j <= min_dot`` (``|n_i . n_j|`` when not ``oriented``). Also returns
     whether the final cell touches the clip polygon (the cell is open there).
 
-    ``reach > 0``: a neighbour bounds the cell at its 3-D bisector but never beyond ``reach``
+    ``reach`` (float; no default, so that every caller compiles the same signature): ``reach > 0``: a neighbour bounds the cell at its 3-D bisector but never beyond ``reach``
     times its own tangential offset (``c = min(|x_j - x_i|^2 / 2, reach |q'_j|^2)``): where the surface bends
     away faster than the spacing (a neighbour far below the tangent plane) the plain
     bisector lies far out in the plane, off the surface.

@@ -133,26 +133,33 @@ def _raster(vertices, faces, t, axis, inv_d, d, count_only, out_pos, out_face, o
 
 
 @njit(cache=True, parallel=True)
-def ldc_count(vertices, faces, f0, f1, axis, d):  # pragma: no cover - numba
-    """Number of ray hits (f1-f0,) of each triangle in ``faces[f0:f1]`` for one ray bundle."""
-    counts = np.zeros(f1 - f0, np.int64)
-    dummy_p = np.empty((0, 3))
-    dummy_f = np.empty(0, np.int64)
-    dummy_b = np.empty((0, 3))
+def _ldc_pass(vertices, faces, f0, f1, axis, d, count_only, offsets, counts, pos, face, bary):  # pragma: no cover
+    """Count (into ``counts``) or write (from ``offsets``) the hits of ``faces[f0:f1]``.
+
+    One kernel with a run-time ``count_only`` for both passes: a single parallel kernel and a
+    single ``_raster`` to compile instead of two of each.
+    """
     inv_d = 1.0 / d
     for t in prange(f0, f1):
-        counts[t - f0] = _raster(vertices, faces, t, axis, inv_d, d, True, dummy_p, dummy_f, dummy_b, 0)
+        base = 0 if count_only else offsets[t - f0]
+        n = _raster(vertices, faces, t, axis, inv_d, d, count_only, pos, face, bary, base)
+        if count_only:
+            counts[t - f0] = n
+
+
+def ldc_count(vertices, faces, f0, f1, axis, d):
+    """Number of ray hits (f1-f0,) of each triangle in ``faces[f0:f1]`` for one ray bundle."""
+    counts = np.zeros(f1 - f0, np.int64)
+    _ldc_pass(vertices, faces, f0, f1, axis, float(d), True, counts, counts, np.empty((0, 3)),
+              np.empty(0, np.int64), np.empty((0, 3)))
     return counts
 
 
-@njit(cache=True, parallel=True)
-def ldc_fill(vertices, faces, f0, f1, axis, d, offsets):  # pragma: no cover - numba
+def ldc_fill(vertices, faces, f0, f1, axis, d, offsets):
     """Hit positions (H,3), faces (H,) and barycentrics (H,3); ``offsets`` from :func:`ldc_count`."""
-    total = offsets[-1]
+    total = int(offsets[-1])
     pos = np.empty((total, 3))
     face = np.empty(total, np.int64)
     bary = np.empty((total, 3))
-    inv_d = 1.0 / d
-    for t in prange(f0, f1):
-        _raster(vertices, faces, t, axis, inv_d, d, False, pos, face, bary, offsets[t - f0])
+    _ldc_pass(vertices, faces, f0, f1, axis, float(d), False, offsets, np.empty(0, np.int64), pos, face, bary)
     return pos, face, bary

@@ -164,7 +164,7 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
     min_dot = MIN_DOT_SMOOTH if smooth else MIN_DOT
     valid = _valid(nrm, rows, dist, idx, oriented, min_dot)
     clip = OPEN_CLIP * _positive_scale(dist)  # the local sample spacing, whatever the normals
-    radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, min_dot)
+    radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, min_dot, 0.0)
     # Open cells, too few valid neighbours (another sheet was nearer), or cells that a neighbour
     # beyond the k-th may cut by much (a vertex past RECHECK times the k-th neighbour distance):
     # retry with 4k neighbours.
