@@ -175,7 +175,10 @@ def test_haptic_process_publishes_the_force():
     try:
         loop.publish(np.array([0.002]), np.array([[0, 1.0, 0]]), np.zeros(3), 0.5, np.zeros(3))
         deadline = time.time() + 20.0
-        while time.time() < deadline and not np.allclose(loop.force, [0, K_PENALTY * 0.002, 0], rtol=1e-12):
+        # the loop writes the force before it counts the period: wait for both (a preempted
+        # loop process showed the force with no period counted yet)
+        while time.time() < deadline and not (np.allclose(loop.force, [0, K_PENALTY * 0.002, 0], rtol=1e-12)
+                                              and loop.stats()["samples"] > 0):
             time.sleep(0.05)
         np.testing.assert_allclose(loop.force, [0, K_PENALTY * 0.002, 0], rtol=1e-12)
         assert loop.stats()["samples"] > 0
