@@ -73,7 +73,8 @@ def test_sph_sweep_equals_serial_runs(tmp_path, client):
         for name in frames:
             assert filecmp.cmp(alone / "frames" / name, got / "frames" / name, shallow=False)
         a, b = (json.loads((d / "summary.json").read_text()) for d in (alone, got))
-        a.pop("wall_seconds"), b.pop("wall_seconds")
+        for d in (a, b):
+            d.pop("wall_seconds"), d.pop("process", None)  # run metadata: wall time, pid/host/start
         for rec in (*a["frames"], *b["frames"]):
             rec.pop("step_seconds", None)
         assert a == b
