@@ -195,6 +195,16 @@ def work_buffers(size):
     return np.empty(size, np.int64), np.empty((size, 9)), np.empty((size, 4))
 
 
+@njit(cache=True)
+def block_scratch():
+    """The per-block scratch of the projection and ray kernels: cell ``ranges`` (9, 2) int64, normal
+    equations ``A`` (6, 6) and ``rhs`` (6,), fit results ``res`` (12,), the :func:`work_buffers` of
+    :data:`_CAP` rows, a ``centre`` (3,) and ``meta`` (2,) int64 (zeroed)."""
+    cand, cbuf, nbuf = work_buffers(np.int64(_CAP))  # int64, not a literal: one signature
+    return (np.empty((9, 2), np.int64), np.empty((6, 6)), np.empty(6), np.empty(12), cand, cbuf, nbuf, np.empty(3),
+            np.zeros(2, np.int64))
+
+
 # -- local fit -------------------------------------------------------------------------------
 
 
@@ -359,13 +369,7 @@ def local_fit(x, kernel, normal_mode, degree, cbuf, ncand, nbuf, A, rhs, res):
 def _project_block(blk, queries, gpack, kernel, normal_mode, degree, margin, lv_origin, lv_inv, lv_dims,
                    lv_koff, lv_keys, lv_start, max_iter, tol, out_p, out_n, status, nq):
     """Queries of block ``blk`` (body of :func:`project_kernel`)."""
-    ranges = np.empty((9, 2), np.int64)
-    A = np.empty((6, 6))
-    rhs = np.empty(6)
-    res = np.empty(12)
-    cand, cbuf, nbuf = work_buffers(np.int64(_CAP))  # int64, not a literal: one signature
-    centre = np.empty(3)
-    meta = np.zeros(2, np.int64)
+    ranges, A, rhs, res, cand, cbuf, nbuf, centre, meta = block_scratch()
     y = np.empty(3)
     for qi in range(blk * _BLOCK, min(nq, (blk + 1) * _BLOCK)):
         x0, x1, x2 = queries[qi, 0], queries[qi, 1], queries[qi, 2]

@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from unmesh.mls._kernels import _BLOCK, _CAP, local_fit, refresh, work_buffers
+from unmesh.mls._kernels import _BLOCK, block_scratch, local_fit, refresh
 from unmesh.spatial._kernels import find_cell
 
 
@@ -247,13 +247,7 @@ def _intersect_block(blk, origins, dirs, tmax, gpack, kernel, normal_mode, degre
                      r_koff, r_keys, r_start, r_items, r_skoff, r_skip, r_use_skip, max_iter, tol, eps2,
                      max_attempts, out_t, out_hit, out_n, nr):
     """Rays of block ``blk`` (body of :func:`intersect_kernel`)."""
-    ranges = np.empty((9, 2), np.int64)
-    A = np.empty((6, 6))
-    rhs = np.empty(6)
-    res = np.empty(12)
-    cand, cbuf, nbuf = work_buffers(np.int64(_CAP))  # int64, not a literal: one signature
-    centre = np.empty(3)
-    meta = np.zeros(2, np.int64)
+    ranges, A, rhs, res, cand, cbuf, nbuf, centre, meta = block_scratch()
     x = np.empty(3)
     best = np.empty(2)
     o = np.empty(3)
