@@ -172,6 +172,18 @@ def _dot(a0, a1, a2, b0, b1, b2):  # pragma: no cover - numba
     return a0 * b0 + a1 * b1 + a2 * b2
 
 
+@njit(cache=True)
+def _push_nearer_last(stack, sp, lc, rc, left_nearer):
+    """Push children ``lc`` and ``rc`` so that the nearer one is popped first; the new stack size."""
+    if left_nearer:
+        stack[sp] = rc
+        stack[sp + 1] = lc
+    else:
+        stack[sp] = lc
+        stack[sp + 1] = rc
+    return sp + 2
+
+
 @njit(cache=True, inline="always")
 def _edge_point(p, e0, e1):  # pragma: no cover - numba
     """Closest point ``x = e0 + t (e1 - e0)`` on a segment: (x, t, squared distance)."""
@@ -288,13 +300,7 @@ def _closest_one(qi, queries, vertices, faces, order, lo, hi, left, right, start
                 c2 = 0.5 * (lo[rc, k] + hi[rc, k]) - p[k]
                 dl += c1 * c1
                 dr += c2 * c2
-            if dl <= dr:
-                stack[sp] = rc
-                stack[sp + 1] = lc
-            else:
-                stack[sp] = lc
-                stack[sp + 1] = rc
-            sp += 2
+            sp = _push_nearer_last(stack, sp, lc, rc, dl <= dr)
     dist[qi] = math.sqrt(best)
     pts[qi] = bp
     face[qi] = bface
@@ -492,13 +498,7 @@ def _ray_first_one(r, origins, directions, vertices, faces, order, lo, hi, left,
             tr = _ray_box(o, d, lo, hi, rc, best)
             # the nearer child goes on top of the stack
             if tl >= 0.0 and tr >= 0.0:
-                if tl <= tr:
-                    stack[sp] = rc
-                    stack[sp + 1] = lc
-                else:
-                    stack[sp] = lc
-                    stack[sp + 1] = rc
-                sp += 2
+                sp = _push_nearer_last(stack, sp, lc, rc, tl <= tr)
             elif tl >= 0.0:
                 stack[sp] = lc
                 sp += 1
