@@ -13,7 +13,9 @@ from unmesh.shells.skinning import (
     bind_points,
     cover_radii_reference,
     deform_reference,
+    frame_normals,
     skin_weight,
+    usable_frames,
 )
 
 
@@ -64,7 +66,7 @@ def test_kernel_matches_reference(surface, rng):
     out = surf.deform(x, n)
     sel = rng.choice(len(surf), 200, replace=False)
     ref_p, ref_a = deform_reference(surf.node_rest, x, n, surf.node_normals, surf.bind[sel], surf.weights[sel],
-                                    surf.points[sel], surf.axes[sel])
+                                    surf.points[sel], surf.axes[sel], surf.by_normals[sel])
     np.testing.assert_allclose(out.positions[sel], ref_p, atol=1e-10)
     axis_r = np.linalg.norm(ref_a, axis=2).max(axis=1)     # radii start there (exactly: next tests)
     assert np.all(out.radii[sel] >= axis_r * (1 - 1e-8)) and np.all(out.radii[sel] <= COVER_CAP * axis_r * (1 + 1e-8))
@@ -127,7 +129,7 @@ def test_cover_radii_kernel_matches_reference(surface, rng):
     x = cloud.positions[idx] * (1 + 0.2 * rng.uniform(size=(len(idx), 1)))
     out = surf.deform(x, cloud.normals[idx])
     _, ref_a = deform_reference(surf.node_rest, x, cloud.normals[idx], surf.node_normals, surf.bind, surf.weights,
-                                surf.points, surf.axes)
+                                surf.points, surf.axes, surf.by_normals)
     axis_r = np.linalg.norm(ref_a, axis=2).max(axis=1)
     ref = cover_radii_reference(out.positions, surf._cover_nbr, surf._cover_scale2, axis_r)
     np.testing.assert_allclose(out.radii, ref, rtol=1e-10)
@@ -158,7 +160,7 @@ def test_nonuniform_stretch_opens_no_holes():
     assert np.abs(out.positions[:, 2]).max() < 1e-12
     assert _uncovered(out, probes) == 0.0
     _, axes = deform_reference(surf.node_rest, x, up, surf.node_normals, surf.bind, surf.weights, surf.points,
-                               surf.axes)
+                               surf.axes, surf.by_normals)
     axis_only = SurfelCloud(out.positions, out.normals, radii=np.linalg.norm(axes, axis=2).max(axis=1))
     assert _uncovered(axis_only, probes) > 0.0
 
@@ -222,3 +224,70 @@ def test_within_reach_grid_equals_the_plain_loop():
     d = np.linalg.norm(pts[rows][:, None] - centers[None], axis=2)
     np.testing.assert_array_equal(got, (d <= (reach[rows] + 0.3)[:, None]).any(axis=1))
     assert 0 < got.sum() < len(rows)
+
+
+# -- bindings whose nodes have no plane (module notes: frame_normals) -------------------------
+def _ball_binding():
+    """A node and the six around it spread about equally in all three directions (an ear's base
+    at the node scale), with normals pointing away from the z axis and up."""
+    nodes = np.array([[0.0, 0, 0], [1.0, 0, 0], [-1.0, 0, 0], [0, 1.05, 0], [0, -1.05, 0], [0, 0, 1.1], [0, 0, -1.1]])
+    normals = np.column_stack([nodes[:, 0], nodes[:, 1], np.full(7, 0.5)])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return nodes, normals
+
+
+def test_frame_normals_flag_bindings_without_a_plane():
+    flat = np.array([[x, y, 0.01 * (x * y)] for x in range(3) for y in range(3)], dtype=float)
+    up = np.tile([0.0, 0.0, 1.0], (9, 1))
+    plane, flag = frame_normals(flat, up, np.array([[4, 0, 1, 2, 3, 5, 6]]))
+    assert flag.tolist() == [0] and plane[0, 2] > 0.999
+    nodes, normals = _ball_binding()
+    plane, flag = frame_normals(nodes, normals, np.arange(7)[None])
+    assert flag.tolist() == [1]
+    o = normals.sum(axis=0)
+    np.testing.assert_allclose(plane[0], o / np.linalg.norm(o), atol=1e-12)
+    # a plane that crosses the surface: nodes on a flat strip whose normals lie in the strip
+    strip = np.array([[x, y, 0.0] for x in range(4) for y in (0.0, 0.3)])
+    sideways = np.tile([0.0, 1.0, 0.2], (8, 1))
+    plane, flag = frame_normals(strip, sideways, np.arange(7)[None])
+    assert flag.tolist() == [1]
+
+
+def test_a_binding_without_a_plane_does_not_amplify_node_motion():
+    """Small node motions move a surfel bound to nodes without a plane by about as much: frames
+    on the least-squares plane turned its normal with the noise and threw the surfel off (a
+    detached splat behind the plastic blob's ear); rigid motions stay exact."""
+    from unmesh.shells import _skinning_kernels as sk
+
+    nodes, normals = _ball_binding()
+    cloud_p = np.array([[0.1, -0.05, 0.3]])
+    from unmesh.surfels import SurfelCloud
+
+    cloud = SurfelCloud(cloud_p, [[0.0, 0.0, 1.0]], radii=[0.2])
+    surf = SkinnedSurface(cloud, nodes, normals, skin_nodes=6)
+    assert surf.by_normals.tolist() == [1]
+    rng = np.random.default_rng(1)
+    q = rotation(rng)
+    moved = surf.deform(nodes @ q.T + 1.0, normals @ q.T)
+    np.testing.assert_allclose(moved.positions, cloud_p @ q.T + 1.0, atol=1e-12)
+    _, raw = bind_points(cloud_p, nodes, 6)
+    setups = []
+    for flag in (0, 1):                       # least-squares plane frames (7.26) vs node-normal frames
+        plane = np.empty((1, 3))
+        sk.rest_plane_normals(nodes, normals, surf.bind, plane)
+        if flag:
+            plane = surf.dense.view("plane").copy()
+        w = usable_frames(nodes, surf.bind, raw, plane)
+        coords = np.empty((1, surf.k, sk.COORDS))
+        sk.local_coordinates(nodes, surf.bind, w, plane, surf.points, surf.axes, coords)
+        setups.append((w, coords))
+    worst = {0: 0.0, 1: 0.0}
+    for _ in range(50):
+        eps = 0.02 * rng.normal(size=nodes.shape)
+        for flag, (w, coords) in enumerate(setups):
+            out_p, out_n, out_r = np.empty((1, 3)), np.empty((1, 3)), np.empty(1)
+            sk.deform(nodes, nodes + eps, normals, surf.bind, w, coords, surf.points, surf.axes,
+                      np.ones(1), np.array([flag], dtype=np.uint8), out_p, out_n, out_r)
+            worst[flag] = max(worst[flag], np.linalg.norm(out_p[0] - cloud_p[0]) / np.abs(eps).max())
+    print(f"displacement / node motion: plane frames {worst[0]:.1f}, node-normal frames {worst[1]:.1f}")
+    assert worst[1] < 3.0 < worst[0]

@@ -209,8 +209,8 @@ _CNT, _NSUM, _COV, _M = 0, 1, 4, 10
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes, orient, rest, blk, out_points,
-                  out_normals, out_radii):
+def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes, orient, by_normals, rest, blk,
+                  out_points, out_normals, out_radii):
     """:func:`deform` of the surfels ``s0 .. s0 + nb`` (nb <= SBLK): node sums per surfel (one pass,
     offsets from x_0), the plane normals of the whole block (vectorised), then frames and
     blending per surfel."""
@@ -269,8 +269,9 @@ def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes,
         vx = -vx if flip else vx
         vy = -vy if flip else vy
         vz = -vz if flip else vz
-        # fewer than 3 nodes: the normalised sum of their normals
-        few = blk[_CNT * B + t] < 3.0
+        # fewer than 3 nodes, or no reliable plane at rest (``by_normals``): the normalised sum
+        # of their normals
+        few = blk[_CNT * B + t] < 3.0 or by_normals[s0 + t] != 0
         on = math.sqrt(ox * ox + oy * oy + oz * oz)
         ion0 = 1.0 / on
         ion = ion0 if on > 0.0 else 0.0
@@ -370,14 +371,17 @@ def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes,
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model="numpy")
-def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, out_points, out_normals, out_radii):
+def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, by_normals, out_points, out_normals,
+           out_radii):
     """Skin S points and their tangent axes from rest to current node positions (7.26-7.30).
 
     bind (S, K+1): x_0 first, then frame nodes (-1 = unused); weights (S, K) of the frames
     (7.30); coords (S, K, 9) from :func:`local_coordinates`. Writes positions, unit normals
     (``orient`` times the normalised cross product of the deformed axes; the plane normal
     where that vanishes, (0, 0, 1) where both do) and radii (the longer deformed axis,
-    1e-9 where zero). Points without any weighted frame are translated with x_0. The
+    1e-9 where zero). Points without any weighted frame are translated with x_0. Points with
+    ``by_normals[s] != 0`` (S,) uint8 use the normalised sum of their nodes' normals as ``N``
+    instead of the least-squares plane normal (see :func:`unmesh.shells.skinning.frame_normals`). The
     surfels are done in blocks of :data:`SBLK`; the plane normal is that of :func:`plane_normal`
     (its covariance from sums of the node offsets from x_0, up to round-off).
     """
@@ -387,8 +391,8 @@ def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, 
         blk = np.empty(SROWS * SBLK)
         for bb in range(8 * c, min(8 * c + 8, nblocks)):
             s0 = bb * SBLK
-            _deform_block(s0, min(SBLK, n - s0), cur, cur_normals, bind, weights, coords, points, axes, orient, rest,
-                          blk, out_points, out_normals, out_radii)
+            _deform_block(s0, min(SBLK, n - s0), cur, cur_normals, bind, weights, coords, points, axes, orient,
+                          by_normals, rest, blk, out_points, out_normals, out_radii)
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH)

@@ -43,7 +43,7 @@ def _cover_pairs_reference(bind: np.ndarray, nbr: np.ndarray, rows: np.ndarray, 
 class _Passive:
     """Arrays of a set of bound passive points (dense surfels or discontinuity surfels), growable."""
 
-    FIELDS = ("points", "axes", "orient", "colors", "bind", "weights", "plane", "coords", "reach")
+    FIELDS = ("points", "axes", "orient", "colors", "bind", "weights", "plane", "by_normals", "coords", "reach")
 
     def __init__(self, k: int) -> None:
         self.n = 0
@@ -54,6 +54,7 @@ class _Passive:
         self.bind = np.zeros((0, k + 1), dtype=np.int64)
         self.weights = np.zeros((0, k))
         self.plane = np.zeros((0, 3))
+        self.by_normals = np.zeros(0, dtype=np.uint8)  # frames on the node normals (skinning.frame_normals)
         self.coords = np.zeros((0, k, _sk.COORDS))
         self.reach = np.zeros(0)     # distance to the farthest bound node
 
@@ -121,8 +122,8 @@ class Rebinding:
     def _rebind(self, part: _Passive, rows: np.ndarray, blocked: Any) -> None:
         pts = part.points[rows]
         axes = part.axes[rows]
-        b, w, plane, reach = self._bind(pts, blocked, self._candidates(rows) if part is self.dense else None)
-        part.bind[rows], part.weights[rows], part.plane[rows] = b, w, plane
+        b, w, plane, by_normals, reach = self._bind(pts, blocked, self._candidates(rows) if part is self.dense else None)
+        part.bind[rows], part.weights[rows], part.plane[rows], part.by_normals[rows] = b, w, plane, by_normals
         part.coords[rows] = self._coords(b, w, plane, pts, axes)
         part.reach[rows] = reach
         self._reach = max(self._reach, float(reach.max()))

@@ -177,7 +177,9 @@ class ShellSimulation(Tearing, Simulation):
         self.fibers = FiberState.at_rest(self.rest, topo, material.arc_samples,
                                          **material.fiber_material(topo.fibers, self.rest))
         self.fibers_initial = len(topo.fibers)
-        self.surface = SkinnedSurface(cloud, self.rest, self.rest_normals, skin_nodes)
+        # the umbrella normals at rest: what deform() is given in the rest state
+        self._skin_normals = umbrella_normals(self.rest, topo)[1]
+        self.surface = SkinnedSurface(cloud, self.rest, self.rest_normals, skin_nodes, self._skin_normals)
         owner = self.surface.bind[:, 0]
         self.area = node_areas(cloud, owner, len(idx), total_area)
         if np.any(self.area <= 0):
@@ -546,7 +548,7 @@ class ShellSimulation(Tearing, Simulation):
         self.cracks.normals = self.cracks.normals.reshape(-1, 3).astype(np.float64)
         self.cracks.nodes = self.cracks.nodes.astype(np.int64)
         self._reach = max(self._reach, self._neighbor_reach())
-        self.surface = SkinnedSurface(self.cloud, self.rest, self.rest_normals, self.surface.k)
+        self.surface = SkinnedSurface(self.cloud, self.rest, self.rest_normals, self.surface.k, self._skin_normals)
         self._pending_cracks = []
         self.surface.exclude_nodes(self.anchor >= 0, self.cracks.blocked)
         if len(self.cracks):

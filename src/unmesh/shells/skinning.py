@@ -19,6 +19,18 @@ separate cleanly; each crack also adds a pair of *discontinuity surfels* with op
 normals on either side of the crack plane (for the edge clipping of 4.3; written with the
 per-surfel attribute ``discontinuity = 1``).
 
+Where the bound nodes have no plane (beyond the thesis): at a thin or sharply curved part (an
+ear's base) the nearest nodes of a surfel can lie on both sides of it, spread in all three
+directions. Their least-squares plane is then ill-defined (its normal turns with small motions
+of the nodes) or crosses the surface, and frames built on it amplify small node motions into
+large displacements of the surfel (a stretched splat that detached from the surface of a
+dented plastic blob). Such surfels, found once at rest by :func:`frame_normals` (the two
+smallest spreads differ by less than :data:`PLANE_FLATNESS`, or the plane normal is more than
+60° from the sum of the node normals, :data:`PLANE_AGREEMENT`), use the normalised sum of
+their nodes' normals as ``N``, as points bound to fewer than 3 nodes do. A frame whose edge
+``e1`` is within 30° of ``N`` (:data:`FRAME_MAX_COS`; a node across the thin part) spans
+almost nothing across ``e1`` and gets no weight (:func:`usable_frames`).
+
 Splat radii (beyond the thesis): the deformed circle takes the longer deformed tangent axis,
 but the blend of (7.28) is not continuous where ``x_0`` changes between neighbouring
 surfels, and the node-level strain of a stretched shell varies strongly from node to node,
@@ -49,9 +61,18 @@ from unmesh.shells.nodes import hide_blocked
 from unmesh.shells.rebinding import Rebinding, _cover_pairs, _cover_pairs_reference, _Passive  # noqa: F401
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "SkinnedSurface", "bind_points",
-           "cover_radii_reference", "deform_reference", "skin_weight"]
+__all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "FRAME_MAX_COS", "PLANE_AGREEMENT", "PLANE_FLATNESS", "SkinnedSurface",
+           "bind_points", "cover_radii_reference", "deform_reference", "frame_normals", "skin_weight",
+           "usable_frames"]
 
+#: A binding has no plane when the smallest spread of its nodes (covariance eigenvalue) is more
+#: than this fraction of the middle one (see the module notes and :func:`frame_normals`).
+PLANE_FLATNESS = 0.5
+#: ... or when its plane normal and the sum of its node normals make a larger angle (cosine).
+PLANE_AGREEMENT = 0.5
+#: A frame whose rest edge ``e1`` makes a smaller angle with ``N`` (cosine above this) is degenerate
+#: (7.26: ``e2 = N x e1 / |e1|`` vanishes) and gets no weight (:func:`usable_frames`).
+FRAME_MAX_COS = float(np.cos(np.radians(30.0)))
 #: Nodes per passive point: x_0 and K further nodes (K - 1 weighted frames).
 DEFAULT_SKIN_NODES = 6
 #: Below this many passive points the skinning kernel runs on one thread (see unmesh._threads).
@@ -161,10 +182,92 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
     return bind, weights
 
 
+def frame_normals(rest: np.ndarray, normals: np.ndarray, bind: np.ndarray, frame: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The rest normal ``N`` of each binding's frames (7.26) and whether it is the node normals'.
+
+    ``N`` is the least-squares plane normal through the bound nodes, oriented along the sum of
+    their normals, except where the nodes have no plane (module notes): fewer than 3 nodes,
+    an eigenvalue ratio ``lambda_0 / lambda_1 > PLANE_FLATNESS`` of their covariance, or
+    ``|N . n_sum| < PLANE_AGREEMENT`` with ``n_sum`` the normalised sum of the node normals;
+    there ``N`` is the normalised sum of the ``frame`` normals, and the flag tells
+    :func:`unmesh.shells._skinning_kernels.deform` to use the node normals it is given for the
+    deformed frames too (so ``frame`` must be what it is given at rest).
+
+    Parameters
+    ----------
+    rest : ndarray (N, 3) float64
+        Node rest positions.
+    normals : ndarray (N, 3) float64
+        Node rest normals.
+    bind : ndarray (S, K+1) int64
+        Bound nodes (-1 unused).
+    frame : ndarray (N, 3) float64, optional
+        The node normals the deformation gets at rest (zero rows allowed); ``normals`` if omitted.
+
+    Returns
+    -------
+    plane : ndarray (S, 3) float64
+        Unit normals.
+    by_normals : ndarray (S,) uint8
+        1 where ``plane`` is the node normals' sum.
+
+    Example
+    -------
+    >>> x = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.01]])
+    >>> n = np.tile([0.0, 0, 1], (4, 1))
+    >>> plane, flag = frame_normals(x, n, np.array([[0, 1, 2, 3]]))
+    >>> flag.tolist(), bool(plane[0, 2] > 0.99)
+    ([0], True)
+    """
+    plane = np.empty((len(bind), 3))
+    flag = np.zeros(len(bind), dtype=np.uint8)
+    if not len(bind):
+        return plane, flag
+    _sk.rest_plane_normals(rest, normals, bind, plane)
+    valid = bind >= 0
+    cnt = valid.sum(axis=1)
+    x = np.where(valid[..., None], rest[np.maximum(bind, 0)], 0.0)
+    mean = x.sum(axis=1) / np.maximum(cnt, 1)[:, None]
+    d = np.where(valid[..., None], x - mean[:, None], 0.0)
+    lam = np.linalg.eigvalsh(np.einsum("ska,skb->sab", d, d))
+    nsum = np.where(valid[..., None], normals[np.maximum(bind, 0)], 0.0).sum(axis=1)
+    length = np.linalg.norm(nsum, axis=1)
+    unit = np.where(length[:, None] > 0, nsum / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])
+    loose = (lam[:, 0] > PLANE_FLATNESS * lam[:, 1]) | \
+        (np.abs(np.einsum("sk,sk->s", plane, unit)) < PLANE_AGREEMENT)
+    flag[(cnt >= 3) & loose] = 1
+    if frame is not None:
+        fsum = np.where(valid[..., None], frame[np.maximum(bind, 0)], 0.0).sum(axis=1)
+        length = np.linalg.norm(fsum, axis=1)
+        unit = np.where(length[:, None] > 0, fsum / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])
+    plane[flag == 1] = unit[flag == 1]
+    return plane, flag
+
+
+def usable_frames(rest: np.ndarray, bind: np.ndarray, weights: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """``weights`` (S, K) with 0 for the degenerate frames: rest edge ``e1 = x_i - x_0`` within 30°
+    of the frame normal ``plane`` (S, 3) (``|cos| > FRAME_MAX_COS``), where (7.26)'s ``e2`` and
+    ``e3`` nearly vanish and local coordinates across ``e1`` blow up.
+
+    Example
+    -------
+    >>> x = np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 1]])
+    >>> usable_frames(x, np.array([[0, 1, 2]]), np.array([[1.0, 1.0]]), np.array([[0.0, 0, 1]])).tolist()
+    [[1.0, 0.0]]
+    """
+    frames = bind[:, 1:]
+    e = rest[np.maximum(frames, 0)] - rest[bind[:, :1]]
+    length = np.linalg.norm(e, axis=2)
+    cos = np.abs(np.einsum("ska,sa->sk", e, plane)) / np.maximum(length, 1e-300)
+    return np.where((frames >= 0) & (cos > FRAME_MAX_COS), 0.0, weights)
+
+
 def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray, rest_normals: np.ndarray,
                      bind: np.ndarray, weights: np.ndarray, points: np.ndarray,
-                     axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Plain numpy version of the skinning kernel (7.26-7.30), for tests.
+                     axes: np.ndarray, by_normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Plain numpy version of the skinning kernel (7.26-7.30), for tests (``by_normals`` (S,):
+    the flags of :func:`frame_normals`, none set when omitted).
 
     Returns
     -------
@@ -174,10 +277,10 @@ def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray,
     out_p = np.empty_like(points)
     out_a = np.empty_like(axes)
 
-    def plane(x, nrm, nodes):
+    def plane(x, nrm, nodes, by_normals):
         nodes = nodes[nodes >= 0]
         o = nrm[nodes].sum(axis=0)
-        if len(nodes) < 3:
+        if len(nodes) < 3 or by_normals:
             return o / np.linalg.norm(o)
         d = x[nodes] - x[nodes].mean(axis=0)
         _, vec = np.linalg.eigh(d.T @ d)
@@ -193,8 +296,9 @@ def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray,
 
     for s in range(len(points)):
         o = bind[s, 0]
-        n_rest = plane(rest, rest_normals, bind[s])
-        n_cur = plane(cur, cur_normals, bind[s])
+        flag = by_normals is not None and bool(by_normals[s])
+        n_rest = plane(rest, rest_normals, bind[s], flag)
+        n_cur = plane(cur, cur_normals, bind[s], flag)
         acc_p, acc_a, wsum = np.zeros(3), np.zeros((2, 3)), 0.0
         for i in range(weights.shape[1]):
             j, w = bind[s, i + 1], weights[s, i]
@@ -284,6 +388,10 @@ class SkinnedSurface(Rebinding):
         Rest normals of the nodes (orientation of the local planes).
     skin_nodes : int
         Frame nodes per point ``K``.
+    frame_normals : ndarray (N, 3), optional
+        The node normals :meth:`deform` gets at rest (a simulation's umbrella normals), for the
+        frames of points whose nodes have no plane (:func:`frame_normals`); ``node_normals``
+        if omitted.
 
     Example
     -------
@@ -297,12 +405,13 @@ class SkinnedSurface(Rebinding):
     """
 
     def __init__(self, cloud: SurfelCloud, node_rest: np.ndarray, node_normals: np.ndarray,
-                 skin_nodes: int = DEFAULT_SKIN_NODES) -> None:
+                 skin_nodes: int = DEFAULT_SKIN_NODES, frame_normals: np.ndarray | None = None) -> None:
         from unmesh.spatial import KDTree
 
         self.cloud = cloud
         self.node_rest = np.ascontiguousarray(node_rest, dtype=np.float64)
         self.node_normals = np.ascontiguousarray(node_normals, dtype=np.float64)
+        self.frame_normals = None if frame_normals is None else np.ascontiguousarray(frame_normals, dtype=np.float64)
         self.k = int(skin_nodes)
         self.tree = KDTree(self.node_rest)
         axes = np.ascontiguousarray(cloud.tangent_axes())
@@ -310,10 +419,11 @@ class SkinnedSurface(Rebinding):
         cross = np.cross(axes[:, 0], axes[:, 1])
         orient = np.where(np.einsum("ij,ij->i", cross, cloud.normals) >= 0, 1.0, -1.0)
         bind, weights = bind_points(pts, self.node_rest, self.k, tree=self.tree)
-        plane = self._planes(bind)
+        plane, by_normals = self._frame_normals(bind)
+        weights = usable_frames(self.node_rest, bind, weights, plane)
         self.dense = _Passive(self.k)
         self.dense.append(points=pts, axes=axes, orient=orient, colors=cloud.colors, bind=bind, weights=weights,
-                          plane=plane, coords=self._coords(bind, weights, plane, pts, axes),
+                          plane=plane, by_normals=by_normals, coords=self._coords(bind, weights, plane, pts, axes),
                           reach=self._reaches(bind, pts))
         self.disc = _Passive(self.k)
         self.excluded = np.zeros(len(self.node_rest), dtype=bool)     # nodes not bound to (crumbs)
@@ -361,6 +471,11 @@ class SkinnedSurface(Rebinding):
         return self._cat("weights")
 
     @property
+    def by_normals(self) -> np.ndarray:
+        """(S,) uint8: 1 where the frames use the node normals (:func:`frame_normals`)."""
+        return self._cat("by_normals")
+
+    @property
     def discontinuity(self) -> np.ndarray:
         """(S,) uint8: 1 for the discontinuity surfels of the cracks."""
         out = np.zeros(len(self), dtype=np.uint8)
@@ -369,12 +484,6 @@ class SkinnedSurface(Rebinding):
 
     def __len__(self) -> int:
         return self.dense.n + self.disc.n
-
-    def _planes(self, bind: np.ndarray) -> np.ndarray:
-        out = np.empty((len(bind), 3))
-        if len(bind):
-            _sk.rest_plane_normals(self.node_rest, self.node_normals, bind, out)
-        return out
 
     def _coords(self, bind: np.ndarray, weights: np.ndarray, plane: np.ndarray, points: np.ndarray,
                 axes: np.ndarray) -> np.ndarray:
@@ -386,13 +495,17 @@ class SkinnedSurface(Rebinding):
 
     def _bind(self, pts: np.ndarray, blocked: Any, cand: tuple[np.ndarray, np.ndarray] | None = None,
               ) -> tuple[np.ndarray, ...]:
-        """Binding of points with visibility and without the excluded nodes: nodes, weights, plane
-        normals and reaches."""
+        """Binding of points with visibility and without the excluded nodes: nodes, weights, frame
+        normals and their flags (:func:`frame_normals`), and reaches."""
         if cand is None:
             cand = self.tree.knn(pts, int(min(3 * min(self.k + 1, len(self.node_rest)), len(self.node_rest))))
         b, w = bind_points(pts, self.node_rest, self.k, blocked=blocked, tree=self.tree, candidates=cand,
                            exclude=self.excluded)
-        return b, w, self._planes(b), self._reaches(b, pts, cand[0])
+        plane, by_normals = self._frame_normals(b)
+        return b, usable_frames(self.node_rest, b, w, plane), plane, by_normals, self._reaches(b, pts, cand[0])
+
+    def _frame_normals(self, bind: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return frame_normals(self.node_rest, self.node_normals, bind, self.frame_normals)
 
     def add_discontinuity(self, center: np.ndarray, normal: np.ndarray, radius: float, surface_normal: np.ndarray,
                           blocked: Any) -> None:
@@ -426,8 +539,9 @@ class SkinnedSurface(Rebinding):
         p, a = np.asarray(pts), np.asarray(axes)
         cross = np.cross(a[:, 0], a[:, 1])
         orient = np.where(np.einsum("ij,ij->i", cross, np.asarray(facing)) >= 0, 1.0, -1.0)
-        b, w, plane, reach = self._bind(p, blocked)
+        b, w, plane, by_normals, reach = self._bind(p, blocked)
         self.disc.append(points=p, axes=a, orient=orient, colors=np.asarray(colors), bind=b, weights=w, plane=plane,
+                         by_normals=by_normals,
                          coords=self._coords(b, w, plane, p, a), reach=reach)
         self._reach = max(self._reach, float(reach.max()))
 
@@ -452,7 +566,7 @@ class SkinnedSurface(Rebinding):
                 if part.n:
                     hi = lo + part.n
                     _sk.deform(self.node_rest, cur, nrm, part.view("bind"), part.view("weights"), part.view("coords"),
-                               part.view("points"), part.view("axes"), part.view("orient"), out_p[lo:hi],
+                               part.view("points"), part.view("axes"), part.view("orient"), part.view("by_normals"), out_p[lo:hi],
                                out_n[lo:hi], out_r[lo:hi])
             if self.dense.n:
                 n = self.dense.n
