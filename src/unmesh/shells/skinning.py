@@ -231,16 +231,18 @@ def frame_normals(rest: np.ndarray, normals: np.ndarray, bind: np.ndarray, frame
     mean = x.sum(axis=1) / np.maximum(cnt, 1)[:, None]
     d = np.where(valid[..., None], x - mean[:, None], 0.0)
     lam = np.linalg.eigvalsh(np.einsum("ska,skb->sab", d, d))
-    nsum = np.where(valid[..., None], normals[np.maximum(bind, 0)], 0.0).sum(axis=1)
-    length = np.linalg.norm(nsum, axis=1)
-    unit = np.where(length[:, None] > 0, nsum / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])
+
+    def unit_sum(nrm: np.ndarray) -> np.ndarray:
+        total = np.where(valid[..., None], nrm[np.maximum(bind, 0)], 0.0).sum(axis=1)
+        length = np.linalg.norm(total, axis=1)
+        return np.where(length[:, None] > 0, total / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])
+
+    unit = unit_sum(normals)
     loose = (lam[:, 0] > PLANE_FLATNESS * lam[:, 1]) | \
         (np.abs(np.einsum("sk,sk->s", plane, unit)) < PLANE_AGREEMENT)
     flag[(cnt >= 3) & loose] = 1
     if frame is not None:
-        fsum = np.where(valid[..., None], frame[np.maximum(bind, 0)], 0.0).sum(axis=1)
-        length = np.linalg.norm(fsum, axis=1)
-        unit = np.where(length[:, None] > 0, fsum / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])
+        unit = unit_sum(frame)
     plane[flag == 1] = unit[flag == 1]
     return plane, flag
 
