@@ -32,7 +32,8 @@ def run_shell_scene(ctx: ExampleContext, name: str, quick: dict[str, Any], durat
 
 
 def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path | None = None, size: int = 320,
-                  fps: float = 25.0, floor: bool = False, context: tuple[Any, ...] = ()) -> tuple[list[np.ndarray], Path | None]:
+                  fps: float = 25.0, floor: bool = False, context: tuple[Any, ...] = (), closed: bool = False,
+                  ) -> tuple[list[np.ndarray], Path | None]:
     """Render selected frames (stills, anti-aliased by 2x2 supersampling) and optionally every
     frame (video, at least 640x480) with one camera.
 
@@ -40,11 +41,12 @@ def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path |
     passes them to the splatter as clip information (section 4.3) and draws no colour for them.
     ``floor`` draws the floor ``y = 0`` of the scenes' plane colliders with a grid and the
     contact shadow of the shell (:class:`unmesh.render.Floor`); ``context`` adds fixed objects
-    (e.g. the clamp, :func:`_clamps`).
+    (e.g. the clamp, :func:`_clamps`). ``closed`` culls back-facing splats (a closed shell that does
+    not tear: the far side of a thin part then shows no dark rim at its silhouette).
     """
     from unmesh import io
     from unmesh.gallery.figures import floor_under
-    from unmesh.render import Camera, render, write_video
+    from unmesh.render import Camera, SplatOptions, render, write_video
 
     files = sorted((outdir / "frames").glob("frame_*.ply"))
     clouds = {}
@@ -70,12 +72,13 @@ def render_frames(outdir: Path, frames: list[int], direction: Any, video: Path |
         vis = cloud.visible().positions
         return [cloud, ground.with_casters(vis[:: max(1, len(vis) // 20000)]), *context]
 
+    cull = {"splat": SplatOptions(cull_backfaces=True)} if closed else {}
     cam = Camera.fit(framed, size, size, direction=direction)
-    stills = [render(scene(min(i, len(files) - 1)), cam, supersample=2).color for i in frames]  # anti-aliased
+    stills = [render(scene(min(i, len(files) - 1)), cam, supersample=2, **cull).color for i in frames]  # anti-aliased
     written = None
     if video is not None:
         vcam = Camera.fit(framed, 640, 480, direction=direction)
-        written = write_video((render(scene(i), vcam).color for i in range(len(files))), video, fps=fps)
+        written = write_video((render(scene(i), vcam, **cull).color for i in range(len(files))), video, fps=fps)
     return stills, written
 
 
@@ -214,7 +217,7 @@ def plastic_drop(ctx: ExampleContext) -> None:
     s = _summary(out)
     last = len(s["frames"]) - 1
     picks = [0, last // 4, last // 2, last]
-    stills, video = render_frames(out, picks, (0.4, 0.3, 1.0), ctx.path("plastic_drop.mp4"), floor=True)
+    stills, video = render_frames(out, picks, (0.4, 0.3, 1.0), ctx.path("plastic_drop.mp4"), floor=True, closed=True)
     _strip(ctx, "plastic_drop", stills, "the blob denting on impact; the dent stays")
     ctx.video(video, "plastic impact")
     h0 = np.ptp(_nodes(out, 0).positions[:, 1])
