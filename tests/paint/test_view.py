@@ -163,3 +163,37 @@ def test_shadow_map_against_brute_force():
     want = (near & (brush[None, :, 2] > pts[:, None, 2] + 1e-9)).any(axis=1)
     assert np.array_equal(got, want)
     assert 200 < want.sum() < 3800
+
+
+def test_backface_culling_in_full_and_differential_updates():
+    """A closed model splats only surfels facing the camera (full and differential alike), and
+    the differential image still equals a full re-render; ``cull=False`` splats both sides."""
+    sphere = by_name("sphere", radius=0.5).surfels(0.06)
+    s = Session(sphere, PaintOptions(haptics=False))
+    cam = Camera((0.4, 0.9, 1.4), (0, 0, 0), width=160, height=120, fov=40)
+
+    def facing_rows():
+        rows = s.surface.visible_rows()
+        p, n = s.surface.pos[rows], s.surface.nrm[rows]
+        return rows[np.einsum("ij,ij->i", n, cam.eye - p) > 0]  # brute force, not Camera.facing
+
+    s.render(cam)
+    assert s.last_update == "full" and s._view.last_count == len(facing_rows()) < 0.7 * len(s.surface.visible_rows())
+    assert np.array_equal(np.flatnonzero(s._view._on[:s.surface.n]), np.sort(facing_rows()))
+    top = tuple(0.5 * cam.eye / np.linalg.norm(cam.eye))  # the point of the sphere nearest the eye
+    s.stroke([Sample(0.0, top, 0.7)], brush=ROUND, paint=RED)
+    s.stroke([Sample(0.0, (0.0, -0.5, 0.0), 0.7)], brush=ROUND, paint=RED)  # on the far side: culled
+    diff = s.render(cam, brush=False)
+    assert s.last_update == "differential"
+    assert np.array_equal(np.flatnonzero(s._view._on[:s.surface.n]), np.sort(facing_rows()))
+    zd = s._view.renderer.zvis.copy()
+    v = PaintView(s.surface)
+    s.surface.dirty.clear()
+    full_r = v.update(cam, force_full=True)
+    full = v.result()
+    same = (zd == full_r.zvis) & full.coverage
+    assert same.sum() > 0.8 * full.coverage.sum()
+    np.testing.assert_allclose(diff.color[same], full.color[same], atol=1e-6)
+    assert (np.abs(diff.color - (0.9, 0.1, 0.1)).sum(axis=2) < 0.3).any()  # the front stroke shows
+    s.render(cam, cull=False)
+    assert s.last_update == "full" and s._view.last_count == len(s.surface.visible_rows())

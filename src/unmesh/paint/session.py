@@ -333,14 +333,18 @@ class Session:
 
     @_locked
     def render(self, camera: Camera, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0),
-               brush: bool = True, full: bool = False) -> RenderResult:
+               brush: bool = True, full: bool = False, cull: bool = True) -> RenderResult:
         """Image of the painted model: differential update when only paint changed, full when the
-        view changed (5.7); the brush of an open stroke is drawn with its shadow."""
+        view changed (5.7); the brush of an open stroke is drawn with its shadow.
+
+        ``cull`` culls back faces (surfels facing away from the camera are not drawn): right for
+        closed models, where the far side's splats would otherwise poke out dark past thin
+        features; pass False for open surfaces seen from both sides (a palette plane, scans)."""
         if not isinstance(camera, Camera):
             raise InputError(f"camera: expected a Camera, got {type(camera).__name__}")
         view = self._view_for(camera)
         view.set_style(shading, background)
-        view.update(camera, force_full=full)
+        view.update(camera, force_full=full, cull_backfaces=bool(cull))
         self.view_axes = (np.asarray(camera.right, float), np.asarray(camera.true_up, float))
         b = self._last_brush if brush else None
         extra = None

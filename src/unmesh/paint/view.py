@@ -146,6 +146,18 @@ class PaintView:
         self.shading: Any = "phong"
         self.background: Any = (1.0, 1.0, 1.0)
         self._style = (repr(self.shading), repr(self.background))
+        #: Back-face culling (closed models): surfels facing away from the camera are not
+        #: splatted, in full and differential updates alike. False for open sheets seen from
+        #: both sides (a palette plane, scans); a change forces a full update.
+        self.cull_backfaces = True
+        self._culled_with: bool | None = None
+
+    def _facing(self, rows: np.ndarray) -> np.ndarray:
+        """``rows`` less those facing away from the camera when culling (the surface's current state)."""
+        if not self.cull_backfaces or not len(rows):
+            return rows
+        s = self.surface
+        return rows[self.camera.facing(s.pos[rows], s.nrm[rows])]
 
     def _grow(self, n: int) -> None:
         if len(self._on) >= n:
@@ -174,15 +186,20 @@ class PaintView:
             scatter_surfels(np.ascontiguousarray(rows, dtype=np.int64), arrays.positions, arrays.normals, arrays.radii,
                             np.ascontiguousarray(arrays.colors), self._pos, self._nrm, self._rad, self._col)
 
-    def update(self, camera: Camera, force_full: bool = False) -> SplatRenderer:
-        """Bring the buffers up to date with the surface for ``camera`` (full or differential)."""
+    def update(self, camera: Camera, force_full: bool = False, cull_backfaces: bool | None = None) -> SplatRenderer:
+        """Bring the buffers up to date with the surface for ``camera`` (full or differential).
+
+        ``cull_backfaces`` sets :attr:`cull_backfaces` (None keeps it); only front-facing
+        surfels are splatted while it is on."""
+        if cull_backfaces is not None:
+            self.cull_backfaces = bool(cull_backfaces)
         s = self.surface
         self._grow(s.n)
         dirty = np.fromiter(s.dirty, np.int64, len(s.dirty)) if s.dirty else np.zeros(0, np.int64)
         s.dirty.clear()
         nvis = max(1, len(s.visible_rows()))
         full = (force_full or not same_camera(self.camera, camera) or self.renderer is None
-                or len(dirty) > FULL_FRACTION * nvis)
+                or len(dirty) > FULL_FRACTION * nvis or self._culled_with != self.cull_backfaces)
         if not full and len(dirty):
             dirty = np.sort(dirty)
             # the per-surfel update counter: rows updated in place, and resampled rows (whose
@@ -194,12 +211,15 @@ class PaintView:
             self.camera = camera
             self.renderer = self.renderer if self.renderer is not None and same_camera(self.renderer.camera, camera) \
                 else SplatRenderer(camera, self.options)
+            self._culled_with = self.cull_backfaces
             rows = s.visible_rows()
+            mark = int(s.updates[rows].max()) if len(rows) else 0
+            rows = self._facing(rows)
             arr = self._arrays(rows, False)
             self.renderer.render(arr)
             self._on[:] = False
             self._partial[:] = 0
-            self._mark = int(s.updates[rows].max()) if len(rows) else 0
+            self._mark = mark
             self._store(rows, arr)
             self.last_update, self.last_count = "full", len(rows)
             self._g = None
@@ -213,7 +233,7 @@ class PaintView:
             self.renderer.unsplat(a_old)
             self._on[old] = False
         cur = dirty[dirty < s.n]
-        new = cur[s.active[cur] & s.alive[cur]]
+        new = self._facing(cur[s.active[cur] & s.alive[cur]])
         if len(new):
             arr = self._arrays(new, False)
             touched.append(arr)
