@@ -333,13 +333,16 @@ class Session:
 
     @_locked
     def render(self, camera: Camera, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0),
-               brush: bool = True, full: bool = False, cull: bool = True) -> RenderResult:
+               brush: bool = True, full: bool = False, cull: bool = True, palette: Any = None) -> RenderResult:
         """Image of the painted model: differential update when only paint changed, full when the
         view changed (5.7); the brush of an open stroke is drawn with its shadow.
 
         ``cull`` culls back faces (surfels facing away from the camera are not drawn): right for
         closed models, where the far side's splats would otherwise poke out dark past thin
-        features; pass False for open surfaces seen from both sides (a palette plane, scans)."""
+        features; pass False for open surfaces seen from both sides (a palette plane, scans).
+        ``palette`` (a :class:`unmesh.paint.palette.Palette`) is drawn into the same image, in its
+        inset's corner viewport over the object and the brush (5.7: "the final normalization
+        pass ... additionally draws palette and brush handle")."""
         if not isinstance(camera, Camera):
             raise InputError(f"camera: expected a Camera, got {type(camera).__name__}")
         view = self._view_for(camera)
@@ -352,7 +355,8 @@ class Session:
             pos, nrm = b.surfels()
             col = np.where(b.vw[:, None] > 0, b.wet, _BRISTLE)
             extra = (pos, nrm, col)
-        return view.result(extra)
+        overlay = palette.overlay(camera.width, camera.height) if palette is not None else None
+        return view.result(extra, overlay=overlay)
 
     @property
     def last_update(self) -> str:

@@ -304,8 +304,11 @@ class PaintView:
                 self._shade((0, h, 0, w))
                 self._stale = None
 
-    def result(self, brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RenderResult:
-        """The shaded image; ``brush`` = (positions, normals, colours) is drawn with its shadow.
+    def result(self, brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+               overlay: tuple[int, int, np.ndarray] | None = None) -> RenderResult:
+        """The shaded image; ``brush`` = (positions, normals, colours) is drawn with its shadow,
+        and ``overlay`` = (row, column, image (h, w, 3)) replaces the colour of the pixels it
+        covers (the palette's inset, 5.7), after the brush; depth and coverage stay the object's.
 
         The arrays are read-only views of the view's buffers, and a frame pays only for what
         changed: the composed image (object, brush and shadow) is kept, and each call rewrites
@@ -330,6 +333,10 @@ class PaintView:
             win = _draw_brush(g, self._out_color, self._out_depth, self._out_cov, self.camera, brush, self)
             if win is not None:
                 self._stale.append(win)
+        if overlay is not None:
+            win = _draw_overlay(self._out_color, *overlay)
+            if win is not None:
+                self._stale.append(win)
         out = []
         for a in (self._out_color, self._out_depth, self._out_cov, g.normal, g.albedo, g.weight):
             v = a.view()
@@ -347,6 +354,20 @@ class PaintView:
         depth = self._out_depth[sl]
         depth[...] = g.depth[sl]
         np.copyto(depth, np.inf, where=~cov)
+
+
+def _draw_overlay(color: np.ndarray, r0: int, c0: int, image: np.ndarray) -> tuple[int, int, int, int] | None:
+    """Copy ``image`` (h, w, 3) into ``color`` at row ``r0``, column ``c0`` (clipped to it);
+    the window it rewrote, or None."""
+    h, w = color.shape[:2]
+    ih, iw = image.shape[:2]
+    r0, c0 = int(r0), int(c0)
+    r1, c1 = min(h, r0 + ih), min(w, c0 + iw)
+    a0, b0 = max(r0, 0), max(c0, 0)
+    if a0 >= r1 or b0 >= c1:
+        return None
+    color[a0:r1, b0:c1] = image[a0 - r0:r1 - r0, b0 - c0:c1 - c0]
+    return a0, r1, b0, c1
 
 
 def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:

@@ -12,12 +12,13 @@ from unmesh.shapes import by_name
 
 
 def _session():
+    # a plane seen from above (pitch 60): seen edge on (pitch 0) its surfels would all be back-face culled
     return Session(by_name("plane", size=1.0).surfels(0.05), PaintOptions(haptics=False))
 
 
 def test_tick_advances_between_strokes_and_replays(tmp_path):
     ws = Workspace(_session(), tmp_path / "p.ply", advance_every=0.01)
-    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 0, "zoom": 1, "pan": [0, 0]}})
+    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 60, "zoom": 1, "pan": [0, 0]}})
     ws.frames()
     assert not ws.tick() or ws.strokes == 0  # nothing painted: nothing to dry
     ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.08},
@@ -43,7 +44,7 @@ def _stroke_rows(n=12):
 
 
 def _begin(ws):
-    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 0, "zoom": 1, "pan": [0, 0]}})
+    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 60, "zoom": 1, "pan": [0, 0]}})
     ws.frames()
     ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.08},
                "paint": {"type": "oil", "color": [0.8, 0.1, 0.1], "drying": 0.1}})

@@ -4,9 +4,10 @@ A :class:`Workspace` turns the page's messages (:mod:`unmesh.paint.studio.protoc
 on the engine (:class:`unmesh.paint.Session`) and renders what they changed. It is used from one
 thread at a time (the server's worker thread); nothing here knows about HTTP.
 
-* The model and the **palette** are two sessions: the palette is a paintable surfel plane on
-  which paint is mixed with the brush like on the object (chapter 5's palette), and
-  ``pick_color`` loads the brush with the paint under the pen.
+* The model and the **palette** are two sessions: the palette is the engine's
+  :class:`unmesh.paint.palette.Palette`, a paintable surfel plane on which paint is mixed with
+  the brush like on the object (chapter 5's palette), and ``pick_color`` loads the brush with the
+  paint under the pen. The page shows it in its own canvas beside the model.
 * Pen positions arrive in image pixels and are ray-cast onto the surface with
   ``Session.pick``; samples that miss the surface are dropped. Sample times are the page's
   clock mapped to seconds since the studio started, so drying follows real time and a
@@ -39,34 +40,21 @@ import numpy as np
 
 from unmesh.errors import InputError
 from unmesh.io.atomic import atomic_write_json
+from unmesh.paint.palette import PALETTE_EXTENT, PALETTE_SIZE, Palette
 from unmesh.paint.studio.frames import FrameEncoder, to_uint8
 from unmesh.paint.studio.protocol import brush_spec, paint_spec, samples_spec
 from unmesh.paint.studio.security import output_path
 from unmesh.paint.studio.view import PRESETS, Framing, View, view_from_message
 from unmesh.render.camera import Camera
-from unmesh.surfels.cloud import SurfelCloud
 
-__all__ = ["PALETTE_SIZE", "Workspace", "palette_cloud"]
+__all__ = ["PALETTE_SIZE", "Workspace"]
 
-#: Palette image size in pixels (width, height).
-PALETTE_SIZE = (300, 180)
 #: Largest model image (pixels per side).
 MAX_SIDE = 2048
 #: Preview (view drag) resolution divisors: the studio picks one from the last preview's render time.
 PREVIEW_SCALES = (2, 3, 4)
 #: Render time (s) of a preview above which the next preview uses a coarser image, and below which a finer one.
 PREVIEW_SLOW, PREVIEW_FAST = 0.05, 0.015
-
-
-def palette_cloud(width: float = 1.76, height: float = 1.06, spacing: float = 0.02) -> SurfelCloud:
-    """The palette: a flat grid of surfels in the z = 0 plane facing +z, off-white."""
-    xs = np.arange(-width / 2, width / 2 + 1e-9, spacing)
-    ys = np.arange(-height / 2, height / 2 + 1e-9, spacing)
-    X, Y = np.meshgrid(xs, ys)
-    pos = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
-    nrm = np.tile([0.0, 0.0, 1.0], (len(pos), 1))
-    return SurfelCloud(pos, nrm, radii=np.full(len(pos), 0.75 * spacing),
-                       colors=np.tile([0.95, 0.94, 0.91], (len(pos), 1)))
 
 
 def _engine():
@@ -82,19 +70,15 @@ class Workspace:
 
     def __init__(self, session: Any, out_path: str | Path, *, palette: Any = None, autosave_every: int = 5,
                  advance_every: float | None = 1.0) -> None:
-        from unmesh.paint.session import PaintOptions
-
-        _, _, _, Session = _engine()
         self.session = session
         self.out_path = Path(out_path).resolve()
         self.folder = self.out_path.parent
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.palette = palette if palette is not None else Session(palette_cloud(), PaintOptions(haptics=False))
+        self.palette = palette if palette is not None else Palette()
         self.framing = Framing.of_points(session.cloud().positions)
         self.view = View()
         self.width, self.height = 800, 600
-        pw, ph = PALETTE_SIZE
-        self.palette_camera = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), width=pw, height=ph, ortho=1.04)
+        self.palette_camera = Palette.camera(*PALETTE_SIZE)
         self.autosave_every = int(autosave_every)
         self.advance_every = advance_every
         self._last_advance = time.monotonic()
@@ -106,7 +90,6 @@ class Workspace:
         self.changed_since_save = False
         self.strokes = 0
         self._pending: dict[str, str] = {"model": "full", "palette": "full"}
-        self._palette_albedo: np.ndarray | None = None
         self._last_ts: float | None = None
         self._rows: list[tuple[float, float, float, float, float, float]] = []
         self._paint_time = 0.0
@@ -127,7 +110,7 @@ class Workspace:
         v = self.view
         return {"type": "state", "width": self.width, "height": self.height, "palette": list(PALETTE_SIZE),
                 "view": {"yaw": v.yaw, "pitch": v.pitch, "zoom": v.zoom, "pan": list(v.pan)},
-                "px_per_unit": self.px_per_unit(), "palette_px_per_unit": PALETTE_SIZE[1] / 1.04,
+                "px_per_unit": self.px_per_unit(), "palette_px_per_unit": PALETTE_SIZE[1] / PALETTE_EXTENT,
                 "radius": self.framing.radius, "strokes": self.strokes, "out": self.out_path.name,
                 "presets": {k: list(p) for k, p in PRESETS.items()}}
 
@@ -169,7 +152,7 @@ class Workspace:
         if name == "model":
             return self.session, self.camera()
         if name == "palette":
-            return self.palette, self.palette_camera
+            return self.palette.session, self.palette_camera
         raise InputError(f"target: expected 'model' or 'palette', got {name!r}")
 
     def _on_begin(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
@@ -313,12 +296,9 @@ class Workspace:
 
     def _on_pick_color(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         x, y = msg.get("x"), msg.get("y")
-        pw, ph = PALETTE_SIZE
-        if not (isinstance(x, int | float) and isinstance(y, int | float) and 0 <= x < pw and 0 <= y < ph):
-            raise InputError(f"x, y: expected a palette pixel within {pw}x{ph}, got {x!r}, {y!r}")
-        if self._palette_albedo is None:
-            self._palette_albedo = np.asarray(self.palette.render(self.palette_camera, shading="none", brush=False).albedo)
-        rgb = np.clip(self._palette_albedo[int(y), int(x)], 0.0, 1.0)
+        if isinstance(x, bool) or isinstance(y, bool):
+            x = y = None  # refused by color_at
+        rgb = self.palette.color_at(x, y, *PALETTE_SIZE)
         return [{"type": "color", "color": [round(float(c), 4) for c in rgb]}]
 
     # -- output -------------------------------------------------------------------------
@@ -345,8 +325,7 @@ class Workspace:
                 if mode == "preview":
                     self._adapt_preview(time.perf_counter() - t0)
             else:
-                res = self.palette.render(self.palette_camera, shading="none", brush=False)
-                self._palette_albedo = np.asarray(res.albedo)
+                res = self.palette.render(*PALETTE_SIZE)
                 img, scale = to_uint8(res.color), 1
             srv = {"paint": round(1000 * self._paint_time, 2), "render": round(1000 * (time.perf_counter() - t0), 2)}
             if queue_ms is not None:
@@ -414,7 +393,7 @@ class Workspace:
         if self._stroke is not None:
             self._on_end({})
         self.session.close()
-        self.palette.close()
+        self.palette.session.close()
         if not self.changed_since_save:
             return None
         self._save_model(self.out_path)
