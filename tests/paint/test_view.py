@@ -197,3 +197,24 @@ def test_backface_culling_in_full_and_differential_updates():
     assert (np.abs(diff.color - (0.9, 0.1, 0.1)).sum(axis=2) < 0.3).any()  # the front stroke shows
     s.render(cam, cull=False)
     assert s.last_update == "full" and s._view.last_count == len(s.surface.visible_rows())
+
+
+def test_last_windows_cover_every_changed_pixel():
+    s = Session(by_name("plane", size=1.0).surfels(0.015), PaintOptions(haptics=False))  # fine: no full updates
+    first = np.array(s.render(CAM).color)
+    assert s.last_windows is None  # a full update: anywhere
+    serial = s.render_serial
+    sid = s.begin_stroke(ROUND, RED)
+    prev = first
+    for i in range(4):
+        s.add_samples(sid, [Sample(0.05 * i, (-0.1 + 0.06 * i, 0.0, 0.02), 0.7)])
+        cur = np.array(s.render(CAM).color)  # differential, with the brush
+        wins = s.last_windows
+        assert wins is not None and s.render_serial == serial + i + 1
+        outside = np.ones(cur.shape[:2], bool)
+        for r0, r1, c0, c1 in wins:
+            outside[r0:r1, c0:c1] = False
+        assert outside.any() and (cur != prev).any()
+        np.testing.assert_array_equal(cur[outside], prev[outside])
+        prev = cur
+    s.end_stroke(sid)

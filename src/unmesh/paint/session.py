@@ -359,6 +359,17 @@ class Session:
         return view.result(extra, overlay=overlay)
 
     @property
+    def last_windows(self) -> list[tuple[int, int, int, int]] | None:
+        """Pixel windows ``(r0, r1, c0, c1)`` where the last render's colour may differ from the
+        render before it (through the same camera); None: anywhere (a full update, a new view)."""
+        return self._view.last_windows if self._view is not None else None
+
+    @property
+    def render_serial(self) -> int:
+        """Renders so far: :attr:`last_windows` is relative to render ``render_serial - 1``."""
+        return self._view.results if self._view is not None else 0
+
+    @property
     def last_update(self) -> str:
         """``"full"`` or ``"differential"``: the kind of the last render's update."""
         return self._view.last_update if self._view is not None else "none"

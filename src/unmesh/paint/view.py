@@ -133,6 +133,12 @@ class PaintView:
         self._partial = np.zeros(0, np.int64)
         self.last_update = "none"
         self.last_count = 0
+        #: Pixel windows ``(r0, r1, c0, c1)`` of the composed image that the last :meth:`result`
+        #: rewrote (None: all of it); outside them its colour equals the result before it.
+        self.last_windows: list[tuple[int, int, int, int]] | None = None
+        #: Number of :meth:`result` calls so far (a caller that uses :attr:`last_windows` checks
+        #: that no other result came between its own two).
+        self.results = 0
         self.max_partial = MAX_PARTIAL
         self._mark = 0
         self._g: GBuffer | None = None
@@ -325,7 +331,8 @@ class PaintView:
             self._out_color, self._out_depth = np.empty((h, w, 3)), np.empty((h, w))
             self._out_cov = np.empty((h, w), bool)
             self._stale = None
-        stale = [(0, h, 0, w)] if self._stale is None else self._stale
+        whole = self._stale is None
+        stale = [(0, h, 0, w)] if whole else self._stale
         for r0, r1, c0, c1 in stale:
             self._compose((slice(r0, r1), slice(c0, c1)))
         self._stale = []
@@ -337,6 +344,8 @@ class PaintView:
             win = _draw_overlay(self._out_color, *overlay)
             if win is not None:
                 self._stale.append(win)
+        self.last_windows = None if whole else [*stale, *self._stale]
+        self.results += 1
         out = []
         for a in (self._out_color, self._out_depth, self._out_cov, g.normal, g.albedo, g.weight):
             v = a.view()

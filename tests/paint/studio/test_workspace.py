@@ -99,3 +99,31 @@ def test_preview_resolution_follows_the_render_time(tmp_path):
         seen.append(ws.preview_scale)
     assert seen == [2, 3, 4, 4, 3, 2, 2, 2] and PREVIEW_SCALES == (2, 3, 4)
     ws.shutdown()
+
+
+def test_frames_convert_and_diff_only_the_changed_windows_yet_match_the_engine_image(tmp_path):
+    """While painting, each frame converts and compares only the engine's changed windows; the
+    image the page is sent stays equal to the engine's image, also when another render (an
+    export) came between two frames."""
+    from unmesh.paint.studio.frames import to_uint8
+
+    fine = Session(by_name("plane", size=1.0).surfels(0.015), PaintOptions(haptics=False))  # no full updates
+    ws = Workspace(fine, tmp_path / "p.ply", advance_every=None)
+    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 60, "zoom": 1, "pan": [0, 0]}})
+    ws.frames()
+    ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.03}, "paint": {"type": "oil", "color": [0.8, 0.1, 0.1]}})
+    converted = []
+    orig = ws._model_image
+    ws._model_image = lambda color, windows: converted.append(windows) or orig(color, windows)
+    for k in range(4):
+        ws.handle({"type": "samples", "samples": [[10 * k, 50 + 3 * k, 45, 0.6, 0, 0]], "ts": float(k)})
+        if k == 2:
+            ws.handle({"type": "export", "name": "mid.png"})  # a render the frames did not see
+        ws.frames()
+        shown = ws.encoder._last["model"]
+        np.testing.assert_array_equal(shown, to_uint8(ws.session.render(ws.camera()).color))
+        ws._model_serial = (id(ws.session), ws.session.render_serial)  # the check's render is not a frame
+    assert converted[0] is not None and converted[1] is not None  # windows while painting ...
+    assert converted[2] is None  # ... but the whole image after a render between frames
+    ws.handle({"type": "end"})
+    ws.shutdown()

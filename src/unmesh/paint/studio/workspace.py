@@ -91,6 +91,8 @@ class Workspace:
         self.strokes = 0
         self._pending: dict[str, str] = {"model": "full", "palette": "full"}
         self._last_ts: float | None = None
+        self._model_u8: np.ndarray | None = None
+        self._model_serial: tuple[int, int] | None = None
         self._rows: list[tuple[float, float, float, float, float, float]] = []
         self._paint_time = 0.0
         self.preview_scale = PREVIEW_SCALES[0]
@@ -315,15 +317,23 @@ class Workspace:
         pending, self._pending = self._pending, {}
         for target, mode in pending.items():
             t0 = time.perf_counter()
+            windows = None
             if target == "model":
                 cam = self.camera()
                 scale = 1
                 if mode == "preview":
                     scale = self.preview_scale
                     cam = cam.resized(max(8, self.width // scale), max(8, self.height // scale))
-                img = to_uint8(self.session.render(cam).color)
+                res = self.session.render(cam)
                 if mode == "preview":
+                    img = to_uint8(res.color)
                     self._adapt_preview(time.perf_counter() - t0)
+                else:
+                    # the engine's changed windows, if this render follows the previous frame's
+                    serial, self._model_serial = self._model_serial, (id(self.session), self.session.render_serial)
+                    consecutive = serial == (id(self.session), self.session.render_serial - 1)
+                    windows = self.session.last_windows if mode != "full" and consecutive else None
+                    img = self._model_image(res.color, windows)
             else:
                 res = self.palette.render(*PALETTE_SIZE)
                 img, scale = to_uint8(res.color), 1
@@ -338,12 +348,23 @@ class Workspace:
                 extra["ts"] = self._last_ts
             size = (self.width, self.height) if target == "model" else None
             msg = self.encoder.encode(target, img, full=mode in ("full", "preview"), scale=scale, size=size,
-                                      extra=extra)
+                                      extra=extra, windows=windows)
             if msg is not None:
                 out.append(msg)
         self._last_ts = None
         self._paint_time = 0.0
         return out
+
+    def _model_image(self, color: np.ndarray, windows: list[tuple[int, int, int, int]] | None) -> np.ndarray:
+        """The model image as uint8, kept between frames: only ``windows`` (where the engine's
+        image changed, ``Session.last_windows``) are converted again; None converts all of it."""
+        img = self._model_u8
+        if windows is None or img is None or img.shape != color.shape:
+            self._model_u8 = to_uint8(color)
+            return self._model_u8
+        for r0, r1, c0, c1 in windows:
+            img[r0:r1, c0:c1] = to_uint8(color[r0:r1, c0:c1])
+        return img
 
     def _adapt_preview(self, seconds: float) -> None:
         """Coarser previews when the last one rendered slowly, finer ones when fast."""
