@@ -203,9 +203,10 @@ class PaintView:
         self._grow(s.n)
         dirty = np.fromiter(s.dirty, np.int64, len(s.dirty)) if s.dirty else np.zeros(0, np.int64)
         s.dirty.clear()
-        nvis = max(1, len(s.visible_rows()))
         full = (force_full or not same_camera(self.camera, camera) or self.renderer is None
-                or len(dirty) > FULL_FRACTION * nvis or self._culled_with != self.cull_backfaces)
+                or self._culled_with != self.cull_backfaces)
+        if not full and len(dirty):  # (counting the visible rows is O(n): only when something changed)
+            full = len(dirty) > FULL_FRACTION * max(1, np.count_nonzero(s.active & s.alive))
         if not full and len(dirty):
             dirty = np.sort(dirty)
             # the per-surfel update counter: rows updated in place, and resampled rows (whose
