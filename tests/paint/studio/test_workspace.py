@@ -127,3 +127,43 @@ def test_frames_convert_and_diff_only_the_changed_windows_yet_match_the_engine_i
     assert converted[2] is None  # ... but the whole image after a render between frames
     ws.handle({"type": "end"})
     ws.shutdown()
+
+
+def test_a_frame_paints_within_its_budget_and_the_rest_follows_in_the_next_frames(tmp_path):
+    """With a paint budget of about one sample, queued samples are painted one per frame (a frame
+    each, time stamps of the painted samples, the message's once all its samples are painted),
+    and the model ends equal to painting them all in one call."""
+    from unmesh.paint.studio.frames import decode
+
+    rows = _stroke_rows(6)
+    clouds = []
+    for budget in (None, "one"):
+        ws = Workspace(_session(), tmp_path / f"b{budget}.ply", advance_every=None)
+        _begin(ws)
+        calls = []
+        add = ws.session.add_samples
+        ws.session.add_samples = lambda sid, samples, add=add, calls=calls: calls.append(len(samples)) or add(sid, samples)
+        ws.handle({"type": "samples", "samples": rows[:1], "ts": 0.5})
+        ws.frames()  # measures the cost of one sample
+        ws.handle({"type": "samples", "samples": rows[1:3], "ts": 25.0})
+        ws.handle({"type": "samples", "samples": rows[3:], "ts": 55.0})
+        if budget is None:
+            ws.paint_budget = None
+            heads = [decode(f)[0] for f in ws.frames() if decode(f)[0]["target"] == "model"]
+            assert calls == [1, 5] and ws.backlog == 0 and heads[-1]["ts"] == 55.0
+        else:
+            ws.paint_budget = 1.5 * ws._sample_cost  # about one sample a frame
+            stamps = []
+            while ws.backlog:
+                heads = [decode(f)[0] for f in ws.frames() if decode(f)[0]["target"] == "model"]
+                stamps.append(heads[-1]["ts"] if heads else None)
+            assert calls[0] == 1 and sum(calls) == 6 and len(calls) >= 3 and max(calls[1:]) <= 2
+            assert stamps[-1] == 55.0 and stamps == sorted(stamps)
+            assert set(stamps) <= {25.0, 55.0, *(float(r[0]) for r in rows)}
+        ws.handle({"type": "end"})
+        clouds.append(ws.session.cloud())
+        ws.shutdown()
+    a, b = clouds  # (the two sessions' clocks start at different times: equal to rounding)
+    assert len(a) == len(b)
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
+    np.testing.assert_allclose(a.colors, b.colors, atol=1e-12)

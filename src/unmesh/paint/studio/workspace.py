@@ -15,7 +15,12 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
 * Pen samples are checked when their message arrives but painted in one engine call per frame
   (:meth:`Workspace.flush`, run before any other message and before rendering): the samples of
   every ``samples`` message queued while the engine was busy cost one ``add_samples`` and one
-  render, so the server catches up with a fast pen instead of falling further behind.
+  render, so the server catches up with a fast pen instead of falling further behind. A frame
+  paints only what fits in :data:`PAINT_BUDGET` at the measured cost per sample (at least one
+  sample); the rest wait for the next frame, so a slow engine (a large model) shows the stroke
+  growing at a steady frame rate instead of in one late frame per burst.
+* While painting, a frame converts and compares only the windows where the engine's image
+  changed (``Session.last_windows``), never the whole image.
 * Every frame's header carries the server's timings in milliseconds (``srv``: ``queue`` wait of
   the newest pen message, ``paint`` = ray casts + ``add_samples``, ``render``; wall-clock
   ``received`` and ``done``) and the encoder's ``enc``, next to the time stamp ``ts`` of the
@@ -49,6 +54,8 @@ from unmesh.render.camera import Camera
 
 __all__ = ["PALETTE_SIZE", "Workspace"]
 
+#: Seconds of painting per frame while pen samples queue up (:meth:`Workspace.flush`).
+PAINT_BUDGET = 0.05
 #: Largest model image (pixels per side).
 MAX_SIDE = 2048
 #: Preview (view drag) resolution divisors: the studio picks one from the last preview's render time.
@@ -94,6 +101,12 @@ class Workspace:
         self._model_u8: np.ndarray | None = None
         self._model_serial: tuple[int, int] | None = None
         self._rows: list[tuple[float, float, float, float, float, float]] = []
+        self._row_ts: list[float | None] = []
+        # ray-cast samples waiting to be painted: (sample or None for a miss, row time, message ts)
+        self._ready: list[tuple[Any, float, float | None]] = []
+        #: Seconds of engine work (ray casts + ``add_samples``) a frame may spend on pen samples.
+        self.paint_budget = PAINT_BUDGET
+        self._sample_cost: float | None = None
         self._paint_time = 0.0
         self.preview_scale = PREVIEW_SCALES[0]
 
@@ -177,37 +190,66 @@ class Workspace:
         cam = st["camera"]
         rows = samples_spec(msg.get("samples"), cam.width, cam.height)
         ts = msg.get("ts")
-        if isinstance(ts, int | float) and not isinstance(ts, bool) and math.isfinite(ts):
-            self._last_ts = float(ts)
+        if not (isinstance(ts, int | float) and not isinstance(ts, bool) and math.isfinite(ts)):
+            ts = None
         self._rows.extend(rows)
+        # the message's time stamp goes with its last row: a frame that painted it shows the message
+        self._row_ts.extend([None] * (len(rows) - 1) + [None if ts is None else float(ts)] if rows else [])
         return []
 
-    def flush(self) -> None:
+    @property
+    def backlog(self) -> int:
+        """Pen samples received but not painted yet (a frame paints at most :attr:`paint_budget`)."""
+        return len(self._rows) + len(self._ready) if self._stroke is not None else 0
+
+    def flush(self, budget: float | None = None) -> None:
         """Paint the pen samples received since the last flush: ray-cast each onto the surface
-        and give them to the engine in one ``add_samples`` call."""
+        and give them to the engine in one ``add_samples`` call.
+
+        ``budget`` (seconds) paints only as many of the oldest samples as the measured cost per
+        sample allows (at least one); the rest stay queued for the next frame (:attr:`backlog`),
+        so a slow engine still sends frames at a steady rate instead of one late frame per burst.
+        The next frame's time stamp is that of the newest message whose samples are all painted
+        (or of the newest painted sample)."""
         _, _, Sample, _ = _engine()
-        st, rows, self._rows = self._stroke, self._rows, []
-        if st is None or not rows:
+        st = self._stroke
+        if st is None:
+            self._rows, self._row_ts, self._ready = [], [], []
             return
         t0 = time.perf_counter()
         cam = st["camera"]
-        samples = []
-        for t_ms, x, y, pressure, tilt_x, tilt_y in rows:
+        # every received row is ray-cast now, before any of them is painted (as when all are
+        # painted at once), so the points do not depend on how the samples are split into frames
+        for (t_ms, x, y, pressure, tilt_x, tilt_y), mark in zip(self._rows, self._row_ts, strict=True):
             if st["t_client"] is None:
                 st["t_client"] = t_ms
             point = st["session"].pick(cam, x, y)
-            if point is None:
-                continue
-            t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
-            samples.append(Sample(t=t, point=tuple(float(c) for c in point), pressure=pressure,
-                                  tilt=(tilt_x, tilt_y)))
+            smp = None
+            if point is not None:
+                t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
+                smp = Sample(t=t, point=tuple(float(c) for c in point), pressure=pressure, tilt=(tilt_x, tilt_y))
+            self._ready.append((smp, float(t_ms), mark))
+        self._rows, self._row_ts = [], []
+        if not self._ready:
+            return
+        n = len(self._ready)
+        if budget is not None and self._sample_cost is not None:
+            n = max(1, min(n, int(budget / max(self._sample_cost, 1e-6))))
+        ready, self._ready = self._ready[:n], self._ready[n:]
+        done = [m for _, _, m in ready if m is not None]
+        self._last_ts = done[-1] if done else ready[-1][1]
+        samples = [smp for smp, _, _ in ready if smp is not None]
+        t1 = time.perf_counter()
         if samples:
             if st["sid"] is None:
                 st["sid"] = st["session"].begin_stroke(st["brush"], st["paint"])
             st["session"].add_samples(st["sid"], samples)
             st["n"] += len(samples)
             self._pending.setdefault(st["target"], "diff")
-        self._paint_time += time.perf_counter() - t0
+        t2 = time.perf_counter()
+        self._paint_time += t2 - t0
+        cost = (t2 - t1) / len(ready)
+        self._sample_cost = cost if self._sample_cost is None else 0.5 * (self._sample_cost + cost)
 
     def _on_end(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         st, self._stroke = self._stroke, None
@@ -305,14 +347,15 @@ class Workspace:
 
     # -- output -------------------------------------------------------------------------
     def frames(self, queue_ms: float | None = None, received_at: float | None = None) -> list[bytes]:
-        """Paint pending samples (:meth:`flush`), then render and encode every target that
-        changed since the last call.
+        """Paint pending samples (:meth:`flush`, within :attr:`paint_budget`: the rest are the
+        :attr:`backlog` for the next frame), then render and encode every target that changed
+        since the last call.
 
         ``queue_ms`` (the server's queue wait of the newest pen message) and ``received_at`` (the
         wall-clock time in ms at which the server received it) go into the headers' ``srv``, with
         ``done``, the wall-clock time at which the image was rendered (the page, on the same
         machine, splits its latency with them)."""
-        self.flush()
+        self.flush(self.paint_budget)
         out = []
         pending, self._pending = self._pending, {}
         for target, mode in pending.items():
@@ -410,8 +453,10 @@ class Workspace:
         return {"type": "autosaved", "name": ply.name}
 
     def shutdown(self) -> Path | None:
-        """Close an open stroke and save the model to the output file if it changed."""
+        """Close an open stroke (painting its queued samples) and save the model to the output file
+        if it changed."""
         if self._stroke is not None:
+            self.flush()
             self._on_end({})
         self.session.close()
         self.palette.session.close()
