@@ -208,6 +208,7 @@ class Studio:
             done += 1
             if queue_ms is None or '"samples"' in text:  # the wait of the newest pen message
                 queue_ms, received_at = 1000 * (time.perf_counter() - received), 1000 * wall
+            self.workspace.arrival = (received, 1000 * wall)
             try:
                 msg = parse_message(text)
                 replies.extend((ws, r) for r in self.workspace.handle(msg))

@@ -101,9 +101,12 @@ class Workspace:
         self._model_u8: np.ndarray | None = None
         self._model_serial: tuple[int, int] | None = None
         self._rows: list[tuple[float, float, float, float, float, float]] = []
-        self._row_ts: list[float | None] = []
+        self._row_ts: list[tuple[float, Any] | None] = []
+        #: (perf counter s, wall clock ms) at which the server received the message being handled
+        self.arrival: tuple[float, float] | None = None
+        self._last_arrival: tuple[float, float] | None = None
         # ray-cast samples waiting to be painted: (sample or None for a miss, row time, message ts)
-        self._ready: list[tuple[Any, float, float | None]] = []
+        self._ready: list[tuple[Any, float, tuple[float, Any] | None]] = []
         #: Seconds of engine work (ray casts + ``add_samples``) a frame may spend on pen samples.
         self.paint_budget = PAINT_BUDGET
         self._sample_cost: float | None = None
@@ -193,8 +196,10 @@ class Workspace:
         if not (isinstance(ts, int | float) and not isinstance(ts, bool) and math.isfinite(ts)):
             ts = None
         self._rows.extend(rows)
-        # the message's time stamp goes with its last row: a frame that painted it shows the message
-        self._row_ts.extend([None] * (len(rows) - 1) + [None if ts is None else float(ts)] if rows else [])
+        # the message's time stamp (and arrival) goes with its last row: a frame that painted it shows the message
+        mark = None if ts is None else (float(ts), self.arrival)
+        self._row_ts.extend([None] * (len(rows) - 1) + [mark] if rows else [])
+        self.arrival = None
         return []
 
     @property
@@ -237,7 +242,9 @@ class Workspace:
             n = max(1, min(n, int(budget / max(self._sample_cost, 1e-6))))
         ready, self._ready = self._ready[:n], self._ready[n:]
         done = [m for _, _, m in ready if m is not None]
-        self._last_ts = done[-1] if done else ready[-1][1]
+        self._last_ts, arrival = done[-1] if done else (ready[-1][1], None)
+        # the newest painted message's wait for the engine (perf counter) and arrival (wall clock, ms)
+        self._last_arrival = None if arrival is None else (1000 * (t0 - arrival[0]), arrival[1])
         samples = [smp for smp, _, _ in ready if smp is not None]
         t1 = time.perf_counter()
         if samples:
@@ -381,6 +388,8 @@ class Workspace:
                 res = self.palette.render(*PALETTE_SIZE)
                 img, scale = to_uint8(res.color), 1
             srv = {"paint": round(1000 * self._paint_time, 2), "render": round(1000 * (time.perf_counter() - t0), 2)}
+            if self._last_arrival is not None:  # the newest pen message this frame shows
+                queue_ms, received_at = self._last_arrival
             if queue_ms is not None:
                 srv["queue"] = round(queue_ms, 2)
             if received_at is not None:
@@ -394,7 +403,7 @@ class Workspace:
                                       extra=extra, windows=windows)
             if msg is not None:
                 out.append(msg)
-        self._last_ts = None
+        self._last_ts = self._last_arrival = None
         self._paint_time = 0.0
         return out
 
