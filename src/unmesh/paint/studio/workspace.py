@@ -16,9 +16,9 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
   (:meth:`Workspace.flush`, run before any other message and before rendering): the samples of
   every ``samples`` message queued while the engine was busy cost one ``add_samples`` and one
   render, so the server catches up with a fast pen instead of falling further behind. A frame
-  paints only what fits in :data:`PAINT_BUDGET` at the measured cost per sample (but at least
-  half the queued samples, and one); the rest follow in the next frame at once, so a slow engine
-  (a large model) shows the stroke growing at a steadier frame rate.
+  paints only what fits in :data:`PAINT_BUDGET` at the measured cost per sample (at least one
+  sample); the rest wait for the next frame, so a slow engine (a large model) shows the stroke
+  growing at a steady frame rate instead of in one late frame per burst.
 * While painting, a frame converts and compares only the windows where the engine's image
   changed (``Session.last_windows``), never the whole image.
 * Every frame's header carries the server's timings in milliseconds (``srv``: ``queue`` wait of
@@ -212,9 +212,8 @@ class Workspace:
         and give them to the engine in one ``add_samples`` call.
 
         ``budget`` (seconds) paints only as many of the oldest samples as the measured cost per
-        sample allows, but at least half of them (and one); the rest stay queued for the next
-        frame (:attr:`backlog`), so a slow engine sends frames at a steadier rate instead of one
-        late frame per burst, and a backlog still drains.
+        sample allows (at least one); the rest stay queued for the next frame (:attr:`backlog`),
+        so a slow engine still sends frames at a steady rate instead of one late frame per burst.
         The next frame's time stamp is that of the newest message whose samples are all painted
         (or of the newest painted sample)."""
         _, _, Sample, _ = _engine()
@@ -240,9 +239,7 @@ class Workspace:
             return
         n = len(self._ready)
         if budget is not None and self._sample_cost is not None:
-            # what fits in the budget, but at least half the backlog: a frame shows the stroke
-            # soon, and a backlog (an engine slower than the pen) drains instead of growing
-            n = max(1, -(-n // 2), min(n, int(budget / max(self._sample_cost, 1e-6))))
+            n = max(1, min(n, int(budget / max(self._sample_cost, 1e-6))))
         ready, self._ready = self._ready[:n], self._ready[n:]
         done = [m for _, _, m in ready if m is not None]
         self._last_ts, arrival = done[-1] if done else (ready[-1][1], None)
