@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from tests.paint.conftest import RED, ROUND, line
+from unmesh.errors import InputError
 from unmesh.paint import Brush, Paint, PaintOptions, Sample, Session
 from unmesh.paint.session import _BRISTLE
 from unmesh.paint.view import PaintView
@@ -218,3 +219,22 @@ def test_last_windows_cover_every_changed_pixel():
         np.testing.assert_array_equal(cur[outside], prev[outside])
         prev = cur
     s.end_stroke(sid)
+
+
+def test_preview_level_of_detail():
+    """``preview`` with stride 1 is the full image; with stride 4 (a quarter of the surfels, radii
+    doubled) it covers about the same pixels; the view's own buffers are not touched."""
+    s = Session(by_name("sphere", radius=0.5).surfels(0.03), PaintOptions(haptics=False))
+    s.stroke([Sample(0.0, (0.0, 0.5, 0.0), 0.7)], brush=ROUND, paint=RED)
+    s.render(CAM)
+    p1 = s.preview(CAM, 1)
+    full = s.render(CAM, brush=False, full=True)
+    np.testing.assert_allclose(p1.color, full.color, atol=1e-12)
+    assert np.array_equal(p1.coverage, full.coverage)
+    p4 = s.preview(CAM, 4)
+    both = (p4.coverage & full.coverage).sum()
+    assert both > 0.97 * full.coverage.sum() and p4.coverage.sum() < 1.05 * full.coverage.sum()
+    s.render(CAM)
+    assert s.last_update == "differential"  # the previews did not disturb the view
+    with pytest.raises(InputError, match="stride"):
+        s.preview(CAM, 0)

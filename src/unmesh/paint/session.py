@@ -358,6 +358,17 @@ class Session:
         overlay = palette.overlay(camera.width, camera.height) if palette is not None else None
         return view.result(extra, overlay=overlay)
 
+    @_locked
+    def preview(self, camera: Camera, stride: int = 1, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0),
+                cull: bool = True) -> RenderResult:
+        """A quick image of the painted model from every ``stride``-th surfel with enlarged splats
+        (a level of detail while the view is dragged); the next :meth:`render` is not affected."""
+        if not isinstance(camera, Camera):
+            raise InputError(f"camera: expected a Camera, got {type(camera).__name__}")
+        view = PaintView(self.surface, self._view_for(camera).options)
+        view.shading, view.background, view.cull_backfaces = shading, background, bool(cull)
+        return view.preview(camera, stride)
+
     @property
     def last_windows(self) -> list[tuple[int, int, int, int]] | None:
         """Pixel windows ``(r0, r1, c0, c1)`` where the last render's colour may differ from the

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from unmesh._threads import serial_if_small
+from unmesh.errors import InputError
 from unmesh.paint._paint_kernels import gather_surfels, scatter_surfels
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
@@ -35,6 +36,9 @@ from unmesh.render.splat import SurfelArrays
 __all__ = ["FULL_FRACTION", "MAX_PARTIAL", "PaintView", "environment", "same_camera", "shadow_test"]
 
 FULL_FRACTION = 0.4
+#: Splat radius factor of :meth:`PaintView.preview` beyond ``sqrt(stride)``: a subset of an
+#: irregular sampling has gaps wider than its mean spacing.
+PREVIEW_GROWTH = 1.8
 MAX_PARTIAL = 64
 _SKY = np.array([0.75, 0.85, 1.0])
 _HORIZON = np.array([1.0, 0.97, 0.9])
@@ -254,6 +258,37 @@ class PaintView:
         self._partial[dirty] += 1
         self.last_update, self.last_count = "differential", int(len(old) + len(new))
         return self.renderer
+
+    def preview(self, camera: Camera, stride: int = 1) -> RenderResult:
+        """A quick image for ``camera`` from every ``stride``-th visible surfel, its radius times
+        ``PREVIEW_GROWTH * sqrt(stride)`` (no holes): a level of detail for dragging the view. It
+        does not touch the view's buffers (the next :meth:`update` is unaffected); with
+        ``stride`` 1 it equals a full update's image without the brush.
+
+        Parameters
+        ----------
+        camera : Camera
+        stride : int >= 1
+        """
+        stride = int(stride)
+        if stride < 1:
+            raise InputError(f"stride: expected a positive integer, got {stride}")
+        s = self.surface
+        rows = s.visible_rows()[::stride]
+        if self.cull_backfaces and len(rows):
+            rows = rows[camera.facing(s.pos[rows], s.nrm[rows])]
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        pos, nrm, rad = np.empty((len(rows), 3)), np.empty((len(rows), 3)), np.empty(len(rows))
+        with serial_if_small(len(rows)):
+            gather_surfels(rows, s.pos, s.nrm, s.rad, pos, nrm, rad)
+        if stride > 1:
+            rad *= PREVIEW_GROWTH * np.sqrt(stride)
+        renderer = SplatRenderer(camera, self.options)
+        renderer.render(SurfelArrays(pos, nrm, rad, None, reflect_colors(s, rows, camera)))
+        h, w = camera.shape
+        g = renderer.resolve_window(GBuffer.empty(h, w), (0, h, 0, w))
+        color = shade(g, camera, self.shading, self.background, window=(0, h, 0, w))
+        return RenderResult.from_gbuffer(g, camera, color, copy=False)
 
     def _window(self, arrays: list[SurfelArrays]) -> tuple[int, int, int, int] | None:
         """Pixel rectangle (r0, r1, c0, c1) covering the splats of ``arrays`` (None: nothing)."""

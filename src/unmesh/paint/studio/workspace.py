@@ -60,6 +60,9 @@ PAINT_BUDGET = 0.05
 MAX_SIDE = 2048
 #: Preview (view drag) resolution divisors: the studio picks one from the last preview's render time.
 PREVIEW_SCALES = (2, 3, 4)
+#: Surfels drawn in a preview (view drag): a larger model is drawn from every k-th surfel
+#: with larger splats (``Session.preview``).
+PREVIEW_SURFELS = 60_000
 #: Render time (s) of a preview above which the next preview uses a coarser image, and below which a finer one.
 PREVIEW_SLOW, PREVIEW_FAST = 0.05, 0.015
 
@@ -374,11 +377,12 @@ class Workspace:
                 if mode == "preview":
                     scale = self.preview_scale
                     cam = cam.resized(max(8, self.width // scale), max(8, self.height // scale))
-                res = self.session.render(cam)
-                if mode == "preview":
-                    img = to_uint8(res.color)
+                if mode == "preview":  # a level of detail: at most about PREVIEW_SURFELS surfels
+                    stride = max(1, round(len(self.session.surface.visible_rows()) / PREVIEW_SURFELS))
+                    img = to_uint8(self.session.preview(cam, stride).color)
                     self._adapt_preview(time.perf_counter() - t0)
                 else:
+                    res = self.session.render(cam)
                     # the engine's changed windows, if this render follows the previous frame's
                     serial, self._model_serial = self._model_serial, (id(self.session), self.session.render_serial)
                     consecutive = serial == (id(self.session), self.session.render_serial - 1)
