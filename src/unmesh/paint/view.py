@@ -8,6 +8,12 @@ full update runs when the camera moved, when the update list passes :data:`FULL_
 of the visible surfels, or when a row was updated differentially more than
 :data:`MAX_PARTIAL` times since the last full update (the per-surfel update counter of 5.7).
 
+Closed models are drawn with back-face culling (:attr:`PaintView.cull_backfaces`): surfels
+facing away from the camera are never splatted, in full and differential updates alike, so the
+far side's splats do not poke out dark past thin features; open surfaces turn it off.
+:meth:`PaintView.preview` is a level-of-detail image for a moving view, and ``result(overlay=)``
+draws the palette's inset (:mod:`unmesh.paint.palette`) into the same image.
+
 Reflective paint is environment mapped per surfel (5.7: "reflectivity is evaluated per surfel
 using a cube map"); the environment is a procedural sky (:func:`environment`). The brush is
 drawn into the same image with a shadow map from it onto the object.
