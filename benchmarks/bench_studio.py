@@ -26,7 +26,7 @@ PNG (the image in ``docs/images/studio.png``). Figures depend on the machine and
 
 Usage::
 
-    python benchmarks/bench_studio.py [--spacing 0.035 | --surfels 500000] [--size 1280x800]
+    python benchmarks/bench_studio.py [--spacing 0.035 | --surfels 500000] [--cache DIR] [--size 1280x800]
                                       [--strokes 4] [--rate 120] [--haptics thread|process|off]
                                       [--screenshot docs/images/studio.png]
 """
@@ -51,6 +51,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--spacing", type=float, default=0.035)
     ap.add_argument("--surfels", type=int, help="pick the spacing for about this many surfels")
+    ap.add_argument("--cache", help="folder for the sampled model (PLY): sampled once, loaded on later runs")
     ap.add_argument("--size", default="1280x800", help="browser viewport WxH")
     ap.add_argument("--strokes", type=int, default=4)
     ap.add_argument("--rate", type=float, default=120.0, help="pen events per second")
@@ -75,8 +76,19 @@ def main() -> None:
         n0 = len(Blob().surfels(spacing=0.05))
         spacing = 0.05 * math.sqrt(n0 / args.surfels)
     t = time.perf_counter()
-    cloud = Blob().surfels(spacing=spacing)
-    print(f"model: blob, spacing {spacing:.4g}, {len(cloud)} surfels (sampled in {time.perf_counter() - t:.1f} s)")
+    cached = Path(args.cache) / f"blob_{spacing:.6g}.ply" if args.cache else None
+    if cached is not None and cached.is_file():
+        from unmesh.io import load_surfels
+
+        cloud, how = load_surfels(cached), f"loaded from {cached}"
+    else:
+        cloud, how = Blob().surfels(spacing=spacing), "sampled"
+        if cached is not None:
+            from unmesh.io import save
+
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            save(cached, cloud)
+    print(f"model: blob, spacing {spacing:.4g}, {len(cloud)} surfels ({how} in {time.perf_counter() - t:.1f} s)")
     w, h = (int(v) for v in args.size.split("x"))
     haptics = {"thread": "thread", "process": "process", "off": False}[args.haptics]
     print(f"haptic loop: {args.haptics}")

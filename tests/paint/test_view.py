@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from tests.paint.conftest import RED, ROUND, line
+from unmesh.errors import InputError
 from unmesh.paint import Brush, Paint, PaintOptions, Sample, Session
 from unmesh.paint.session import _BRISTLE
 from unmesh.paint.view import PaintView
@@ -163,3 +164,77 @@ def test_shadow_map_against_brute_force():
     want = (near & (brush[None, :, 2] > pts[:, None, 2] + 1e-9)).any(axis=1)
     assert np.array_equal(got, want)
     assert 200 < want.sum() < 3800
+
+
+def test_backface_culling_in_full_and_differential_updates():
+    """A closed model splats only surfels facing the camera (full and differential alike), and
+    the differential image still equals a full re-render; ``cull=False`` splats both sides."""
+    sphere = by_name("sphere", radius=0.5).surfels(0.06)
+    s = Session(sphere, PaintOptions(haptics=False))
+    cam = Camera((0.4, 0.9, 1.4), (0, 0, 0), width=160, height=120, fov=40)
+
+    def facing_rows():
+        rows = s.surface.visible_rows()
+        p, n = s.surface.pos[rows], s.surface.nrm[rows]
+        return rows[np.einsum("ij,ij->i", n, cam.eye - p) > 0]  # brute force, not Camera.facing
+
+    s.render(cam)
+    assert s.last_update == "full" and s._view.last_count == len(facing_rows()) < 0.7 * len(s.surface.visible_rows())
+    assert np.array_equal(np.flatnonzero(s._view._on[:s.surface.n]), np.sort(facing_rows()))
+    top = tuple(0.5 * cam.eye / np.linalg.norm(cam.eye))  # the point of the sphere nearest the eye
+    s.stroke([Sample(0.0, top, 0.7)], brush=ROUND, paint=RED)
+    s.stroke([Sample(0.0, (0.0, -0.5, 0.0), 0.7)], brush=ROUND, paint=RED)  # on the far side: culled
+    diff = s.render(cam, brush=False)
+    assert s.last_update == "differential"
+    assert np.array_equal(np.flatnonzero(s._view._on[:s.surface.n]), np.sort(facing_rows()))
+    zd = s._view.renderer.zvis.copy()
+    v = PaintView(s.surface)
+    s.surface.dirty.clear()
+    full_r = v.update(cam, force_full=True)
+    full = v.result()
+    same = (zd == full_r.zvis) & full.coverage
+    assert same.sum() > 0.8 * full.coverage.sum()
+    np.testing.assert_allclose(diff.color[same], full.color[same], atol=1e-6)
+    assert (np.abs(diff.color - (0.9, 0.1, 0.1)).sum(axis=2) < 0.3).any()  # the front stroke shows
+    s.render(cam, cull=False)
+    assert s.last_update == "full" and s._view.last_count == len(s.surface.visible_rows())
+
+
+def test_last_windows_cover_every_changed_pixel():
+    s = Session(by_name("plane", size=1.0).surfels(0.015), PaintOptions(haptics=False))  # fine: no full updates
+    first = np.array(s.render(CAM).color)
+    assert s.last_windows is None  # a full update: anywhere
+    serial = s.render_serial
+    sid = s.begin_stroke(ROUND, RED)
+    prev = first
+    for i in range(4):
+        s.add_samples(sid, [Sample(0.05 * i, (-0.1 + 0.06 * i, 0.0, 0.02), 0.7)])
+        cur = np.array(s.render(CAM).color)  # differential, with the brush
+        wins = s.last_windows
+        assert wins is not None and s.render_serial == serial + i + 1
+        outside = np.ones(cur.shape[:2], bool)
+        for r0, r1, c0, c1 in wins:
+            outside[r0:r1, c0:c1] = False
+        assert outside.any() and (cur != prev).any()
+        np.testing.assert_array_equal(cur[outside], prev[outside])
+        prev = cur
+    s.end_stroke(sid)
+
+
+def test_preview_level_of_detail():
+    """``preview`` with stride 1 is the full image; with stride 4 (a quarter of the surfels, radii
+    doubled) it covers about the same pixels; the view's own buffers are not touched."""
+    s = Session(by_name("sphere", radius=0.5).surfels(0.03), PaintOptions(haptics=False))
+    s.stroke([Sample(0.0, (0.0, 0.5, 0.0), 0.7)], brush=ROUND, paint=RED)
+    s.render(CAM)
+    p1 = s.preview(CAM, 1)
+    full = s.render(CAM, brush=False, full=True)
+    np.testing.assert_allclose(p1.color, full.color, atol=1e-12)
+    assert np.array_equal(p1.coverage, full.coverage)
+    p4 = s.preview(CAM, 4)
+    both = (p4.coverage & full.coverage).sum()
+    assert both > 0.97 * full.coverage.sum() and p4.coverage.sum() < 1.05 * full.coverage.sum()
+    s.render(CAM)
+    assert s.last_update == "differential"  # the previews did not disturb the view
+    with pytest.raises(InputError, match="stride"):
+        s.preview(CAM, 0)

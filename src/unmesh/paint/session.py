@@ -333,14 +333,21 @@ class Session:
 
     @_locked
     def render(self, camera: Camera, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0),
-               brush: bool = True, full: bool = False) -> RenderResult:
+               brush: bool = True, full: bool = False, cull: bool = True, palette: Any = None) -> RenderResult:
         """Image of the painted model: differential update when only paint changed, full when the
-        view changed (5.7); the brush of an open stroke is drawn with its shadow."""
+        view changed (5.7); the brush of an open stroke is drawn with its shadow.
+
+        ``cull`` culls back faces (surfels facing away from the camera are not drawn): right for
+        closed models, where the far side's splats would otherwise poke out dark past thin
+        features; pass False for open surfaces seen from both sides (a palette plane, scans).
+        ``palette`` (a :class:`unmesh.paint.palette.Palette`) is drawn into the same image, in its
+        inset's corner viewport over the object and the brush (5.7: "the final normalization
+        pass ... additionally draws palette and brush handle")."""
         if not isinstance(camera, Camera):
             raise InputError(f"camera: expected a Camera, got {type(camera).__name__}")
         view = self._view_for(camera)
         view.set_style(shading, background)
-        view.update(camera, force_full=full)
+        view.update(camera, force_full=full, cull_backfaces=bool(cull))
         self.view_axes = (np.asarray(camera.right, float), np.asarray(camera.true_up, float))
         b = self._last_brush if brush else None
         extra = None
@@ -348,7 +355,30 @@ class Session:
             pos, nrm = b.surfels()
             col = np.where(b.vw[:, None] > 0, b.wet, _BRISTLE)
             extra = (pos, nrm, col)
-        return view.result(extra)
+        overlay = palette.overlay(camera.width, camera.height) if palette is not None else None
+        return view.result(extra, overlay=overlay)
+
+    @_locked
+    def preview(self, camera: Camera, stride: int = 1, shading: Any = "phong", background: Any = (1.0, 1.0, 1.0),
+                cull: bool = True) -> RenderResult:
+        """A quick image of the painted model from every ``stride``-th surfel with enlarged splats
+        (a level of detail while the view is dragged); the next :meth:`render` is not affected."""
+        if not isinstance(camera, Camera):
+            raise InputError(f"camera: expected a Camera, got {type(camera).__name__}")
+        view = PaintView(self.surface, self._view_for(camera).options)
+        view.shading, view.background, view.cull_backfaces = shading, background, bool(cull)
+        return view.preview(camera, stride)
+
+    @property
+    def last_windows(self) -> list[tuple[int, int, int, int]] | None:
+        """Pixel windows ``(r0, r1, c0, c1)`` where the last render's colour may differ from the
+        render before it (through the same camera); None: anywhere (a full update, a new view)."""
+        return self._view.last_windows if self._view is not None else None
+
+    @property
+    def render_serial(self) -> int:
+        """Renders so far: :attr:`last_windows` is relative to render ``render_serial - 1``."""
+        return self._view.results if self._view is not None else 0
 
     @property
     def last_update(self) -> str:

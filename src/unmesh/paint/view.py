@@ -8,6 +8,12 @@ full update runs when the camera moved, when the update list passes :data:`FULL_
 of the visible surfels, or when a row was updated differentially more than
 :data:`MAX_PARTIAL` times since the last full update (the per-surfel update counter of 5.7).
 
+Closed models are drawn with back-face culling (:attr:`PaintView.cull_backfaces`): surfels
+facing away from the camera are never splatted, in full and differential updates alike, so the
+far side's splats do not poke out dark past thin features; open surfaces turn it off.
+:meth:`PaintView.preview` is a level-of-detail image for a moving view, and ``result(overlay=)``
+draws the palette's inset (:mod:`unmesh.paint.palette`) into the same image.
+
 Reflective paint is environment mapped per surfel (5.7: "reflectivity is evaluated per surfel
 using a cube map"); the environment is a procedural sky (:func:`environment`). The brush is
 drawn into the same image with a shadow map from it onto the object.
@@ -26,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from unmesh._threads import serial_if_small
+from unmesh.errors import InputError
 from unmesh.paint._paint_kernels import gather_surfels, scatter_surfels
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
@@ -35,6 +42,9 @@ from unmesh.render.splat import SurfelArrays
 __all__ = ["FULL_FRACTION", "MAX_PARTIAL", "PaintView", "environment", "same_camera", "shadow_test"]
 
 FULL_FRACTION = 0.4
+#: Splat radius factor of :meth:`PaintView.preview` beyond ``sqrt(stride)``: a subset of an
+#: irregular sampling has gaps wider than its mean spacing.
+PREVIEW_GROWTH = 1.8
 MAX_PARTIAL = 64
 _SKY = np.array([0.75, 0.85, 1.0])
 _HORIZON = np.array([1.0, 0.97, 0.9])
@@ -133,6 +143,12 @@ class PaintView:
         self._partial = np.zeros(0, np.int64)
         self.last_update = "none"
         self.last_count = 0
+        #: Pixel windows ``(r0, r1, c0, c1)`` of the composed image that the last :meth:`result`
+        #: rewrote (None: all of it); outside them its colour equals the result before it.
+        self.last_windows: list[tuple[int, int, int, int]] | None = None
+        #: Number of :meth:`result` calls so far (a caller that uses :attr:`last_windows` checks
+        #: that no other result came between its own two).
+        self.results = 0
         self.max_partial = MAX_PARTIAL
         self._mark = 0
         self._g: GBuffer | None = None
@@ -146,6 +162,18 @@ class PaintView:
         self.shading: Any = "phong"
         self.background: Any = (1.0, 1.0, 1.0)
         self._style = (repr(self.shading), repr(self.background))
+        #: Back-face culling (closed models): surfels facing away from the camera are not
+        #: splatted, in full and differential updates alike. False for open sheets seen from
+        #: both sides (a palette plane, scans); a change forces a full update.
+        self.cull_backfaces = True
+        self._culled_with: bool | None = None
+
+    def _facing(self, rows: np.ndarray) -> np.ndarray:
+        """``rows`` less those facing away from the camera when culling (the surface's current state)."""
+        if not self.cull_backfaces or not len(rows):
+            return rows
+        s = self.surface
+        return rows[self.camera.facing(s.pos[rows], s.nrm[rows])]
 
     def _grow(self, n: int) -> None:
         if len(self._on) >= n:
@@ -174,15 +202,21 @@ class PaintView:
             scatter_surfels(np.ascontiguousarray(rows, dtype=np.int64), arrays.positions, arrays.normals, arrays.radii,
                             np.ascontiguousarray(arrays.colors), self._pos, self._nrm, self._rad, self._col)
 
-    def update(self, camera: Camera, force_full: bool = False) -> SplatRenderer:
-        """Bring the buffers up to date with the surface for ``camera`` (full or differential)."""
+    def update(self, camera: Camera, force_full: bool = False, cull_backfaces: bool | None = None) -> SplatRenderer:
+        """Bring the buffers up to date with the surface for ``camera`` (full or differential).
+
+        ``cull_backfaces`` sets :attr:`cull_backfaces` (None keeps it); only front-facing
+        surfels are splatted while it is on."""
+        if cull_backfaces is not None:
+            self.cull_backfaces = bool(cull_backfaces)
         s = self.surface
         self._grow(s.n)
         dirty = np.fromiter(s.dirty, np.int64, len(s.dirty)) if s.dirty else np.zeros(0, np.int64)
         s.dirty.clear()
-        nvis = max(1, len(s.visible_rows()))
         full = (force_full or not same_camera(self.camera, camera) or self.renderer is None
-                or len(dirty) > FULL_FRACTION * nvis)
+                or self._culled_with != self.cull_backfaces)
+        if not full and len(dirty):  # (counting the visible rows is O(n): only when something changed)
+            full = len(dirty) > FULL_FRACTION * max(1, np.count_nonzero(s.active & s.alive))
         if not full and len(dirty):
             dirty = np.sort(dirty)
             # the per-surfel update counter: rows updated in place, and resampled rows (whose
@@ -194,12 +228,15 @@ class PaintView:
             self.camera = camera
             self.renderer = self.renderer if self.renderer is not None and same_camera(self.renderer.camera, camera) \
                 else SplatRenderer(camera, self.options)
+            self._culled_with = self.cull_backfaces
             rows = s.visible_rows()
+            mark = int(s.updates[rows].max()) if len(rows) else 0
+            rows = self._facing(rows)
             arr = self._arrays(rows, False)
             self.renderer.render(arr)
             self._on[:] = False
             self._partial[:] = 0
-            self._mark = int(s.updates[rows].max()) if len(rows) else 0
+            self._mark = mark
             self._store(rows, arr)
             self.last_update, self.last_count = "full", len(rows)
             self._g = None
@@ -213,7 +250,7 @@ class PaintView:
             self.renderer.unsplat(a_old)
             self._on[old] = False
         cur = dirty[dirty < s.n]
-        new = cur[s.active[cur] & s.alive[cur]]
+        new = self._facing(cur[s.active[cur] & s.alive[cur]])
         if len(new):
             arr = self._arrays(new, False)
             touched.append(arr)
@@ -227,6 +264,37 @@ class PaintView:
         self._partial[dirty] += 1
         self.last_update, self.last_count = "differential", int(len(old) + len(new))
         return self.renderer
+
+    def preview(self, camera: Camera, stride: int = 1) -> RenderResult:
+        """A quick image for ``camera`` from every ``stride``-th visible surfel, its radius times
+        ``PREVIEW_GROWTH * sqrt(stride)`` (no holes): a level of detail for dragging the view. It
+        does not touch the view's buffers (the next :meth:`update` is unaffected); with
+        ``stride`` 1 it equals a full update's image without the brush.
+
+        Parameters
+        ----------
+        camera : Camera
+        stride : int >= 1
+        """
+        stride = int(stride)
+        if stride < 1:
+            raise InputError(f"stride: expected a positive integer, got {stride}")
+        s = self.surface
+        rows = s.visible_rows()[::stride]
+        if self.cull_backfaces and len(rows):
+            rows = rows[camera.facing(s.pos[rows], s.nrm[rows])]
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        pos, nrm, rad = np.empty((len(rows), 3)), np.empty((len(rows), 3)), np.empty(len(rows))
+        with serial_if_small(len(rows)):
+            gather_surfels(rows, s.pos, s.nrm, s.rad, pos, nrm, rad)
+        if stride > 1:
+            rad *= PREVIEW_GROWTH * np.sqrt(stride)
+        renderer = SplatRenderer(camera, self.options)
+        renderer.render(SurfelArrays(pos, nrm, rad, None, reflect_colors(s, rows, camera)))
+        h, w = camera.shape
+        g = renderer.resolve_window(GBuffer.empty(h, w), (0, h, 0, w))
+        color = shade(g, camera, self.shading, self.background, window=(0, h, 0, w))
+        return RenderResult.from_gbuffer(g, camera, color, copy=False)
 
     def _window(self, arrays: list[SurfelArrays]) -> tuple[int, int, int, int] | None:
         """Pixel rectangle (r0, r1, c0, c1) covering the splats of ``arrays`` (None: nothing)."""
@@ -284,8 +352,11 @@ class PaintView:
                 self._shade((0, h, 0, w))
                 self._stale = None
 
-    def result(self, brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RenderResult:
-        """The shaded image; ``brush`` = (positions, normals, colours) is drawn with its shadow.
+    def result(self, brush: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+               overlay: tuple[int, int, np.ndarray] | None = None) -> RenderResult:
+        """The shaded image; ``brush`` = (positions, normals, colours) is drawn with its shadow,
+        and ``overlay`` = (row, column, image (h, w, 3)) replaces the colour of the pixels it
+        covers (the palette's inset, 5.7), after the brush; depth and coverage stay the object's.
 
         The arrays are read-only views of the view's buffers, and a frame pays only for what
         changed: the composed image (object, brush and shadow) is kept, and each call rewrites
@@ -302,7 +373,8 @@ class PaintView:
             self._out_color, self._out_depth = np.empty((h, w, 3)), np.empty((h, w))
             self._out_cov = np.empty((h, w), bool)
             self._stale = None
-        stale = [(0, h, 0, w)] if self._stale is None else self._stale
+        whole = self._stale is None
+        stale = [(0, h, 0, w)] if whole else self._stale
         for r0, r1, c0, c1 in stale:
             self._compose((slice(r0, r1), slice(c0, c1)))
         self._stale = []
@@ -310,6 +382,12 @@ class PaintView:
             win = _draw_brush(g, self._out_color, self._out_depth, self._out_cov, self.camera, brush, self)
             if win is not None:
                 self._stale.append(win)
+        if overlay is not None:
+            win = _draw_overlay(self._out_color, *overlay)
+            if win is not None:
+                self._stale.append(win)
+        self.last_windows = None if whole else [*stale, *self._stale]
+        self.results += 1
         out = []
         for a in (self._out_color, self._out_depth, self._out_cov, g.normal, g.albedo, g.weight):
             v = a.view()
@@ -327,6 +405,20 @@ class PaintView:
         depth = self._out_depth[sl]
         depth[...] = g.depth[sl]
         np.copyto(depth, np.inf, where=~cov)
+
+
+def _draw_overlay(color: np.ndarray, r0: int, c0: int, image: np.ndarray) -> tuple[int, int, int, int] | None:
+    """Copy ``image`` (h, w, 3) into ``color`` at row ``r0``, column ``c0`` (clipped to it);
+    the window it rewrote, or None."""
+    h, w = color.shape[:2]
+    ih, iw = image.shape[:2]
+    r0, c0 = int(r0), int(c0)
+    r1, c1 = min(h, r0 + ih), min(w, c0 + iw)
+    a0, b0 = max(r0, 0), max(c0, 0)
+    if a0 >= r1 or b0 >= c1:
+        return None
+    color[a0:r1, b0:c1] = image[a0 - r0:r1 - r0, b0 - c0:c1 - c0]
+    return a0, r1, b0, c1
 
 
 def unproject(cam: Camera, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:

@@ -243,6 +243,24 @@ class Camera:
             zz = np.where(z > 0, z, np.nan)
             return cy - f * y / zz, cx + f * x / zz, z
 
+    def facing(self, positions: Any, normals: Any) -> np.ndarray:
+        """Mask (N,) bool of the oriented points whose normal faces the camera, ``n . (eye - x) > 0``
+        (``n . -forward > 0`` for an orthographic camera): the survivors of back-face culling.
+
+        Parameters
+        ----------
+        positions, normals : array_like, shape (N, 3)
+
+        Example
+        -------
+        >>> Camera((0, 0, 5), (0, 0, 0)).facing([[0.0, 0, 0], [0, 0, 0]], [[0.0, 0, 1], [0, 0, -1]]).tolist()
+        [True, False]
+        """
+        n = np.asarray(normals, dtype=np.float64)
+        if self.is_ortho:
+            return n @ (-self.forward) > 0
+        return np.einsum("ij,ij->i", n, self.eye - np.asarray(positions, dtype=np.float64)) > 0
+
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
         """World-space rays through every pixel centre.
 

@@ -341,9 +341,7 @@ def _draw_surfels(gbuffer: GBuffer, clouds: Sequence[SurfelCloud], context: Draw
 
 def _front_facing(cloud: SurfelCloud, camera: Camera) -> np.ndarray:
     """Mask (N,) of the surfels whose normal faces the camera (``n . (eye - x) > 0``)."""
-    if camera.is_ortho:
-        return np.asarray(cloud.normals) @ (-camera.forward) > 0
-    return np.einsum("ij,ij->i", np.asarray(cloud.normals), np.asarray(camera.eye) - np.asarray(cloud.positions)) > 0
+    return camera.facing(cloud.positions, cloud.normals)
 
 
 def _discontinuities(cloud: SurfelCloud) -> SurfelCloud | None:

@@ -111,9 +111,9 @@ def test_palette_mixing_and_pick(page, studio):
     page.evaluate(f"window.studio.setColor({yellow})")
     y = box["y"] + box["height"] * 0.5
     pts = [(box["x"] + box["width"] * (0.2 + 0.5 * i / 20), y) for i in range(21)]
-    before = studio.run_in_worker(lambda ws: ws.palette.cloud().colors.copy())
+    before = studio.run_in_worker(lambda ws: ws.palette.session.cloud().colors.copy())
     pen_stroke(page, pts, [0.8] * 21)
-    after = studio.run_in_worker(lambda ws: ws.palette.cloud().colors)
+    after = studio.run_in_worker(lambda ws: ws.palette.session.cloud().colors)
     assert len(after) > len(before) or not np.array_equal(after[:len(before)], before)
     # Alt+click on the painted band loads the brush with that paint
     page.keyboard.down("Alt")

@@ -80,3 +80,28 @@ def test_view_cameras_look_at_the_framed_centre():
 def test_bad_views(kw, key):
     with pytest.raises(InputError, match=f"view.{key}"):
         View(**kw)
+
+
+def test_changed_rects_within_windows_equal_the_whole_image_search():
+    rng = np.random.default_rng(3)
+    enc = FrameEncoder(tile=16)
+    for _ in range(30):
+        h, w = rng.integers(20, 90, size=2)
+        old = rng.integers(0, 255, (h, w, 3), dtype=np.uint8)
+        new = old.copy()
+        windows = []
+        for _ in range(rng.integers(1, 4)):
+            r0, c0 = rng.integers(0, h), rng.integers(0, w)
+            r1, c1 = r0 + rng.integers(1, 30), c0 + rng.integers(1, 30)
+            windows.append((int(r0), int(r1), int(c0), int(c1)))
+            new[r0:r1, c0:c1] = rng.integers(0, 255, new[r0:r1, c0:c1].shape, dtype=np.uint8)
+        assert enc.changed_rects(old, new, windows) == enc.changed_rects(old, new)
+    # the encoder's base image follows the sent tiles
+    enc = FrameEncoder(tile=8)
+    img = np.zeros((32, 32, 3), np.uint8)
+    enc.encode("m", img)
+    new = img.copy()
+    new[3, 3] = 9
+    head, _ = decode(enc.encode("m", new, windows=[(0, 5, 0, 5)]))
+    assert [r[:4] for r in head["rects"]] == [[0, 0, 8, 8]]
+    assert enc.encode("m", new) is None

@@ -12,12 +12,13 @@ from unmesh.shapes import by_name
 
 
 def _session():
+    # a plane seen from above (pitch 60): seen edge on (pitch 0) its surfels would all be back-face culled
     return Session(by_name("plane", size=1.0).surfels(0.05), PaintOptions(haptics=False))
 
 
 def test_tick_advances_between_strokes_and_replays(tmp_path):
     ws = Workspace(_session(), tmp_path / "p.ply", advance_every=0.01)
-    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 0, "zoom": 1, "pan": [0, 0]}})
+    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 60, "zoom": 1, "pan": [0, 0]}})
     ws.frames()
     assert not ws.tick() or ws.strokes == 0  # nothing painted: nothing to dry
     ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.08},
@@ -43,7 +44,7 @@ def _stroke_rows(n=12):
 
 
 def _begin(ws):
-    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 0, "zoom": 1, "pan": [0, 0]}})
+    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 60, "zoom": 1, "pan": [0, 0]}})
     ws.frames()
     ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.08},
                "paint": {"type": "oil", "color": [0.8, 0.1, 0.1], "drying": 0.1}})
@@ -98,3 +99,71 @@ def test_preview_resolution_follows_the_render_time(tmp_path):
         seen.append(ws.preview_scale)
     assert seen == [2, 3, 4, 4, 3, 2, 2, 2] and PREVIEW_SCALES == (2, 3, 4)
     ws.shutdown()
+
+
+def test_frames_convert_and_diff_only_the_changed_windows_yet_match_the_engine_image(tmp_path):
+    """While painting, each frame converts and compares only the engine's changed windows; the
+    image the page is sent stays equal to the engine's image, also when another render (an
+    export) came between two frames."""
+    from unmesh.paint.studio.frames import to_uint8
+
+    fine = Session(by_name("plane", size=1.0).surfels(0.015), PaintOptions(haptics=False))  # no full updates
+    ws = Workspace(fine, tmp_path / "p.ply", advance_every=None)
+    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 60, "zoom": 1, "pan": [0, 0]}})
+    ws.frames()
+    ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.03}, "paint": {"type": "oil", "color": [0.8, 0.1, 0.1]}})
+    converted = []
+    orig = ws._model_image
+    ws._model_image = lambda color, windows: converted.append(windows) or orig(color, windows)
+    for k in range(4):
+        ws.handle({"type": "samples", "samples": [[10 * k, 50 + 3 * k, 45, 0.6, 0, 0]], "ts": float(k)})
+        if k == 2:
+            ws.handle({"type": "export", "name": "mid.png"})  # a render the frames did not see
+        ws.frames()
+        shown = ws.encoder._last["model"]
+        np.testing.assert_array_equal(shown, to_uint8(ws.session.render(ws.camera()).color))
+        ws._model_serial = (id(ws.session), ws.session.render_serial)  # the check's render is not a frame
+    assert converted[0] is not None and converted[1] is not None  # windows while painting ...
+    assert converted[2] is None  # ... but the whole image after a render between frames
+    ws.handle({"type": "end"})
+    ws.shutdown()
+
+
+def test_a_frame_paints_within_its_budget_and_the_rest_follows_in_the_next_frames(tmp_path):
+    """With a paint budget of about one sample, queued samples are painted one per frame (a frame
+    each, time stamps of the painted samples, the message's once all its samples are painted),
+    and the model ends equal to painting them all in one call."""
+    from unmesh.paint.studio.frames import decode
+
+    rows = _stroke_rows(6)
+    clouds = []
+    for budget in (None, "one"):
+        ws = Workspace(_session(), tmp_path / f"b{budget}.ply", advance_every=None)
+        _begin(ws)
+        calls = []
+        add = ws.session.add_samples
+        ws.session.add_samples = lambda sid, samples, add=add, calls=calls: calls.append(len(samples)) or add(sid, samples)
+        ws.handle({"type": "samples", "samples": rows[:1], "ts": 0.5})
+        ws.frames()  # measures the cost of one sample
+        ws.handle({"type": "samples", "samples": rows[1:3], "ts": 25.0})
+        ws.handle({"type": "samples", "samples": rows[3:], "ts": 55.0})
+        if budget is None:
+            ws.paint_budget = None
+            heads = [decode(f)[0] for f in ws.frames() if decode(f)[0]["target"] == "model"]
+            assert calls == [1, 5] and ws.backlog == 0 and heads[-1]["ts"] == 55.0
+        else:
+            ws.paint_budget = 1.5 * ws._sample_cost  # about one sample a frame
+            stamps = []
+            while ws.backlog:
+                heads = [decode(f)[0] for f in ws.frames() if decode(f)[0]["target"] == "model"]
+                stamps.append(heads[-1]["ts"] if heads else None)
+            assert calls[0] == 1 and sum(calls) == 6 and len(calls) >= 3 and max(calls[1:]) <= 2
+            assert stamps[-1] == 55.0 and stamps == sorted(stamps)
+            assert set(stamps) <= {25.0, 55.0, *(float(r[0]) for r in rows)}
+        ws.handle({"type": "end"})
+        clouds.append(ws.session.cloud())
+        ws.shutdown()
+    a, b = clouds  # (the two sessions' clocks start at different times: equal to rounding)
+    assert len(a) == len(b)
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
+    np.testing.assert_allclose(a.colors, b.colors, atol=1e-12)

@@ -225,6 +225,32 @@ def paint_downsampling(ctx: ExampleContext) -> None:
     ctx.metric("downsampling time", round(dt, 3), "s")
 
 
+def _art_palette(data: dict[str, Any]) -> Any:
+    """A palette with a dab of each of the design's oil paints and a stroke mixing two of them."""
+    from unmesh.paint import Brush, Paint, Palette, PaletteInset, Sample
+
+    palette = Palette(inset=PaletteInset(corner="top-right", width=0.34, margin=6))
+    colors = []
+    for st in data["strokes"]:
+        c = tuple(st["paint"]["color"])
+        if c not in colors:
+            colors.append(c)
+    brush = Brush("round", 0.09)
+
+    def dab(color: tuple[float, ...], x0: float, y0: float, x1: float, y1: float, t0: float) -> None:
+        n = 6
+        samples = [Sample(t0 + 0.05 * i, (x0 + (x1 - x0) * i / (n - 1), y0 + (y1 - y0) * i / (n - 1), 0.0), 0.8)
+                   for i in range(n)]
+        palette.session.stroke(samples, brush=brush, paint=Paint("oil", color, relief="none"))
+
+    for k, c in enumerate(colors):
+        x = -0.66 + 0.33 * k
+        dab(c, x, 0.32, x, 0.12, 1.0 * k)
+    dab(colors[0], -0.55, -0.22, 0.15, -0.22, 10.0)  # red, then yellow over it: orange where they mix
+    dab(colors[1], -0.2, -0.32, 0.5, -0.32, 11.0)
+    return palette
+
+
 @example("paint-art", "Art on the blob: a multi-colour design and its sampling density (Fig. 5.12)",
          section="Painting")
 def paint_art(ctx: ExampleContext) -> None:
@@ -239,12 +265,15 @@ def paint_art(ctx: ExampleContext) -> None:
     events = sum(len(st["samples"]) for st in data["strokes"][:2 if ctx.quick else None])
     size = (300, 225) if ctx.quick else (480, 360)
     cams = [Camera.framing(cloud.bounds(), *size, direction=d) for d in ((0.0, 0.15, 1.0), (0.8, 0.3, 0.7))]
-    views = [_still(s, c, brush=False) for c in cams]
+    palette = _art_palette(data)
+    views = [_still(s, cams[0], brush=False), _still(s, cams[1], brush=False, palette=palette)]
     dens, lo, hi = _density_colors(s)
     dmap = draw_legend(render(dens, cams[0], shading="none", supersample=K, splat=_closed()).color, lo, hi, "magma", "log10 surfels per unit area")
     path = ctx.path("art.png")
     save_image(path, _side_by_side([*views, dmap]))
     ctx.image(path, "A design painted on the bunny-like blob from the shipped stroke file: two views and the "
-                    "sampling density (dense where paint landed).")
+                    "sampling density (dense where paint landed). The second view has the palette in its "
+                    "corner, drawn by the engine into the same image: the design's paints dabbed on it, "
+                    "and two of them mixed by painting one over the other.")
     ctx.metric("paint events per second (replay)", round(events / elapsed, 1))
     ctx.metric("surfels: model / painted", f"{len(cloud)} / {len(s.cloud())}")

@@ -90,17 +90,30 @@ class FrameEncoder:
         else:
             self._last.pop(target, None)
 
-    def changed_rects(self, old: np.ndarray, new: np.ndarray) -> list[tuple[int, int, int, int]]:
-        """Rectangles ``(x, y, w, h)`` covering the tiles where ``new`` differs from ``old``."""
+    def changed_rects(self, old: np.ndarray, new: np.ndarray,
+                      windows: list[tuple[int, int, int, int]] | None = None) -> list[tuple[int, int, int, int]]:
+        """Rectangles ``(x, y, w, h)`` covering the tiles where ``new`` differs from ``old``.
+
+        ``windows`` (pixel windows ``(r0, r1, c0, c1)``, e.g. ``Session.last_windows``) limits
+        the comparison to the tiles they touch: the caller promises no change outside them, and
+        a frame then costs in proportion to what changed instead of the whole image."""
         t = self.tile
         h, w = new.shape[:2]
         ny, nx = -(-h // t), -(-w // t)
-        diff = np.any(old != new, axis=2)
-        pad = np.zeros((ny * t, nx * t), dtype=bool)
-        pad[:h, :w] = diff
-        changed = pad.reshape(ny, t, nx, t).any(axis=(1, 3))
+        changed = np.zeros((ny, nx), dtype=bool)
+        if windows is None:
+            windows = [(0, h, 0, w)]
+        for r0, r1, c0, c1 in windows:
+            r0, c0 = max(0, int(r0)) // t, max(0, int(c0)) // t
+            r1, c1 = -(-min(h, int(r1)) // t), -(-min(w, int(c1)) // t)
+            if r0 >= r1 or c0 >= c1:
+                continue
+            y0, y1, x0, x1 = r0 * t, min(h, r1 * t), c0 * t, min(w, c1 * t)
+            diff = np.zeros(((r1 - r0) * t, (c1 - c0) * t), dtype=bool)
+            diff[:y1 - y0, :x1 - x0] = np.any(old[y0:y1, x0:x1] != new[y0:y1, x0:x1], axis=2)
+            changed[r0:r1, c0:c1] |= diff.reshape(r1 - r0, t, c1 - c0, t).any(axis=(1, 3))
         rects = []
-        for ty in range(ny):
+        for ty in np.flatnonzero(changed.any(axis=1)):
             row = changed[ty]
             tx = 0
             while tx < nx:
@@ -110,17 +123,19 @@ class FrameEncoder:
                 start = tx
                 while tx < nx and row[tx]:
                     tx += 1
-                x0, y0 = start * t, ty * t
+                x0, y0 = start * t, int(ty) * t
                 rects.append((x0, y0, min(tx * t, w) - x0, min(y0 + t, h) - y0))
         return rects
 
     def encode(self, target: str, image: np.ndarray, *, full: bool = False, scale: int = 1,
-               size: tuple[int, int] | None = None, extra: dict[str, Any] | None = None) -> bytes | None:
+               size: tuple[int, int] | None = None, extra: dict[str, Any] | None = None,
+               windows: list[tuple[int, int, int, int]] | None = None) -> bytes | None:
         """The frame message for ``image`` (H,W,3) uint8; None when nothing changed.
 
         ``scale`` > 1 marks a low-resolution preview (never used as the base of tiles) of an
         image of ``size`` = (width, height) full-resolution pixels (default: ``scale`` times the
-        image's). The header's ``enc`` is the JPEG encoding time in milliseconds.
+        image's). ``windows`` limits the search for changed tiles (:meth:`changed_rects`). The
+        header's ``enc`` is the JPEG encoding time in milliseconds.
         """
         img = np.ascontiguousarray(image, dtype=np.uint8)
         h, w = img.shape[:2]
@@ -133,14 +148,18 @@ class FrameEncoder:
             rects = [(0, 0, w, h)]
             full = True
         else:
-            rects = self.changed_rects(last, img)
+            rects = self.changed_rects(last, img, windows)
             if not rects:
                 return None
             area = sum(r[2] * r[3] for r in rects)
             if area > self.full_fraction * w * h:
                 rects, full = [(0, 0, w, h)], True
         if scale == 1:
-            self._last[target] = img.copy()
+            if full:
+                self._last[target] = img.copy()
+            else:  # only the sent tiles changed
+                for x, y, rw, rh in rects:
+                    last[y:y + rh, x:x + rw] = img[y:y + rh, x:x + rw]
         t0 = time.perf_counter()
         blobs = [_jpeg(img[y:y + rh, x:x + rw], self.quality) for x, y, rw, rh in rects]
         enc = round(1000 * (time.perf_counter() - t0), 2)

@@ -16,7 +16,8 @@ Routes (all on ``127.0.0.1`` only; every response checks the ``Host`` header):
 Messages are handled one batch at a time on a single worker thread (the engine is never called
 from two threads; the event loop only moves bytes, so it keeps receiving pen messages while the
 engine paints), and a batch paints its pen samples in one engine call and renders once, so a
-burst of pen samples costs one frame. A malformed message gets an ``{"type": "error"}`` reply;
+burst of pen samples costs one frame; samples beyond the frame's paint budget
+(:attr:`Workspace.backlog`) get the next frame at once. A malformed message gets an ``{"type": "error"}`` reply;
 the session goes on.
 
 Example
@@ -207,6 +208,7 @@ class Studio:
             done += 1
             if queue_ms is None or '"samples"' in text:  # the wait of the newest pen message
                 queue_ms, received_at = 1000 * (time.perf_counter() - received), 1000 * wall
+            self.workspace.arrival = (received, 1000 * wall)
             try:
                 msg = parse_message(text)
                 replies.extend((ws, r) for r in self.workspace.handle(msg))
@@ -232,11 +234,13 @@ class Studio:
             await self._wake.wait()
             self._wake.clear()
             batch, self._queue = self._queue, []
-            if not batch:
+            if not batch and not self.workspace.backlog:
                 continue
             replies, frames, done = await loop.run_in_executor(self.pool, self._process, batch)
             if done < len(batch):  # the rest first, before anything that arrived meanwhile
                 self._queue = batch[done:] + self._queue
+                self._wake.set()
+            if self.workspace.backlog:  # pen samples the last frame had no time for: another frame
                 self._wake.set()
             # frames first: a reply (e.g. "synced") tells the page that the frames before it arrived
             for frame in frames:

@@ -4,9 +4,10 @@ A :class:`Workspace` turns the page's messages (:mod:`unmesh.paint.studio.protoc
 on the engine (:class:`unmesh.paint.Session`) and renders what they changed. It is used from one
 thread at a time (the server's worker thread); nothing here knows about HTTP.
 
-* The model and the **palette** are two sessions: the palette is a paintable surfel plane on
-  which paint is mixed with the brush like on the object (chapter 5's palette), and
-  ``pick_color`` loads the brush with the paint under the pen.
+* The model and the **palette** are two sessions: the palette is the engine's
+  :class:`unmesh.paint.palette.Palette`, a paintable surfel plane on which paint is mixed with
+  the brush like on the object (chapter 5's palette), and ``pick_color`` loads the brush with the
+  paint under the pen. The page shows it in its own canvas beside the model.
 * Pen positions arrive in image pixels and are ray-cast onto the surface with
   ``Session.pick``; samples that miss the surface are dropped. Sample times are the page's
   clock mapped to seconds since the studio started, so drying follows real time and a
@@ -14,7 +15,12 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
 * Pen samples are checked when their message arrives but painted in one engine call per frame
   (:meth:`Workspace.flush`, run before any other message and before rendering): the samples of
   every ``samples`` message queued while the engine was busy cost one ``add_samples`` and one
-  render, so the server catches up with a fast pen instead of falling further behind.
+  render, so the server catches up with a fast pen instead of falling further behind. A frame
+  paints only what fits in :data:`PAINT_BUDGET` at the measured cost per sample (at least one
+  sample); the rest wait for the next frame, so a slow engine (a large model) shows the stroke
+  growing at a steady frame rate instead of in one late frame per burst.
+* While painting, a frame converts and compares only the windows where the engine's image
+  changed (``Session.last_windows``), never the whole image.
 * Every frame's header carries the server's timings in milliseconds (``srv``: ``queue`` wait of
   the newest pen message, ``paint`` = ray casts + ``add_samples``, ``render``; wall-clock
   ``received`` and ``done``) and the encoder's ``enc``, next to the time stamp ``ts`` of the
@@ -39,34 +45,26 @@ import numpy as np
 
 from unmesh.errors import InputError
 from unmesh.io.atomic import atomic_write_json
+from unmesh.paint.palette import PALETTE_EXTENT, PALETTE_SIZE, Palette
 from unmesh.paint.studio.frames import FrameEncoder, to_uint8
 from unmesh.paint.studio.protocol import brush_spec, paint_spec, samples_spec
 from unmesh.paint.studio.security import output_path
 from unmesh.paint.studio.view import PRESETS, Framing, View, view_from_message
 from unmesh.render.camera import Camera
-from unmesh.surfels.cloud import SurfelCloud
 
-__all__ = ["PALETTE_SIZE", "Workspace", "palette_cloud"]
+__all__ = ["PALETTE_SIZE", "Workspace"]
 
-#: Palette image size in pixels (width, height).
-PALETTE_SIZE = (300, 180)
+#: Seconds of painting per frame while pen samples queue up (:meth:`Workspace.flush`).
+PAINT_BUDGET = 0.05
 #: Largest model image (pixels per side).
 MAX_SIDE = 2048
 #: Preview (view drag) resolution divisors: the studio picks one from the last preview's render time.
 PREVIEW_SCALES = (2, 3, 4)
+#: Surfels drawn in a preview (view drag): a larger model is drawn from every k-th surfel
+#: with larger splats (``Session.preview``).
+PREVIEW_SURFELS = 60_000
 #: Render time (s) of a preview above which the next preview uses a coarser image, and below which a finer one.
 PREVIEW_SLOW, PREVIEW_FAST = 0.05, 0.015
-
-
-def palette_cloud(width: float = 1.76, height: float = 1.06, spacing: float = 0.02) -> SurfelCloud:
-    """The palette: a flat grid of surfels in the z = 0 plane facing +z, off-white."""
-    xs = np.arange(-width / 2, width / 2 + 1e-9, spacing)
-    ys = np.arange(-height / 2, height / 2 + 1e-9, spacing)
-    X, Y = np.meshgrid(xs, ys)
-    pos = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
-    nrm = np.tile([0.0, 0.0, 1.0], (len(pos), 1))
-    return SurfelCloud(pos, nrm, radii=np.full(len(pos), 0.75 * spacing),
-                       colors=np.tile([0.95, 0.94, 0.91], (len(pos), 1)))
 
 
 def _engine():
@@ -82,19 +80,15 @@ class Workspace:
 
     def __init__(self, session: Any, out_path: str | Path, *, palette: Any = None, autosave_every: int = 5,
                  advance_every: float | None = 1.0) -> None:
-        from unmesh.paint.session import PaintOptions
-
-        _, _, _, Session = _engine()
         self.session = session
         self.out_path = Path(out_path).resolve()
         self.folder = self.out_path.parent
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.palette = palette if palette is not None else Session(palette_cloud(), PaintOptions(haptics=False))
+        self.palette = palette if palette is not None else Palette()
         self.framing = Framing.of_points(session.cloud().positions)
         self.view = View()
         self.width, self.height = 800, 600
-        pw, ph = PALETTE_SIZE
-        self.palette_camera = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), width=pw, height=ph, ortho=1.04)
+        self.palette_camera = Palette.camera(*PALETTE_SIZE)
         self.autosave_every = int(autosave_every)
         self.advance_every = advance_every
         self._last_advance = time.monotonic()
@@ -106,9 +100,19 @@ class Workspace:
         self.changed_since_save = False
         self.strokes = 0
         self._pending: dict[str, str] = {"model": "full", "palette": "full"}
-        self._palette_albedo: np.ndarray | None = None
         self._last_ts: float | None = None
+        self._model_u8: np.ndarray | None = None
+        self._model_serial: tuple[int, int] | None = None
         self._rows: list[tuple[float, float, float, float, float, float]] = []
+        self._row_ts: list[tuple[float, Any] | None] = []
+        #: (perf counter s, wall clock ms) at which the server received the message being handled
+        self.arrival: tuple[float, float] | None = None
+        self._last_arrival: tuple[float, float] | None = None
+        # ray-cast samples waiting to be painted: (sample or None for a miss, row time, message ts)
+        self._ready: list[tuple[Any, float, tuple[float, Any] | None]] = []
+        #: Seconds of engine work (ray casts + ``add_samples``) a frame may spend on pen samples.
+        self.paint_budget = PAINT_BUDGET
+        self._sample_cost: float | None = None
         self._paint_time = 0.0
         self.preview_scale = PREVIEW_SCALES[0]
 
@@ -127,7 +131,7 @@ class Workspace:
         v = self.view
         return {"type": "state", "width": self.width, "height": self.height, "palette": list(PALETTE_SIZE),
                 "view": {"yaw": v.yaw, "pitch": v.pitch, "zoom": v.zoom, "pan": list(v.pan)},
-                "px_per_unit": self.px_per_unit(), "palette_px_per_unit": PALETTE_SIZE[1] / 1.04,
+                "px_per_unit": self.px_per_unit(), "palette_px_per_unit": PALETTE_SIZE[1] / PALETTE_EXTENT,
                 "radius": self.framing.radius, "strokes": self.strokes, "out": self.out_path.name,
                 "presets": {k: list(p) for k, p in PRESETS.items()}}
 
@@ -169,7 +173,7 @@ class Workspace:
         if name == "model":
             return self.session, self.camera()
         if name == "palette":
-            return self.palette, self.palette_camera
+            return self.palette.session, self.palette_camera
         raise InputError(f"target: expected 'model' or 'palette', got {name!r}")
 
     def _on_begin(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
@@ -192,37 +196,70 @@ class Workspace:
         cam = st["camera"]
         rows = samples_spec(msg.get("samples"), cam.width, cam.height)
         ts = msg.get("ts")
-        if isinstance(ts, int | float) and not isinstance(ts, bool) and math.isfinite(ts):
-            self._last_ts = float(ts)
+        if not (isinstance(ts, int | float) and not isinstance(ts, bool) and math.isfinite(ts)):
+            ts = None
         self._rows.extend(rows)
+        # the message's time stamp (and arrival) goes with its last row: a frame that painted it shows the message
+        mark = None if ts is None else (float(ts), self.arrival)
+        self._row_ts.extend([None] * (len(rows) - 1) + [mark] if rows else [])
+        self.arrival = None
         return []
 
-    def flush(self) -> None:
+    @property
+    def backlog(self) -> int:
+        """Pen samples received but not painted yet (a frame paints at most :attr:`paint_budget`)."""
+        return len(self._rows) + len(self._ready) if self._stroke is not None else 0
+
+    def flush(self, budget: float | None = None) -> None:
         """Paint the pen samples received since the last flush: ray-cast each onto the surface
-        and give them to the engine in one ``add_samples`` call."""
+        and give them to the engine in one ``add_samples`` call.
+
+        ``budget`` (seconds) paints only as many of the oldest samples as the measured cost per
+        sample allows (at least one); the rest stay queued for the next frame (:attr:`backlog`),
+        so a slow engine still sends frames at a steady rate instead of one late frame per burst.
+        The next frame's time stamp is that of the newest message whose samples are all painted
+        (or of the newest painted sample)."""
         _, _, Sample, _ = _engine()
-        st, rows, self._rows = self._stroke, self._rows, []
-        if st is None or not rows:
+        st = self._stroke
+        if st is None:
+            self._rows, self._row_ts, self._ready = [], [], []
             return
         t0 = time.perf_counter()
         cam = st["camera"]
-        samples = []
-        for t_ms, x, y, pressure, tilt_x, tilt_y in rows:
+        # every received row is ray-cast now, before any of them is painted (as when all are
+        # painted at once), so the points do not depend on how the samples are split into frames
+        for (t_ms, x, y, pressure, tilt_x, tilt_y), mark in zip(self._rows, self._row_ts, strict=True):
             if st["t_client"] is None:
                 st["t_client"] = t_ms
             point = st["session"].pick(cam, x, y)
-            if point is None:
-                continue
-            t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
-            samples.append(Sample(t=t, point=tuple(float(c) for c in point), pressure=pressure,
-                                  tilt=(tilt_x, tilt_y)))
+            smp = None
+            if point is not None:
+                t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
+                smp = Sample(t=t, point=tuple(float(c) for c in point), pressure=pressure, tilt=(tilt_x, tilt_y))
+            self._ready.append((smp, float(t_ms), mark))
+        self._rows, self._row_ts = [], []
+        if not self._ready:
+            return
+        n = len(self._ready)
+        if budget is not None and self._sample_cost is not None:
+            n = max(1, min(n, int(budget / max(self._sample_cost, 1e-6))))
+        ready, self._ready = self._ready[:n], self._ready[n:]
+        done = [m for _, _, m in ready if m is not None]
+        self._last_ts, arrival = done[-1] if done else (ready[-1][1], None)
+        # the newest painted message's wait for the engine (perf counter) and arrival (wall clock, ms)
+        self._last_arrival = None if arrival is None else (1000 * (t0 - arrival[0]), arrival[1])
+        samples = [smp for smp, _, _ in ready if smp is not None]
+        t1 = time.perf_counter()
         if samples:
             if st["sid"] is None:
                 st["sid"] = st["session"].begin_stroke(st["brush"], st["paint"])
             st["session"].add_samples(st["sid"], samples)
             st["n"] += len(samples)
             self._pending.setdefault(st["target"], "diff")
-        self._paint_time += time.perf_counter() - t0
+        t2 = time.perf_counter()
+        self._paint_time += t2 - t0
+        cost = (t2 - t1) / len(ready)
+        self._sample_cost = cost if self._sample_cost is None else 0.5 * (self._sample_cost + cost)
 
     def _on_end(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         st, self._stroke = self._stroke, None
@@ -313,42 +350,50 @@ class Workspace:
 
     def _on_pick_color(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         x, y = msg.get("x"), msg.get("y")
-        pw, ph = PALETTE_SIZE
-        if not (isinstance(x, int | float) and isinstance(y, int | float) and 0 <= x < pw and 0 <= y < ph):
-            raise InputError(f"x, y: expected a palette pixel within {pw}x{ph}, got {x!r}, {y!r}")
-        if self._palette_albedo is None:
-            self._palette_albedo = np.asarray(self.palette.render(self.palette_camera, shading="none", brush=False).albedo)
-        rgb = np.clip(self._palette_albedo[int(y), int(x)], 0.0, 1.0)
+        if isinstance(x, bool) or isinstance(y, bool):
+            x = y = None  # refused by color_at
+        rgb = self.palette.color_at(x, y, *PALETTE_SIZE)
         return [{"type": "color", "color": [round(float(c), 4) for c in rgb]}]
 
     # -- output -------------------------------------------------------------------------
     def frames(self, queue_ms: float | None = None, received_at: float | None = None) -> list[bytes]:
-        """Paint pending samples (:meth:`flush`), then render and encode every target that
-        changed since the last call.
+        """Paint pending samples (:meth:`flush`, within :attr:`paint_budget`: the rest are the
+        :attr:`backlog` for the next frame), then render and encode every target that changed
+        since the last call.
 
         ``queue_ms`` (the server's queue wait of the newest pen message) and ``received_at`` (the
         wall-clock time in ms at which the server received it) go into the headers' ``srv``, with
         ``done``, the wall-clock time at which the image was rendered (the page, on the same
         machine, splits its latency with them)."""
-        self.flush()
+        self.flush(self.paint_budget)
         out = []
         pending, self._pending = self._pending, {}
         for target, mode in pending.items():
             t0 = time.perf_counter()
+            windows = None
             if target == "model":
                 cam = self.camera()
                 scale = 1
                 if mode == "preview":
                     scale = self.preview_scale
                     cam = cam.resized(max(8, self.width // scale), max(8, self.height // scale))
-                img = to_uint8(self.session.render(cam).color)
-                if mode == "preview":
+                if mode == "preview":  # a level of detail: at most about PREVIEW_SURFELS surfels
+                    stride = max(1, round(len(self.session.surface.visible_rows()) / PREVIEW_SURFELS))
+                    img = to_uint8(self.session.preview(cam, stride).color)
                     self._adapt_preview(time.perf_counter() - t0)
+                else:
+                    res = self.session.render(cam)
+                    # the engine's changed windows, if this render follows the previous frame's
+                    serial, self._model_serial = self._model_serial, (id(self.session), self.session.render_serial)
+                    consecutive = serial == (id(self.session), self.session.render_serial - 1)
+                    windows = self.session.last_windows if mode != "full" and consecutive else None
+                    img = self._model_image(res.color, windows)
             else:
-                res = self.palette.render(self.palette_camera, shading="none", brush=False)
-                self._palette_albedo = np.asarray(res.albedo)
+                res = self.palette.render(*PALETTE_SIZE)
                 img, scale = to_uint8(res.color), 1
             srv = {"paint": round(1000 * self._paint_time, 2), "render": round(1000 * (time.perf_counter() - t0), 2)}
+            if self._last_arrival is not None:  # the newest pen message this frame shows
+                queue_ms, received_at = self._last_arrival
             if queue_ms is not None:
                 srv["queue"] = round(queue_ms, 2)
             if received_at is not None:
@@ -359,12 +404,23 @@ class Workspace:
                 extra["ts"] = self._last_ts
             size = (self.width, self.height) if target == "model" else None
             msg = self.encoder.encode(target, img, full=mode in ("full", "preview"), scale=scale, size=size,
-                                      extra=extra)
+                                      extra=extra, windows=windows)
             if msg is not None:
                 out.append(msg)
-        self._last_ts = None
+        self._last_ts = self._last_arrival = None
         self._paint_time = 0.0
         return out
+
+    def _model_image(self, color: np.ndarray, windows: list[tuple[int, int, int, int]] | None) -> np.ndarray:
+        """The model image as uint8, kept between frames: only ``windows`` (where the engine's
+        image changed, ``Session.last_windows``) are converted again; None converts all of it."""
+        img = self._model_u8
+        if windows is None or img is None or img.shape != color.shape:
+            self._model_u8 = to_uint8(color)
+            return self._model_u8
+        for r0, r1, c0, c1 in windows:
+            img[r0:r1, c0:c1] = to_uint8(color[r0:r1, c0:c1])
+        return img
 
     def _adapt_preview(self, seconds: float) -> None:
         """Coarser previews when the last one rendered slowly, finer ones when fast."""
@@ -410,11 +466,13 @@ class Workspace:
         return {"type": "autosaved", "name": ply.name}
 
     def shutdown(self) -> Path | None:
-        """Close an open stroke and save the model to the output file if it changed."""
+        """Close an open stroke (painting its queued samples) and save the model to the output file
+        if it changed."""
         if self._stroke is not None:
+            self.flush()
             self._on_end({})
         self.session.close()
-        self.palette.close()
+        self.palette.session.close()
         if not self.changed_since_save:
             return None
         self._save_model(self.out_path)
