@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
+from unmesh.paint._buffer_kernels import grid_knn2d, pixel_owners
 from unmesh.paint.brush import BrushState
 from unmesh.paint.model import transfer
 from unmesh.paint.strokes import Paint
@@ -102,6 +104,46 @@ def _height_map(cam: Camera, pos: np.ndarray, nrm: np.ndarray, rad: np.ndarray, 
                        np.zeros((len(pos), 3)))
     g = SplatRenderer(cam, options).render(arr).gbuffer()
     return np.where(g.coverage, Z - g.depth, -np.inf), g.coverage
+
+
+def pixel_owners_reference(points: np.ndarray, radius: np.ndarray, queries: np.ndarray,
+                           k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Plain reference of :func:`owners` (kd-tree k-nearest, then the smallest distance / radius)."""
+    dist, cand = KDTree(points).knn(queries, k)
+    ratio = dist / radius[cand]
+    best = np.argmin(ratio, axis=1)
+    r = np.arange(len(queries))
+    return cand[r, best], ratio[r, best]
+
+
+def owners(points: np.ndarray, radius: np.ndarray, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Owner of each paint-buffer pixel: among the ``k`` nearest surfel centres ``points`` (P, 2)
+    of each pixel centre ``queries`` (Q, 2), the one covering it best (smallest distance /
+    ``radius``), so cells of small children and large originals tile what they cover.
+
+    Returns
+    -------
+    own : (Q,) int64
+        Index into ``points``.
+    ratio : (Q,) float64
+        Its distance / radius (<= 1: the pixel is covered).
+    """
+    own = np.empty(len(queries), np.int64)
+    ratio = np.empty(len(queries))
+    with serial_if_small(len(queries) * k):
+        pixel_owners(np.ascontiguousarray(points), np.ascontiguousarray(radius), np.ascontiguousarray(queries),
+                     k, own, ratio)
+    return own, ratio
+
+
+def nearest(points: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to and index of the nearest of ``points`` (P, 2) for each of ``queries`` (Q, 2),
+    ties by index (as ``KDTree(points).knn(queries, 1)``), (Q,) float64 and (Q,) int64."""
+    dist = np.empty((len(queries), 1))
+    idx = np.empty((len(queries), 1), np.int64)
+    with serial_if_small(len(queries)):
+        grid_knn2d(np.ascontiguousarray(points), np.ascontiguousarray(queries), 1, dist, idx)
+    return dist[:, 0], idx[:, 0]
 
 
 def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
@@ -193,12 +235,8 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # ownership: nearest object surfel in the plane, within its radius
     # ownership: among the nearest object surfels, the one covering the pixel best (smallest
     # distance / radius), so cells of small children and large originals tile what they cover
-    kk = min(8, len(rows))
-    dist, cand = KDTree(ou).knn(pix, kk)
-    ratio = dist / surface.rad[rows][cand]
-    best = np.argmin(ratio, axis=1)
-    own = cand[np.arange(len(pix)), best]
-    covered = ratio[np.arange(len(pix)), best] <= 1.0
+    own, ratio = owners(ou, surface.rad[rows], pix, min(8, len(rows)))
+    covered = ratio <= 1.0
     # the object's height: splatted, or (where the clipped kernels leave a pixel centre
     # uncovered, e.g. at a corner of touching splats) the owner's plane
     on = surface.nrm[rows][own]
@@ -208,8 +246,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # penetration and brush ownership
     depth = ho - hb.ravel()
     pen = covered & cov_b.ravel() & (depth > 0)
-    bdist, bown = KDTree(bu).knn(pix, 1)
-    bdist, bown = bdist[:, 0], bown[:, 0]
+    bdist, bown = nearest(bu, pix)
     pen &= bdist <= 1.5 * brush.sk.spacing
     if not pen.any():
         return empty

@@ -1,0 +1,59 @@
+"""The paint buffer's pixel-ownership kernels against the kd-tree (exact, ties by index)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from unmesh.paint._buffer_kernels import grid_knn2d
+from unmesh.paint.transfer import nearest, owners, pixel_owners_reference
+from unmesh.spatial import KDTree
+
+
+def _pixels(W, H, h, lo):
+    cu = ((np.arange(W) + 0.5) - 0.5 * W) * h + (lo[0] + 0.5 * W * h)
+    cv = (0.5 * H - (np.arange(H) + 0.5)) * h + (lo[1] + 0.5 * H * h)
+    U, V = np.meshgrid(cu, cv)
+    return np.stack([U.ravel(), V.ravel()], axis=1)
+
+
+def _clouds():
+    rng = np.random.default_rng(3)
+    yield rng.random((300, 2)) - 0.5, _pixels(60, 50, 0.02, (-0.6, -0.5))
+    # a dense cluster (children) inside sparse originals, queries reaching beyond the points
+    dense = 0.05 * rng.random((400, 2))
+    sparse = rng.random((80, 2)) * 2 - 1
+    yield np.concatenate([sparse, dense]), _pixels(40, 70, 0.04, (-1.2, -1.5))
+    # a lattice: many exact ties (equal distances), duplicated points
+    g = np.stack(np.meshgrid(np.arange(12.0), np.arange(9.0)), axis=-1).reshape(-1, 2) * 0.125
+    yield np.concatenate([g, g[:20]]), _pixels(30, 30, 0.0625, (-0.3, -0.2))
+    # fewer points than k, and a single point
+    yield rng.random((5, 2)), rng.random((40, 2)) * 3
+    yield np.array([[0.3, 0.1]]), rng.random((10, 2))
+
+
+@pytest.mark.parametrize("k", [1, 3, 8])
+def test_grid_knn2d_equals_the_kd_tree(k):
+    for pts, q in _clouds():
+        kk = min(k, len(pts))
+        dist, idx = np.empty((len(q), kk)), np.empty((len(q), kk), np.int64)
+        grid_knn2d(pts, q, kk, dist, idx)
+        rd, ri = KDTree(pts).knn(q, kk)
+        np.testing.assert_array_equal(idx, ri)
+        np.testing.assert_array_equal(dist, rd)
+
+
+def test_pixel_owners_and_nearest_equal_their_references():
+    rng = np.random.default_rng(4)
+    for pts, q in _clouds():
+        rad = 0.01 + 0.1 * rng.random(len(pts))
+        rad[::7] = rad[0]  # equal ratios: the first in (distance, index) order wins
+        kk = min(8, len(pts))
+        own, ratio = owners(pts, rad, q, kk)
+        ro, rr = pixel_owners_reference(pts, rad, q, kk)
+        np.testing.assert_array_equal(own, ro)
+        np.testing.assert_array_equal(ratio, rr)
+        d, i = nearest(pts, q)
+        rd, ri = KDTree(pts).knn(q, 1)
+        np.testing.assert_array_equal(i, ri[:, 0])
+        np.testing.assert_array_equal(d, rd[:, 0])
