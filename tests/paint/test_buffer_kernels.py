@@ -57,3 +57,37 @@ def test_pixel_owners_and_nearest_equal_their_references():
         rd, ri = KDTree(pts).knn(q, 1)
         np.testing.assert_array_equal(i, ri[:, 0])
         np.testing.assert_array_equal(d, rd[:, 0])
+
+
+def test_ball_knn_equals_the_kd_tree_inside_and_outside_its_ball():
+    from unmesh.paint.collide import BallKnn
+
+    rng = np.random.default_rng(7)
+    g = np.stack(np.meshgrid(np.arange(20.0), np.arange(20.0)), axis=-1).reshape(-1, 2) * 0.05
+    pts = np.concatenate([np.c_[g, np.zeros(len(g))], np.c_[g[:50], np.zeros(50)]])  # ties and duplicates
+    tree = KDTree(pts)
+    ball = BallKnn(tree, np.array([0.5, 0.5, 0.0]), 0.3)
+    q = np.concatenate([np.array([0.5, 0.5, 0.0]) + 0.1 * rng.standard_normal((60, 3)),
+                        rng.random((20, 3)) * 1.2, np.c_[g[:10], np.full(10, 0.02)]])
+    for k in (1, 10):
+        d, i = ball.knn(q, k)
+        rd, ri = tree.knn(q, k)
+        np.testing.assert_array_equal(i, ri)
+        np.testing.assert_array_equal(d, rd)
+
+
+def test_radius_neighbors_few_queries_equal_the_paired_trees():
+    import unmesh.spatial.kdtree as kd
+
+    rng = np.random.default_rng(8)
+    tree = KDTree(rng.random((3000, 3)))
+    q = rng.random((kd._FEW_QUERIES, 3))
+    a = tree.radius_neighbors(q, 0.1)
+    old = kd._FEW_QUERIES
+    try:
+        kd._FEW_QUERIES = 0
+        b = tree.radius_neighbors(q, 0.1)
+    finally:
+        kd._FEW_QUERIES = old
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])

@@ -27,8 +27,8 @@ def _bin(points, x0, y0, inv, nx, ny):  # pragma: no cover - numba
     cell = np.empty(n, np.int64)
     start = np.zeros(nx * ny + 1, np.int64)
     for a in range(n):
-        i = min(max(int(math.floor((points[a, 0] - x0) * inv)), 0), nx - 1)
-        j = min(max(int(math.floor((points[a, 1] - y0) * inv)), 0), ny - 1)
+        i = min(max(math.floor((points[a, 0] - x0) * inv), 0), nx - 1)
+        j = min(max(math.floor((points[a, 1] - y0) * inv), 0), ny - 1)
         cell[a] = j * nx + i
         start[cell[a] + 1] += 1
     for c in range(nx * ny):
@@ -63,8 +63,8 @@ def _insert(bd, bi, m, k, d, a):  # pragma: no cover - numba
 @njit(cache=True)
 def _query(qx, qy, points, start, order, x0, y0, cell, inv, nx, ny, k, bd, bi):  # pragma: no cover - numba
     """The k nearest points of (qx, qy) into bd, bi (sorted by distance, then index)."""
-    ci = min(max(int(math.floor((qx - x0) * inv)), 0), nx - 1)
-    cj = min(max(int(math.floor((qy - y0) * inv)), 0), ny - 1)
+    ci = min(max(math.floor((qx - x0) * inv), 0), nx - 1)
+    cj = min(max(math.floor((qy - y0) * inv), 0), ny - 1)
     eps = 1e-9 * cell
     m = 0
     r = 0

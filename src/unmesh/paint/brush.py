@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from unmesh.paint.collide import collide
+from unmesh.paint.collide import BallKnn, collide
 from unmesh.paint.strokes import Brush
 from unmesh.spatial import KDTree
 
@@ -254,13 +254,18 @@ class BrushState:
         if first:
             o0, r0 = self.origin, self.rotation
         eta = self.brush.friction
+        # the originals the active masses can meet during these steps, fetched once (exact: the
+        # queries that could reach past them go to the tree)
+        reach = 0.5 * float(np.linalg.norm(self.origin - o0)) + float(np.abs(self.sk.active).max()) \
+            + 1.5 * self.brush.size
+        near = BallKnn(tree, 0.5 * (o0 + self.origin), reach) if isinstance(tree, KDTree) else tree
         for s in range(1, steps + 1):
             a = s / steps
             o = (1 - a) * o0 + a * self.origin
             h = self.sk.handles @ ((1 - a) * r0 + a * self.rotation).T + o
             f, _ = self._forces(self.x, h)
             xn = self.x + DAMPING * (self.x - self.x_prev) + f
-            inside, d, n = collide(tree, positions, normals, xn)
+            inside, d, n = collide(near, positions, normals, xn)
             prev = self.x.copy()
             if inside.any():
                 xn[inside] += d[inside, None] * n[inside]
