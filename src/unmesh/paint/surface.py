@@ -21,6 +21,7 @@ Example
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
@@ -166,6 +167,23 @@ class PaintSurface:
             grown[:cap] = arr
             self._data[name] = grown
 
+    def rows_of(self, fathers: np.ndarray) -> np.ndarray:
+        """The visible rows (active and alive) among ``fathers`` and their children, ascending.
+
+        Example
+        -------
+        >>> s = PaintSurface(SurfelCloud([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, radii=[0.7, 0.7]))
+        >>> s.rows_of(np.array([1])).tolist()
+        [1]
+        """
+        fathers = np.asarray(fathers, np.int64)
+        get = self.children.get
+        kids = [k for f in fathers.tolist() if (k := get(f))]
+        rows = np.concatenate([fathers, np.fromiter(itertools.chain.from_iterable(kids), np.int64)]) if kids \
+            else fathers
+        rows = np.unique(rows)
+        return rows[self.active[rows] & self.alive[rows]]
+
     def rebuild_children(self) -> None:
         """The father -> alive children lists, from the arrays."""
         self.children = {}
@@ -180,13 +198,13 @@ class PaintSurface:
         kids = rows[rows >= self.n_original]
         if len(kids):
             self.set("alive", kids, False)
-            fa = self._data["father"]
-            for k in kids.tolist():
-                lst = self.children.get(int(fa[k]))
+            children = self.children
+            for k, f in zip(kids.tolist(), self._data["father"][kids].tolist(), strict=True):
+                lst = children.get(f)
                 if lst is not None and k in lst:
                     lst.remove(k)
                     if not lst:
-                        del self.children[int(fa[k])]
+                        del children[f]
 
     # -- journalled changes -----------------------------------------------------------------
     def set(self, name: str, idx: np.ndarray, values: Any) -> None:
@@ -224,10 +242,14 @@ class PaintSurface:
                 arr[n:n + m] = 0
         self.n = n + m
         idx = np.arange(n, n + m, dtype=np.int64)
-        fa = self._data["father"]
-        for i in idx:
-            self.children.setdefault(int(fa[i]), []).append(int(i))
-        self.dirty.update(idx.tolist())
+        children = self.children
+        for f, i in zip(self._data["father"][n:n + m].tolist(), range(n, n + m), strict=True):
+            kids = children.get(f)
+            if kids is None:
+                children[f] = [i]
+            else:
+                kids.append(i)
+        self.dirty.update(range(n, n + m))
         return idx
 
     def begin_record(self) -> None:

@@ -189,13 +189,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     ext = float(np.abs(bu).max()) + 3.0 * rmax
     off, ind = tree.radius_neighbors(o[None], ext * 1.5)
     fathers = ind[off[0]:off[1]]
-    rows = [fathers]
-    for f in fathers.tolist():
-        kids = surface.children.get(f)
-        if kids:
-            rows.append(np.asarray(kids, np.int64))
-    rows = np.unique(np.concatenate(rows))
-    rows = rows[surface.active[rows] & surface.alive[rows]]
+    rows = surface.rows_of(fathers)
     rel = surface.pos[rows] - o
     rh = rel @ N
     ok = (surface.nrm[rows] @ N > 0.2) & (np.abs(rh) < reach)
@@ -246,8 +240,14 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # penetration and brush ownership
     depth = ho - hb.ravel()
     pen = covered & cov_b.ravel() & (depth > 0)
-    bdist, bown = nearest(bu, pix)
-    pen &= bdist <= 1.5 * brush.sk.spacing
+    # the nearest brush surfel of the pixels that may be penetrated (only those are used)
+    cand = np.flatnonzero(pen)
+    if len(cand) == 0:
+        return empty
+    bdist, bown_c = nearest(bu, pix[cand])
+    pen[cand[bdist > 1.5 * brush.sk.spacing]] = False
+    bown = np.zeros(len(pix), np.int64)
+    bown[cand] = bown_c
     if not pen.any():
         return empty
     # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer
