@@ -68,6 +68,7 @@ def _query(qx, qy, points, start, order, x0, y0, cell, inv, nx, ny, k, bd, bi): 
     eps = 1e-9 * cell
     m = 0
     r = 0
+    lim = np.inf  # squared distances above this are certainly farther than the k-th
     while True:
         for j in range(max(cj - r, 0), min(cj + r, ny - 1) + 1):
             edge = j == cj - r or j == cj + r
@@ -82,7 +83,11 @@ def _query(qx, qy, points, start, order, x0, y0, cell, inv, nx, ny, k, bd, bi): 
                         d2 = dx * dx
                         dy = points[a, 1] - qy
                         d2 = d2 + dy * dy
+                        if d2 > lim:
+                            continue
                         m = _insert(bd, bi, m, k, np.sqrt(d2), a)
+                        if m == k:
+                            lim = bd[k - 1] * bd[k - 1] * (1.0 + 1e-12)
                 if step == 0:
                     break
                 i += step

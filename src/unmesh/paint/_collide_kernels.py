@@ -35,3 +35,4 @@ def ball_knn(points, ids, queries, k, centre, radius, dist, idx, ok):  # pragma:
         for t in range(m):
             dist[q, t] = bd[t]
             idx[q, t] = bi[t]
+

@@ -187,6 +187,9 @@ class BrushState:
         Paint on the brush surfels (wet colour and volume; brush paint does not dry, 5.6.1).
     split : bool
         Whether the brush is split (5.4.3).
+    ball : BallKnn or None
+        The originals near the brush fetched by the last :meth:`simulate` (exact k-nearest
+        queries there, for the paint event that follows).
     """
 
     def __init__(self, brush: Brush) -> None:
@@ -207,6 +210,7 @@ class BrushState:
         self.handle_normal = np.zeros((len(self.sk.handles), 3))
         self.handle_velocity = np.zeros(3)
         self.spring_reaction = np.zeros(3)
+        self.ball: BallKnn | None = None
 
     def load(self, color: tuple[float, float, float], thickness: float) -> None:
         """Dip the brush: every surfel carries ``RESERVOIR * thickness * spacing^2`` of paint of
@@ -259,6 +263,7 @@ class BrushState:
         reach = 0.5 * float(np.linalg.norm(self.origin - o0)) + float(np.abs(self.sk.active).max()) \
             + 1.5 * self.brush.size
         near = BallKnn(tree, 0.5 * (o0 + self.origin), reach) if isinstance(tree, KDTree) else tree
+        self.ball = near if isinstance(near, BallKnn) else None
         for s in range(1, steps + 1):
             a = s / steps
             o = (1 - a) * o0 + a * self.origin

@@ -172,7 +172,8 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     tree = surface.tree
     no = surface.n_original
     opos, onrm = surface.pos[:no], surface.nrm[:no]
-    _, near = tree.knn(tip[None], min(20, no))
+    ball = brush.ball if brush.ball is not None and brush.ball.tree is tree else tree
+    _, near = ball.knn(tip[None], min(20, no))
     o, N = lsq_plane(opos[near[0]], onrm[near[0]])
     t1, t2 = plane_frame(N)
     h = brush.sk.spacing
