@@ -260,9 +260,8 @@ class BrushState:
         eta = self.brush.friction
         # the originals the active masses can meet during these steps, fetched once (exact: the
         # queries that could reach past them go to the tree)
-        reach = 0.5 * float(np.linalg.norm(self.origin - o0)) + float(np.abs(self.sk.active).max()) \
-            + 1.5 * self.brush.size
-        near = BallKnn(tree, 0.5 * (o0 + self.origin), reach) if isinstance(tree, KDTree) else tree
+        reach = float(np.linalg.norm(self.origin - o0)) + float(np.abs(self.sk.active).max()) + self.brush.size
+        near = BallKnn(tree, self.x.mean(axis=0), reach) if isinstance(tree, KDTree) else tree
         self.ball = near if isinstance(near, BallKnn) else None
         for s in range(1, steps + 1):
             a = s / steps

@@ -177,11 +177,8 @@ class PaintSurface:
         [1]
         """
         fathers = np.asarray(fathers, np.int64)
-        get = self.children.get
-        kids = [k for f in fathers.tolist() if (k := get(f))]
-        rows = np.concatenate([fathers, np.fromiter(itertools.chain.from_iterable(kids), np.int64)]) if kids \
-            else fathers
-        rows = np.unique(rows)
+        kids = itertools.chain.from_iterable(map(self.children.get, fathers.tolist(), itertools.repeat(())))
+        rows = np.unique(np.concatenate([fathers, np.fromiter(kids, np.int64)]))
         return rows[self.active[rows] & self.alive[rows]]
 
     def rebuild_children(self) -> None:

@@ -9,6 +9,8 @@ identical to a brute-force stable sort even with duplicate points.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -180,7 +182,7 @@ class KDTree:
             found = self._tree.query_ball_point(q, radius * (1.0 + _SLACK), workers=1)
             counts = np.fromiter((len(f) for f in found), np.int64, nq)
             rows = np.repeat(np.arange(nq, dtype=np.int64), counts)
-            cols = np.fromiter((j for f in found for j in f), np.int64, int(counts.sum()))
+            cols = np.fromiter(itertools.chain.from_iterable(found), np.int64, int(counts.sum()))
         else:
             sdm = cKDTree(q).sparse_distance_matrix(self._tree, radius * (1.0 + _SLACK), output_type="ndarray")
             rows = np.ascontiguousarray(sdm["i"], dtype=np.int64)
