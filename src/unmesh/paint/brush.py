@@ -239,7 +239,7 @@ class BrushState:
         allp = np.concatenate([x, h])
         i, j = self.sk.springs[:, 0], self.sk.springs[:, 1]
         dv = allp[j] - allp[i]
-        ln = np.maximum(np.linalg.norm(dv, axis=1), 1e-300)
+        ln = np.maximum(np.sqrt(np.add.reduce(dv * dv, axis=1)), 1e-300)  # np.linalg.norm(dv, axis=1)
         f = (self.brush.stiffness * (ln - self.sk.rest) / ln)[:, None] * dv  # on i, towards j when stretched
         out = np.zeros_like(allp)
         np.add.at(out, i, f)

@@ -54,11 +54,12 @@ class BallKnn:
     def knn(self, x: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """As :meth:`unmesh.spatial.KDTree.knn` for (M, 3) ``x`` and ``1 <= k <= len(self)``."""
         x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
-        dist = np.full((len(x), k), np.inf)
-        idx = np.full((len(x), k), -1, np.int64)
-        ok = np.zeros(len(x), np.bool_)
-        if len(self.ids) >= k:
-            ball_knn(self.points, self.ids, x, k, self.centre, self.radius, dist, idx, ok)
+        if len(self.ids) < k:
+            return self.tree.knn(x, k)
+        dist = np.empty((len(x), k))
+        idx = np.empty((len(x), k), np.int64)
+        ok = np.empty(len(x), np.bool_)
+        ball_knn(self.points, self.ids, x, k, self.centre, self.radius, dist, idx, ok)
         if not ok.all():
             bad = np.flatnonzero(~ok)
             dist[bad], idx[bad] = self.tree.knn(x[bad], k)
@@ -73,16 +74,18 @@ def _shading(tree: KDTree | BallKnn, positions: np.ndarray, normals: np.ndarray,
     w = dmax - dist
     s = w.sum(axis=1, keepdims=True)
     flat = s[:, 0] <= 0
-    w[flat] = 1.0
-    s[flat] = k
+    if flat.any():
+        w[flat] = 1.0
+        s[flat] = k
     w = w / s
     nn = normals[idx]
     d = np.einsum("mk,mk->m", w, np.einsum("mki,mki->mk", nn, positions[idx] - x[:, None, :]))
     N = np.einsum("mk,mki->mi", w, nn)
-    ln = np.linalg.norm(N, axis=1)
+    ln = np.sqrt(np.add.reduce(N * N, axis=1))  # np.linalg.norm(N, axis=1) without its checks
     bad = ln < 1e-12
-    N[bad] = nn[bad, 0]
-    ln[bad] = 1.0
+    if bad.any():
+        N[bad] = nn[bad, 0]
+        ln[bad] = 1.0
     return d, N / ln[:, None], idx[:, 0]
 
 

@@ -177,8 +177,12 @@ class PaintSurface:
         [1]
         """
         fathers = np.asarray(fathers, np.int64)
-        kids = itertools.chain.from_iterable(map(self.children.get, fathers.tolist(), itertools.repeat(())))
-        rows = np.unique(np.concatenate([fathers, np.fromiter(kids, np.int64)]))
+        if len(fathers) > 1 and not (fathers[1:] > fathers[:-1]).all():
+            fathers = np.unique(fathers)
+        kids = np.fromiter(itertools.chain.from_iterable(map(self.children.get, fathers.tolist(), itertools.repeat(()))),
+                           np.int64)
+        kids.sort()  # children rows are distinct and follow every original row
+        rows = np.concatenate([fathers, kids])
         return rows[self.active[rows] & self.alive[rows]]
 
     def rebuild_children(self) -> None:
