@@ -6,8 +6,7 @@ force shading over the ``n`` (10) nearest samples with weights (5.4)
 
 Example
 -------
->>> from unmesh.paint._collide_kernels import ball_knn
-from unmesh.spatial import KDTree
+>>> from unmesh.spatial import KDTree
 >>> pts = np.array([[x, y, 0.0] for x in range(-3, 4) for y in range(-3, 4)], float)
 >>> nrm = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
 >>> inside, d, n = collide(KDTree(pts), pts, nrm, np.array([[0.2, 0.1, -0.25]]))
