@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from unmesh.paint._buffer_kernels import grid_knn2d
 from unmesh.paint.transfer import nearest, owners, pixel_owners_reference
@@ -91,3 +93,20 @@ def test_radius_neighbors_few_queries_equal_the_paired_trees():
         kd._FEW_QUERIES = old
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], b[1])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(-6, 6), st.integers(-6, 6)), min_size=1, max_size=60),
+       st.lists(st.tuples(st.integers(-20, 20), st.integers(-20, 20)), min_size=1, max_size=30),
+       st.integers(1, 8), st.sampled_from([0.25, 0.1, 1.0 / 3.0]))
+def test_grid_knn2d_equals_the_kd_tree_on_lattices(points, queries, k, scale):
+    # lattice points (many equal distances, duplicates) and queries on a finer lattice, in and
+    # far outside the points' box
+    pts = np.array(points, float) * scale
+    q = np.array(queries, float) * (0.5 * scale)
+    k = min(k, len(pts))
+    dist, idx = np.empty((len(q), k)), np.empty((len(q), k), np.int64)
+    grid_knn2d(pts, q, k, dist, idx)
+    rd, ri = KDTree(pts).knn(q, k)
+    np.testing.assert_array_equal(idx, ri)
+    np.testing.assert_array_equal(dist, rd)
