@@ -110,3 +110,19 @@ def test_grid_knn2d_equals_the_kd_tree_on_lattices(points, queries, k, scale):
     rd, ri = KDTree(pts).knn(q, k)
     np.testing.assert_array_equal(idx, ri)
     np.testing.assert_array_equal(dist, rd)
+
+
+def test_spring_forces_equal_the_numpy_reference_bit_for_bit():
+    from unmesh.paint._brush_kernels import spring_forces
+    from unmesh.paint.brush import skeleton, spring_forces_reference
+    from unmesh.paint.strokes import Brush
+
+    rng = np.random.default_rng(9)
+    for kind in ("round", "flat", "pencil"):
+        sk = skeleton(Brush(kind, 0.03))
+        for _ in range(20):
+            x = sk.active + 0.01 * rng.standard_normal(sk.active.shape)
+            h = sk.handles + 0.01 * rng.standard_normal(sk.handles.shape)
+            out = np.empty((len(x) + len(h), 3))
+            spring_forces(x, h, sk.springs, sk.rest, 7.5, out)
+            np.testing.assert_array_equal(out, spring_forces_reference(x, h, sk.springs, sk.rest, 7.5))

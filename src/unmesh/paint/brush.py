@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh.paint._brush_kernels import spring_forces
 from unmesh.paint.collide import BallKnn, collide
 from unmesh.paint.strokes import Brush
 from unmesh.spatial import KDTree
@@ -157,6 +158,20 @@ def skeleton(brush: Brush) -> Skeleton:
                     float(lower), float(spacing))
 
 
+def spring_forces_reference(x: np.ndarray, h: np.ndarray, springs: np.ndarray, rest: np.ndarray,
+                            stiffness: float) -> np.ndarray:
+    """Plain reference of :func:`unmesh.paint._brush_kernels.spring_forces`, (A + H, 3)."""
+    allp = np.concatenate([x, h])
+    i, j = springs[:, 0], springs[:, 1]
+    dv = allp[j] - allp[i]
+    ln = np.maximum(np.linalg.norm(dv, axis=1), 1e-300)
+    f = (stiffness * (ln - rest) / ln)[:, None] * dv  # on i, towards j when stretched
+    out = np.zeros_like(allp)
+    np.add.at(out, i, f)
+    np.add.at(out, j, -f)
+    return out
+
+
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rotation matrix taking unit ``a`` to unit ``b`` (Rodrigues)."""
     v = np.cross(a, b)
@@ -236,14 +251,9 @@ class BrushState:
 
     def _forces(self, x: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Spring forces (5.1) on the active masses (A,3) and their sum on the handle (3,)."""
-        allp = np.concatenate([x, h])
-        i, j = self.sk.springs[:, 0], self.sk.springs[:, 1]
-        dv = allp[j] - allp[i]
-        ln = np.maximum(np.sqrt(np.add.reduce(dv * dv, axis=1)), 1e-300)  # np.linalg.norm(dv, axis=1)
-        f = (self.brush.stiffness * (ln - self.sk.rest) / ln)[:, None] * dv  # on i, towards j when stretched
-        out = np.zeros_like(allp)
-        np.add.at(out, i, f)
-        np.add.at(out, j, -f)
+        out = np.empty((len(x) + len(h), 3))
+        spring_forces(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(h, dtype=np.float64),
+                      self.sk.springs, self.sk.rest, float(self.brush.stiffness), out)
         na = len(x)
         return out[:na], out[na:].sum(axis=0)
 
