@@ -70,13 +70,7 @@ def diffuse_pairs_reference(pi: np.ndarray, pj: np.ndarray, coef: np.ndarray, vw
 
 
 def _local_rows(surface: PaintSurface, fathers: np.ndarray) -> np.ndarray:
-    rows = [fathers[surface.active[fathers] & surface.alive[fathers]]]
-    for f in fathers.tolist():
-        kids = surface.children.get(f)
-        if kids:
-            rows.append(np.asarray(kids, np.int64))
-    out = np.unique(np.concatenate(rows))
-    return out[surface.active[out] & surface.alive[out]]
+    return surface.rows_of(fathers)
 
 
 def diffusion_pairs(surface: PaintSurface, dt: float, tensor: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

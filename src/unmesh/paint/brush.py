@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from unmesh.paint.collide import collide
+from unmesh.paint._brush_kernels import spring_forces
+from unmesh.paint.collide import BallKnn, collide
 from unmesh.paint.strokes import Brush
 from unmesh.spatial import KDTree
 
@@ -157,6 +158,20 @@ def skeleton(brush: Brush) -> Skeleton:
                     float(lower), float(spacing))
 
 
+def spring_forces_reference(x: np.ndarray, h: np.ndarray, springs: np.ndarray, rest: np.ndarray,
+                            stiffness: float) -> np.ndarray:
+    """Plain reference of :func:`unmesh.paint._brush_kernels.spring_forces`, (A + H, 3)."""
+    allp = np.concatenate([x, h])
+    i, j = springs[:, 0], springs[:, 1]
+    dv = allp[j] - allp[i]
+    ln = np.maximum(np.linalg.norm(dv, axis=1), 1e-300)
+    f = (stiffness * (ln - rest) / ln)[:, None] * dv  # on i, towards j when stretched
+    out = np.zeros_like(allp)
+    np.add.at(out, i, f)
+    np.add.at(out, j, -f)
+    return out
+
+
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rotation matrix taking unit ``a`` to unit ``b`` (Rodrigues)."""
     v = np.cross(a, b)
@@ -187,6 +202,9 @@ class BrushState:
         Paint on the brush surfels (wet colour and volume; brush paint does not dry, 5.6.1).
     split : bool
         Whether the brush is split (5.4.3).
+    ball : BallKnn or None
+        The originals near the brush fetched by the last :meth:`simulate` (exact k-nearest
+        queries there, for the paint event that follows).
     """
 
     def __init__(self, brush: Brush) -> None:
@@ -207,6 +225,7 @@ class BrushState:
         self.handle_normal = np.zeros((len(self.sk.handles), 3))
         self.handle_velocity = np.zeros(3)
         self.spring_reaction = np.zeros(3)
+        self.ball: BallKnn | None = None
 
     def load(self, color: tuple[float, float, float], thickness: float) -> None:
         """Dip the brush: every surfel carries ``RESERVOIR * thickness * spacing^2`` of paint of
@@ -232,14 +251,9 @@ class BrushState:
 
     def _forces(self, x: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Spring forces (5.1) on the active masses (A,3) and their sum on the handle (3,)."""
-        allp = np.concatenate([x, h])
-        i, j = self.sk.springs[:, 0], self.sk.springs[:, 1]
-        dv = allp[j] - allp[i]
-        ln = np.maximum(np.linalg.norm(dv, axis=1), 1e-300)
-        f = (self.brush.stiffness * (ln - self.sk.rest) / ln)[:, None] * dv  # on i, towards j when stretched
-        out = np.zeros_like(allp)
-        np.add.at(out, i, f)
-        np.add.at(out, j, -f)
+        out = np.empty((len(x) + len(h), 3))
+        spring_forces(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(h, dtype=np.float64),
+                      self.sk.springs, self.sk.rest, float(self.brush.stiffness), out)
         na = len(x)
         return out[:na], out[na:].sum(axis=0)
 
@@ -254,13 +268,18 @@ class BrushState:
         if first:
             o0, r0 = self.origin, self.rotation
         eta = self.brush.friction
+        # the originals the active masses can meet during these steps, fetched once (exact: the
+        # queries that could reach past them go to the tree)
+        reach = float(np.linalg.norm(self.origin - o0)) + float(np.abs(self.sk.active).max()) + self.brush.size
+        near = BallKnn(tree, self.x.mean(axis=0), reach) if isinstance(tree, KDTree) else tree
+        self.ball = near if isinstance(near, BallKnn) else None
         for s in range(1, steps + 1):
             a = s / steps
             o = (1 - a) * o0 + a * self.origin
             h = self.sk.handles @ ((1 - a) * r0 + a * self.rotation).T + o
             f, _ = self._forces(self.x, h)
             xn = self.x + DAMPING * (self.x - self.x_prev) + f
-            inside, d, n = collide(tree, positions, normals, xn)
+            inside, d, n = collide(near, positions, normals, xn)
             prev = self.x.copy()
             if inside.any():
                 xn[inside] += d[inside, None] * n[inside]

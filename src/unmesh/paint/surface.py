@@ -21,12 +21,14 @@ Example
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import numpy as np
 
 from unmesh._threads import serial_if_small
 from unmesh.errors import InputError
+from unmesh.paint._children_kernels import gather_children, link_rows, relink_all, unlink_rows
 from unmesh.paint._paint_kernels import visible_colors_rows
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
@@ -137,7 +139,11 @@ class PaintSurface:
             d["shin"][:n0] = 20.0
         no = self.n_original
         self.tree = KDTree(self._data["pos"][:no])
-        self.children: dict[int, list[int]] = {}
+        self._head = np.full(no, -1, np.int64)
+        self._tail = np.full(no, -1, np.int64)
+        self._links = {"nxt": np.full(len(self._data["pos"]), -1, np.int64),
+                       "prv": np.full(len(self._data["pos"]), -1, np.int64),
+                       "linked": np.zeros(len(self._data["pos"]), np.bool_)}
         self.rebuild_children()
         self.journal: list[tuple[str, np.ndarray, np.ndarray]] | None = None
         self.journal_n0 = self.n
@@ -165,13 +171,40 @@ class PaintSurface:
             grown = np.zeros((new, *arr.shape[1:]), dtype=arr.dtype)
             grown[:cap] = arr
             self._data[name] = grown
+        links = self.__dict__.get("_links")
+        if links is not None:
+            for name, arr in links.items():
+                grown = np.full(new, -1 if arr.dtype == np.int64 else False, dtype=arr.dtype)
+                grown[:cap] = arr
+                links[name] = grown
+
+    def rows_of(self, fathers: np.ndarray) -> np.ndarray:
+        """The visible rows (active and alive) among ``fathers`` and their children, ascending.
+
+        Example
+        -------
+        >>> s = PaintSurface(SurfelCloud([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, radii=[0.7, 0.7]))
+        >>> s.rows_of(np.array([1])).tolist()
+        [1]
+        """
+        fathers = np.ascontiguousarray(fathers, np.int64)
+        if len(fathers) > 1 and not (fathers[1:] > fathers[:-1]).all():
+            fathers = np.unique(fathers)
+        kids = gather_children(fathers, self._head, self._links["nxt"])
+        kids.sort()  # children rows are distinct and follow every original row
+        rows = np.concatenate([fathers, kids])
+        return rows[self.active[rows] & self.alive[rows]]
+
+    @property
+    def children(self) -> Children:
+        """The father -> alive children lists (read-only mapping of original row -> list of rows)."""
+        return Children(self._head, self._links["nxt"])
 
     def rebuild_children(self) -> None:
         """The father -> alive children lists, from the arrays."""
-        self.children = {}
-        fa = self._data["father"][:self.n]
-        for i in np.flatnonzero(self._data["alive"][:self.n] & (fa != np.arange(self.n))):
-            self.children.setdefault(int(fa[i]), []).append(int(i))
+        L = self._links
+        relink_all(self.n, self._data["father"], self._data["alive"], self._head, self._tail, L["nxt"], L["prv"],
+                   L["linked"])
 
     def delete(self, rows: np.ndarray) -> None:
         """Replace rows: originals are disabled, children deleted (5.5)."""
@@ -180,13 +213,8 @@ class PaintSurface:
         kids = rows[rows >= self.n_original]
         if len(kids):
             self.set("alive", kids, False)
-            fa = self._data["father"]
-            for k in kids.tolist():
-                lst = self.children.get(int(fa[k]))
-                if lst is not None and k in lst:
-                    lst.remove(k)
-                    if not lst:
-                        del self.children[int(fa[k])]
+            L = self._links
+            unlink_rows(kids, self._data["father"], self._head, self._tail, L["nxt"], L["prv"], L["linked"])
 
     # -- journalled changes -----------------------------------------------------------------
     def set(self, name: str, idx: np.ndarray, values: Any) -> None:
@@ -224,10 +252,9 @@ class PaintSurface:
                 arr[n:n + m] = 0
         self.n = n + m
         idx = np.arange(n, n + m, dtype=np.int64)
-        fa = self._data["father"]
-        for i in idx:
-            self.children.setdefault(int(fa[i]), []).append(int(i))
-        self.dirty.update(idx.tolist())
+        L = self._links
+        link_rows(idx, self._data["father"], self._head, self._tail, L["nxt"], L["prv"], L["linked"])
+        self.dirty.update(range(n, n + m))
         return idx
 
     def begin_record(self) -> None:
@@ -304,3 +331,30 @@ class PaintSurface:
         return SurfelCloud(self.pos[idx], self.nrm[idx], radii=self.rad[idx], colors=self.colors(idx),
                            attributes={"wet_volume": self.vw[idx].copy(), "dry_volume": self.vd[idx].copy(),
                                        "father": self.father[idx].copy()})
+
+
+class Children(Mapping[int, list[int]]):
+    """Read-only view of a surface's father -> children lists (each ascending)."""
+
+    def __init__(self, head: np.ndarray, nxt: np.ndarray) -> None:
+        self._head = head
+        self._nxt = nxt
+
+    def __getitem__(self, father: int) -> list[int]:
+        f = int(father)
+        if not (0 <= f < len(self._head)) or self._head[f] < 0:
+            raise KeyError(father)
+        return gather_children(np.array([f], np.int64), self._head, self._nxt).tolist()
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(np.flatnonzero(self._head >= 0).tolist())
+
+    def __len__(self) -> int:
+        return int(np.count_nonzero(self._head >= 0))
+
+    def __contains__(self, father: object) -> bool:
+        try:
+            f = int(father)  # type: ignore[call-overload]
+        except (TypeError, ValueError):
+            return False
+        return 0 <= f < len(self._head) and bool(self._head[f] >= 0)

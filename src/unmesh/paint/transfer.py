@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
+from unmesh.paint._buffer_kernels import grid_knn2d, pixel_owners
 from unmesh.paint.brush import BrushState
 from unmesh.paint.model import transfer
 from unmesh.paint.strokes import Paint
@@ -104,6 +106,46 @@ def _height_map(cam: Camera, pos: np.ndarray, nrm: np.ndarray, rad: np.ndarray, 
     return np.where(g.coverage, Z - g.depth, -np.inf), g.coverage
 
 
+def pixel_owners_reference(points: np.ndarray, radius: np.ndarray, queries: np.ndarray,
+                           k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Plain reference of :func:`owners` (kd-tree k-nearest, then the smallest distance / radius)."""
+    dist, cand = KDTree(points).knn(queries, k)
+    ratio = dist / radius[cand]
+    best = np.argmin(ratio, axis=1)
+    r = np.arange(len(queries))
+    return cand[r, best], ratio[r, best]
+
+
+def owners(points: np.ndarray, radius: np.ndarray, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Owner of each paint-buffer pixel: among the ``k`` nearest surfel centres ``points`` (P, 2)
+    of each pixel centre ``queries`` (Q, 2), the one covering it best (smallest distance /
+    ``radius``), so cells of small children and large originals tile what they cover.
+
+    Returns
+    -------
+    own : (Q,) int64
+        Index into ``points``.
+    ratio : (Q,) float64
+        Its distance / radius (<= 1: the pixel is covered).
+    """
+    own = np.empty(len(queries), np.int64)
+    ratio = np.empty(len(queries))
+    with serial_if_small(len(queries) * k):
+        pixel_owners(np.ascontiguousarray(points), np.ascontiguousarray(radius), np.ascontiguousarray(queries),
+                     k, own, ratio)
+    return own, ratio
+
+
+def nearest(points: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to and index of the nearest of ``points`` (P, 2) for each of ``queries`` (Q, 2),
+    ties by index (as ``KDTree(points).knn(queries, 1)``), (Q,) float64 and (Q,) int64."""
+    dist = np.empty((len(queries), 1))
+    idx = np.empty((len(queries), 1), np.int64)
+    with serial_if_small(len(queries)):
+        grid_knn2d(np.ascontiguousarray(points), np.ascontiguousarray(queries), 1, dist, idx)
+    return dist[:, 0], idx[:, 0]
+
+
 def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
                 direction: np.ndarray, tip: np.ndarray | None = None, body: np.ndarray | None = None,
                 km: bool = False) -> TransferResult:
@@ -130,7 +172,8 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     tree = surface.tree
     no = surface.n_original
     opos, onrm = surface.pos[:no], surface.nrm[:no]
-    _, near = tree.knn(tip[None], min(20, no))
+    ball = brush.ball if brush.ball is not None and brush.ball.tree is tree else tree
+    _, near = ball.knn(tip[None], min(20, no))
     o, N = lsq_plane(opos[near[0]], onrm[near[0]])
     t1, t2 = plane_frame(N)
     h = brush.sk.spacing
@@ -147,13 +190,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     ext = float(np.abs(bu).max()) + 3.0 * rmax
     off, ind = tree.radius_neighbors(o[None], ext * 1.5)
     fathers = ind[off[0]:off[1]]
-    rows = [fathers]
-    for f in fathers.tolist():
-        kids = surface.children.get(f)
-        if kids:
-            rows.append(np.asarray(kids, np.int64))
-    rows = np.unique(np.concatenate(rows))
-    rows = rows[surface.active[rows] & surface.alive[rows]]
+    rows = surface.rows_of(fathers)
     rel = surface.pos[rows] - o
     rh = rel @ N
     ok = (surface.nrm[rows] @ N > 0.2) & (np.abs(rh) < reach)
@@ -193,12 +230,8 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # ownership: nearest object surfel in the plane, within its radius
     # ownership: among the nearest object surfels, the one covering the pixel best (smallest
     # distance / radius), so cells of small children and large originals tile what they cover
-    kk = min(8, len(rows))
-    dist, cand = KDTree(ou).knn(pix, kk)
-    ratio = dist / surface.rad[rows][cand]
-    best = np.argmin(ratio, axis=1)
-    own = cand[np.arange(len(pix)), best]
-    covered = ratio[np.arange(len(pix)), best] <= 1.0
+    own, ratio = owners(ou, surface.rad[rows], pix, min(8, len(rows)))
+    covered = ratio <= 1.0
     # the object's height: splatted, or (where the clipped kernels leave a pixel centre
     # uncovered, e.g. at a corner of touching splats) the owner's plane
     on = surface.nrm[rows][own]
@@ -208,9 +241,14 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # penetration and brush ownership
     depth = ho - hb.ravel()
     pen = covered & cov_b.ravel() & (depth > 0)
-    bdist, bown = KDTree(bu).knn(pix, 1)
-    bdist, bown = bdist[:, 0], bown[:, 0]
-    pen &= bdist <= 1.5 * brush.sk.spacing
+    # the nearest brush surfel of the pixels that may be penetrated (only those are used)
+    cand = np.flatnonzero(pen)
+    if len(cand) == 0:
+        return empty
+    bdist, bown_c = nearest(bu, pix[cand])
+    pen[cand[bdist > 1.5 * brush.sk.spacing]] = False
+    bown = np.zeros(len(pix), np.int64)
+    bown[cand] = bown_c
     if not pen.any():
         return empty
     # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer

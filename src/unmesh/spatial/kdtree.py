@@ -9,6 +9,8 @@ identical to a brute-force stable sort even with duplicate points.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -21,6 +23,8 @@ __all__ = ["KDTree"]
 
 #: Relative slack given to SciPy's own distance tests; exact filtering follows.
 _SLACK = 1e-8
+#: Up to this many queries, radius searches ask SciPy per query instead of pairing two trees.
+_FEW_QUERIES = 16
 
 
 def _check_k(k: object) -> int:
@@ -174,9 +178,15 @@ class KDTree:
             rows = np.concatenate([pairs[:, 0], pairs[:, 1], ar])
             cols = np.concatenate([pairs[:, 1], pairs[:, 0], ar])
             return _csr_from_pairs(rows, cols, n, n)
-        sdm = cKDTree(q).sparse_distance_matrix(self._tree, radius * (1.0 + _SLACK), output_type="ndarray")
-        rows = np.ascontiguousarray(sdm["i"], dtype=np.int64)
-        cols = np.ascontiguousarray(sdm["j"], dtype=np.int64)
+        if nq <= _FEW_QUERIES:  # building a tree of the queries costs more than asking per query
+            found = self._tree.query_ball_point(q, radius * (1.0 + _SLACK), workers=1)
+            counts = np.fromiter((len(f) for f in found), np.int64, nq)
+            rows = np.repeat(np.arange(nq, dtype=np.int64), counts)
+            cols = np.fromiter(itertools.chain.from_iterable(found), np.int64, int(counts.sum()))
+        else:
+            sdm = cKDTree(q).sparse_distance_matrix(self._tree, radius * (1.0 + _SLACK), output_type="ndarray")
+            rows = np.ascontiguousarray(sdm["i"], dtype=np.int64)
+            cols = np.ascontiguousarray(sdm["j"], dtype=np.int64)
         keep = _sq_dist(self.points, cols, q, rows) <= r2
         return _csr_from_pairs(rows[keep], cols[keep], nq, n)
 
