@@ -57,6 +57,11 @@ class ConvertOptions:
     depth_map : bool
         Also bake a depth (displacement) texture (6.2): the height of the surface above each
         triangle's plane, world units (OBJ output: ``disp``; .glb files carry none).
+    fit_mesh : bool
+        Move the simplified mesh's vertices along their normals to the least-squares fit of
+        the surfel centres (:func:`unmesh.convert.fit.fit_vertices`): QEM leaves the faces
+        as chords inside convex and outside concave parts, which shifts the texels seen at
+        grazing angles and the outline.
     grid_factor : float
         Marching-cubes cell edge in units of the median surfel radius.
     max_level : int
@@ -82,6 +87,7 @@ class ConvertOptions:
     page_size: int = 2048
     mipmaps: bool = False
     depth_map: bool = False
+    fit_mesh: bool = True
     grid_factor: float = 3.0
     max_level: int = 7
     backend: str = "mls"

@@ -43,7 +43,7 @@ from unmesh.render.splat import SurfelArrays
 from unmesh.spatial import TriangleBVH, knn
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["CANVAS", "CORNER_OFFSET", "DEPTH_CORNER_OFFSET", "Patches", "TriangleFrames", "render_patches", "triangle_frames"]
+__all__ = ["CANVAS", "CORNER_OFFSET", "DEPTH_CORNER_OFFSET", "STALL", "Patches", "TriangleFrames", "render_patches", "triangle_frames"]
 
 #: Canvas edge (pixels) of the batched patch renders.
 CANVAS = 1024
@@ -60,6 +60,10 @@ CORNER_OFFSET = 0.5
 #: (unit sphere at 80 triangles: interior points lifted to within 0.025 of the sphere with
 #: offset 0.5, 0.0095 with offset 1).
 DEPTH_CORNER_OFFSET = 1.0
+#: Refinement stalls when an unmet error at level l is above STALL times its value at level
+#: l - 1: on Igea (1,690 triangles) 18 triangles' normal errors stayed at 0.007-0.07 from
+#: level 4 or 5 on and went to level 7, 117,000 of the atlas' 138,000 texels.
+STALL = 0.75
 
 
 @dataclass(frozen=True)
@@ -252,6 +256,9 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     near_t = inside | ((x > -radii) & (x < length + radii) & (y > -radii) & (y < ay + radii))
     np.minimum.at(dmin, pt[near_t], nn_d[ps[near_t], 1])
     spacing_cap = dmin / (2.0 * np.sqrt(2.0))
+    n_in = np.bincount(pt[inside], minlength=nf)
+    mean_radius = np.bincount(pt[inside], weights=radii[inside], minlength=nf) / np.maximum(n_in, 1)
+    mean_radius[n_in == 0] = float(np.median(radii)) if len(radii) else 0.0
 
     level = np.zeros(nf, np.int64)
     color_level = np.full(nf, -1, np.int64)
@@ -259,6 +266,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     done = np.zeros(nf, bool)
     capped = np.zeros(nf, bool)
     c_err = np.zeros(nf)
+    prev_c = np.full(nf, np.inf)  # errors at the previous level (stall test)
+    prev_n = np.full(nf, np.inf)
     n_err = np.zeros(nf)
     samples = np.zeros(nf, np.int64)
     out_color: list[np.ndarray | None] = [None] * nf
@@ -364,7 +373,15 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
             first_n = ok_n & (normal_level[tri_c] < 0)
             normal_level[tri_c[first_n]] = lvl
             cap = (lvl >= max_level) | (frames.length[tri_c] / 2.0**lvl <= spacing_cap[tri_c])
-            stop = (ok_c & ok_n) | cap
+            # stalled (an extension): once the texels are no larger than the triangle's surfels,
+            # an unmet error that fell by less than STALL since the previous level has reached
+            # what the surfels resolve (occluded samples, a crease the splatted field blurs);
+            # refining further only spends texels (at coarser levels errors may stall and fall)
+            fine = frames.length[tri_c] / 2.0**lvl <= mean_radius[tri_c]
+            stall_c = ok_c | (ec > STALL * prev_c[tri_c])
+            stall_n = ok_n | (en > STALL * prev_n[tri_c])
+            prev_c[tri_c], prev_n[tri_c] = ec, en
+            stop = (ok_c & ok_n) | cap | (fine & stall_c & stall_n)
             capped[tri_c[stop & ~(ok_c & ok_n)]] = True
             for t in tri_c[stop]:
                 r0, c0 = slot_y[t], slot_x[t]

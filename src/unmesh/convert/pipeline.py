@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from unmesh.convert.atlas import assemble, patch_corners, patch_masks
+from unmesh.convert.fit import fit_vertices
 from unmesh.convert.options import ConvertOptions
 from unmesh.convert.packing import base_angles, pack
 from unmesh.convert.patches import render_patches, triangle_frames
@@ -121,8 +122,12 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
     else:
         mesh, rec = simplify_to_error(raw, cloud, bound)
     mesh = clean_mesh(mesh, min_component=1)
-    times["simplification"] = time.perf_counter() - t0
     rec = dict(rec)
+    if opt.fit_mesh:
+        mesh = fit_vertices(mesh, cloud)
+        rec["error_before_fit"] = rec["error"]
+        rec["error"] = max(mesh_distance(mesh, cloud))
+    times["simplification"] = time.perf_counter() - t0
     rec["error_relative"] = rec["error"] / diag
     rec["bound_relative"] = opt.mesh_error if opt.faces is None else None
     rec["euler"] = topology(mesh)[0]
