@@ -137,7 +137,8 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
     bar.stage("texture patches")
     normal_error = opt.normal_error if opt.normal_map else None
     patches = render_patches(mesh, cloud, texture_error=opt.texture_error, normal_error=normal_error,
-                             max_level=opt.max_level, progress=opt.progress, depth=opt.depth_map)
+                             max_level=opt.max_level, progress=opt.progress, depth=opt.depth_map,
+                             depth_error=opt.depth_error * diag)
     times["patches"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -166,6 +167,8 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
         "capped": int(patches.capped.sum()),
         "color_error_max_converged": float(patches.color_error[conv].max()) if conv.any() else 0.0,
         "normal_error_max_converged": float(patches.normal_error[conv].max()) if conv.any() else 0.0,
+        "depth_error_max_converged": (float(patches.depth_error[conv].max()) if conv.any() else 0.0)
+        if patches.depth_error is not None else None,
         "color_error_mean": float(patches.color_error.mean()),
         "uncovered_triangles": int((patches.uncovered > 0).sum()),
         "uncovered_texels": int(patches.uncovered.sum()),
