@@ -61,7 +61,7 @@ def test_height_map_is_unbiased_on_a_sphere_cap(coarse, sphere_cloud):
     texels: +0.006 mean); the splatted centre heights sit below by as much. Their mean is the
     height texture (`patches._height_map`).
     """
-    from unmesh.convert.patches import render_patches, texel_positions, triangle_frames
+    from unmesh.convert.patches import render_patches, spacings, texel_positions, triangle_frames
 
     mesh = coarse.mesh
     cloud = sphere_cloud
@@ -79,7 +79,7 @@ def test_height_map_is_unbiased_on_a_sphere_cap(coarse, sphere_cloud):
         x, y = lxy[:, 0], lxy[:, 1]
         inside = (y >= 0) & (ax * y - ay * x <= 0) & ((length - ax) * y + ay * (x - length) <= 0)
         errs.append((pa.depth[t].ravel() - true)[inside])
-        sizes.append(np.full(inside.sum(), length / 2.0 ** pa.level[t]))
+        sizes.append(np.full(inside.sum(), length / spacings(pa.level[t])))
     e, h = np.concatenate(errs), np.concatenate(sizes)
     bias = (h**2 / 2).mean()  # the extrapolated depth's bias for this footprint (one texel)
     assert abs(e.mean()) < 0.1 * bias

@@ -3,7 +3,7 @@
 import numpy as np
 
 from unmesh.convert.fit import fit_vertices
-from unmesh.convert.patches import render_patches
+from unmesh.convert.patches import render_patches, spacings
 from unmesh.convert.simplify import mesh_distance
 from unmesh.meshes import TriangleMesh
 from unmesh.shapes import Sphere
@@ -59,7 +59,7 @@ def test_refinement_stalls_on_normals_the_surfels_do_not_resolve():
     mesh = TriangleMesh([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]])
     max_level = 9
     pa = render_patches(mesh, cloud, texture_error=0.02, normal_error=0.005, max_level=max_level)
-    spacing = np.sqrt(2.0) / 2.0**pa.level  # the longest edge is the diagonal
+    spacing = np.sqrt(2.0) / spacings(pa.level)  # the longest edge is the diagonal
     assert (pa.level < max_level).all()
     assert pa.capped.all() and (pa.normal_error > 0.005).all()
     assert (spacing <= radius).all() and (spacing > radius / 4).all()

@@ -3,10 +3,11 @@
 For every triangle t the surfels are projected orthogonally onto its plane, its longest edge
 along the x axis and the third corner above it (Fig. 6.1 a), and splatted with the renderer's
 EWA splatter (:class:`unmesh.render.SplatRenderer`, visibility splatting included). Patch
-size follows level ``l``: ``2**l`` texels along the longest edge (texel spacing
-``h_t = L_t / 2**l``) with the corners on texel centres (:data:`CORNER_OFFSET`), and the
-texels around it that a bilinear lookup inside the triangle reads. Starting at ``l = 0`` the level
-grows (slivers start at the level whose texel spacing is at most twice their height) until the
+size follows level ``l >= 1``: ``2**l`` texels along the longest edge, ``2**l - 1`` texel
+spacings (:func:`spacings`, ``h_t = L_t / (2**l - 1)``) between the corners on texel centres
+(:data:`CORNER_OFFSET`), and the texels around it that a bilinear lookup inside the triangle
+reads. Patch widths are powers of two, as the atlas pages' edges are (6.3). Starting at
+``l = 1`` the level grows (slivers start at the level whose texel spacing is at most twice their height) until the
 error (6.1)
 
     E_t = sum_s A_s e(C_s, T(x_s, y_s)) / sum_s A_s
@@ -43,7 +44,8 @@ from unmesh.render.splat import SurfelArrays
 from unmesh.spatial import TriangleBVH, knn
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["CANVAS", "CORNER_OFFSET", "STALL", "Patches", "TriangleFrames", "render_patches", "triangle_frames"]
+__all__ = ["CANVAS", "CORNER_OFFSET", "STALL", "Patches", "TriangleFrames", "render_patches", "spacings",
+           "triangle_frames"]
 
 #: Canvas edge (pixels) of the batched patch renders.
 CANVAS = 1024
@@ -120,7 +122,7 @@ class Patches:
     Attributes
     ----------
     level : (F,) int64
-        Layout level: ``2**level`` texels along the longest edge.
+        Layout level (>= 1): ``2**level`` texels along the longest edge (:func:`spacings`).
     color_level, normal_level : (F,) int64
         The levels at which each error first dropped below its threshold (or the cap).
     width, height : (F,) int64
@@ -163,14 +165,27 @@ class Patches:
     depth_error: np.ndarray | None = None  # (F,) float64 with depth textures: mean |h_s - D| (world)
 
 
+def spacings(level: np.ndarray | int) -> np.ndarray:
+    """Texel spacings along the longest edge at ``level``: ``2**level - 1`` (at least 1), so that
+    a patch with its corners on texel centres is ``2**level`` texels wide (a power of two, like
+    the atlas pages: a level-7 patch fits a 128 page, where ``2**7 + 1`` texels needed 256).
+
+    Example
+    -------
+    >>> spacings(np.array([1, 2, 7])).tolist()
+    [1.0, 3.0, 127.0]
+    """
+    return np.maximum(2.0 ** np.asarray(level) - 1.0, 1.0)
+
+
 def patch_size(frames: TriangleFrames, level: np.ndarray,
                offset: float = CORNER_OFFSET) -> tuple[np.ndarray, np.ndarray]:
     """Patch width and height (texels, borders included) at the given levels.
 
     With the corners on texel centres (``offset`` 0.5, :data:`CORNER_OFFSET`) the base spans
-    ``2**l + 1`` texel centres and the texels a bilinear lookup needs lie in
+    ``2**l`` texel centres and the texels a bilinear lookup needs lie in
     ``ceil(apex height) + 1`` rows; with corners on texel boundaries (offset 1) one more each."""
-    n = 2.0 ** level
+    n = spacings(level)
     h = frames.length / n
     hy = np.ceil(frames.apex[:, 1] / h - 1e-9).astype(np.int64)
     extra = round(2 * offset)
@@ -285,7 +300,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         bar = tqdm(total=nf, desc="texture patches", unit="tri", leave=False)
     # slivers start finer: the texel spacing never exceeds twice the triangle's height, so the
     # texels a lookup inside the triangle reads lie close to it
-    start = np.clip(np.ceil(np.log2(frames.length / np.maximum(2.0 * frames.apex[:, 1], 1e-300)) - 1e-9), 0,
+    # (2**l - 1 >= L / (2 height)); levels start at 1 (two texels along the base)
+    start = np.clip(np.ceil(np.log2(1.0 + frames.length / np.maximum(2.0 * frames.apex[:, 1], 1e-300)) - 1e-9), 1,
                     max_level).astype(np.int64)
     for lvl in range(max_level + 1):
         active = np.flatnonzero(~done & (start <= lvl))
@@ -295,7 +311,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
             continue
         level[active] = lvl
         width, height = patch_size(frames, level, offset)
-        scale = (2.0**lvl) / frames.length  # texels per unit
+        scale = spacings(lvl) / frames.length  # texels per unit
         is_active = np.zeros(nf, bool)
         is_active[active] = True
         live = np.flatnonzero(is_active[pt])  # pairs of the triangles rendered at this level
@@ -382,12 +398,12 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
             color_level[tri_c[first_c]] = lvl
             first_n = ok_n & (normal_level[tri_c] < 0)
             normal_level[tri_c[first_n]] = lvl
-            cap = (lvl >= max_level) | (frames.length[tri_c] / 2.0**lvl <= spacing_cap[tri_c])
+            cap = (lvl >= max_level) | (frames.length[tri_c] / spacings(lvl) <= spacing_cap[tri_c])
             # stalled (an extension): once the texels are no larger than the triangle's surfels,
             # an unmet error that fell by less than STALL since the previous level has reached
             # what the surfels resolve (occluded samples, a crease the splatted field blurs);
             # refining further only spends texels (at coarser levels errors may stall and fall)
-            fine = frames.length[tri_c] / 2.0**lvl <= mean_radius[tri_c]
+            fine = frames.length[tri_c] / spacings(lvl) <= mean_radius[tri_c]
             stall_c = ok_c | (ec > STALL * prev_c[tri_c])
             stall_n = ok_n | (en > STALL * prev_n[tri_c])
             stall_d = ok_d | (ed > STALL * prev_d[tri_c])
@@ -459,7 +475,7 @@ def texel_positions(frames: TriangleFrames, t: np.ndarray, level: np.ndarray, he
                     rows: np.ndarray, cols: np.ndarray,
                     offset: float = CORNER_OFFSET) -> tuple[np.ndarray, np.ndarray]:
     """Local (x, y) (N, 2) and world positions (N, 3) of texel centres ``(rows, cols)`` of patches ``t``."""
-    h = frames.length[t] / 2.0 ** level[t]
+    h = frames.length[t] / spacings(level[t])
     lx = (cols + 0.5 - offset) * h
     ly = (height[t] - offset - (rows + 0.5)) * h
     world = frames.origin[t] + lx[:, None] * frames.rotation[t, 0] + ly[:, None] * frames.rotation[t, 1]
