@@ -43,7 +43,7 @@ __all__ = ["RIDGE", "fit_vertices"]
 RIDGE = 0.01
 
 
-def fit_vertices(mesh: TriangleMesh, cloud: SurfelCloud, iterations: int = 2, ridge: float = RIDGE) -> TriangleMesh:
+def fit_vertices(mesh: TriangleMesh, cloud: SurfelCloud, iterations: int = 1, ridge: float = RIDGE) -> TriangleMesh:
     """Move the vertices along their normals to the least-squares fit of the surfel centres.
 
     Parameters
@@ -53,7 +53,9 @@ def fit_vertices(mesh: TriangleMesh, cloud: SurfelCloud, iterations: int = 2, ri
     cloud : SurfelCloud
         The surfels it approximates.
     iterations : int
-        Fits in a row (each with the closest points and normals of the previous one).
+        Fits in a row (each with the closest points and normals of the previous one; on Igea
+        at 1,690 faces a second one changes the two-sided distance by < 0.2 %). One fit on
+        Igea (134,345 surfels, 847 vertices): 0.85 s CPU, mostly the closest-point queries.
     ridge : float
         Ridge weight per surfel around a vertex (keeps vertices without surfels in place).
 
@@ -62,8 +64,8 @@ def fit_vertices(mesh: TriangleMesh, cloud: SurfelCloud, iterations: int = 2, ri
     TriangleMesh
         Same faces, moved vertices (V, 3) float64.
     """
-    from scipy.sparse import coo_matrix, diags, vstack
-    from scipy.sparse.linalg import lsqr
+    from scipy.sparse import coo_matrix, diags
+    from scipy.sparse.linalg import spsolve
 
     m = mesh
     pts = cloud.positions
@@ -78,7 +80,8 @@ def fit_vertices(mesh: TriangleMesh, cloud: SurfelCloud, iterations: int = 2, ri
         rows = np.repeat(np.arange(len(pts)), 3)
         a = coo_matrix((coef.ravel(), (rows, corners.ravel())), shape=(len(pts), nv)).tocsr()
         count = np.bincount(corners.ravel(), weights=bary.ravel(), minlength=nv)
-        reg = diags(np.sqrt(ridge * np.maximum(count, 1.0)))
-        sol = lsqr(vstack([a, reg]).tocsr(), np.concatenate([resid, np.zeros(nv)]), atol=1e-10, btol=1e-10)[0]
+        # normal equations (A^T A + lam K) t = A^T r: V x V, sparse (vertex neighbours)
+        lhs = (a.T @ a + diags(ridge * np.maximum(count, 1.0))).tocsc()
+        sol = np.asarray(spsolve(lhs, a.T @ resid)).ravel()
         m = m.replace(vertices=m.vertices + sol[:, None] * vn)
     return m
