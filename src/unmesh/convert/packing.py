@@ -46,7 +46,7 @@ import numpy as np
 from unmesh.convert._packing_kernels import SCAN, pack_page
 from unmesh.errors import InputError
 
-__all__ = ["Placement", "base_angles", "first_fit_reference", "pack", "pack_page_reference"]
+__all__ = ["Placement", "base_angles", "fill_bound", "first_fit_reference", "pack", "pack_page_reference"]
 
 #: Smallest edge of a page packed full before the rest goes on to further pages (the last page
 #: may be smaller): the quick gallery atlas (600 triangles) gets 6 pages instead of 9 at the
@@ -214,6 +214,34 @@ def _profile_arrays(masks: list[np.ndarray]) -> tuple[np.ndarray, ...]:
     np.minimum.at(lft, row[flat], col[flat])
     np.maximum.at(rgt, row[flat], col[flat])
     return heights, widths, lft, rgt, off
+
+
+def fill_bound(masks: list[np.ndarray], smallest: int = 16) -> float:
+    """The largest atlas fill any packing into square power-of-two pages could reach.
+
+    A patch of ``h x w`` texels needs a page of edge at least ``e = 2^ceil(log2 max(h, w))``
+    (and ``smallest``); so for every edge e the pages of edge >= e hold at least the footprint
+    texels of the patches needing e or more. Going down from the largest e, whole pages of
+    edge e are added while that area is short; the bound is the footprint texels over the total
+    area of these pages (exact packing of the areas assumed: an upper bound, not a layout).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> round(fill_bound([np.ones((65, 65), bool)]), 3)  # 65 x 65 needs a 128 page
+    0.258
+    """
+    if not masks:
+        return 1.0
+    texels = np.array([int(m.sum()) for m in masks], np.int64)
+    dim = np.array([max(m.shape) for m in masks], np.int64)
+    need = np.maximum(smallest, 1 << np.ceil(np.log2(np.maximum(dim, 1))).astype(np.int64))
+    total = 0
+    for e in sorted(set(need.tolist()), reverse=True):
+        short = int(texels[need >= e].sum()) - total
+        if short > 0:
+            total += -(-short // (e * e)) * e * e
+    return float(texels.sum() / total)
 
 
 def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,

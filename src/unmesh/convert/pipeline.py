@@ -21,7 +21,7 @@ import numpy as np
 from unmesh.convert.atlas import assemble, patch_corners, patch_masks
 from unmesh.convert.fit import fit_vertices
 from unmesh.convert.options import ConvertOptions
-from unmesh.convert.packing import base_angles, pack
+from unmesh.convert.packing import base_angles, fill_bound, pack
 from unmesh.convert.patches import render_patches, triangle_frames
 from unmesh.convert.reconstruct import MIN_POINTS, clean_mesh, reconstruct, reconstruct_poisson
 from unmesh.convert.simplify import mesh_distance, simplify_mesh, simplify_to_error, topology
@@ -177,7 +177,8 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
     report["_levels"] = patches.level.tolist()  # per triangle of ``mesh``, for tests and figures
     report["_color_levels"] = patches.color_level.tolist()
     report["atlas"] = {"pages": list(place.pages), "fill": list(place.fill),
-                       "fill_total": float(texels.sum() / sum(e * e for e in place.pages))}
+                       "fill_total": float(texels.sum() / sum(e * e for e in place.pages)),
+                       "fill_bound": fill_bound(masks)}
     times["total"] = float(sum(times.values()))
     report["timings"] = times
     return Conversion(textured, mesh, report)
