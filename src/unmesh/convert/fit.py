@@ -37,10 +37,13 @@ from unmesh.meshes import TriangleMesh
 from unmesh.spatial import TriangleBVH
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["RIDGE", "fit_vertices"]
+__all__ = ["FACING", "RIDGE", "fit_vertices"]
 
 #: Ridge weight ``lam`` of the fit (relative to a vertex's surfel count).
 RIDGE = 0.01
+#: Smallest cosine between a surfel's normal and its closest face's normal for the surfel to
+#: enter the fit (45 degrees).
+FACING = 0.7
 
 
 def fit_vertices(mesh: TriangleMesh, cloud: SurfelCloud, iterations: int = 1, ridge: float = RIDGE) -> TriangleMesh:
@@ -74,11 +77,15 @@ def fit_vertices(mesh: TriangleMesh, cloud: SurfelCloud, iterations: int = 1, ri
         _, face, point, bary = TriangleBVH(m.vertices, m.faces).closest(pts)
         fn = m.face_normals()[face]  # (N, 3)
         vn = m.computed_vertex_normals()
-        resid = np.einsum("ij,ij->i", fn, pts - point)
+        # only surfels facing like their face sample its surface: the others belong to features
+        # the mesh does not have (a coarse mesh without the ears of a bunny) and would drag it
+        keep = np.einsum("ij,ij->i", fn, cloud.normals) >= FACING
+        resid = np.einsum("ij,ij->i", fn[keep], pts[keep] - point[keep])
+        fn, bary, face = fn[keep], bary[keep], face[keep]
         corners = m.faces[face]  # (N, 3)
         coef = bary * np.einsum("ij,ikj->ik", fn, vn[corners])  # (N, 3)
-        rows = np.repeat(np.arange(len(pts)), 3)
-        a = coo_matrix((coef.ravel(), (rows, corners.ravel())), shape=(len(pts), nv)).tocsr()
+        rows = np.repeat(np.arange(len(resid)), 3)
+        a = coo_matrix((coef.ravel(), (rows, corners.ravel())), shape=(len(resid), nv)).tocsr()
         count = np.bincount(corners.ravel(), weights=bary.ravel(), minlength=nv)
         # normal equations (A^T A + lam K) t = A^T r: V x V, sparse (vertex neighbours)
         lhs = (a.T @ a + diags(ridge * np.maximum(count, 1.0))).tocsc()
