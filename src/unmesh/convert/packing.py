@@ -248,6 +248,11 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
          dh_frac: float = 0.05, best_fit: int = 16, slide: bool = True, holes: bool = True) -> Placement:
     """Pack patch footprints (Algorithm 6.1) into power-of-two pages.
 
+    The chain of full pages is built twice, with full pages down to :data:`MIN_FULL_PAGE` and
+    to half of it, and the atlas of the smaller total page area wins (ties: fewer pages). On
+    Igea at the defaults the second gave pages 256 + 128 x 2 + 64 + 32 + 64 (fill 0.884)
+    where the first ended with a 128 page filled 0.45 (0.828).
+
     Parameters
     ----------
     masks : list of (h, w) bool arrays
@@ -267,6 +272,14 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
     -------
     Placement
     """
+    tries = [_pack_chain(masks, angles, page_size, dh_frac, best_fit, slide, holes, min_full)
+             for min_full in (MIN_FULL_PAGE, MIN_FULL_PAGE // 2)]
+    return min(tries, key=lambda pl: (sum(e * e for e in pl.pages), len(pl.pages)))
+
+
+def _pack_chain(masks: list[np.ndarray], angles: np.ndarray, page_size: int, dh_frac: float, best_fit: int,
+                slide: bool, holes: bool, min_full: int) -> Placement:
+    """:func:`pack` with full pages of at least ``min_full`` texels."""
     n = len(masks)
     for m in masks:
         if m.shape[1] > page_size or m.shape[0] > page_size:
@@ -320,7 +333,7 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
             edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
             if need <= edge_a**2 and (tuple(chain), edge_a) not in tried:
                 heapq.heappush(heap, (used + edge_a**2, next(counter), tuple(chain), edge_a, base, left))
-            if heap and (edge_a <= edge_b or edge_b < min(page_size, MIN_FULL_PAGE) or used + edge_b**2 >= heap[0][0]):
+            if heap and (edge_a <= edge_b or edge_b < min(page_size, min_full) or used + edge_b**2 >= heap[0][0]):
                 break  # B would be A's page again, a tiny page, or no better than a candidate end
             trial_b, rest_b = attempt(base, left, edge_b, len(chain))
             if len(rest_b) == len(left):
