@@ -183,6 +183,6 @@ def test_fill_bound_is_above_every_packing_and_exact_for_page_sized_patches():
     # patches one texel wider than a 64 page need 128 pages (by area, three share one)
     wide = [np.ones((65, 65), bool)] * 3
     assert fill_bound(wide) == pytest.approx(3 * 65 * 65 / (128 * 128))
-    assert fill_bound(wide[:1] + [np.ones((10, 10), bool)]) == pytest.approx((65 * 65 + 100) / (128 * 128))
+    assert fill_bound([*wide[:1], np.ones((10, 10), bool)]) == pytest.approx((65 * 65 + 100) / (128 * 128))
     # page-sized patches: one page each, nothing wasted
     assert fill_bound([np.ones((64, 64), bool)] * 5) == 1.0
