@@ -11,6 +11,7 @@ from unmesh.convert.packing import (
     Placement,
     _profile_arrays,
     base_angles,
+    fill_bound,
     first_fit_reference,
     pack,
     pack_page_reference,
@@ -172,3 +173,16 @@ def test_first_fit_kernel_equals_the_numpy_reference():
     assert np.array_equal(g, g_ref)
     for a in ("x", "y", "flip_h", "flip_v"):
         assert np.array_equal(getattr(got, a), getattr(ref, a)), a
+
+
+def test_fill_bound_is_above_every_packing_and_exact_for_page_sized_patches():
+    masks, angles = _random_patches(300, seed=3)
+    pl = pack(masks, angles, page_size=256)
+    fill = _check(masks, pl) / sum(e * e for e in pl.pages)
+    assert fill <= fill_bound(masks) + 1e-12
+    # patches one texel wider than a 64 page need 128 pages (by area, three share one)
+    wide = [np.ones((65, 65), bool)] * 3
+    assert fill_bound(wide) == pytest.approx(3 * 65 * 65 / (128 * 128))
+    assert fill_bound([*wide[:1], np.ones((10, 10), bool)]) == pytest.approx((65 * 65 + 100) / (128 * 128))
+    # page-sized patches: one page each, nothing wasted
+    assert fill_bound([np.ones((64, 64), bool)] * 5) == 1.0

@@ -25,7 +25,7 @@ import numpy as np
 
 from unmesh.convert._patch_kernels import footprints
 from unmesh.convert.packing import Placement
-from unmesh.convert.patches import CORNER_OFFSET, Patches, TriangleFrames
+from unmesh.convert.patches import CORNER_OFFSET, Patches, TriangleFrames, spacings
 from unmesh.convert.textured import TexturedMesh
 from unmesh.meshes import TriangleMesh
 from unmesh.render.raster import corner_normals
@@ -37,7 +37,7 @@ def patch_corners(frames: TriangleFrames, level: np.ndarray, height: np.ndarray,
                   offset: float = CORNER_OFFSET) -> np.ndarray:
     """Corners (F, 3, 2) of every triangle in its patch's texel coordinates (column, row), in face
     order; ``offset``: :attr:`unmesh.convert.patches.Patches.offset`."""
-    s = 2.0**level / frames.length
+    s = spacings(level) / frames.length
     loc = frames.corners_local()
     out = np.empty_like(loc)
     out[:, :, 0] = offset + loc[:, :, 0] * s[:, None]
@@ -111,7 +111,7 @@ def _tangent_normals(part: TriangleMesh, on: np.ndarray, frames: TriangleFrames,
     cn = corner_normals(part).reshape(len(on), 3, 3)  # world, face order
     rot = frames.rotation[t]
     cn_loc = np.einsum("pij,pkj->pki", rot, cn[row_of[t]])
-    h = frames.length[t] / 2.0 ** patches.level[t]
+    h = frames.length[t] / spacings(patches.level[t])
     lx = (c + 0.5 - patches.offset) * h
     ly = (patches.height[t] - patches.offset - (r + 0.5)) * h
     loc = frames.corners_local()[t]  # (P, 3, 2) face order

@@ -57,6 +57,16 @@ class ConvertOptions:
     depth_map : bool
         Also bake a depth (displacement) texture (6.2): the height of the surface above each
         triangle's plane, world units (OBJ output: ``disp``; .glb files carry none).
+    depth_error : float
+        With ``depth_map``: threshold of the depth error, the mean distance between the
+        surfels' heights above their triangle and the bilinear depth texture, relative to the
+        bounding-box diagonal; patches are refined until it holds too. Default 0.0005 (a tenth
+        of the default mesh error).
+    fit_mesh : bool
+        Move the simplified mesh's vertices along their normals to the least-squares fit of
+        the surfel centres (:func:`unmesh.convert.fit.fit_vertices`): QEM leaves the faces
+        as chords inside convex and outside concave parts, which shifts the texels seen at
+        grazing angles and the outline.
     grid_factor : float
         Marching-cubes cell edge in units of the median surfel radius.
     max_level : int
@@ -82,6 +92,8 @@ class ConvertOptions:
     page_size: int = 2048
     mipmaps: bool = False
     depth_map: bool = False
+    depth_error: float = 0.0005
+    fit_mesh: bool = True
     grid_factor: float = 3.0
     max_level: int = 7
     backend: str = "mls"
@@ -95,6 +107,7 @@ class ConvertOptions:
                 raise InputError(f"faces: expected an integer >= 4, got {self.faces!r}")
             object.__setattr__(self, "faces", f)
         object.__setattr__(self, "texture_error", scalar(self.texture_error, "texture_error", 1e-6, 2.0))
+        object.__setattr__(self, "depth_error", scalar(self.depth_error, "depth_error", 1e-9, 1.0))
         object.__setattr__(self, "normal_error", scalar(self.normal_error, "normal_error", 1e-7, 2.0))
         object.__setattr__(self, "page_size", _pow2(self.page_size, "page_size", 64, 16384))
         object.__setattr__(self, "grid_factor", scalar(self.grid_factor, "grid_factor", 0.5, 20.0))

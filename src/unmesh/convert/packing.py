@@ -46,7 +46,7 @@ import numpy as np
 from unmesh.convert._packing_kernels import SCAN, pack_page
 from unmesh.errors import InputError
 
-__all__ = ["Placement", "base_angles", "first_fit_reference", "pack", "pack_page_reference"]
+__all__ = ["Placement", "base_angles", "fill_bound", "first_fit_reference", "pack", "pack_page_reference"]
 
 #: Smallest edge of a page packed full before the rest goes on to further pages (the last page
 #: may be smaller): the quick gallery atlas (600 triangles) gets 6 pages instead of 9 at the
@@ -216,9 +216,42 @@ def _profile_arrays(masks: list[np.ndarray]) -> tuple[np.ndarray, ...]:
     return heights, widths, lft, rgt, off
 
 
+def fill_bound(masks: list[np.ndarray], smallest: int = 16) -> float:
+    """The largest atlas fill any packing into square power-of-two pages could reach.
+
+    A patch of ``h x w`` texels needs a page of edge at least ``e = 2^ceil(log2 max(h, w))``
+    (and ``smallest``); so for every edge e the pages of edge >= e hold at least the footprint
+    texels of the patches needing e or more. Going down from the largest e, whole pages of
+    edge e are added while that area is short; the bound is the footprint texels over the total
+    area of these pages (exact packing of the areas assumed: an upper bound, not a layout).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> round(fill_bound([np.ones((65, 65), bool)]), 3)  # 65 x 65 needs a 128 page
+    0.258
+    """
+    if not masks:
+        return 1.0
+    texels = np.array([int(m.sum()) for m in masks], np.int64)
+    dim = np.array([max(m.shape) for m in masks], np.int64)
+    need = np.maximum(smallest, 1 << np.ceil(np.log2(np.maximum(dim, 1))).astype(np.int64))
+    total = 0
+    for e in sorted(set(need.tolist()), reverse=True):
+        short = int(texels[need >= e].sum()) - total
+        if short > 0:
+            total += -(-short // (e * e)) * e * e
+    return float(texels.sum() / total)
+
+
 def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
          dh_frac: float = 0.05, best_fit: int = 16, slide: bool = True, holes: bool = True) -> Placement:
     """Pack patch footprints (Algorithm 6.1) into power-of-two pages.
+
+    The chain of full pages is built twice, with full pages down to :data:`MIN_FULL_PAGE` and
+    to half of it, and the atlas of the smaller total page area wins (ties: fewer pages). On
+    Igea at the defaults the second gave pages 256 + 128 x 2 + 64 + 32 + 64 (fill 0.884)
+    where the first ended with a 128 page filled 0.45 (0.828).
 
     Parameters
     ----------
@@ -239,6 +272,14 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
     -------
     Placement
     """
+    tries = [_pack_chain(masks, angles, page_size, dh_frac, best_fit, slide, holes, min_full)
+             for min_full in (MIN_FULL_PAGE, MIN_FULL_PAGE // 2)]
+    return min(tries, key=lambda pl: (sum(e * e for e in pl.pages), len(pl.pages)))
+
+
+def _pack_chain(masks: list[np.ndarray], angles: np.ndarray, page_size: int, dh_frac: float, best_fit: int,
+                slide: bool, holes: bool, min_full: int) -> Placement:
+    """:func:`pack` with full pages of at least ``min_full`` texels."""
     n = len(masks)
     for m in masks:
         if m.shape[1] > page_size or m.shape[0] > page_size:
@@ -292,7 +333,7 @@ def pack(masks: list[np.ndarray], angles: np.ndarray, page_size: int = 2048,
             edge_b = min(page_size, max(smallest, 1 << int(np.floor(np.log2(np.sqrt(need))))))
             if need <= edge_a**2 and (tuple(chain), edge_a) not in tried:
                 heapq.heappush(heap, (used + edge_a**2, next(counter), tuple(chain), edge_a, base, left))
-            if heap and (edge_a <= edge_b or edge_b < min(page_size, MIN_FULL_PAGE) or used + edge_b**2 >= heap[0][0]):
+            if heap and (edge_a <= edge_b or edge_b < min(page_size, min_full) or used + edge_b**2 >= heap[0][0]):
                 break  # B would be A's page again, a tiny page, or no better than a candidate end
             trial_b, rest_b = attempt(base, left, edge_b, len(chain))
             if len(rest_b) == len(left):

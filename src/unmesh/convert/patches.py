@@ -3,10 +3,11 @@
 For every triangle t the surfels are projected orthogonally onto its plane, its longest edge
 along the x axis and the third corner above it (Fig. 6.1 a), and splatted with the renderer's
 EWA splatter (:class:`unmesh.render.SplatRenderer`, visibility splatting included). Patch
-size follows level ``l``: ``2**l`` texels along the longest edge (texel spacing
-``h_t = L_t / 2**l``) with the corners on texel centres (:data:`CORNER_OFFSET`), and the
-texels around it that a bilinear lookup inside the triangle reads. Starting at ``l = 0`` the level
-grows (slivers start at the level whose texel spacing is at most twice their height) until the
+size follows level ``l >= 1``: ``2**l`` texels along the longest edge, ``2**l - 1`` texel
+spacings (:func:`spacings`, ``h_t = L_t / (2**l - 1)``) between the corners on texel centres
+(:data:`CORNER_OFFSET`), and the texels around it that a bilinear lookup inside the triangle
+reads. Patch widths are powers of two, as the atlas pages' edges are (6.3). Starting at
+``l = 1`` the level grows (slivers start at the level whose texel spacing is at most twice their height) until the
 error (6.1)
 
     E_t = sum_s A_s e(C_s, T(x_s, y_s)) / sum_s A_s
@@ -36,14 +37,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from unmesh.convert._patch_kernels import bilinear, candidate_pairs, pair_frames
+from unmesh.convert._patch_kernels import bilinear, bilinear_reference, candidate_pairs, pair_frames
 from unmesh.meshes import TriangleMesh
 from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render.splat import SurfelArrays
 from unmesh.spatial import TriangleBVH, knn
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["CANVAS", "CORNER_OFFSET", "DEPTH_CORNER_OFFSET", "Patches", "TriangleFrames", "render_patches", "triangle_frames"]
+__all__ = ["CANVAS", "CORNER_OFFSET", "STALL", "Patches", "TriangleFrames", "render_patches", "spacings",
+           "triangle_frames"]
 
 #: Canvas edge (pixels) of the batched patch renders.
 CANVAS = 1024
@@ -54,12 +56,10 @@ CANVAS = 1024
 #: on Igea at 11,340 triangles 264,288 instead of 208,636 texels, and the wider rims of the
 #: footprints pack worse, atlas fill 0.86 instead of 0.93.)
 CORNER_OFFSET = 0.5
-#: The corner offset of conversions with a depth (displacement) texture: texels centred on the
-#: edges of a coarse patch average the splatted surface over a texel that reaches outside the
-#: triangle, where only the triangle's own surfels are splatted, and bias the heights there
-#: (unit sphere at 80 triangles: interior points lifted to within 0.025 of the sphere with
-#: offset 0.5, 0.0095 with offset 1).
-DEPTH_CORNER_OFFSET = 1.0
+#: Refinement stalls when an unmet error at level l is above STALL times its value at level
+#: l - 1: on Igea (1,690 triangles) 18 triangles' normal errors stayed at 0.007-0.07 from
+#: level 4 or 5 on and went to level 7, 117,000 of the atlas' 138,000 texels.
+STALL = 0.75
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ class Patches:
     Attributes
     ----------
     level : (F,) int64
-        Layout level: ``2**level`` texels along the longest edge.
+        Layout level (>= 1): ``2**level`` texels along the longest edge (:func:`spacings`).
     color_level, normal_level : (F,) int64
         The levels at which each error first dropped below its threshold (or the cap).
     width, height : (F,) int64
@@ -141,10 +141,11 @@ class Patches:
     depth : list of (height, width) float64 arrays or None
         With ``depth=True``: the height of the splatted surface above the triangle's plane
         (world units, along the face normal) at every texel, the depth (displacement) texture
-        of 6.2.
+        of 6.2 (:func:`_height_map`: the mean of the splatted depth and the splatted centre
+        heights, unbiased on curved surfaces).
     offset : float
         Texels from the patch's left and bottom edge to the triangle's corners
-        (:data:`CORNER_OFFSET`, with depth textures :data:`DEPTH_CORNER_OFFSET`).
+        (:data:`CORNER_OFFSET`; depth textures use the same corners).
     """
 
     level: np.ndarray
@@ -161,6 +162,20 @@ class Patches:
     samples: np.ndarray
     depth: list[np.ndarray] | None = None
     offset: float = CORNER_OFFSET
+    depth_error: np.ndarray | None = None  # (F,) float64 with depth textures: mean |h_s - D| (world)
+
+
+def spacings(level: np.ndarray | int) -> np.ndarray:
+    """Texel spacings along the longest edge at ``level``: ``2**level - 1`` (at least 1), so that
+    a patch with its corners on texel centres is ``2**level`` texels wide (a power of two, like
+    the atlas pages: a level-7 patch fits a 128 page, where ``2**7 + 1`` texels needed 256).
+
+    Example
+    -------
+    >>> spacings(np.array([1, 2, 7])).tolist()
+    [1.0, 3.0, 127.0]
+    """
+    return np.maximum(2.0 ** np.asarray(level) - 1.0, 1.0)
 
 
 def patch_size(frames: TriangleFrames, level: np.ndarray,
@@ -168,9 +183,9 @@ def patch_size(frames: TriangleFrames, level: np.ndarray,
     """Patch width and height (texels, borders included) at the given levels.
 
     With the corners on texel centres (``offset`` 0.5, :data:`CORNER_OFFSET`) the base spans
-    ``2**l + 1`` texel centres and the texels a bilinear lookup needs lie in
+    ``2**l`` texel centres and the texels a bilinear lookup needs lie in
     ``ceil(apex height) + 1`` rows; with corners on texel boundaries (offset 1) one more each."""
-    n = 2.0 ** level
+    n = spacings(level)
     h = frames.length / n
     hy = np.ceil(frames.apex[:, 1] / h - 1e-9).astype(np.int64)
     extra = round(2 * offset)
@@ -202,7 +217,8 @@ def _layout(widths: np.ndarray, heights: np.ndarray, gap: int,
 
 
 def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: float, normal_error: float | None,
-                   max_level: int, progress: bool = False, depth: bool = False) -> Patches:
+                   max_level: int, progress: bool = False, depth: bool = False,
+                   depth_error: float | None = None) -> Patches:
     """Adaptive texture patches of every triangle of ``mesh`` from the surfels (6.2.1).
 
     Parameters
@@ -221,9 +237,13 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         Progress bar over the levels.
     depth : bool
         Also keep the depth (displacement) texture of every patch (``Patches.depth``).
+    depth_error : float, optional
+        With ``depth``: threshold of the depth error, the mean ``|h_s - D(x_s, y_s)|`` (world
+        units) between the surfels' heights above the plane and the bilinear depth texture;
+        the patch is refined until it holds as well (None: no depth refinement).
     """
     frames = triangle_frames(mesh)
-    offset = DEPTH_CORNER_OFFSET if depth else CORNER_OFFSET
+    offset = CORNER_OFFSET
     nf = len(mesh.faces)
     _, nearest, _, _ = TriangleBVH(mesh.vertices, mesh.faces).closest(cloud.positions)
     pt, ps = candidate_pairs(mesh.faces, len(mesh.vertices), nearest, cloud.normals, frames.rotation[:, 2])
@@ -252,6 +272,9 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     near_t = inside | ((x > -radii) & (x < length + radii) & (y > -radii) & (y < ay + radii))
     np.minimum.at(dmin, pt[near_t], nn_d[ps[near_t], 1])
     spacing_cap = dmin / (2.0 * np.sqrt(2.0))
+    n_in = np.bincount(pt[inside], minlength=nf)
+    mean_radius = np.bincount(pt[inside], weights=radii[inside], minlength=nf) / np.maximum(n_in, 1)
+    mean_radius[n_in == 0] = float(np.median(radii)) if len(radii) else 0.0
 
     level = np.zeros(nf, np.int64)
     color_level = np.full(nf, -1, np.int64)
@@ -259,6 +282,11 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     done = np.zeros(nf, bool)
     capped = np.zeros(nf, bool)
     c_err = np.zeros(nf)
+    prev_c = np.full(nf, np.inf)  # errors at the previous level (stall test)
+    prev_n = np.full(nf, np.inf)
+    prev_d = np.full(nf, np.inf)
+    d_err = np.zeros(nf)
+    depth_tol = depth_error if (depth and depth_error is not None) else np.inf
     n_err = np.zeros(nf)
     samples = np.zeros(nf, np.int64)
     out_color: list[np.ndarray | None] = [None] * nf
@@ -272,7 +300,8 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         bar = tqdm(total=nf, desc="texture patches", unit="tri", leave=False)
     # slivers start finer: the texel spacing never exceeds twice the triangle's height, so the
     # texels a lookup inside the triangle reads lie close to it
-    start = np.clip(np.ceil(np.log2(frames.length / np.maximum(2.0 * frames.apex[:, 1], 1e-300)) - 1e-9), 0,
+    # (2**l - 1 >= L / (2 height)); levels start at 1 (two texels along the base)
+    start = np.clip(np.ceil(np.log2(1.0 + frames.length / np.maximum(2.0 * frames.apex[:, 1], 1e-300)) - 1e-9), 1,
                     max_level).astype(np.int64)
     for lvl in range(max_level + 1):
         active = np.flatnonzero(~done & (start <= lvl))
@@ -282,7 +311,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
             continue
         level[active] = lvl
         width, height = patch_size(frames, level, offset)
-        scale = (2.0**lvl) / frames.length  # texels per unit
+        scale = spacings(lvl) / frames.length  # texels per unit
         is_active = np.zeros(nf, bool)
         is_active[active] = True
         live = np.flatnonzero(is_active[pt])  # pairs of the triangles rendered at this level
@@ -303,7 +332,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
         slot_x = np.zeros(nf, np.int64)
         slot_y = np.zeros(nf, np.int64)
         slot_c[active], slot_x[active], slot_y[active] = canvas, ox, oy
-        sums = np.zeros((nf, 3))  # sum A, sum A e_color, sum A e_normal
+        sums = np.zeros((nf, 4))  # sum A, sum A e_color, sum A e_normal, sum A e_depth
         pair_canvas = slot_c[pt[sel]]
         by_canvas = np.argsort(pair_canvas, kind="stable")
         canvas_start = np.searchsorted(pair_canvas[by_canvas], np.arange(int(canvas.max()) + 2))
@@ -332,6 +361,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
             tol = max(1.0, 2.0 / float(np.median(r_c))) if len(r_c) else 1.0
             rend = SplatRenderer(cam, SplatOptions(depth_tolerance=tol))
             g = rend.render(arr).gbuffer()
+            hmap = _height_map(cam, arr, tol, g, zeye, z) if out_depth is not None else None
             # error (6.1) at the visible surfels inside their triangle
             ins = inside[idx]
             ri = np.clip(row.astype(np.int64), 0, ch - 1)
@@ -349,31 +379,46 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
                 tn /= np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-12)
                 e_n = 1.0 - np.einsum("ij,ij->i", tn, lnrm[idx[q]])
                 a = area[idx[q]]
-                for j, wgt in enumerate((a, a * e_c, a * e_n)):
+                e_d = np.zeros(len(q))
+                if hmap is not None:
+                    e_d = np.abs(z[q] - bilinear_reference(hmap[..., None], col[q], row[q])[:, 0]) / sc[q]
+                for j, wgt in enumerate((a, a * e_c, a * e_n, a * e_d)):
                     sums[:, j] += np.bincount(t_i[q], weights=wgt, minlength=nf)
             # extract the patches of the triangles that stop here
             with np.errstate(invalid="ignore", divide="ignore"):
                 ec = np.where(sums[tri_c, 0] > 0, sums[tri_c, 1] / sums[tri_c, 0], 0.0)
                 en = np.where(sums[tri_c, 0] > 0, sums[tri_c, 2] / sums[tri_c, 0], 0.0)
-            c_err[tri_c], n_err[tri_c] = ec, en
+                ed = np.where(sums[tri_c, 0] > 0, sums[tri_c, 3] / sums[tri_c, 0], 0.0)
+            c_err[tri_c], n_err[tri_c], d_err[tri_c] = ec, en, ed
             samples[tri_c] = np.bincount(t_i[q], minlength=nf)[tri_c] if len(q) else 0
             ok_c = ec <= texture_error
             ok_n = en <= normal_error if normal_error is not None else np.ones(len(tri_c), bool)
+            ok_d = ed <= depth_tol  # the depth texture shares the layout with colour and normals
             first_c = ok_c & (color_level[tri_c] < 0)
             color_level[tri_c[first_c]] = lvl
             first_n = ok_n & (normal_level[tri_c] < 0)
             normal_level[tri_c[first_n]] = lvl
-            cap = (lvl >= max_level) | (frames.length[tri_c] / 2.0**lvl <= spacing_cap[tri_c])
-            stop = (ok_c & ok_n) | cap
-            capped[tri_c[stop & ~(ok_c & ok_n)]] = True
+            cap = (lvl >= max_level) | (frames.length[tri_c] / spacings(lvl) <= spacing_cap[tri_c])
+            # stalled (an extension): once the texels are no larger than the triangle's surfels,
+            # an unmet error that fell by less than STALL since the previous level has reached
+            # what the surfels resolve (occluded samples, a crease the splatted field blurs);
+            # refining further only spends texels (at coarser levels errors may stall and fall)
+            fine = frames.length[tri_c] / spacings(lvl) <= mean_radius[tri_c]
+            stall_c = ok_c | (ec > STALL * prev_c[tri_c])
+            stall_n = ok_n | (en > STALL * prev_n[tri_c])
+            stall_d = ok_d | (ed > STALL * prev_d[tri_c])
+            prev_c[tri_c], prev_n[tri_c], prev_d[tri_c] = ec, en, ed
+            met = ok_c & ok_n & ok_d
+            stop = met | cap | (fine & stall_c & stall_n & stall_d)
+            capped[tri_c[stop & ~met]] = True
             for t in tri_c[stop]:
                 r0, c0 = slot_y[t], slot_x[t]
                 sl = (slice(r0, r0 + height[t]), slice(c0, c0 + width[t]))
                 out_color[t] = g.albedo[sl].copy()
                 out_normal[t] = g.normal[sl].copy()
                 out_cov[t] = g.coverage[sl].copy()
-                if out_depth is not None:  # canvas depth (texel units) -> height above the plane
-                    out_depth[t] = (zeye - g.depth[sl]) / scale[t]
+                if out_depth is not None and hmap is not None:  # texel units -> world
+                    out_depth[t] = hmap[sl] / scale[t]
             done[tri_c[stop]] = True
             if bar is not None:
                 bar.update(int(stop.sum()))
@@ -385,7 +430,28 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
     uncovered = _fill_uncovered(mesh, cloud, frames, level, offset, width, height, out_color, out_normal, out_cov,
                                 out_depth)
     return Patches(level, color_level, normal_level, width, height, out_color, out_normal,  # type: ignore[arg-type]
-                   c_err, n_err, capped, uncovered, samples, out_depth, offset)  # type: ignore[arg-type]
+                   c_err, n_err, capped, uncovered, samples, out_depth, offset,  # type: ignore[arg-type]
+                   d_err if depth else None)
+
+
+def _height_map(cam: Camera, arr: SurfelArrays, tol: float, g, zeye: float, z: np.ndarray) -> np.ndarray:
+    """Height above the patch plane (texel units) of every canvas pixel, unbiased on curved surfaces.
+
+    The splatted depth extrapolates every surfel's tangent plane over its footprint (a texel or
+    more at coarse levels, where the screen filter dominates): on a convex surface the planes
+    lie above it and the depth is biased upwards by ~ kappa sigma^2 / 2 (kappa: curvature,
+    sigma^2: second moment of the footprint); the weighted mean of the surfels' *centre*
+    heights with the same weights is biased down by as much (z(x) = a + b x - kappa x^2 / 2:
+    E[z_s + z'_s (p - x_s)] = z(p) + kappa sigma^2 / 2, E[z_s] = z(p) - kappa sigma^2 / 2).
+    Their mean is exact for a locally quadratic surface. The centre heights are splatted as a
+    colour (mapped into [0, 1], which the splatter clamps to). Pixels no splat reached: 0.
+    """
+    z0, zr = float(z.min()), max(float(np.ptp(z)), 1e-12)
+    hz = np.ascontiguousarray(np.repeat(((z - z0) / zr)[:, None], 3, axis=1))
+    g_h = SplatRenderer(cam, SplatOptions(depth_tolerance=tol)).render(
+        SurfelArrays(arr.positions, arr.normals, arr.radii, arr.axes, hz)).gbuffer()
+    centre = z0 + zr * g_h.albedo[..., 0]
+    return np.where(g.coverage, 0.5 * ((zeye - np.where(g.coverage, g.depth, zeye)) + centre), 0.0)
 
 
 def _depth_band(pt: np.ndarray, ps: np.ndarray, loc: np.ndarray, lnrm: np.ndarray, nearest: np.ndarray,
@@ -409,7 +475,7 @@ def texel_positions(frames: TriangleFrames, t: np.ndarray, level: np.ndarray, he
                     rows: np.ndarray, cols: np.ndarray,
                     offset: float = CORNER_OFFSET) -> tuple[np.ndarray, np.ndarray]:
     """Local (x, y) (N, 2) and world positions (N, 3) of texel centres ``(rows, cols)`` of patches ``t``."""
-    h = frames.length[t] / 2.0 ** level[t]
+    h = frames.length[t] / spacings(level[t])
     lx = (cols + 0.5 - offset) * h
     ly = (height[t] - offset - (rows + 0.5)) * h
     world = frames.origin[t] + lx[:, None] * frames.rotation[t, 0] + ly[:, None] * frames.rotation[t, 1]

@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from unmesh.convert.atlas import assemble, patch_corners, patch_masks
+from unmesh.convert.fit import fit_vertices
 from unmesh.convert.options import ConvertOptions
-from unmesh.convert.packing import base_angles, pack
+from unmesh.convert.packing import base_angles, fill_bound, pack
 from unmesh.convert.patches import render_patches, triangle_frames
 from unmesh.convert.reconstruct import MIN_POINTS, clean_mesh, reconstruct, reconstruct_poisson
 from unmesh.convert.simplify import mesh_distance, simplify_mesh, simplify_to_error, topology
@@ -121,8 +122,12 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
     else:
         mesh, rec = simplify_to_error(raw, cloud, bound)
     mesh = clean_mesh(mesh, min_component=1)
-    times["simplification"] = time.perf_counter() - t0
     rec = dict(rec)
+    if opt.fit_mesh:
+        mesh = fit_vertices(mesh, cloud)
+        rec["error_before_fit"] = rec["error"]
+        rec["error"] = max(mesh_distance(mesh, cloud))
+    times["simplification"] = time.perf_counter() - t0
     rec["error_relative"] = rec["error"] / diag
     rec["bound_relative"] = opt.mesh_error if opt.faces is None else None
     rec["euler"] = topology(mesh)[0]
@@ -132,7 +137,8 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
     bar.stage("texture patches")
     normal_error = opt.normal_error if opt.normal_map else None
     patches = render_patches(mesh, cloud, texture_error=opt.texture_error, normal_error=normal_error,
-                             max_level=opt.max_level, progress=opt.progress, depth=opt.depth_map)
+                             max_level=opt.max_level, progress=opt.progress, depth=opt.depth_map,
+                             depth_error=opt.depth_error * diag)
     times["patches"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -161,6 +167,8 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
         "capped": int(patches.capped.sum()),
         "color_error_max_converged": float(patches.color_error[conv].max()) if conv.any() else 0.0,
         "normal_error_max_converged": float(patches.normal_error[conv].max()) if conv.any() else 0.0,
+        "depth_error_max_converged": (float(patches.depth_error[conv].max()) if conv.any() else 0.0)
+        if patches.depth_error is not None else None,
         "color_error_mean": float(patches.color_error.mean()),
         "uncovered_triangles": int((patches.uncovered > 0).sum()),
         "uncovered_texels": int(patches.uncovered.sum()),
@@ -169,7 +177,8 @@ def convert_cloud(cloud: SurfelCloud, options: ConvertOptions | None = None) -> 
     report["_levels"] = patches.level.tolist()  # per triangle of ``mesh``, for tests and figures
     report["_color_levels"] = patches.color_level.tolist()
     report["atlas"] = {"pages": list(place.pages), "fill": list(place.fill),
-                       "fill_total": float(texels.sum() / sum(e * e for e in place.pages))}
+                       "fill_total": float(texels.sum() / sum(e * e for e in place.pages)),
+                       "fill_bound": fill_bound(masks)}
     times["total"] = float(sum(times.values()))
     report["timings"] = times
     return Conversion(textured, mesh, report)
