@@ -54,6 +54,7 @@ __all__ = [
     "corner_tables",
     "sample_boundary",
     "wall_friction_tables",
+    "wall_moment_tables",
     "wall_tables",
 ]
 
@@ -182,6 +183,35 @@ def wall_tables(h: float, dim: int, size: int = TABLE_SIZE) -> tuple[np.ndarray,
     return np.ascontiguousarray(rho), np.ascontiguousarray(grad)
 
 
+def _half_space_moments(h: float, dim: int, eps: float | None, size: int, order: int) -> np.ndarray:
+    """``M(d) = ∫_{s·n > d, |s| < h} s sᵀ G(|s|) ds = Mt (I − n nᵀ) + Mn n nᵀ`` on ``d ∈ [−h, h]``,
+    ``G(r) = ŵ'(r)/r`` (spiky), divided by ``r² + eps`` unless ``eps`` is None; shape (2, size)."""
+    from unmesh.kernels import spiky_derivative
+
+    hh = positive_scalar(h, "h")
+    xg, wg = np.polynomial.legendre.leggauss(order)
+    d = np.linspace(-hh, hh, size)
+    out = np.zeros((2, size))
+    for k, dk in enumerate(d[:-1]):
+        z = dk + 0.5 * (xg + 1.0) * (hh - dk)  # s_n from d to h
+        wz = 0.5 * (hh - dk) * wg
+        span = np.sqrt(np.maximum(hh * hh - z * z, 0.0))  # in-plane radius of the support
+        rho_in = 0.5 * (xg[None, :] + 1.0) * span[:, None]
+        wr = 0.5 * span[:, None] * wg[None, :]
+        r = np.sqrt(rho_in * rho_in + z[:, None] ** 2)
+        g = np.asarray(spiky_derivative(r, hh, dim=dim)) / np.maximum(r, 1e-300)
+        if eps is not None:
+            g = g / (r * r + eps)
+        if dim == 3:
+            meas = 2.0 * np.pi * rho_in * wr * wz[:, None]
+            out[0, k] = np.sum(0.5 * rho_in * rho_in * g * meas)
+        else:
+            meas = 2.0 * wr * wz[:, None]
+            out[0, k] = np.sum(rho_in * rho_in * g * meas)
+        out[1, k] = np.sum(z[:, None] ** 2 * g * meas)
+    return np.ascontiguousarray(out)
+
+
 def wall_friction_tables(h: float, dim: int, size: int = 513, order: int = 96) -> np.ndarray:
     """Half-space integrals of the no-slip wall viscosity, shape (2, size), on ``d ∈ [−h, h]``.
 
@@ -198,29 +228,27 @@ def wall_friction_tables(h: float, dim: int, size: int = 513, order: int = 96) -
     >>> bool(np.all(m <= 0) and m[0, -1] == 0 and m[0, 0] < m[0, 32] < 0)
     True
     """
-    from unmesh.kernels import spiky_derivative
-
     hh = positive_scalar(h, "h")
-    eps = 0.01 * hh * hh
-    xg, wg = np.polynomial.legendre.leggauss(order)
-    d = np.linspace(-hh, hh, size)
-    out = np.zeros((2, size))
-    for k, dk in enumerate(d[:-1]):
-        z = dk + 0.5 * (xg + 1.0) * (hh - dk)  # s_n from d to h
-        wz = 0.5 * (hh - dk) * wg
-        span = np.sqrt(np.maximum(hh * hh - z * z, 0.0))  # in-plane radius of the support
-        rho_in = 0.5 * (xg[None, :] + 1.0) * span[:, None]
-        wr = 0.5 * span[:, None] * wg[None, :]
-        r = np.sqrt(rho_in * rho_in + z[:, None] ** 2)
-        g = np.asarray(spiky_derivative(r, hh, dim=dim)) / np.maximum(r, 1e-300) / (r * r + eps)
-        if dim == 3:
-            meas = 2.0 * np.pi * rho_in * wr * wz[:, None]
-            out[0, k] = np.sum(0.5 * rho_in * rho_in * g * meas)
-        else:
-            meas = 2.0 * wr * wz[:, None]
-            out[0, k] = np.sum(rho_in * rho_in * g * meas)
-        out[1, k] = np.sum(z[:, None] ** 2 * g * meas)
-    return np.ascontiguousarray(out)
+    return _half_space_moments(hh, dim, 0.01 * hh * hh, size, order)
+
+
+def wall_moment_tables(h: float, dim: int, size: int = 513, order: int = 96) -> np.ndarray:
+    """Half-space moments of the kernel gradient, shape (2, size), on ``d ∈ [−h, h]``.
+
+    ``M(d) = ∫_{wall} s ⊗ ∇Ŵ(s) dy = ∫ s sᵀ ŵ'(|s|)/|s| dy = Mt (I − n nᵀ) + Mn n nᵀ``
+    (offsets ``s = x − y`` to the points behind the wall; row 0 ``Mt``, row 1 ``Mn``, both
+    in ``[−1, 0]``: ``−I`` deep inside the wall, ``−I/2`` on it, 0 beyond ``h``). It is the
+    part of the pressure gradient that the fluid behind the wall would contribute to a linear
+    pressure field: the hydrostatic wall pressure ``p_b(y) = p_i + ρ_i g·(y − x_i)``
+    (Adami et al. 2012, walls at rest) adds ``(ρ0/ρ_i) M(d) g`` to the acceleration.
+
+    Example
+    -------
+    >>> m = wall_moment_tables(1.0, 3, size=65)
+    >>> round(float(m[0, 0]), 3), round(float(m[1, 32]), 3), float(m[0, -1])
+    (-1.0, -0.5, 0.0)
+    """
+    return _half_space_moments(h, dim, None, size, order)
 
 
 #: Samples per axis of the corner tables on [-h, h]².

@@ -50,7 +50,15 @@ from unmesh.sph import _kernels as K
 from unmesh.sph import _phase_kernels as PK
 from unmesh.sph import _slot_kernels as SK
 from unmesh.sph import materials as MT
-from unmesh.sph.boundary import BoundaryParticles, Plane, corner_pairs, corner_tables, wall_friction_tables, wall_tables
+from unmesh.sph.boundary import (
+    BoundaryParticles,
+    Plane,
+    corner_pairs,
+    corner_tables,
+    wall_friction_tables,
+    wall_moment_tables,
+    wall_tables,
+)
 from unmesh.sph.front import surge_front
 from unmesh.sph.materials import Material, material_table
 from unmesh.sph.phase import HeatSource
@@ -284,6 +292,7 @@ class SPHSimulation(Simulation):
         self.corners = corner_pairs(self.planes)
         self.plane_noslip = np.array([p.no_slip for p in self.planes], np.uint8)
         self.wall_visc = wall_friction_tables(self.h, self.dim) if self.plane_noslip.any() else np.zeros((2, 2))
+        self.wall_mom = wall_moment_tables(self.h, self.dim) if len(self.planes) else np.zeros((2, 2))
         if len(self.corners):
             self.corner_rho, self.corner_grad = corner_tables(self.h, self.dim)
         else:
@@ -545,7 +554,7 @@ class SPHSimulation(Simulation):
         K.force_pass(self.x, self.v, self.m, self.rho, self.p, self.temp, self.phase, self.obj, self.mat, self.uid,
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
-                     self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.bnoslip,
+                     self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.wall_mom, self.bnoslip,
                      self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
         if self.elastic:
             # the new lattice state (in the new order) becomes the previous one of the next step
