@@ -120,6 +120,21 @@ def _plane_dist(x0, x1, x2, plane_p, plane_n, k):
 
 
 @njit(**PLAIN)
+def _corner_hydrostatic(ka, kb, da, db, h, hyd, gravity, plane_n, corner_mom, out):
+    """``hyd · M_Q g`` into ``out`` (3,): the hydrostatic wall pressure of the quarter-space behind the
+    walls ``ka`` and ``kb`` (moments of :func:`unmesh.sph.boundary.corner_moment_tables`)."""
+    q11 = _table2(corner_mom[0], da, db, h)
+    q22 = _table2(corner_mom[0], db, da, h)
+    q12 = _table2(corner_mom[1], da, db, h)
+    qee = _table2(corner_mom[2], da, db, h)
+    ga = gravity[0] * plane_n[ka, 0] + gravity[1] * plane_n[ka, 1] + gravity[2] * plane_n[ka, 2]
+    gb = gravity[0] * plane_n[kb, 0] + gravity[1] * plane_n[kb, 1] + gravity[2] * plane_n[kb, 2]
+    for c in range(3):
+        ge = gravity[c] - ga * plane_n[ka, c] - gb * plane_n[kb, c]  # the edge component of g
+        out[c] = hyd * ((q11 * ga + q12 * gb) * plane_n[ka, c] + (q12 * ga + q22 * gb) * plane_n[kb, c] + qee * ge)
+
+
+@njit(**PLAIN)
 def pressure_eos(rho, rho0, k, gamma, zeta):
     """Eq. (8.15) with the negative-pressure scale ζ of eq. (8.16)."""
     if gamma == 1.0:
@@ -368,8 +383,8 @@ PAIR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 @njit(cache=True, fastmath=PAIR_FASTMATH, error_model="numpy")
 def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, mats, h, dim, gravity, nbr, nnbr,
                  bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-                 plane_noslip, wall_visc, wall_mom, bnoslip, grad_scale, tensile, damping, spacing, elastic, fel, fown, pk,
-                 acc, xsph, dtemp):
+                 plane_noslip, wall_visc, wall_mom, corner_mom, bnoslip, grad_scale, tensile, damping, spacing, elastic,
+                 fel, fown, pk, acc, xsph, dtemp):
     """Particles ``r0 .. r1 - 1`` of :func:`force_pass` (one block, serial): the first ``ncol`` columns
     of the neighbours' ``pk`` rows are gathered, the others are the constants of material ``mat0``
     and object ``obj0``."""
@@ -381,6 +396,7 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
     c6 = poly6_coef(h, dim)
     cg = spiky_coef(h, dim)
     buf = np.empty((PK_COLS, cap))
+    acc_c = np.empty(3)
     # contact stiffness between objects (8.37): the lattice force (8.31) towards the rest distance d
     dsp = spacing
     tensile_inv = 1.0 / (h2 - 0.25 * spacing * spacing)  # W(r)/W(d/2) = ((h² − r²)/(h² − d²/4))³
@@ -595,6 +611,12 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
                 ai0 += ga * plane_n[ka, 0] + gb * plane_n[kb, 0]
                 ai1 += ga * plane_n[ka, 1] + gb * plane_n[kb, 1]
                 ai2 += ga * plane_n[ka, 2] + gb * plane_n[kb, 2]
+                if hyd > 0.0:
+                    # the quarter-space behind both walls is in both half-space moments: subtract it once
+                    _corner_hydrostatic(ka, kb, da, db, h, hyd, gravity, plane_n, corner_mom, acc_c)
+                    ai0 -= acc_c[0]
+                    ai1 -= acc_c[1]
+                    ai2 -= acc_c[2]
         if elastic and solid_i:
             ai0 += fe0 / m[i]
             ai1 += fe1 / m[i]
@@ -611,8 +633,8 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
 @njit(cache=True, parallel=True, error_model="numpy")
 def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
                bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-               plane_noslip, wall_visc, wall_mom, bnoslip, grad_scale, tensile, damping, spacing, elastic, fel, fown, pk,
-               acc, xsph, dtemp):
+               plane_noslip, wall_visc, wall_mom, corner_mom, bnoslip, grad_scale, tensile, damping, spacing, elastic,
+               fel, fown, pk, acc, xsph, dtemp):
     """Accelerations, XSPH corrections and temperature rates of every particle.
 
     See the module docstring for the terms. ``elastic`` (bool) adds the lattice forces
@@ -627,7 +649,8 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     ``wall_visc`` (2, S) of :func:`unmesh.sph.boundary.wall_friction_tables`. With pressure mirroring
     the mirrored pressure of a fluid particle behind an analytic wall is extrapolated hydrostatically
     (Adami et al. 2012): ``(ρ0/ρ_i) χ M(d) g`` with the half-space moments ``wall_mom`` (2, S) of
-    :func:`unmesh.sph.boundary.wall_moment_tables`, ``χ = min(p_i⁺/(ρ_i |g| h), 1)``. ``grad_scale`` multiplies the kernel
+    :func:`unmesh.sph.boundary.wall_moment_tables`, ``χ = min(p_i⁺/(ρ_i |g| h), 1)``, less the quarter-spaces at box
+    edges (``corner_mom`` (3, S, S) of :func:`unmesh.sph.boundary.corner_moment_tables`). ``grad_scale`` multiplies the kernel
     gradient of particle pairs (the lattice correction, see
     :func:`unmesh.sph.sampling.gradient_moment`).
 
@@ -675,8 +698,8 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     for blk in prange(nblk):
         _force_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid,
                      mats, h, dim, gravity, nbr, nnbr, bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners,
-                     corner_grad, wall_mirror, plane_noslip, wall_visc, wall_mom, bnoslip, grad_scale, tensile, damping,
-                     spacing, elastic, fel, fown, pk, acc, xsph, dtemp)
+                     corner_grad, wall_mirror, plane_noslip, wall_visc, wall_mom, corner_mom, bnoslip, grad_scale,
+                     tensile, damping, spacing, elastic, fel, fown, pk, acc, xsph, dtemp)
 
 
 @njit(cache=True, parallel=True)

@@ -50,6 +50,7 @@ __all__ = [
     "Plane",
     "boundary_volumes",
     "box_planes",
+    "corner_moment_tables",
     "corner_pairs",
     "corner_tables",
     "sample_boundary",
@@ -326,6 +327,54 @@ def corner_tables(h: float, dim: int, size: int = CORNER_SIZE, fine: int = 800) 
     rho = RegularGridInterpolator((ew, ew), cw)(pts).reshape(size, size)
     grad = RegularGridInterpolator((ew, ew), cg)(pts).reshape(size, size)
     return np.ascontiguousarray(rho), np.ascontiguousarray(grad)
+
+
+def corner_moment_tables(h: float, dim: int, size: int = CORNER_SIZE, fine: int = 400) -> np.ndarray:
+    """Kernel-gradient moments over the quarter-space behind two perpendicular walls, shape (3, size, size).
+
+    With the region ``Q = {s : s·n1 < −d1, s·n2 < −d2}`` of :func:`corner_tables` and
+    ``G(r) = ŵ'(r)/r`` (spiky), ``∫_Q s sᵀ G = Q11 n1n1ᵀ + Q22 n2n2ᵀ + Q12 (n1n2ᵀ + n2n1ᵀ) + Qee eeᵀ``
+    (``e`` the edge direction, 3D): row 0 holds ``Q11`` (``Q22`` is its transpose), row 1 ``Q12``,
+    row 2 ``Qee`` (0 in 2D), sampled at ``(d1, d2)`` on ``[−h, h]²``. Both walls' half-space moments
+    (:func:`wall_moment_tables`) contain this region, so the hydrostatic wall pressure subtracts it once.
+
+    Example
+    -------
+    >>> q = corner_moment_tables(1.0, 3, size=33, fine=200)
+    >>> round(float(q[0, 0, 0]), 2), round(float(q[2, 0, 0]), 2), round(float(q[1, 0, 0]), 3)  # the whole kernel: −I
+    (-1.0, -1.0, 0.0)
+    """
+    hh = positive_scalar(h, "h")
+    step = 2.0 * hh / fine
+    c = -hh + (np.arange(fine) + 0.5) * step
+    s1, s2 = np.meshgrid(c, c, indexing="ij")
+    rho_in = np.sqrt(s1 * s1 + s2 * s2)
+    if dim == 2:
+        d2 = np.asarray(spiky_derivative(rho_in, hh, dim=2))
+        g = np.where(rho_in > 0, d2 / np.where(rho_in > 0, rho_in, 1.0), 0.0) * step * step
+        gt2 = np.zeros_like(g)
+    else:
+        xg, wg = np.polynomial.legendre.leggauss(48)
+        span = np.sqrt(np.maximum(hh * hh - rho_in * rho_in, 0.0))
+        t = 0.5 * (xg[None, None, :] + 1.0) * span[..., None]
+        r = np.sqrt(rho_in[..., None] ** 2 + t * t)
+        d3 = np.asarray(spiky_derivative(r, hh, dim=3))
+        g3 = np.where(r > 0, d3 / np.where(r > 0, r, 1.0), 0.0)
+        # ∫ over t in [−span, span] (even integrands): twice [0, span], Gauss weights on [0, span] carry span/2
+        g = (g3 * wg).sum(axis=-1) * span * step * step
+        gt2 = (g3 * t * t * wg).sum(axis=-1) * span * step * step
+    cols = [s1 * s1 * g, s1 * s2 * g, gt2]
+    ew = np.concatenate([[-hh], -hh + np.arange(1, fine + 1) * step])
+    d = np.linspace(-hh, hh, size)
+    q1, q2 = np.meshgrid(-d, -d, indexing="ij")
+    pts = np.stack([q1.ravel(), q2.ravel()], axis=1)
+    from scipy.interpolate import RegularGridInterpolator
+
+    out = np.zeros((3, size, size))
+    for k, col in enumerate(cols):
+        cum = np.pad(np.cumsum(np.cumsum(col, axis=0), axis=1), ((1, 0), (1, 0)))
+        out[k] = RegularGridInterpolator((ew, ew), cum)(pts).reshape(size, size)
+    return np.ascontiguousarray(out)
 
 
 def boundary_volumes(points: Any, h: float, dim: int) -> np.ndarray:

@@ -53,6 +53,7 @@ from unmesh.sph import materials as MT
 from unmesh.sph.boundary import (
     BoundaryParticles,
     Plane,
+    corner_moment_tables,
     corner_pairs,
     corner_tables,
     wall_friction_tables,
@@ -295,8 +296,10 @@ class SPHSimulation(Simulation):
         self.wall_mom = wall_moment_tables(self.h, self.dim) if len(self.planes) else np.zeros((2, 2))
         if len(self.corners):
             self.corner_rho, self.corner_grad = corner_tables(self.h, self.dim)
+            self.corner_mom = corner_moment_tables(self.h, self.dim)
         else:
             self.corner_rho = self.corner_grad = np.zeros((2, 2))
+            self.corner_mom = np.zeros((3, 2, 2))
         self.boundary = boundary if boundary is not None else BoundaryParticles(np.zeros((0, 3)), np.zeros(0))
         self.boundary_shapes = list(boundary_shapes)
         self.heat_sources = list(heat_sources)
@@ -554,7 +557,8 @@ class SPHSimulation(Simulation):
         K.force_pass(self.x, self.v, self.m, self.rho, self.p, self.temp, self.phase, self.obj, self.mat, self.uid,
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
-                     self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.wall_mom, self.bnoslip,
+                     self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.wall_mom,
+                     self.corner_mom, self.bnoslip,
                      self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
         if self.elastic:
             # the new lattice state (in the new order) becomes the previous one of the next step
