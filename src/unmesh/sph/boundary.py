@@ -341,7 +341,7 @@ def corner_moment_tables(h: float, dim: int, size: int = CORNER_SIZE, fine: int 
     Example
     -------
     >>> q = corner_moment_tables(1.0, 3, size=33, fine=200)
-    >>> round(float(q[0, 0, 0]), 2), round(float(q[2, 0, 0]), 2), round(float(q[1, 0, 0]), 3)  # the whole kernel: −I
+    >>> round(float(q[0, 0, 0]), 2), round(float(q[2, 0, 0]), 2), abs(round(float(q[1, 0, 0]), 3))  # the whole kernel: −I
     (-1.0, -1.0, 0.0)
     """
     hh = positive_scalar(h, "h")
