@@ -115,7 +115,10 @@ class SPHConfig:
         ``ε (|p_i⁻|/ρ_i² + |p_j⁻|/ρ_j²) ((W(r)/W(d/2))⁴ − 1)₊ ∇W`` (poly6 ``W``), which is 0 from
         ``r = d/2`` on (a fluid at rest is unaffected), outweighs the tension's pull from
         ``r ≈ 0.42 d`` inwards and is 37 times it at ``r = 0`` (``ε = 4``, ``h = 2d``), so tension
-        cannot pull particles onto each other (the pairing of tensile instability). 0 switches it off.
+        cannot pull particles onto each other (the pairing of tensile instability). It also carries a
+        background ``B c_i²/ρ_i + B c_j²/ρ_j`` (background pressure ``B Γ K``,
+        :data:`unmesh.sph._kernels.TENSILE_BACKGROUND`), so that pairs at ``p ≈ 0`` (thin films) are
+        kept apart too. 0 switches it off.
     contact_damping : float
         Damping ratio ζ in [0, 1] of the contacts of solids (0: off, elastic contacts): a pair of
         particles of different objects closer than ``d`` gets a dashpot ``2ζ√k_c`` on its normal
