@@ -84,7 +84,7 @@ def test_density_forces_xsph_match_brute_force(dim):
     p = pressure(rho, 1.0, 100.0, 1.0, 0.5)
     assert np.allclose(sim.p[o], p, rtol=1e-10, atol=1e-12)
     acc = acceleration_reference(x, v, m, rho, p, np.full(len(x), 0.01), sim.h, dim, tensile=4.0,
-                                 spacing=d) + np.array([0.0, -9.81, 0.0])
+                                 spacing=d, sound=np.full(len(x), mat.sound_speed)) + np.array([0.0, -9.81, 0.0])
     assert np.allclose(sim.a[o], acc, rtol=1e-9, atol=1e-9 * np.abs(acc).max())
     assert np.allclose(sim.xsph[o], xsph_reference(x, v, m, rho, 0.3, sim.h, dim), atol=1e-12)
 

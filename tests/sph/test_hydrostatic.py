@@ -127,7 +127,7 @@ TANK_3D = """
 dimension = 3
 spacing = 0.025
 dt = 0.0002
-duration = 1.5
+duration = 1.0
 
 [materials.water]
 stiffness = 1000.0
@@ -140,27 +140,33 @@ density_passes = 16
 [[objects]]
 name = "water"
 material = "water"
-shape = { type = "box", center = [0.1, 0.1, 0.1], size = [0.2, 0.2, 0.2] }
+shape = { type = "box", center = [0.15, 0.15, 0.15], size = [0.3, 0.3, 0.3] }
 
 [[boundaries]]
 type = "box"
 min = [0, 0, 0]
-max = [0.2, 0.6, 0.2]
+max = [0.3, 0.9, 0.3]
 open_top = true
 """
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 22 item 2, open: the 3D tank gives R^2 0.94 and slope 1.19 rho0 g "
-                                       "(measured 2026-12-04); 2D passes")
 def test_hydrostatic_pressure_linear_3d_tank(tmp_path):
-    """A 3D water column in a square tank (the 2D scene's water and filter): pressure linear in depth."""
+    """A 3D water column in a square tank (the 2D scene's water and filter): pressure linear in depth.
+
+    The tank is 12 particles across and 12 layers deep. In a tank of 0.2 m (8 across, 8 layers) the
+    fit failed in 3D (R² 0.94, slope 1.19 ρ0 g) and in 2D alike (R² 0.94, slope 1.09 at 1 s): with 8
+    particles across, three quarters of them within h of a side wall, the selection away from the
+    walls, the floor and the surface is a few columns whose layer-to-layer pressure steps dominate the
+    fit. Measured (0.3 m, 1 s): R² 0.996, slope 0.982 ρ0 g (0.995 at 0.5 s; all particles: R² 0.989,
+    slope 1.015). Slow: about 7 minutes on one loaded thread.
+    """
     scene = tmp_path / "tank.toml"
     scene.write_text(TANK_3D)
     sim, settings = build_simulation(load_scene(scene))
     while sim.time < settings.duration - 1e-9:
         sim.step()
-    r2, slope, _sel = _pressure_fit(sim, 0.2)
+    r2, slope, _sel = _pressure_fit(sim, 0.3)
     print(f"3D hydrostatic: R^2 {r2:.4f}, slope/(rho0 g) {slope:.4f}")
     assert r2 >= 0.98
     assert abs(slope - 1.0) <= 0.05

@@ -11,7 +11,8 @@ contributions, pressure (8.15) with the negative-pressure scale (8.16).
 
 Pass 2 ``force_pass``: symmetric pressure acceleration (8.17, spiky gradient),
 viscosity (8.18, Monaghan's central form of ``μ∇²v``, plus Monaghan's artificial
-viscosity between approaching particles, Monaghan's tensile correction below ``d/2``), XSPH
+viscosity between approaching particles, Monaghan's tensile correction below ``d/2`` with a
+background pressure :data:`TENSILE_BACKGROUND`), XSPH
 velocity correction (8.19), heat conduction (Cleary & Monaghan), penalty collisions between objects
 (8.37: the repulsive part of the pair force plus, between two solids, a contact spring
 ``CONTACT · 2 min(K_e,i, K_e,j) m_j/ρ0 W (d − r)₊`` towards the rest distance), elastic forces gathered from the neighbourhoods (section
@@ -41,6 +42,12 @@ SOLID = 1
 CONTACT = 0.25
 #: Regularisation ε h² of the viscosity and heat-conduction denominators.
 EPS = 0.01
+#: Background ``B`` of the tensile correction: besides the negative pressures it repels pairs closer
+#: than ``d/2`` with ``B c_i²/ρ_i + B c_j²/ρ_j`` (about ``2 p_b/ρ²``, background pressure ``p_b = B ρ0 c² = B Γ K``,
+#: 4 Pa in the dam break), so that particles at ``p ≈ 0`` (thin films, splashes) cannot be carried onto each
+#: other either: with the negative pressures alone a pair in the film spreading on the dam break's floor
+#: (p between −0.3 and 0 Pa) came within 0.299 d.
+TENSILE_BACKGROUND = 0.002
 
 
 @njit(**PLAIN)
@@ -110,6 +117,21 @@ def _table2(tab, d1, d2, h):
 def _plane_dist(x0, x1, x2, plane_p, plane_n, k):
     return ((x0 - plane_p[k, 0]) * plane_n[k, 0] + (x1 - plane_p[k, 1]) * plane_n[k, 1]
             + (x2 - plane_p[k, 2]) * plane_n[k, 2])
+
+
+@njit(**PLAIN)
+def _corner_hydrostatic(ka, kb, da, db, h, hyd, gravity, plane_n, corner_mom, out):
+    """``hyd · M_Q g`` into ``out`` (3,): the hydrostatic wall pressure of the quarter-space behind the
+    walls ``ka`` and ``kb`` (moments of :func:`unmesh.sph.boundary.corner_moment_tables`)."""
+    q11 = _table2(corner_mom[0], da, db, h)
+    q22 = _table2(corner_mom[0], db, da, h)
+    q12 = _table2(corner_mom[1], da, db, h)
+    qee = _table2(corner_mom[2], da, db, h)
+    ga = gravity[0] * plane_n[ka, 0] + gravity[1] * plane_n[ka, 1] + gravity[2] * plane_n[ka, 2]
+    gb = gravity[0] * plane_n[kb, 0] + gravity[1] * plane_n[kb, 1] + gravity[2] * plane_n[kb, 2]
+    for c in range(3):
+        ge = gravity[c] - ga * plane_n[ka, c] - gb * plane_n[kb, c]  # the edge component of g
+        out[c] = hyd * ((q11 * ga + q12 * gb) * plane_n[ka, c] + (q12 * ga + q22 * gb) * plane_n[kb, c] + qee * ge)
 
 
 @njit(**PLAIN)
@@ -361,8 +383,8 @@ PAIR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 @njit(cache=True, fastmath=PAIR_FASTMATH, error_model="numpy")
 def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, mats, h, dim, gravity, nbr, nnbr,
                  bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-                 plane_noslip, wall_visc, bnoslip, grad_scale, tensile, damping, spacing, elastic, fel, fown, pk, acc, xsph,
-                 dtemp):
+                 plane_noslip, wall_visc, wall_mom, corner_mom, bnoslip, grad_scale, tensile, damping, spacing, elastic,
+                 fel, fown, pk, acc, xsph, dtemp):
     """Particles ``r0 .. r1 - 1`` of :func:`force_pass` (one block, serial): the first ``ncol`` columns
     of the neighbours' ``pk`` rows are gathered, the others are the constants of material ``mat0``
     and object ``obj0``."""
@@ -374,9 +396,11 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
     c6 = poly6_coef(h, dim)
     cg = spiky_coef(h, dim)
     buf = np.empty((PK_COLS, cap))
+    acc_c = np.empty(3)
     # contact stiffness between objects (8.37): the lattice force (8.31) towards the rest distance d
     dsp = spacing
     tensile_inv = 1.0 / (h2 - 0.25 * spacing * spacing)  # W(r)/W(d/2) = ((h² − r²)/(h² − d²/4))³
+    gmag = math.sqrt(gravity[0] * gravity[0] + gravity[1] * gravity[1] + gravity[2] * gravity[2])
     if r1 > r0:
         for t in range(cap):
             buf[PK_VISC, t] = mats[mat0, M.VISC]
@@ -435,6 +459,7 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
         xs2 = 0.0
         dti = 0.0
         solid_i = phase[i] == SOLID
+        bgi = TENSILE_BACKGROUND * ci * ci * rinv_i
         for t in range(cnt):
             d0 = xi0 - buf[PK_X, t]
             d1 = xi1 - buf[PK_X + 1, t]
@@ -458,7 +483,10 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
             fw = t6 * tensile_inv
             fw3 = fw * fw * fw
             fw6 = fw3 * fw3
-            rt = tensile * (max(-pi_, 0.0) + max(-buf[PK_PR, t], 0.0)) * max(fw6 * fw6 - 1.0, 0.0)
+            # (plus a background B c²/ρ of each particle: pairs at p ≈ 0, e.g. in thin films, are kept apart too)
+            rt = tensile * (max(-pi_, 0.0) + max(-buf[PK_PR, t], 0.0) + bgi
+                            + TENSILE_BACKGROUND * buf[PK_SOUND, t] * buf[PK_SOUND, t] * buf[PK_RINV, t]) \
+                * max(fw6 * fw6 - 1.0, 0.0)
             # pressure (8.17) + viscosity (8.18) + Monaghan's artificial viscosity (approaching pairs
             # only: min(v_ij·x_ij, 0)), all along x_ij
             bracket = (-(pi_ + buf[PK_PR, t] + rt)
@@ -539,12 +567,26 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
         # analytic walls; a solid particle in contact (closer than d) is damped like the contacts
         # between objects: ``−2ζ√(CONTACT K_e) v`` (normal: restitution; tangential: friction)
         cw = 2.0 * damping * math.sqrt(CONTACT * kei) if solid_i else 0.0
+        # hydrostatic wall pressure (pressure mirroring, fluids): the mirrored pressure grows with depth behind
+        # the wall, p_b(y) = p_i + ρ_i g·(y − x_i) (Adami et al. 2012, walls at rest), which adds
+        # (ρ0/ρ_i) M(d) g (half-space moment M = Mt (I − n nᵀ) + Mn n nᵀ); weighted by
+        # χ = min(p_i⁺/(ρ_i |g| h), 1): full in the bulk, none for films and splashes at p ≤ 0
+        hyd = 0.0
+        if wall_mirror >= 2.0 and not solid_i and gmag > 0.0 and p[i] > 0.0:
+            hyd = min(p[i] / (rhoi * gmag * h), 1.0) * rho0 / rhoi
         for k in range(plane_p.shape[0]):
             dist = _plane_dist(xi0, xi1, xi2, plane_p, plane_n, k)
             if dist < dsp and cw > 0.0:
                 ai0 -= cw * vi0
                 ai1 -= cw * vi1
                 ai2 -= cw * vi2
+            if dist < h and hyd > 0.0:
+                gn = gravity[0] * plane_n[k, 0] + gravity[1] * plane_n[k, 1] + gravity[2] * plane_n[k, 2]
+                mt = hyd * _table(wall_mom[0], dist, h)
+                mn = hyd * _table(wall_mom[1], dist, h)
+                ai0 += mt * (gravity[0] - gn * plane_n[k, 0]) + mn * gn * plane_n[k, 0]
+                ai1 += mt * (gravity[1] - gn * plane_n[k, 1]) + mn * gn * plane_n[k, 1]
+                ai2 += mt * (gravity[2] - gn * plane_n[k, 2]) + mn * gn * plane_n[k, 2]
             if dist < h:
                 s = rho0 * pb * _table(wall_grad, dist, h)
                 if plane_noslip[k] != 0:
@@ -569,6 +611,12 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
                 ai0 += ga * plane_n[ka, 0] + gb * plane_n[kb, 0]
                 ai1 += ga * plane_n[ka, 1] + gb * plane_n[kb, 1]
                 ai2 += ga * plane_n[ka, 2] + gb * plane_n[kb, 2]
+                if hyd > 0.0:
+                    # the quarter-space behind both walls is in both half-space moments: subtract it once
+                    _corner_hydrostatic(ka, kb, da, db, h, hyd, gravity, plane_n, corner_mom, acc_c)
+                    ai0 -= acc_c[0]
+                    ai1 -= acc_c[1]
+                    ai2 -= acc_c[2]
         if elastic and solid_i:
             ai0 += fe0 / m[i]
             ai1 += fe1 / m[i]
@@ -585,8 +633,8 @@ def _force_block(r0, r1, ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid, 
 @njit(cache=True, parallel=True, error_model="numpy")
 def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, gravity, nbr, nnbr,
                bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners, corner_grad, wall_mirror,
-               plane_noslip, wall_visc, bnoslip, grad_scale, tensile, damping, spacing, elastic, fel, fown, pk, acc,
-               xsph, dtemp):
+               plane_noslip, wall_visc, wall_mom, corner_mom, bnoslip, grad_scale, tensile, damping, spacing, elastic,
+               fel, fown, pk, acc, xsph, dtemp):
     """Accelerations, XSPH corrections and temperature rates of every particle.
 
     See the module docstring for the terms. ``elastic`` (bool) adds the lattice forces
@@ -598,7 +646,11 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     (NB,) uint8 mark no-slip walls: they apply the viscous term of (8.18) with the fluid's
     effective shear viscosity ``ν = μ/ρ0 + αch/(4(n+2))`` to the wall at rest (Akinci et al.
     2012, eq. 11; :mod:`unmesh.sph.boundary`), for planes through the half-space integrals
-    ``wall_visc`` (2, S) of :func:`unmesh.sph.boundary.wall_friction_tables`. ``grad_scale`` multiplies the kernel
+    ``wall_visc`` (2, S) of :func:`unmesh.sph.boundary.wall_friction_tables`. With pressure mirroring
+    the mirrored pressure of a fluid particle behind an analytic wall is extrapolated hydrostatically
+    (Adami et al. 2012): ``(ρ0/ρ_i) χ M(d) g`` with the half-space moments ``wall_mom`` (2, S) of
+    :func:`unmesh.sph.boundary.wall_moment_tables`, ``χ = min(p_i⁺/(ρ_i |g| h), 1)``, less the quarter-spaces at box
+    edges (``corner_mom`` (3, S, S) of :func:`unmesh.sph.boundary.corner_moment_tables`). ``grad_scale`` multiplies the kernel
     gradient of particle pairs (the lattice correction, see
     :func:`unmesh.sph.sampling.gradient_moment`).
 
@@ -646,8 +698,8 @@ def force_pass(x, v, m, rho, p, temp, phase, obj, matid, uid, mats, h, dim, grav
     for blk in prange(nblk):
         _force_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), ncol, mat0, obj0, x, v, m, rho, p, temp, phase, matid,
                      mats, h, dim, gravity, nbr, nnbr, bx, bvol, bnbr, nbnbr, plane_p, plane_n, wall_grad, corners,
-                     corner_grad, wall_mirror, plane_noslip, wall_visc, bnoslip, grad_scale, tensile, damping, spacing,
-                     elastic, fel, fown, pk, acc, xsph, dtemp)
+                     corner_grad, wall_mirror, plane_noslip, wall_visc, wall_mom, corner_mom, bnoslip, grad_scale,
+                     tensile, damping, spacing, elastic, fel, fown, pk, acc, xsph, dtemp)
 
 
 @njit(cache=True, parallel=True)

@@ -50,10 +50,12 @@ __all__ = [
     "Plane",
     "boundary_volumes",
     "box_planes",
+    "corner_moment_tables",
     "corner_pairs",
     "corner_tables",
     "sample_boundary",
     "wall_friction_tables",
+    "wall_moment_tables",
     "wall_tables",
 ]
 
@@ -182,6 +184,35 @@ def wall_tables(h: float, dim: int, size: int = TABLE_SIZE) -> tuple[np.ndarray,
     return np.ascontiguousarray(rho), np.ascontiguousarray(grad)
 
 
+def _half_space_moments(h: float, dim: int, eps: float | None, size: int, order: int) -> np.ndarray:
+    """``M(d) = ∫_{s·n > d, |s| < h} s sᵀ G(|s|) ds = Mt (I − n nᵀ) + Mn n nᵀ`` on ``d ∈ [−h, h]``,
+    ``G(r) = ŵ'(r)/r`` (spiky), divided by ``r² + eps`` unless ``eps`` is None; shape (2, size)."""
+    from unmesh.kernels import spiky_derivative
+
+    hh = positive_scalar(h, "h")
+    xg, wg = np.polynomial.legendre.leggauss(order)
+    d = np.linspace(-hh, hh, size)
+    out = np.zeros((2, size))
+    for k, dk in enumerate(d[:-1]):
+        z = dk + 0.5 * (xg + 1.0) * (hh - dk)  # s_n from d to h
+        wz = 0.5 * (hh - dk) * wg
+        span = np.sqrt(np.maximum(hh * hh - z * z, 0.0))  # in-plane radius of the support
+        rho_in = 0.5 * (xg[None, :] + 1.0) * span[:, None]
+        wr = 0.5 * span[:, None] * wg[None, :]
+        r = np.sqrt(rho_in * rho_in + z[:, None] ** 2)
+        g = np.asarray(spiky_derivative(r, hh, dim=dim)) / np.maximum(r, 1e-300)
+        if eps is not None:
+            g = g / (r * r + eps)
+        if dim == 3:
+            meas = 2.0 * np.pi * rho_in * wr * wz[:, None]
+            out[0, k] = np.sum(0.5 * rho_in * rho_in * g * meas)
+        else:
+            meas = 2.0 * wr * wz[:, None]
+            out[0, k] = np.sum(rho_in * rho_in * g * meas)
+        out[1, k] = np.sum(z[:, None] ** 2 * g * meas)
+    return np.ascontiguousarray(out)
+
+
 def wall_friction_tables(h: float, dim: int, size: int = 513, order: int = 96) -> np.ndarray:
     """Half-space integrals of the no-slip wall viscosity, shape (2, size), on ``d ∈ [−h, h]``.
 
@@ -198,29 +229,27 @@ def wall_friction_tables(h: float, dim: int, size: int = 513, order: int = 96) -
     >>> bool(np.all(m <= 0) and m[0, -1] == 0 and m[0, 0] < m[0, 32] < 0)
     True
     """
-    from unmesh.kernels import spiky_derivative
-
     hh = positive_scalar(h, "h")
-    eps = 0.01 * hh * hh
-    xg, wg = np.polynomial.legendre.leggauss(order)
-    d = np.linspace(-hh, hh, size)
-    out = np.zeros((2, size))
-    for k, dk in enumerate(d[:-1]):
-        z = dk + 0.5 * (xg + 1.0) * (hh - dk)  # s_n from d to h
-        wz = 0.5 * (hh - dk) * wg
-        span = np.sqrt(np.maximum(hh * hh - z * z, 0.0))  # in-plane radius of the support
-        rho_in = 0.5 * (xg[None, :] + 1.0) * span[:, None]
-        wr = 0.5 * span[:, None] * wg[None, :]
-        r = np.sqrt(rho_in * rho_in + z[:, None] ** 2)
-        g = np.asarray(spiky_derivative(r, hh, dim=dim)) / np.maximum(r, 1e-300) / (r * r + eps)
-        if dim == 3:
-            meas = 2.0 * np.pi * rho_in * wr * wz[:, None]
-            out[0, k] = np.sum(0.5 * rho_in * rho_in * g * meas)
-        else:
-            meas = 2.0 * wr * wz[:, None]
-            out[0, k] = np.sum(rho_in * rho_in * g * meas)
-        out[1, k] = np.sum(z[:, None] ** 2 * g * meas)
-    return np.ascontiguousarray(out)
+    return _half_space_moments(hh, dim, 0.01 * hh * hh, size, order)
+
+
+def wall_moment_tables(h: float, dim: int, size: int = 513, order: int = 96) -> np.ndarray:
+    """Half-space moments of the kernel gradient, shape (2, size), on ``d ∈ [−h, h]``.
+
+    ``M(d) = ∫_{wall} s ⊗ ∇Ŵ(s) dy = ∫ s sᵀ ŵ'(|s|)/|s| dy = Mt (I − n nᵀ) + Mn n nᵀ``
+    (offsets ``s = x − y`` to the points behind the wall; row 0 ``Mt``, row 1 ``Mn``, both
+    in ``[−1, 0]``: ``−I`` deep inside the wall, ``−I/2`` on it, 0 beyond ``h``). It is the
+    part of the pressure gradient that the fluid behind the wall would contribute to a linear
+    pressure field: the hydrostatic wall pressure ``p_b(y) = p_i + ρ_i g·(y − x_i)``
+    (Adami et al. 2012, walls at rest) adds ``(ρ0/ρ_i) M(d) g`` to the acceleration.
+
+    Example
+    -------
+    >>> m = wall_moment_tables(1.0, 3, size=65)
+    >>> round(float(m[0, 0]), 3), round(float(m[1, 32]), 3), float(m[0, -1])
+    (-1.0, -0.5, 0.0)
+    """
+    return _half_space_moments(h, dim, None, size, order)
 
 
 #: Samples per axis of the corner tables on [-h, h]².
@@ -298,6 +327,54 @@ def corner_tables(h: float, dim: int, size: int = CORNER_SIZE, fine: int = 800) 
     rho = RegularGridInterpolator((ew, ew), cw)(pts).reshape(size, size)
     grad = RegularGridInterpolator((ew, ew), cg)(pts).reshape(size, size)
     return np.ascontiguousarray(rho), np.ascontiguousarray(grad)
+
+
+def corner_moment_tables(h: float, dim: int, size: int = CORNER_SIZE, fine: int = 400) -> np.ndarray:
+    """Kernel-gradient moments over the quarter-space behind two perpendicular walls, shape (3, size, size).
+
+    With the region ``Q = {s : s·n1 < −d1, s·n2 < −d2}`` of :func:`corner_tables` and
+    ``G(r) = ŵ'(r)/r`` (spiky), ``∫_Q s sᵀ G = Q11 n1n1ᵀ + Q22 n2n2ᵀ + Q12 (n1n2ᵀ + n2n1ᵀ) + Qee eeᵀ``
+    (``e`` the edge direction, 3D): row 0 holds ``Q11`` (``Q22`` is its transpose), row 1 ``Q12``,
+    row 2 ``Qee`` (0 in 2D), sampled at ``(d1, d2)`` on ``[−h, h]²``. Both walls' half-space moments
+    (:func:`wall_moment_tables`) contain this region, so the hydrostatic wall pressure subtracts it once.
+
+    Example
+    -------
+    >>> q = corner_moment_tables(1.0, 3, size=33, fine=200)
+    >>> round(float(q[0, 0, 0]), 2), round(float(q[2, 0, 0]), 2), abs(round(float(q[1, 0, 0]), 3))  # the whole kernel: −I
+    (-1.0, -1.0, 0.0)
+    """
+    hh = positive_scalar(h, "h")
+    step = 2.0 * hh / fine
+    c = -hh + (np.arange(fine) + 0.5) * step
+    s1, s2 = np.meshgrid(c, c, indexing="ij")
+    rho_in = np.sqrt(s1 * s1 + s2 * s2)
+    if dim == 2:
+        d2 = np.asarray(spiky_derivative(rho_in, hh, dim=2))
+        g = np.where(rho_in > 0, d2 / np.where(rho_in > 0, rho_in, 1.0), 0.0) * step * step
+        gt2 = np.zeros_like(g)
+    else:
+        xg, wg = np.polynomial.legendre.leggauss(48)
+        span = np.sqrt(np.maximum(hh * hh - rho_in * rho_in, 0.0))
+        t = 0.5 * (xg[None, None, :] + 1.0) * span[..., None]
+        r = np.sqrt(rho_in[..., None] ** 2 + t * t)
+        d3 = np.asarray(spiky_derivative(r, hh, dim=3))
+        g3 = np.where(r > 0, d3 / np.where(r > 0, r, 1.0), 0.0)
+        # ∫ over t in [−span, span] (even integrands): twice [0, span], Gauss weights on [0, span] carry span/2
+        g = (g3 * wg).sum(axis=-1) * span * step * step
+        gt2 = (g3 * t * t * wg).sum(axis=-1) * span * step * step
+    cols = [s1 * s1 * g, s1 * s2 * g, gt2]
+    ew = np.concatenate([[-hh], -hh + np.arange(1, fine + 1) * step])
+    d = np.linspace(-hh, hh, size)
+    q1, q2 = np.meshgrid(-d, -d, indexing="ij")
+    pts = np.stack([q1.ravel(), q2.ravel()], axis=1)
+    from scipy.interpolate import RegularGridInterpolator
+
+    out = np.zeros((3, size, size))
+    for k, col in enumerate(cols):
+        cum = np.pad(np.cumsum(np.cumsum(col, axis=0), axis=1), ((1, 0), (1, 0)))
+        out[k] = RegularGridInterpolator((ew, ew), cum)(pts).reshape(size, size)
+    return np.ascontiguousarray(out)
 
 
 def boundary_volumes(points: Any, h: float, dim: int) -> np.ndarray:

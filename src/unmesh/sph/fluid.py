@@ -6,8 +6,8 @@ Brute-force (all pairs within ``h``) versions of what the numba passes in
 - density (8.4): ``ρ_i = Σ_j m_j W_ij`` (poly6, self included);
 - pressure (8.15) with the negative-pressure scale (8.16);
 - pressure acceleration (8.17): ``−Σ_j m_j (p_i/ρ_i² + p_j/ρ_j² + R_ij (f_ij⁴ − 1)₊) ∇W_ij``
-  (spiky), with Monaghan's (2000) tensile correction ``R_ij = ε (|p_i⁻|/ρ_i² + |p_j⁻|/ρ_j²)``
-  (negative parts only) and ``f_ij = W(r_ij)/W(d/2)`` (poly6), here only for pairs closer than
+  (spiky), with Monaghan's (2000) tensile correction ``R_ij = ε (|p_i⁻|/ρ_i² + |p_j⁻|/ρ_j² + B c_i²/ρ_i
+  + B c_j²/ρ_j)`` (negative parts of the pressure, plus a small background pressure) and ``f_ij = W(r_ij)/W(d/2)`` (poly6), here only for pairs closer than
   ``d/2``: it keeps tension from pulling particles onto each other (pairing);
 - viscosity (8.18): ``μ∇²v/ρ`` in Monaghan's form
   ``2(n+2) Σ_j m_j μ̄/(ρ_iρ_j) (v_ij·x_ij)/(r² + 0.01h²) ∇W_ij`` — the kernel
@@ -37,6 +37,7 @@ import numpy as np
 
 from unmesh._validate import as_array, as_points
 from unmesh.kernels import poly6, spiky_derivative, spiky_gradient
+from unmesh.sph._kernels import TENSILE_BACKGROUND
 from unmesh.sph.collisions import penalty_projection
 
 __all__ = ["acceleration_reference", "density_diffusion_reference", "density_reference", "pressure", "xsph_reference"]
@@ -77,13 +78,14 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
 
 def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h: float, dim: int,
                            objects: Any = None, phases: Any = None, tensile: float = 0.0,
-                           spacing: float | None = None) -> np.ndarray:
+                           spacing: float | None = None, sound: Any = None) -> np.ndarray:
     """Pressure (8.17) + viscosity (8.18) accelerations by brute force, shape (N, 3).
 
     ``mu`` (N,) per-particle dynamic viscosity (pairs use the mean). With
     ``objects``/``phases`` the pair force between particles of different objects
     (one of them solid) is reduced to its repulsive part (8.37). ``tensile`` is ε of the tensile
-    correction with the reference distance ``spacing`` (``d``).
+    correction with the reference distance ``spacing`` (``d``); ``sound`` (N,) the particles' speeds of
+    sound ``c`` of its background ``B c²/ρ`` (:data:`unmesh.sph._kernels.TENSILE_BACKGROUND`; None: 0).
 
     Example
     -------
@@ -108,7 +110,8 @@ def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h:
     rt = np.zeros(len(i))
     if tensile:
         f = np.asarray(poly6(np.sqrt(r2), h, dim)) / float(poly6(0.5 * spacing, h, dim))
-        rt = tensile * (np.maximum(-pr[i], 0) + np.maximum(-pr[j], 0)) * np.maximum(f ** 4 - 1, 0)
+        bg = np.zeros(n) if sound is None else TENSILE_BACKGROUND * np.asarray(sound, float) ** 2 / rr
+        rt = tensile * (np.maximum(-pr[i], 0) + np.maximum(-pr[j], 0) + bg[i] + bg[j]) * np.maximum(f ** 4 - 1, 0)
     bracket = -(pr[i] + pr[j] + rt) + 2.0 * (dim + 2) * mubar / (rr[i] * rr[j]) * vx / (r2 + 0.01 * h * h)
     f = (mm[j] * bracket)[:, None] * grad
     if objects is not None:

@@ -50,7 +50,16 @@ from unmesh.sph import _kernels as K
 from unmesh.sph import _phase_kernels as PK
 from unmesh.sph import _slot_kernels as SK
 from unmesh.sph import materials as MT
-from unmesh.sph.boundary import BoundaryParticles, Plane, corner_pairs, corner_tables, wall_friction_tables, wall_tables
+from unmesh.sph.boundary import (
+    BoundaryParticles,
+    Plane,
+    corner_moment_tables,
+    corner_pairs,
+    corner_tables,
+    wall_friction_tables,
+    wall_moment_tables,
+    wall_tables,
+)
 from unmesh.sph.front import surge_front
 from unmesh.sph.materials import Material, material_table
 from unmesh.sph.phase import HeatSource
@@ -106,7 +115,10 @@ class SPHConfig:
         ``ε (|p_i⁻|/ρ_i² + |p_j⁻|/ρ_j²) ((W(r)/W(d/2))⁴ − 1)₊ ∇W`` (poly6 ``W``), which is 0 from
         ``r = d/2`` on (a fluid at rest is unaffected), outweighs the tension's pull from
         ``r ≈ 0.42 d`` inwards and is 37 times it at ``r = 0`` (``ε = 4``, ``h = 2d``), so tension
-        cannot pull particles onto each other (the pairing of tensile instability). 0 switches it off.
+        cannot pull particles onto each other (the pairing of tensile instability). It also carries a
+        background ``B c_i²/ρ_i + B c_j²/ρ_j`` (background pressure ``B Γ K``,
+        :data:`unmesh.sph._kernels.TENSILE_BACKGROUND`), so that pairs at ``p ≈ 0`` (thin films) are
+        kept apart too. 0 switches it off.
     contact_damping : float
         Damping ratio ζ in [0, 1] of the contacts of solids (0: off, elastic contacts): a pair of
         particles of different objects closer than ``d`` gets a dashpot ``2ζ√k_c`` on its normal
@@ -284,10 +296,13 @@ class SPHSimulation(Simulation):
         self.corners = corner_pairs(self.planes)
         self.plane_noslip = np.array([p.no_slip for p in self.planes], np.uint8)
         self.wall_visc = wall_friction_tables(self.h, self.dim) if self.plane_noslip.any() else np.zeros((2, 2))
+        self.wall_mom = wall_moment_tables(self.h, self.dim) if len(self.planes) else np.zeros((2, 2))
         if len(self.corners):
             self.corner_rho, self.corner_grad = corner_tables(self.h, self.dim)
+            self.corner_mom = corner_moment_tables(self.h, self.dim)
         else:
             self.corner_rho = self.corner_grad = np.zeros((2, 2))
+            self.corner_mom = np.zeros((3, 2, 2))
         self.boundary = boundary if boundary is not None else BoundaryParticles(np.zeros((0, 3)), np.zeros(0))
         self.boundary_shapes = list(boundary_shapes)
         self.heat_sources = list(heat_sources)
@@ -545,7 +560,8 @@ class SPHSimulation(Simulation):
         K.force_pass(self.x, self.v, self.m, self.rho, self.p, self.temp, self.phase, self.obj, self.mat, self.uid,
                      self.mats, self.h, self.dim, self.config.gravity, self.nbr, self.nnbr, self.bx, self.bvol,
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
-                     self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.bnoslip,
+                     self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.wall_mom,
+                     self.corner_mom, self.bnoslip,
                      self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
         if self.elastic:
             # the new lattice state (in the new order) becomes the previous one of the next step
