@@ -9,21 +9,26 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _append(r, f, head, tail, nxt, prv, linked):  # pragma: no cover - numba
+    """Append row ``r`` to the end of father ``f``'s list."""
+    t = tail[f]
+    prv[r] = t
+    nxt[r] = -1
+    if t >= 0:
+        nxt[t] = r
+    else:
+        head[f] = r
+    tail[f] = r
+    linked[r] = True
+
+
 @njit(cache=True)
 def link_rows(rows, father, head, tail, nxt, prv, linked):  # pragma: no cover - numba
     """Append each of ``rows`` (ascending, larger than every linked row of its father) to the
     end of its father's list."""
     for r in rows:
-        f = father[r]
-        t = tail[f]
-        prv[r] = t
-        nxt[r] = -1
-        if t >= 0:
-            nxt[t] = r
-        else:
-            head[f] = r
-        tail[f] = r
-        linked[r] = True
+        _append(r, father[r], head, tail, nxt, prv, linked)
 
 
 @njit(cache=True)
@@ -54,16 +59,7 @@ def relink_all(n, father, alive, head, tail, nxt, prv, linked):  # pragma: no co
     linked[:] = False
     for r in range(n):
         if alive[r] and father[r] != r:
-            f = father[r]
-            t = tail[f]
-            prv[r] = t
-            nxt[r] = -1
-            if t >= 0:
-                nxt[t] = r
-            else:
-                head[f] = r
-            tail[f] = r
-            linked[r] = True
+            _append(r, father[r], head, tail, nxt, prv, linked)
 
 
 @njit(cache=True)
