@@ -168,12 +168,13 @@ class PaintView:
         self.cull_backfaces = True
         self._culled_with: bool | None = None
 
-    def _facing(self, rows: np.ndarray) -> np.ndarray:
-        """``rows`` less those facing away from the camera when culling (the surface's current state)."""
+    def _facing(self, rows: np.ndarray, camera: Camera | None = None) -> np.ndarray:
+        """``rows`` less those facing away from ``camera`` (default: the view's) when culling (the
+        surface's current state)."""
         if not self.cull_backfaces or not len(rows):
             return rows
         s = self.surface
-        return rows[self.camera.facing(s.pos[rows], s.nrm[rows])]
+        return rows[(camera or self.camera).facing(s.pos[rows], s.nrm[rows])]
 
     def _grow(self, n: int) -> None:
         if len(self._on) >= n:
@@ -280,10 +281,7 @@ class PaintView:
         if stride < 1:
             raise InputError(f"stride: expected a positive integer, got {stride}")
         s = self.surface
-        rows = s.visible_rows()[::stride]
-        if self.cull_backfaces and len(rows):
-            rows = rows[camera.facing(s.pos[rows], s.nrm[rows])]
-        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        rows = np.ascontiguousarray(self._facing(s.visible_rows()[::stride], camera), dtype=np.int64)
         pos, nrm, rad = np.empty((len(rows), 3)), np.empty((len(rows), 3)), np.empty(len(rows))
         with serial_if_small(len(rows)):
             gather_surfels(rows, s.pos, s.nrm, s.rad, pos, nrm, rad)
