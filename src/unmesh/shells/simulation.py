@@ -172,13 +172,14 @@ class ShellSimulation(Tearing, Simulation):
         self.min_angle = float(min_angle)
         self.max_cracks = int(max_cracks)
         topo = build_topology(self.rest, self.rest_normals, self.neighbors, self.min_angle)
+        # the umbrella normals at rest: checked against the input, and what deform() is given in
+        # the rest state (the frames of bindings without a plane, skinning.frame_normals)
+        self._skin_normals = umbrella_normals(self.rest, topo)[1]
         self._check_input(topo)
         self.topology = topo
         self.fibers = FiberState.at_rest(self.rest, topo, material.arc_samples,
                                          **material.fiber_material(topo.fibers, self.rest))
         self.fibers_initial = len(topo.fibers)
-        # the umbrella normals at rest: what deform() is given in the rest state
-        self._skin_normals = umbrella_normals(self.rest, topo)[1]
         self.surface = SkinnedSurface(cloud, self.rest, self.rest_normals, skin_nodes, self._skin_normals)
         owner = self.surface.bind[:, 0]
         self.area = node_areas(cloud, owner, len(idx), total_area)
@@ -247,7 +248,7 @@ class ShellSimulation(Tearing, Simulation):
                 f"input surface is disconnected: its fiber graph has {count} separate pieces (node counts "
                 f"{sizes[:5].tolist()}{'...' if count > 5 else ''}); simulate pieces separately, or use more nodes "
                 f"or neighbors if the surface is in one piece")
-        _, nrm = umbrella_normals(self.rest, topo)
+        nrm = self._skin_normals
         has = np.diff(topo.pair_offsets) > 0
         agree = np.einsum("ij,ij->i", nrm, self.rest_normals)
         bad = np.flatnonzero(has & (agree < 0.3))
