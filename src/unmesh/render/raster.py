@@ -37,9 +37,69 @@ from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer
 from unmesh.surfels import DEFAULT_COLOR
 
-__all__ = ["corner_normals", "draw_meshes", "vertex_tangents"]
+__all__ = ["TEXTURE_FILTERS", "corner_normals", "draw_meshes", "texture_levels", "vertex_tangents"]
 
 _TILE = 32
+TEXTURE_FILTERS = ("trilinear", "bilinear")
+_TAPS = ((-1, 0.125), (0, 0.75), (1, 0.125))
+
+
+def texture_levels(image: np.ndarray, regions: np.ndarray | None = None, count: int | None = None) -> np.ndarray:
+    """Filtered levels (L, h, w, c) of a texture for trilinear (mip-mapped) lookup, every level at
+    full resolution and restricted to the texel's region.
+
+    Level k has the blur of mip level k (a box of 2^k texels: variance (4^k - 1)/12 texel^2
+    beyond level 0): level k = level k - 1 filtered by the taps (1/8, 3/4, 1/8) spaced
+    2^(k-1) texels along each axis (the "a trous" scheme; the variances add up to
+    (4^k - 1)/12). Unlike a decimated mip pyramid, a tap counts only where its texel has the
+    same ``regions`` id as the centre (weights renormalised), so the levels of an atlas of
+    separate patches never mix two patches or a patch with the page background (6.5); without
+    ``regions`` every texel is in one region. Taps beyond the image edge clamp to it.
+
+    Parameters
+    ----------
+    image : (h, w, c) array
+    regions : (h, w) integer array, optional
+    count : int, optional
+        Number of levels (default: 1 + ceil(log2(max(h, w))), down to one region-wide mean).
+
+    Example
+    -------
+    >>> img = np.zeros((4, 4, 1)); img[:, 2:] = 1.0
+    >>> lv = texture_levels(img, regions=np.repeat([[0, 0, 1, 1]], 4, axis=0))
+    >>> lv.shape, bool(lv[-1, :, :2].max() == 0.0)       # the two halves never mix
+    ((3, 4, 4, 1), True)
+    """
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim != 3:
+        raise InputError(f"image: expected an (h, w, c) array, got shape {img.shape}")
+    h, w = img.shape[:2]
+    if regions is not None:
+        regions = np.asarray(regions)
+        if regions.shape != (h, w):
+            raise InputError(f"regions: expected shape {(h, w)}, got {regions.shape}")
+    n = 1 + math.ceil(math.log2(max(h, w, 1))) if count is None else int(count)
+    if n < 1:
+        raise InputError(f"count: expected at least 1 level, got {count}")
+    out = np.empty((n, h, w, img.shape[2]))
+    out[0] = img
+    ri, ci = np.arange(h), np.arange(w)
+    for k in range(1, n):
+        s = 1 << (k - 1)
+        prev = out[k - 1]
+        acc = np.zeros_like(img)
+        wsum = np.zeros((h, w))
+        for dy, wy in _TAPS:
+            rows = np.clip(ri + dy * s, 0, h - 1)
+            for dx, wx in _TAPS:
+                cols = np.clip(ci + dx * s, 0, w - 1)
+                wt = np.full((h, w), wy * wx)
+                if regions is not None:
+                    wt *= regions[np.ix_(rows, cols)] == regions
+                acc += wt[..., None] * prev[np.ix_(rows, cols)]
+                wsum += wt
+        out[k] = acc / wsum[..., None]
+    return out
 
 
 def corner_normals(mesh: TriangleMesh, crease_angle: float = 45.0) -> np.ndarray:
@@ -131,8 +191,19 @@ def vertex_tangents(mesh: TriangleMesh) -> tuple[np.ndarray, np.ndarray]:
     return unit(tan), unit(bit)
 
 
+def _levels(image: np.ndarray, regions: np.ndarray | None, texture_filter: str) -> np.ndarray:
+    """The (L, h, w, 3) stack the tile kernel looks up: one level for bilinear lookup."""
+    if texture_filter == "bilinear":
+        return np.ascontiguousarray(image[None], dtype=np.float64)
+    if regions is not None and np.shape(regions) != image.shape[:2]:
+        raise InputError(f"texture_regions: expected the texture's shape {image.shape[:2]}, got {np.shape(regions)}")
+    return texture_levels(image, regions)
+
+
 def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera,
-                vertex_colors: Sequence[np.ndarray | None] | None = None, crease_angle: float = 45.0) -> None:
+                vertex_colors: Sequence[np.ndarray | None] | None = None, crease_angle: float = 45.0,
+                texture_filter: str = "trilinear",
+                texture_regions: Sequence[np.ndarray | None] | None = None) -> None:
     """Rasterise triangle meshes into ``gbuffer`` (in place, z-buffered against its depth).
 
     Parameters
@@ -146,6 +217,13 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
         vertex colours, white under a texture, or the default grey.
     crease_angle : float
         Degrees; see :func:`corner_normals`.
+    texture_filter : {"trilinear", "bilinear"}
+        ``"trilinear"`` (default): mip-mapped lookup of textures and normal maps, the level
+        from the pixel's texel footprint (the longer of its screen-space edges in texels), in
+        the filtered levels of :func:`texture_levels`; magnified textures are bilinear either way.
+    texture_regions : sequence of (h, w) integer arrays or None, optional
+        Per mesh, the region (e.g. atlas patch) of every texel of its texture and normal map:
+        the filtered levels never mix two regions.
 
     Example
     -------
@@ -158,6 +236,10 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
     h, w = camera.shape
     if gbuffer.depth.shape != (h, w):
         raise InputError(f"gbuffer: expected shape {(h, w)}, got {gbuffer.depth.shape}")
+    if texture_filter not in TEXTURE_FILTERS:
+        raise InputError(f"texture_filter: expected one of {TEXTURE_FILTERS}, got {texture_filter!r}")
+    if texture_regions is not None and len(texture_regions) != len(meshes):
+        raise InputError(f"texture_regions: expected one entry per mesh ({len(meshes)}), got {len(texture_regions)}")
     f, cx, cy, ortho, near = camera.kernel_params()
     frame = camera.rotation
     for mi, mesh in enumerate(meshes):
@@ -179,8 +261,9 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
         has_tex = mesh.texture is not None and mesh.uv is not None and override is None
         has_nmap = mesh.normal_map is not None and mesh.uv is not None
         corner_uv = np.ascontiguousarray(mesh.uv[faces]) if mesh.uv is not None else np.zeros((1, 3, 2))
-        texture = np.ascontiguousarray(mesh.texture) if has_tex else np.zeros((1, 1, 3))
-        nmap = np.ascontiguousarray(mesh.normal_map) if has_nmap else np.zeros((1, 1, 3))
+        regions = None if texture_regions is None else texture_regions[mi]
+        texture = _levels(mesh.texture, regions, texture_filter) if has_tex else np.zeros((1, 1, 1, 3))
+        nmap = _levels(mesh.normal_map, regions, texture_filter) if has_nmap else np.zeros((1, 1, 1, 3))
         if has_nmap:
             tan, bit = vertex_tangents(mesh)
             ctan = np.ascontiguousarray(tan[faces])
