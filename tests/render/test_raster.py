@@ -203,3 +203,15 @@ def test_texture_levels_have_mip_variances_and_keep_regions_apart():
     lv2 = texture_levels(img2, regions=reg)
     assert lv2.shape[0] == 7
     assert np.allclose(lv2[:, reg == 1], 1.0) and np.allclose(lv2[:, reg == 0], 0.25)  # constant per region
+
+
+def test_texture_level_kernel_matches_reference(rng):
+    from unmesh.render._raster_kernels import texture_level
+    from unmesh.render.raster import texture_level_reference
+
+    prev = rng.random((23, 17, 3))
+    regions = rng.integers(-1, 3, size=(23, 17))
+    for s in (1, 2, 8):
+        out = np.empty_like(prev)
+        texture_level(prev, regions, s, out)
+        assert np.allclose(out, texture_level_reference(prev, regions, s), atol=1e-14)

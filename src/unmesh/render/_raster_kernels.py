@@ -19,7 +19,7 @@ from numba import njit, prange
 
 from unmesh.render._kernels import load_tile, sphere_box, tile_rect
 
-__all__ = ["sphere_setup", "sphere_tiles", "texel_lod", "triangle_setup", "triangle_tiles"]
+__all__ = ["sphere_setup", "sphere_tiles", "texel_lod", "texture_level", "triangle_setup", "triangle_tiles"]
 
 
 @njit(cache=True)
@@ -112,6 +112,37 @@ def _bilinear(img, u, v, out):
         a = img[iy0, ix0, k] * (1.0 - fx) + img[iy0, ix1, k] * fx
         b = img[iy1, ix0, k] * (1.0 - fx) + img[iy1, ix1, k] * fx
         out[k] = a * (1.0 - fy) + b * fy
+
+
+@njit(cache=True, parallel=True)
+def texture_level(prev, regions, s, out):
+    """One filtered texture level (h, w, c) from the previous one: taps (1/8, 3/4, 1/8) spaced
+    ``s`` texels along both axes (edges clamped), only where the tap's ``regions`` id (h, w)
+    equals the centre's, weights renormalised (numpy reference:
+    :func:`unmesh.render.raster.texture_level_reference`)."""
+    h = prev.shape[0]
+    w = prev.shape[1]
+    nc = prev.shape[2]
+    for i in prange(h):
+        acc = np.empty(nc)
+        for j in range(w):
+            r0 = regions[i, j]
+            wsum = 0.0
+            for k in range(nc):
+                acc[k] = 0.0
+            for a in range(3):
+                ii = min(max(i + (a - 1) * s, 0), h - 1)
+                wy = 0.75 if a == 1 else 0.125
+                for b in range(3):
+                    jj = min(max(j + (b - 1) * s, 0), w - 1)
+                    if regions[ii, jj] != r0:
+                        continue
+                    wt = wy * (0.75 if b == 1 else 0.125)
+                    wsum += wt
+                    for k in range(nc):
+                        acc[k] += wt * prev[ii, jj, k]
+            for k in range(nc):
+                out[i, j, k] = acc[k] / wsum
 
 
 @njit(cache=True)

@@ -26,13 +26,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from unmesh.errors import InputError
 from unmesh.meshes import TriangleMesh
 from unmesh.render._kernels import SERIAL_BELOW, bin_boxes, box_visits, serial_if_small, tile_order
-from unmesh.render._raster_kernels import triangle_setup, triangle_tiles
+from unmesh.render._raster_kernels import texture_level, triangle_setup, triangle_tiles
 from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer
 from unmesh.surfels import DEFAULT_COLOR
@@ -42,6 +43,8 @@ __all__ = ["TEXTURE_FILTERS", "corner_normals", "draw_meshes", "texture_levels",
 _TILE = 32
 TEXTURE_FILTERS = ("trilinear", "bilinear")
 _TAPS = ((-1, 0.125), (0, 0.75), (1, 0.125))
+_LEVEL_CACHE: dict[tuple[Any, ...], np.ndarray] = {}
+_LEVEL_CACHE_SIZE = 16
 
 
 def texture_levels(image: np.ndarray, regions: np.ndarray | None = None, count: int | None = None) -> np.ndarray:
@@ -81,25 +84,29 @@ def texture_levels(image: np.ndarray, regions: np.ndarray | None = None, count: 
     n = 1 + math.ceil(math.log2(max(h, w, 1))) if count is None else int(count)
     if n < 1:
         raise InputError(f"count: expected at least 1 level, got {count}")
+    reg = np.zeros((h, w), np.int64) if regions is None else np.ascontiguousarray(regions, dtype=np.int64)
     out = np.empty((n, h, w, img.shape[2]))
     out[0] = img
-    ri, ci = np.arange(h), np.arange(w)
     for k in range(1, n):
-        s = 1 << (k - 1)
-        prev = out[k - 1]
-        acc = np.zeros_like(img)
-        wsum = np.zeros((h, w))
-        for dy, wy in _TAPS:
-            rows = np.clip(ri + dy * s, 0, h - 1)
-            for dx, wx in _TAPS:
-                cols = np.clip(ci + dx * s, 0, w - 1)
-                wt = np.full((h, w), wy * wx)
-                if regions is not None:
-                    wt *= regions[np.ix_(rows, cols)] == regions
-                acc += wt[..., None] * prev[np.ix_(rows, cols)]
-                wsum += wt
-        out[k] = acc / wsum[..., None]
+        texture_level(out[k - 1], reg, 1 << (k - 1), out[k])
     return out
+
+
+def texture_level_reference(prev: np.ndarray, regions: np.ndarray, s: int) -> np.ndarray:
+    """Plain numpy reference of :func:`unmesh.render._raster_kernels.texture_level`: level
+    ``prev`` (h, w, c) filtered by the taps (1/8, 3/4, 1/8) spaced ``s`` texels, within regions."""
+    h, w = prev.shape[:2]
+    ri, ci = np.arange(h), np.arange(w)
+    acc = np.zeros_like(prev)
+    wsum = np.zeros((h, w))
+    for dy, wy in _TAPS:
+        rows = np.clip(ri + dy * s, 0, h - 1)
+        for dx, wx in _TAPS:
+            cols = np.clip(ci + dx * s, 0, w - 1)
+            wt = wy * wx * (regions[np.ix_(rows, cols)] == regions)
+            acc += wt[..., None] * prev[np.ix_(rows, cols)]
+            wsum += wt
+    return acc / wsum[..., None]
 
 
 def corner_normals(mesh: TriangleMesh, crease_angle: float = 45.0) -> np.ndarray:
@@ -191,13 +198,28 @@ def vertex_tangents(mesh: TriangleMesh) -> tuple[np.ndarray, np.ndarray]:
     return unit(tan), unit(bit)
 
 
+def _fingerprint(a: np.ndarray | None) -> tuple[Any, ...]:
+    if a is None:
+        return ()
+    return (id(a), a.shape, float(np.sum(a)), float(np.sum(a[::3, ::5])))
+
+
 def _levels(image: np.ndarray, regions: np.ndarray | None, texture_filter: str) -> np.ndarray:
-    """The (L, h, w, 3) stack the tile kernel looks up: one level for bilinear lookup."""
+    """The (L, h, w, 3) stack the tile kernel looks up: one level for bilinear lookup. Filtered
+    stacks are cached for the last few textures (by identity and content sums), so drawing the
+    same mesh again (other views, frames) does not rebuild them."""
     if texture_filter == "bilinear":
         return np.ascontiguousarray(image[None], dtype=np.float64)
     if regions is not None and np.shape(regions) != image.shape[:2]:
         raise InputError(f"texture_regions: expected the texture's shape {image.shape[:2]}, got {np.shape(regions)}")
-    return texture_levels(image, regions)
+    key = (_fingerprint(image), _fingerprint(regions))
+    hit = _LEVEL_CACHE.pop(key, None)
+    if hit is None:
+        hit = texture_levels(image, regions)
+    _LEVEL_CACHE[key] = hit
+    while len(_LEVEL_CACHE) > _LEVEL_CACHE_SIZE:
+        _LEVEL_CACHE.pop(next(iter(_LEVEL_CACHE)))
+    return hit
 
 
 def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera,
