@@ -3,9 +3,11 @@ simulation surfaces).
 
 Each pixel centre's ray is intersected with the triangles (Moller-Trumbore in camera space), so
 interpolation of normals, colours and texture coordinates is perspective-correct. Supported:
-per-vertex colours, uv textures with bilinear filtering (uv (0,0) = bottom-left of the
-texture, which is stored with row 0 at the top, as in OBJ; coordinates outside [0, 1] repeat,
-texels are clamped at the borders), tangent-space normal maps (OpenGL convention: green = +v), and
+per-vertex colours, uv textures with trilinear (mip-mapped) filtering (uv (0,0) = bottom-left
+of the texture, which is stored with row 0 at the top, as in OBJ; coordinates outside [0, 1]
+repeat, texels are clamped at the borders; the level of detail from the pixel's texel
+footprint, :func:`texture_levels`; ``texture_filter="bilinear"`` for plain bilinear lookup),
+tangent-space normal maps (filtered alike) (OpenGL convention: green = +v), and
 smooth vertex normals with a crease angle (corners whose vertex normal deviates from the face
 normal by more than ``crease_angle`` use the face normal, so boxes stay boxy). Both sides of a
 triangle are drawn; shading is two-sided.
