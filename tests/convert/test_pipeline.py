@@ -171,7 +171,7 @@ def test_regions_give_every_page_texel_its_patch(converted):
         row = np.floor((1.0 - uv[:, 1]) * edge).astype(int)
         assert np.array_equal(reg[row, col], ids)
         # the levels of a patch's texels lie within the range of that patch's own texels
-        lv = texture_levels(part.texture, reg, count=4)
+        lv = np.stack(texture_levels(part.texture, reg, count=4))
         for r in ids[:20]:
             inside = reg == r
             lo, hi = part.texture[inside].min(axis=0), part.texture[inside].max(axis=0)

@@ -187,22 +187,29 @@ def test_trilinear_lookup_at_grazing_angle_is_closer_to_supersampling_than_bilin
 
 
 def test_texture_levels_have_mip_variances_and_keep_regions_apart():
-    from unmesh.render.raster import texture_levels
+    from unmesh.render.raster import REGION_LEVELS, texture_levels
 
     img = np.zeros((64, 64, 1))
     img[32, 32] = 1.0  # an impulse: level k is the filter's impulse response
-    lv = texture_levels(img, count=4)
+    lv = texture_levels(img, regions=np.zeros((64, 64), int), count=4)
     x = np.mgrid[0:64, 0:64][1]
     for k in range(4):
-        w = lv[k, :, :, 0]
+        w = lv[k][:, :, 0]
         assert np.isclose(w.sum(), 1.0)
         var = (w * (x - 32) ** 2).sum()
         assert np.isclose(var, (4**k - 1) / 12)  # the variance of a box of 2^k texels beyond level 0
     reg = (x >= 20).astype(int)
     img2 = np.where(reg[..., None] == 1, 1.0, 0.25)
     lv2 = texture_levels(img2, regions=reg)
-    assert lv2.shape[0] == 7
-    assert np.allclose(lv2[:, reg == 1], 1.0) and np.allclose(lv2[:, reg == 0], 0.25)  # constant per region
+    assert len(lv2) == REGION_LEVELS and all(v.shape == img2.shape for v in lv2)
+    assert all(np.allclose(v[reg == 1], 1.0) and np.allclose(v[reg == 0], 0.25) for v in lv2)  # constant per region
+    # without regions: the mip pyramid of 2 x 2 means down to one texel
+    rng = np.random.default_rng(3)
+    img3 = rng.random((12, 5, 3))
+    pyr = texture_levels(img3)
+    assert [p.shape[:2] for p in pyr] == [(12, 5), (6, 3), (3, 2), (2, 1), (1, 1)]
+    assert np.allclose(pyr[1][1, 0], img3[2:4, 0:2].mean(axis=(0, 1)))
+    assert np.allclose(pyr[1][1, 2], img3[2:4, 4].mean(axis=0))  # the odd last column repeated
 
 
 def test_texture_level_kernel_matches_reference(rng):

@@ -146,22 +146,30 @@ def texture_level(prev, regions, s, out):
 
 
 @njit(cache=True)
-def _lookup(levels, u, v, lod, out, tmp):
-    """Trilinear lookup in a stack of filtered levels (L, h, w, 3) of one texture (all levels the
-    size of level 0, see :func:`unmesh.render.raster.texture_levels`): bilinear in levels
-    ``floor(lod)`` and ``floor(lod) + 1``, blended linearly; ``lod <= 0`` (magnification) or a
-    single level: bilinear in level 0."""
-    nl = levels.shape[0]
+def _level(flat, dims, k):
+    """Level ``k`` (h, w, 3) of a texture stored as a flat (N, 3) buffer with ``dims`` (L, 3)
+    rows (offset, h, w)."""
+    o = dims[k, 0]
+    return flat[o:o + dims[k, 1] * dims[k, 2]].reshape((dims[k, 1], dims[k, 2], 3))
+
+
+@njit(cache=True)
+def _lookup(flat, dims, u, v, lod, out, tmp):
+    """Trilinear lookup in the levels of one texture (:func:`unmesh.render.raster.texture_levels`,
+    flat buffer ``flat`` (N, 3), ``dims`` (L, 3): offset, height, width per level): bilinear at
+    (u, v) in levels ``floor(lod)`` and ``floor(lod) + 1``, blended linearly; ``lod <= 0``
+    (magnification) or a single level: bilinear in level 0."""
+    nl = dims.shape[0]
     if nl == 1 or not (lod > 0.0):
-        _bilinear(levels[0], u, v, out)
+        _bilinear(_level(flat, dims, 0), u, v, out)
         return
     if lod >= nl - 1.0:
-        _bilinear(levels[nl - 1], u, v, out)
+        _bilinear(_level(flat, dims, nl - 1), u, v, out)
         return
     i0 = int(lod)
     fr = lod - i0
-    _bilinear(levels[i0], u, v, out)
-    _bilinear(levels[i0 + 1], u, v, tmp)
+    _bilinear(_level(flat, dims, i0), u, v, out)
+    _bilinear(_level(flat, dims, i0 + 1), u, v, tmp)
     for k in range(3):
         out[k] = out[k] * (1.0 - fr) + tmp[k] * fr
 
@@ -309,15 +317,17 @@ def _triangle_tile_loop(T, items, a, b, x0, y0, tw, th, f, cx, cy, ortho, near, 
 
 @njit(cache=True, parallel=True)
 def triangle_tiles(T, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, corner_normals, corner_colors,
-                   corner_uv, texture, has_texture, normal_map, has_normal_map, corner_tangents, corner_bitangents,
+                   corner_uv, texture, texture_dims, has_texture, normal_map, normal_dims, has_normal_map,
+                   corner_tangents, corner_bitangents,
                    depth, albedo, normal, covered, weight):
     """Z-buffer the binned triangles and write their G-buffer entries.
 
     ``corner_*`` arrays are (F, 3, k) per face corner: world normals, colours, uv (when
     ``has_texture`` or ``has_normal_map``), tangent and bitangent (for the normal map).
-    ``texture`` and ``normal_map`` are stacks of filtered levels (L, h, w, 3) of an image (row 0
-    at the top; :func:`unmesh.render.raster.texture_levels`), looked up trilinearly at the
-    pixel's texel footprint (:func:`texel_lod`); one level = bilinear. The G-buffer arrays
+    ``texture`` and ``normal_map`` are the filtered levels of an image (row 0 at the top;
+    :func:`unmesh.render.raster.texture_levels`) in one flat (N, 3) buffer each, with
+    ``texture_dims``/``normal_dims`` (L, 3) int64 rows (offset, height, width); they are looked
+    up trilinearly at the pixel's texel footprint (:func:`texel_lod`); one level = bilinear. The G-buffer arrays
     (``depth`` etc.) are updated where a triangle is nearer than their current depth.
     """
     ntx = (W + tile - 1) // tile
@@ -364,23 +374,23 @@ def triangle_tiles(T, items, offsets, order, tile, W, H, f, cx, cy, ortho, near,
                     tu = w0 * corner_uv[fi, 0, 0] + u * corner_uv[fi, 1, 0] + v * corner_uv[fi, 2, 0]
                     tv = w0 * corner_uv[fi, 0, 1] + u * corner_uv[fi, 1, 1] + v * corner_uv[fi, 2, 1]
                     lod_t = 0.0
-                    if has_texture and texture.shape[0] > 1:
-                        lod_t = texel_lod(T, fi, corner_uv, gx, gy, f, cx, cy, ortho, texture.shape[2],
-                                          texture.shape[1])
+                    if has_texture and texture_dims.shape[0] > 1:
+                        lod_t = texel_lod(T, fi, corner_uv, gx, gy, f, cx, cy, ortho, texture_dims[0, 2],
+                                          texture_dims[0, 1])
                     if has_texture:
-                        _lookup(texture, tu, tv, lod_t, tex, tmp)
+                        _lookup(texture, texture_dims, tu, tv, lod_t, tex, tmp)
                         for c in range(3):
                             col[c] *= tex[c]
                     if has_normal_map:
                         lod_n = 0.0
-                        if normal_map.shape[0] > 1:
-                            same = normal_map.shape[1] == texture.shape[1] and normal_map.shape[2] == texture.shape[2]
-                            if has_texture and texture.shape[0] > 1 and same:
+                        if normal_dims.shape[0] > 1:
+                            same = normal_dims[0, 1] == texture_dims[0, 1] and normal_dims[0, 2] == texture_dims[0, 2]
+                            if has_texture and texture_dims.shape[0] > 1 and same:
                                 lod_n = lod_t
                             else:
-                                lod_n = texel_lod(T, fi, corner_uv, gx, gy, f, cx, cy, ortho, normal_map.shape[2],
-                                                  normal_map.shape[1])
-                        _lookup(normal_map, tu, tv, lod_n, tex, tmp)
+                                lod_n = texel_lod(T, fi, corner_uv, gx, gy, f, cx, cy, ortho, normal_dims[0, 2],
+                                                  normal_dims[0, 1])
+                        _lookup(normal_map, normal_dims, tu, tv, lod_n, tex, tmp)
                         sx = 2.0 * tex[0] - 1.0
                         sy = 2.0 * tex[1] - 1.0
                         sz = 2.0 * tex[2] - 1.0

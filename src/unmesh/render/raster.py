@@ -40,40 +40,52 @@ from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer
 from unmesh.surfels import DEFAULT_COLOR
 
-__all__ = ["TEXTURE_FILTERS", "corner_normals", "draw_meshes", "texture_levels", "vertex_tangents"]
+__all__ = ["REGION_LEVELS", "TEXTURE_FILTERS", "corner_normals", "draw_meshes", "texture_levels", "vertex_tangents"]
 
 _TILE = 32
 TEXTURE_FILTERS = ("trilinear", "bilinear")
 _TAPS = ((-1, 0.125), (0, 0.75), (1, 0.125))
-_LEVEL_CACHE: dict[tuple[Any, ...], np.ndarray] = {}
-_LEVEL_CACHE_SIZE = 16
+_LEVEL_CACHE: dict[tuple[Any, ...], tuple[np.ndarray, np.ndarray]] = {}
+_LEVEL_CACHE_BYTES = 256 * 2**20
+#: Levels of a texture with regions (each a full copy of the texture): a blur of up to 32 texels.
+REGION_LEVELS = 6
 
 
-def texture_levels(image: np.ndarray, regions: np.ndarray | None = None, count: int | None = None) -> np.ndarray:
-    """Filtered levels (L, h, w, c) of a texture for trilinear (mip-mapped) lookup, every level at
-    full resolution and restricted to the texel's region.
+def texture_levels(image: np.ndarray, regions: np.ndarray | None = None, count: int | None = None) -> list[np.ndarray]:
+    """Filtered levels of a texture for trilinear (mip-mapped) lookup: level k has the blur of a
+    box of 2^k texels.
 
-    Level k has the blur of mip level k (a box of 2^k texels: variance (4^k - 1)/12 texel^2
-    beyond level 0): level k = level k - 1 filtered by the taps (1/8, 3/4, 1/8) spaced
-    2^(k-1) texels along each axis (the "a trous" scheme; the variances add up to
-    (4^k - 1)/12). Unlike a decimated mip pyramid, a tap counts only where its texel has the
-    same ``regions`` id as the centre (weights renormalised), so the levels of an atlas of
-    separate patches never mix two patches or a patch with the page background (6.5); without
-    ``regions`` every texel is in one region. Taps beyond the image edge clamp to it.
+    Without ``regions``: the usual mip pyramid, level k + 1 = the 2 x 2 means of level k (an
+    odd edge repeats its last row or column), down to one texel. With ``regions`` (an id per
+    texel, e.g. the patch of an atlas texel): every level at full resolution, level k = level
+    k - 1 filtered by the taps (1/8, 3/4, 1/8) spaced 2^(k-1) texels along each axis (the "a
+    trous" scheme, variance (4^k - 1)/12 texel^2 beyond level 0, like a box of 2^k texels),
+    where a tap counts only if its texel has the centre's id (weights renormalised): the levels
+    of an atlas of separate patches never mix two patches or a patch with the page background
+    (6.5), which a decimated pyramid cannot do for patches of a few texels. Taps beyond the
+    image edge clamp to it.
 
     Parameters
     ----------
     image : (h, w, c) array
     regions : (h, w) integer array, optional
     count : int, optional
-        Number of levels (default: 1 + ceil(log2(max(h, w))), down to one region-wide mean).
+        Number of levels (default: down to one texel; with ``regions`` at most
+        :data:`REGION_LEVELS`, a blur of 2^(REGION_LEVELS - 1) texels, as every level costs a
+        full page).
+
+    Returns
+    -------
+    list of (h_k, w_k, c) float64 arrays
 
     Example
     -------
     >>> img = np.zeros((4, 4, 1)); img[:, 2:] = 1.0
+    >>> [lv.shape[:2] for lv in texture_levels(img)]
+    [(4, 4), (2, 2), (1, 1)]
     >>> lv = texture_levels(img, regions=np.repeat([[0, 0, 1, 1]], 4, axis=0))
-    >>> lv.shape, bool(lv[-1, :, :2].max() == 0.0)       # the two halves never mix
-    ((3, 4, 4, 1), True)
+    >>> len(lv), bool(lv[-1][:, :2].max() == 0.0)       # the two halves never mix
+    (3, True)
     """
     img = np.asarray(image, dtype=np.float64)
     if img.ndim != 3:
@@ -83,14 +95,26 @@ def texture_levels(image: np.ndarray, regions: np.ndarray | None = None, count: 
         regions = np.asarray(regions)
         if regions.shape != (h, w):
             raise InputError(f"regions: expected shape {(h, w)}, got {regions.shape}")
-    n = 1 + math.ceil(math.log2(max(h, w, 1))) if count is None else int(count)
+    full = 1 + math.ceil(math.log2(max(h, w, 1)))
+    n = (full if regions is None else min(full, REGION_LEVELS)) if count is None else int(count)
     if n < 1:
         raise InputError(f"count: expected at least 1 level, got {count}")
-    reg = np.zeros((h, w), np.int64) if regions is None else np.ascontiguousarray(regions, dtype=np.int64)
-    out = np.empty((n, h, w, img.shape[2]))
-    out[0] = img
+    out = [np.ascontiguousarray(img)]
+    if regions is None:
+        for _ in range(1, n):
+            prev = out[-1]
+            ph, pw = prev.shape[:2]
+            if ph == 1 and pw == 1:
+                break
+            prev = np.pad(prev, ((0, ph % 2), (0, pw % 2), (0, 0)), mode="edge")
+            hh, ww = prev.shape[0] // 2, prev.shape[1] // 2
+            out.append(prev.reshape(hh, 2, ww, 2, -1).mean(axis=(1, 3)))
+        return out
+    reg = np.ascontiguousarray(regions, dtype=np.int64)
     for k in range(1, n):
-        texture_level(out[k - 1], reg, 1 << (k - 1), out[k])
+        nxt = np.empty_like(img)
+        texture_level(out[-1], reg, 1 << (k - 1), nxt)
+        out.append(nxt)
     return out
 
 
@@ -206,20 +230,25 @@ def _fingerprint(a: np.ndarray | None) -> tuple[Any, ...]:
     return (id(a), a.shape, float(np.sum(a)), float(np.sum(a[::3, ::5])))
 
 
-def _levels(image: np.ndarray, regions: np.ndarray | None, texture_filter: str) -> np.ndarray:
-    """The (L, h, w, 3) stack the tile kernel looks up: one level for bilinear lookup. Filtered
-    stacks are cached for the last few textures (by identity and content sums), so drawing the
-    same mesh again (other views, frames) does not rebuild them."""
+def _levels(image: np.ndarray, regions: np.ndarray | None, texture_filter: str) -> tuple[np.ndarray, np.ndarray]:
+    """The levels the tile kernel looks up, as one flat (N, 3) buffer and (L, 3) rows (offset,
+    height, width); one level for bilinear lookup. Filtered levels are cached for the textures
+    drawn last (by identity and content sums, at most 256 MB), so drawing the same mesh again
+    (other views, frames) does not rebuild them."""
     if texture_filter == "bilinear":
-        return np.ascontiguousarray(image[None], dtype=np.float64)
+        h, w = image.shape[:2]
+        return np.ascontiguousarray(image, dtype=np.float64).reshape(-1, 3), np.array([[0, h, w]], np.int64)
     if regions is not None and np.shape(regions) != image.shape[:2]:
         raise InputError(f"texture_regions: expected the texture's shape {image.shape[:2]}, got {np.shape(regions)}")
     key = (_fingerprint(image), _fingerprint(regions))
     hit = _LEVEL_CACHE.pop(key, None)
     if hit is None:
-        hit = texture_levels(image, regions)
+        levels = texture_levels(image, regions)
+        dims = np.array([[0, lv.shape[0], lv.shape[1]] for lv in levels], np.int64)
+        dims[1:, 0] = np.cumsum(dims[:-1, 1] * dims[:-1, 2])
+        hit = (np.concatenate([lv.reshape(-1, 3) for lv in levels]), dims)
     _LEVEL_CACHE[key] = hit
-    while len(_LEVEL_CACHE) > _LEVEL_CACHE_SIZE:
+    while sum(v[0].nbytes for v in _LEVEL_CACHE.values()) > _LEVEL_CACHE_BYTES and len(_LEVEL_CACHE) > 1:
         _LEVEL_CACHE.pop(next(iter(_LEVEL_CACHE)))
     return hit
 
@@ -286,8 +315,9 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
         has_nmap = mesh.normal_map is not None and mesh.uv is not None
         corner_uv = np.ascontiguousarray(mesh.uv[faces]) if mesh.uv is not None else np.zeros((1, 3, 2))
         regions = None if texture_regions is None else texture_regions[mi]
-        texture = _levels(mesh.texture, regions, texture_filter) if has_tex else np.zeros((1, 1, 1, 3))
-        nmap = _levels(mesh.normal_map, regions, texture_filter) if has_nmap else np.zeros((1, 1, 1, 3))
+        none = (np.zeros((1, 3)), np.array([[0, 1, 1]], np.int64))
+        texture, tex_dims = _levels(mesh.texture, regions, texture_filter) if has_tex else none
+        nmap, nmap_dims = _levels(mesh.normal_map, regions, texture_filter) if has_nmap else none
         if has_nmap:
             tan, bit = vertex_tangents(mesh)
             ctan = np.ascontiguousarray(tan[faces])
@@ -304,5 +334,5 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
         with serial_if_small(box_visits(box), 20 * SERIAL_BELOW):
             triangle_tiles(T, items, offsets, tile_order(ntx * nty), _TILE, w, h, f, cx, cy, ortho, near,
                            corner_normals(mesh, crease_angle), np.ascontiguousarray(vc[faces]), corner_uv, texture,
-                           has_tex, nmap, has_nmap, ctan, cbit, gbuffer.depth, gbuffer.albedo, gbuffer.normal,
-                           gbuffer.coverage, gbuffer.weight)
+                           tex_dims, has_tex, nmap, nmap_dims, has_nmap, ctan, cbit, gbuffer.depth, gbuffer.albedo,
+                           gbuffer.normal, gbuffer.coverage, gbuffer.weight)
