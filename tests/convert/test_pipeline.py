@@ -10,6 +10,7 @@ from unmesh.convert._patch_kernels import bilinear_reference
 from unmesh.convert.reconstruct import disc_distance
 from unmesh.errors import InputError
 from unmesh.render import Camera, render
+from unmesh.render.raster import texture_levels
 from unmesh.spatial import TriangleBVH
 from unmesh.surfels import SurfelCloud
 
@@ -154,3 +155,24 @@ def test_unmeetable_mesh_error_falls_back_to_the_finest_mesh(pattern_cloud):
     mesh = reconstruct(pattern_cloud)
     out, rec = simplify_to_error(mesh, pattern_cloud, 1e-9)
     assert rec["met"] is False and out is mesh and rec["faces"] == len(mesh.faces)
+
+
+def test_regions_give_every_page_texel_its_patch(converted):
+    """``TexturedMesh.regions``: the texel under every triangle's centroid belongs to that
+    triangle's patch, so the rasteriser's filtered levels stay within the patch (6.5)."""
+    tm = converted.textured
+    assert len(tm.regions) == len(tm.parts)
+    for part, reg in zip(tm.parts, tm.regions, strict=True):
+        ids = np.unique(reg[reg >= 0])
+        assert len(ids) == len(part.faces)  # one region per triangle of the page, in face order
+        uv = part.uv[part.faces].mean(axis=1)
+        edge = reg.shape[0]
+        col = np.floor(uv[:, 0] * edge).astype(int)
+        row = np.floor((1.0 - uv[:, 1]) * edge).astype(int)
+        assert np.array_equal(reg[row, col], ids)
+        # the levels of a patch's texels lie within the range of that patch's own texels
+        lv = np.stack(texture_levels(part.texture, reg, count=4))
+        for r in ids[:20]:
+            inside = reg == r
+            lo, hi = part.texture[inside].min(axis=0), part.texture[inside].max(axis=0)
+            assert np.all(lv[:, inside] >= lo - 1e-12) and np.all(lv[:, inside] <= hi + 1e-12)

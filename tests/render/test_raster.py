@@ -152,3 +152,73 @@ def test_empty_and_degenerate_meshes():
     edge_on = TriangleMesh([[0, -1, -1], [0, 1, -1], [0, 0, 1]], [[0, 1, 2]])
     res = render(edge_on, cam)
     assert np.all(np.isfinite(res.color))
+
+
+def _checker_plane(n=64):
+    """A 10 x 10 plane y = 0 with an n x n checkerboard texture (n / 8 texels per square)."""
+    idx = np.arange(n) // 8
+    tex = np.repeat(((idx[:, None] + idx[None, :]) % 2).astype(float)[..., None], 3, axis=2)
+    v = [[-5, 0, -5], [5, 0, -5], [5, 0, 5], [-5, 0, 5]]
+    return TriangleMesh(v, QUAD_F, uv=QUAD_UV, texture=tex)
+
+
+def test_trilinear_lookup_at_grazing_angle_is_closer_to_supersampling_than_bilinear():
+    plane = _checker_plane()
+    eye, target = (0, 0.35, 5.5), (0, 0, -2)
+    cam = Camera(eye, target, width=48, height=48, fov=50)
+    ss = 8
+    g_ref = GBuffer.empty(48 * ss, 48 * ss)
+    draw_meshes(g_ref, [plane], Camera(eye, target, width=48 * ss, height=48 * ss, fov=50), texture_filter="bilinear")
+    ref = g_ref.albedo.reshape(48, ss, 48, ss, 3).mean(axis=(1, 3))
+    cov = g_ref.coverage.reshape(48, ss, 48, ss).all(axis=(1, 3))
+    errors = {}
+    for mode in ("bilinear", "trilinear"):
+        g = GBuffer.empty(48, 48)
+        draw_meshes(g, [plane], cam, texture_filter=mode)
+        m = cov & g.coverage
+        errors[mode] = np.sqrt(np.mean((g.albedo[m] - ref[m]) ** 2))
+    assert errors["trilinear"] < 0.6 * errors["bilinear"], errors
+    # where the texture is magnified (near the eye) both lookups are the same bilinear one
+    near = GBuffer.empty(48, 48)
+    draw_meshes(near, [plane], Camera((0, 6, 0.1), (0, 0, 0), width=48, height=48, fov=40), texture_filter="bilinear")
+    near_t = GBuffer.empty(48, 48)
+    draw_meshes(near_t, [plane], Camera((0, 6, 0.1), (0, 0, 0), width=48, height=48, fov=40))
+    assert np.array_equal(near.albedo, near_t.albedo)
+
+
+def test_texture_levels_have_mip_variances_and_keep_regions_apart():
+    from unmesh.render.raster import REGION_LEVELS, texture_levels
+
+    img = np.zeros((64, 64, 1))
+    img[32, 32] = 1.0  # an impulse: level k is the filter's impulse response
+    lv = texture_levels(img, regions=np.zeros((64, 64), int), count=4)
+    x = np.mgrid[0:64, 0:64][1]
+    for k in range(4):
+        w = lv[k][:, :, 0]
+        assert np.isclose(w.sum(), 1.0)
+        var = (w * (x - 32) ** 2).sum()
+        assert np.isclose(var, (4**k - 1) / 12)  # the variance of a box of 2^k texels beyond level 0
+    reg = (x >= 20).astype(int)
+    img2 = np.where(reg[..., None] == 1, 1.0, 0.25)
+    lv2 = texture_levels(img2, regions=reg)
+    assert len(lv2) == REGION_LEVELS and all(v.shape == img2.shape for v in lv2)
+    assert all(np.allclose(v[reg == 1], 1.0) and np.allclose(v[reg == 0], 0.25) for v in lv2)  # constant per region
+    # without regions: the mip pyramid of 2 x 2 means down to one texel
+    rng = np.random.default_rng(3)
+    img3 = rng.random((12, 5, 3))
+    pyr = texture_levels(img3)
+    assert [p.shape[:2] for p in pyr] == [(12, 5), (6, 3), (3, 2), (2, 1), (1, 1)]
+    assert np.allclose(pyr[1][1, 0], img3[2:4, 0:2].mean(axis=(0, 1)))
+    assert np.allclose(pyr[1][1, 2], img3[2:4, 4].mean(axis=0))  # the odd last column repeated
+
+
+def test_texture_level_kernel_matches_reference(rng):
+    from unmesh.render._raster_kernels import texture_level
+    from unmesh.render.raster import texture_level_reference
+
+    prev = rng.random((23, 17, 3))
+    regions = rng.integers(-1, 3, size=(23, 17))
+    for s in (1, 2, 8):
+        out = np.empty_like(prev)
+        texture_level(prev, regions, s, out)
+        assert np.allclose(out, texture_level_reference(prev, regions, s), atol=1e-14)

@@ -76,6 +76,7 @@ def assemble(mesh: TriangleMesh, frames: TriangleFrames, patches: Patches, place
     vnorm = mesh.computed_vertex_normals()
     parts = []
     mips = []
+    regions = []
     for p, edge in enumerate(place.pages):
         on = np.flatnonzero(place.page == p)
         uv = np.stack([X[on] / edge, 1.0 - Y[on] / edge], axis=2).reshape(-1, 2)
@@ -92,6 +93,9 @@ def assemble(mesh: TriangleMesh, frames: TriangleFrames, patches: Patches, place
             nmap[:] = (0.5, 0.5, 1.0)
             nmap[rr[sel], cc[sel]] = _tangent_normals(part, on, frames, patches, place, t[sel], r[sel], c[sel])
         parts.append(part.replace(texture=img, normal_map=nmap))
+        reg = np.full((edge, edge), -1, np.int64)
+        reg[rr[sel], cc[sel]] = t[sel]
+        regions.append(reg)
         if dep_flat is not None:
             dpage = np.zeros((edge, edge))
             dpage[rr[sel], cc[sel]] = dep_flat[sel]
@@ -99,7 +103,7 @@ def assemble(mesh: TriangleMesh, frames: TriangleFrames, patches: Patches, place
         if mipmaps:
             mips.append(tuple(_mip(rr[sel], cc[sel], np.clip(col_flat[sel], 0.0, 1.0), edge, k, img[0, 0])
                               for k in (1, 2)))
-    return TexturedMesh(tuple(parts), tuple(mips), tuple(depth_pages))
+    return TexturedMesh(tuple(parts), tuple(mips), tuple(depth_pages), tuple(regions))
 
 
 def _tangent_normals(part: TriangleMesh, on: np.ndarray, frames: TriangleFrames, patches: Patches,

@@ -6,7 +6,9 @@ part holds the triangles whose patches are on that page, with per-corner texture
 normals, the colour page as ``texture`` and the tangent-space normal page as ``normal_map``
 (OpenGL convention, green = +v, tangent = direction of +u). Importing :mod:`unmesh.convert`
 registers the kind ``"textured_mesh"`` with :func:`unmesh.render.register_drawable`, so
-``render(textured_mesh, camera)`` rasterises its parts.
+``render(textured_mesh, camera)`` rasterises its parts, with the rasteriser's trilinear
+(mip-mapped) texture lookup; with ``regions`` (the patch of every page texel) its filtered
+levels never mix two patches (6.5).
 
 Example
 -------
@@ -50,11 +52,16 @@ class TexturedMesh:
     depth_pages : sequence of (H, W) float64 arrays, optional
         Per part, the depth (displacement) page (6.2): the height of the surface above each
         triangle's plane along its face normal, in world units (0 outside the patches).
+    regions : sequence of (H, W) int64 arrays, optional
+        Per part, the patch (triangle) of every page texel, -1 outside the patches; the
+        rasteriser's filtered texture levels stay within a patch
+        (:func:`unmesh.render.raster.texture_levels`).
     """
 
     parts: tuple[TriangleMesh, ...]
     mip_levels: tuple[tuple[np.ndarray, ...], ...] = field(default=())
     depth_pages: tuple[np.ndarray, ...] = field(default=())
+    regions: tuple[np.ndarray, ...] = field(default=())
 
     def __post_init__(self) -> None:
         parts = tuple(self.parts)
@@ -71,6 +78,13 @@ class TexturedMesh:
         if depth and len(depth) != len(parts):
             raise InputError(f"depth_pages: expected one page per part ({len(parts)}), got {len(depth)}")
         object.__setattr__(self, "depth_pages", depth)
+        regions = tuple(np.asarray(r, dtype=np.int64) for r in self.regions)
+        if regions and len(regions) != len(parts):
+            raise InputError(f"regions: expected one page per part ({len(parts)}), got {len(regions)}")
+        for i, (r, p) in enumerate(zip(regions, parts, strict=False)):
+            if r.shape != p.texture.shape[:2]:  # type: ignore[union-attr]
+                raise InputError(f"regions[{i}]: expected the page's shape {p.texture.shape[:2]}, got {r.shape}")  # type: ignore[union-attr]
+        object.__setattr__(self, "regions", regions)
 
     def __repr__(self) -> str:
         pages = ", ".join(f"{p.texture.shape[1]}x{p.texture.shape[0]}" for p in self.parts)  # type: ignore[union-attr]
@@ -93,11 +107,14 @@ class TexturedMesh:
 
     def without_normal_map(self) -> TexturedMesh:
         """The same mesh without its normal maps (e.g. Fig. 6.6, middle row)."""
-        return TexturedMesh(tuple(p.replace(normal_map=None) for p in self.parts), self.mip_levels, self.depth_pages)
+        return TexturedMesh(tuple(p.replace(normal_map=None) for p in self.parts), self.mip_levels, self.depth_pages,
+                            self.regions)
 
 
 def _draw(gbuffer: GBuffer, objects: Sequence[Any], context: DrawContext) -> None:
-    draw_meshes(gbuffer, [p for obj in objects for p in obj.parts], context.camera)
+    parts = [p for obj in objects for p in obj.parts]
+    regions = [r for obj in objects for r in (obj.regions or (None,) * len(obj.parts))]
+    draw_meshes(gbuffer, parts, context.camera, texture_regions=regions)
 
 
 if not any(k.name == "textured_mesh" for k in drawable_kinds()):

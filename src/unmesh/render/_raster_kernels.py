@@ -19,7 +19,7 @@ from numba import njit, prange
 
 from unmesh.render._kernels import load_tile, sphere_box, tile_rect
 
-__all__ = ["sphere_setup", "sphere_tiles", "triangle_setup", "triangle_tiles"]
+__all__ = ["sphere_setup", "sphere_tiles", "texel_lod", "texture_level", "triangle_setup", "triangle_tiles"]
 
 
 @njit(cache=True)
@@ -114,6 +114,138 @@ def _bilinear(img, u, v, out):
         out[k] = a * (1.0 - fy) + b * fy
 
 
+@njit(cache=True, parallel=True)
+def texture_level(prev, regions, s, out):
+    """One filtered texture level (h, w, c) from the previous one: taps (1/8, 3/4, 1/8) spaced
+    ``s`` texels along both axes (edges clamped), only where the tap's ``regions`` id (h, w)
+    equals the centre's, weights renormalised (numpy reference:
+    :func:`unmesh.render.raster.texture_level_reference`)."""
+    h = prev.shape[0]
+    w = prev.shape[1]
+    nc = prev.shape[2]
+    for i in prange(h):
+        acc = np.empty(nc)
+        for j in range(w):
+            r0 = regions[i, j]
+            wsum = 0.0
+            for k in range(nc):
+                acc[k] = 0.0
+            for a in range(3):
+                ii = min(max(i + (a - 1) * s, 0), h - 1)
+                wy = 0.75 if a == 1 else 0.125
+                for b in range(3):
+                    jj = min(max(j + (b - 1) * s, 0), w - 1)
+                    if regions[ii, jj] != r0:
+                        continue
+                    wt = wy * (0.75 if b == 1 else 0.125)
+                    wsum += wt
+                    for k in range(nc):
+                        acc[k] += wt * prev[ii, jj, k]
+            for k in range(nc):
+                out[i, j, k] = acc[k] / wsum
+
+
+@njit(cache=True)
+def _level(flat, dims, k):
+    """Level ``k`` (h, w, 3) of a texture stored as a flat (N, 3) buffer with ``dims`` (L, 3)
+    rows (offset, h, w)."""
+    o = dims[k, 0]
+    return flat[o:o + dims[k, 1] * dims[k, 2]].reshape((dims[k, 1], dims[k, 2], 3))
+
+
+@njit(cache=True)
+def _lookup(flat, dims, u, v, lod, out, tmp):
+    """Trilinear lookup in the levels of one texture (:func:`unmesh.render.raster.texture_levels`,
+    flat buffer ``flat`` (N, 3), ``dims`` (L, 3): offset, height, width per level): bilinear at
+    (u, v) in levels ``floor(lod)`` and ``floor(lod) + 1``, blended linearly; ``lod <= 0``
+    (magnification) or a single level: bilinear in level 0."""
+    nl = dims.shape[0]
+    if nl == 1 or not (lod > 0.0):
+        _bilinear(_level(flat, dims, 0), u, v, out)
+        return
+    if lod >= nl - 1.0:
+        _bilinear(_level(flat, dims, nl - 1), u, v, out)
+        return
+    i0 = int(lod)
+    fr = lod - i0
+    _bilinear(_level(flat, dims, i0), u, v, out)
+    _bilinear(_level(flat, dims, i0 + 1), u, v, tmp)
+    for k in range(3):
+        out[k] = out[k] * (1.0 - fr) + tmp[k] * fr
+
+
+@njit(cache=True)
+def _plane_bary(T, fi, X, Y, ortho):
+    """Barycentrics (u, v) where the ray of the image-plane point (X, Y) meets the plane of
+    triangle ``fi`` (no inside test); NaN when the ray is parallel to it or meets it behind
+    the eye."""
+    if ortho:
+        ox = X
+        oy = Y
+        dx = 0.0
+        dy = 0.0
+    else:
+        ox = 0.0
+        oy = 0.0
+        dx = X
+        dy = Y
+    e1x = T[fi, 3]
+    e1y = T[fi, 4]
+    e1z = T[fi, 5]
+    e2x = T[fi, 6]
+    e2y = T[fi, 7]
+    e2z = T[fi, 8]
+    pvx = dy * e2z - e2y
+    pvy = e2x - dx * e2z
+    pvz = dx * e2y - dy * e2x
+    det = e1x * pvx + e1y * pvy + e1z * pvz
+    if abs(det) < 1e-300:
+        return np.nan, np.nan
+    inv = 1.0 / det
+    tvx = ox - T[fi, 0]
+    tvy = oy - T[fi, 1]
+    tvz = -T[fi, 2]
+    u = (tvx * pvx + tvy * pvy + tvz * pvz) * inv
+    qvx = tvy * e1z - tvz * e1y
+    qvy = tvz * e1x - tvx * e1z
+    qvz = tvx * e1y - tvy * e1x
+    v = (dx * qvx + dy * qvy + qvz) * inv
+    z = (e2x * qvx + e2y * qvy + e2z * qvz) * inv
+    if not ortho and not (z > 0.0):
+        return np.nan, np.nan
+    return u, v
+
+
+@njit(cache=True)
+def texel_lod(T, fi, corner_uv, px, py, f, cx, cy, ortho, tw, th):
+    """Level of detail ``log2(rho)`` of pixel (px, py) on triangle ``fi`` for a texture of
+    tw x th texels: rho = the longer of the pixel's two edge vectors in texel units, from the
+    texture coordinates where the rays of the pixel centre and of its right and lower
+    neighbours meet the triangle's plane (the derivatives of a GPU's mip-map selection, by
+    finite differences). ``inf`` when a neighbour's ray misses the plane (grazing)."""
+    invf = 1.0 / f
+    X = (px + 0.5 - cx) * invf
+    Y = (cy - (py + 0.5)) * invf
+    tuv = np.empty((3, 2))
+    for k in range(3):
+        xx = X + invf if k == 1 else X
+        yy = Y - invf if k == 2 else Y
+        u, v = _plane_bary(T, fi, xx, yy, ortho)
+        if not (u == u):
+            return np.inf
+        w0 = 1.0 - u - v
+        tuv[k, 0] = (w0 * corner_uv[fi, 0, 0] + u * corner_uv[fi, 1, 0] + v * corner_uv[fi, 2, 0]) * tw
+        tuv[k, 1] = (w0 * corner_uv[fi, 0, 1] + u * corner_uv[fi, 1, 1] + v * corner_uv[fi, 2, 1]) * th
+    ax = tuv[1, 0] - tuv[0, 0]
+    ay = tuv[1, 1] - tuv[0, 1]
+    bx = tuv[2, 0] - tuv[0, 0]
+    by = tuv[2, 1] - tuv[0, 1]
+    rho2 = max(ax * ax + ay * ay, bx * bx + by * by)
+    if rho2 <= 0.0:
+        return -np.inf
+    return 0.5 * math.log2(rho2)
+
+
 @njit(cache=True)
 def _triangle_tile_loop(T, items, a, b, x0, y0, tw, th, f, cx, cy, ortho, near, lz, lf, lu, lv):
     """Nearest triangle per pixel of one tile (Moller-Trumbore in camera space).
@@ -185,13 +317,17 @@ def _triangle_tile_loop(T, items, a, b, x0, y0, tw, th, f, cx, cy, ortho, near, 
 
 @njit(cache=True, parallel=True)
 def triangle_tiles(T, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, corner_normals, corner_colors,
-                   corner_uv, texture, has_texture, normal_map, has_normal_map, corner_tangents, corner_bitangents,
+                   corner_uv, texture, texture_dims, has_texture, normal_map, normal_dims, has_normal_map,
+                   corner_tangents, corner_bitangents,
                    depth, albedo, normal, covered, weight):
     """Z-buffer the binned triangles and write their G-buffer entries.
 
     ``corner_*`` arrays are (F, 3, k) per face corner: world normals, colours, uv (when
     ``has_texture`` or ``has_normal_map``), tangent and bitangent (for the normal map).
-    ``texture`` and ``normal_map`` are (h, w, 3) images, row 0 at the top. The G-buffer arrays
+    ``texture`` and ``normal_map`` are the filtered levels of an image (row 0 at the top;
+    :func:`unmesh.render.raster.texture_levels`) in one flat (N, 3) buffer each, with
+    ``texture_dims``/``normal_dims`` (L, 3) int64 rows (offset, height, width); they are looked
+    up trilinearly at the pixel's texel footprint (:func:`texel_lod`); one level = bilinear. The G-buffer arrays
     (``depth`` etc.) are updated where a triangle is nearer than their current depth.
     """
     ntx = (W + tile - 1) // tile
@@ -210,6 +346,7 @@ def triangle_tiles(T, items, offsets, order, tile, W, H, f, cx, cy, ortho, near,
         _triangle_tile_loop(T, items, a, b, x0, y0, tw, th, f, cx, cy, ortho, near, lz, lf, lu, lv)
         col = np.empty(3)
         tex = np.empty(3)
+        tmp = np.empty(3)
         tg = np.empty(3)
         bt = np.empty(3)
         for i in range(th):
@@ -236,12 +373,24 @@ def triangle_tiles(T, items, offsets, order, tile, W, H, f, cx, cy, ortho, near,
                 if has_texture or has_normal_map:
                     tu = w0 * corner_uv[fi, 0, 0] + u * corner_uv[fi, 1, 0] + v * corner_uv[fi, 2, 0]
                     tv = w0 * corner_uv[fi, 0, 1] + u * corner_uv[fi, 1, 1] + v * corner_uv[fi, 2, 1]
+                    lod_t = 0.0
+                    if has_texture and texture_dims.shape[0] > 1:
+                        lod_t = texel_lod(T, fi, corner_uv, gx, gy, f, cx, cy, ortho, texture_dims[0, 2],
+                                          texture_dims[0, 1])
                     if has_texture:
-                        _bilinear(texture, tu, tv, tex)
+                        _lookup(texture, texture_dims, tu, tv, lod_t, tex, tmp)
                         for c in range(3):
                             col[c] *= tex[c]
                     if has_normal_map:
-                        _bilinear(normal_map, tu, tv, tex)
+                        lod_n = 0.0
+                        if normal_dims.shape[0] > 1:
+                            same = normal_dims[0, 1] == texture_dims[0, 1] and normal_dims[0, 2] == texture_dims[0, 2]
+                            if has_texture and texture_dims.shape[0] > 1 and same:
+                                lod_n = lod_t
+                            else:
+                                lod_n = texel_lod(T, fi, corner_uv, gx, gy, f, cx, cy, ortho, normal_dims[0, 2],
+                                                  normal_dims[0, 1])
+                        _lookup(normal_map, normal_dims, tu, tv, lod_n, tex, tmp)
                         sx = 2.0 * tex[0] - 1.0
                         sy = 2.0 * tex[1] - 1.0
                         sz = 2.0 * tex[2] - 1.0

@@ -3,9 +3,11 @@ simulation surfaces).
 
 Each pixel centre's ray is intersected with the triangles (Moller-Trumbore in camera space), so
 interpolation of normals, colours and texture coordinates is perspective-correct. Supported:
-per-vertex colours, uv textures with bilinear filtering (uv (0,0) = bottom-left of the
-texture, which is stored with row 0 at the top, as in OBJ; coordinates outside [0, 1] repeat,
-texels are clamped at the borders), tangent-space normal maps (OpenGL convention: green = +v), and
+per-vertex colours, uv textures with trilinear (mip-mapped) filtering (uv (0,0) = bottom-left
+of the texture, which is stored with row 0 at the top, as in OBJ; coordinates outside [0, 1]
+repeat, texels are clamped at the borders; the level of detail from the pixel's texel
+footprint, :func:`texture_levels`; ``texture_filter="bilinear"`` for plain bilinear lookup),
+tangent-space normal maps (filtered alike) (OpenGL convention: green = +v), and
 smooth vertex normals with a crease angle (corners whose vertex normal deviates from the face
 normal by more than ``crease_angle`` use the face normal, so boxes stay boxy). Both sides of a
 triangle are drawn; shading is two-sided.
@@ -26,20 +28,111 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from unmesh.errors import InputError
 from unmesh.meshes import TriangleMesh
 from unmesh.render._kernels import SERIAL_BELOW, bin_boxes, box_visits, serial_if_small, tile_order
-from unmesh.render._raster_kernels import triangle_setup, triangle_tiles
+from unmesh.render._raster_kernels import texture_level, triangle_setup, triangle_tiles
 from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer
 from unmesh.surfels import DEFAULT_COLOR
 
-__all__ = ["corner_normals", "draw_meshes", "vertex_tangents"]
+__all__ = ["REGION_LEVELS", "TEXTURE_FILTERS", "corner_normals", "draw_meshes", "texture_levels", "vertex_tangents"]
 
 _TILE = 32
+TEXTURE_FILTERS = ("trilinear", "bilinear")
+_TAPS = ((-1, 0.125), (0, 0.75), (1, 0.125))
+_LEVEL_CACHE: dict[tuple[Any, ...], tuple[np.ndarray, np.ndarray]] = {}
+_LEVEL_CACHE_BYTES = 256 * 2**20
+#: Levels of a texture with regions (each a full copy of the texture): a blur of up to 32 texels.
+REGION_LEVELS = 6
+
+
+def texture_levels(image: np.ndarray, regions: np.ndarray | None = None, count: int | None = None) -> list[np.ndarray]:
+    """Filtered levels of a texture for trilinear (mip-mapped) lookup: level k has the blur of a
+    box of 2^k texels.
+
+    Without ``regions``: the usual mip pyramid, level k + 1 = the 2 x 2 means of level k (an
+    odd edge repeats its last row or column), down to one texel. With ``regions`` (an id per
+    texel, e.g. the patch of an atlas texel): every level at full resolution, level k = level
+    k - 1 filtered by the taps (1/8, 3/4, 1/8) spaced 2^(k-1) texels along each axis (the "a
+    trous" scheme, variance (4^k - 1)/12 texel^2 beyond level 0, like a box of 2^k texels),
+    where a tap counts only if its texel has the centre's id (weights renormalised): the levels
+    of an atlas of separate patches never mix two patches or a patch with the page background
+    (6.5), which a decimated pyramid cannot do for patches of a few texels. Taps beyond the
+    image edge clamp to it.
+
+    Parameters
+    ----------
+    image : (h, w, c) array
+    regions : (h, w) integer array, optional
+    count : int, optional
+        Number of levels (default: down to one texel; with ``regions`` at most
+        :data:`REGION_LEVELS`, a blur of 2^(REGION_LEVELS - 1) texels, as every level costs a
+        full page).
+
+    Returns
+    -------
+    list of (h_k, w_k, c) float64 arrays
+
+    Example
+    -------
+    >>> img = np.zeros((4, 4, 1)); img[:, 2:] = 1.0
+    >>> [lv.shape[:2] for lv in texture_levels(img)]
+    [(4, 4), (2, 2), (1, 1)]
+    >>> lv = texture_levels(img, regions=np.repeat([[0, 0, 1, 1]], 4, axis=0))
+    >>> len(lv), bool(lv[-1][:, :2].max() == 0.0)       # the two halves never mix
+    (3, True)
+    """
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim != 3:
+        raise InputError(f"image: expected an (h, w, c) array, got shape {img.shape}")
+    h, w = img.shape[:2]
+    if regions is not None:
+        regions = np.asarray(regions)
+        if regions.shape != (h, w):
+            raise InputError(f"regions: expected shape {(h, w)}, got {regions.shape}")
+    full = 1 + math.ceil(math.log2(max(h, w, 1)))
+    n = (full if regions is None else min(full, REGION_LEVELS)) if count is None else int(count)
+    if n < 1:
+        raise InputError(f"count: expected at least 1 level, got {count}")
+    out = [np.ascontiguousarray(img)]
+    if regions is None:
+        for _ in range(1, n):
+            prev = out[-1]
+            ph, pw = prev.shape[:2]
+            if ph == 1 and pw == 1:
+                break
+            prev = np.pad(prev, ((0, ph % 2), (0, pw % 2), (0, 0)), mode="edge")
+            hh, ww = prev.shape[0] // 2, prev.shape[1] // 2
+            out.append(prev.reshape(hh, 2, ww, 2, -1).mean(axis=(1, 3)))
+        return out
+    reg = np.ascontiguousarray(regions, dtype=np.int64)
+    for k in range(1, n):
+        nxt = np.empty_like(img)
+        texture_level(out[-1], reg, 1 << (k - 1), nxt)
+        out.append(nxt)
+    return out
+
+
+def texture_level_reference(prev: np.ndarray, regions: np.ndarray, s: int) -> np.ndarray:
+    """Plain numpy reference of :func:`unmesh.render._raster_kernels.texture_level`: level
+    ``prev`` (h, w, c) filtered by the taps (1/8, 3/4, 1/8) spaced ``s`` texels, within regions."""
+    h, w = prev.shape[:2]
+    ri, ci = np.arange(h), np.arange(w)
+    acc = np.zeros_like(prev)
+    wsum = np.zeros((h, w))
+    for dy, wy in _TAPS:
+        rows = np.clip(ri + dy * s, 0, h - 1)
+        for dx, wx in _TAPS:
+            cols = np.clip(ci + dx * s, 0, w - 1)
+            wt = wy * wx * (regions[np.ix_(rows, cols)] == regions)
+            acc += wt[..., None] * prev[np.ix_(rows, cols)]
+            wsum += wt
+    return acc / wsum[..., None]
 
 
 def corner_normals(mesh: TriangleMesh, crease_angle: float = 45.0) -> np.ndarray:
@@ -131,8 +224,39 @@ def vertex_tangents(mesh: TriangleMesh) -> tuple[np.ndarray, np.ndarray]:
     return unit(tan), unit(bit)
 
 
+def _fingerprint(a: np.ndarray | None) -> tuple[Any, ...]:
+    if a is None:
+        return ()
+    return (id(a), a.shape, float(np.sum(a)), float(np.sum(a[::3, ::5])))
+
+
+def _levels(image: np.ndarray, regions: np.ndarray | None, texture_filter: str) -> tuple[np.ndarray, np.ndarray]:
+    """The levels the tile kernel looks up, as one flat (N, 3) buffer and (L, 3) rows (offset,
+    height, width); one level for bilinear lookup. Filtered levels are cached for the textures
+    drawn last (by identity and content sums, at most 256 MB), so drawing the same mesh again
+    (other views, frames) does not rebuild them."""
+    if texture_filter == "bilinear":
+        h, w = image.shape[:2]
+        return np.ascontiguousarray(image, dtype=np.float64).reshape(-1, 3), np.array([[0, h, w]], np.int64)
+    if regions is not None and np.shape(regions) != image.shape[:2]:
+        raise InputError(f"texture_regions: expected the texture's shape {image.shape[:2]}, got {np.shape(regions)}")
+    key = (_fingerprint(image), _fingerprint(regions))
+    hit = _LEVEL_CACHE.pop(key, None)
+    if hit is None:
+        levels = texture_levels(image, regions)
+        dims = np.array([[0, lv.shape[0], lv.shape[1]] for lv in levels], np.int64)
+        dims[1:, 0] = np.cumsum(dims[:-1, 1] * dims[:-1, 2])
+        hit = (np.concatenate([lv.reshape(-1, 3) for lv in levels]), dims)
+    _LEVEL_CACHE[key] = hit
+    while sum(v[0].nbytes for v in _LEVEL_CACHE.values()) > _LEVEL_CACHE_BYTES and len(_LEVEL_CACHE) > 1:
+        _LEVEL_CACHE.pop(next(iter(_LEVEL_CACHE)))
+    return hit
+
+
 def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera,
-                vertex_colors: Sequence[np.ndarray | None] | None = None, crease_angle: float = 45.0) -> None:
+                vertex_colors: Sequence[np.ndarray | None] | None = None, crease_angle: float = 45.0,
+                texture_filter: str = "trilinear",
+                texture_regions: Sequence[np.ndarray | None] | None = None) -> None:
     """Rasterise triangle meshes into ``gbuffer`` (in place, z-buffered against its depth).
 
     Parameters
@@ -146,6 +270,13 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
         vertex colours, white under a texture, or the default grey.
     crease_angle : float
         Degrees; see :func:`corner_normals`.
+    texture_filter : {"trilinear", "bilinear"}
+        ``"trilinear"`` (default): mip-mapped lookup of textures and normal maps, the level
+        from the pixel's texel footprint (the longer of its screen-space edges in texels), in
+        the filtered levels of :func:`texture_levels`; magnified textures are bilinear either way.
+    texture_regions : sequence of (h, w) integer arrays or None, optional
+        Per mesh, the region (e.g. atlas patch) of every texel of its texture and normal map:
+        the filtered levels never mix two regions.
 
     Example
     -------
@@ -158,6 +289,10 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
     h, w = camera.shape
     if gbuffer.depth.shape != (h, w):
         raise InputError(f"gbuffer: expected shape {(h, w)}, got {gbuffer.depth.shape}")
+    if texture_filter not in TEXTURE_FILTERS:
+        raise InputError(f"texture_filter: expected one of {TEXTURE_FILTERS}, got {texture_filter!r}")
+    if texture_regions is not None and len(texture_regions) != len(meshes):
+        raise InputError(f"texture_regions: expected one entry per mesh ({len(meshes)}), got {len(texture_regions)}")
     f, cx, cy, ortho, near = camera.kernel_params()
     frame = camera.rotation
     for mi, mesh in enumerate(meshes):
@@ -179,8 +314,10 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
         has_tex = mesh.texture is not None and mesh.uv is not None and override is None
         has_nmap = mesh.normal_map is not None and mesh.uv is not None
         corner_uv = np.ascontiguousarray(mesh.uv[faces]) if mesh.uv is not None else np.zeros((1, 3, 2))
-        texture = np.ascontiguousarray(mesh.texture) if has_tex else np.zeros((1, 1, 3))
-        nmap = np.ascontiguousarray(mesh.normal_map) if has_nmap else np.zeros((1, 1, 3))
+        regions = None if texture_regions is None else texture_regions[mi]
+        none = (np.zeros((1, 3)), np.array([[0, 1, 1]], np.int64))
+        texture, tex_dims = _levels(mesh.texture, regions, texture_filter) if has_tex else none
+        nmap, nmap_dims = _levels(mesh.normal_map, regions, texture_filter) if has_nmap else none
         if has_nmap:
             tan, bit = vertex_tangents(mesh)
             ctan = np.ascontiguousarray(tan[faces])
@@ -197,5 +334,5 @@ def draw_meshes(gbuffer: GBuffer, meshes: Sequence[TriangleMesh], camera: Camera
         with serial_if_small(box_visits(box), 20 * SERIAL_BELOW):
             triangle_tiles(T, items, offsets, tile_order(ntx * nty), _TILE, w, h, f, cx, cy, ortho, near,
                            corner_normals(mesh, crease_angle), np.ascontiguousarray(vc[faces]), corner_uv, texture,
-                           has_tex, nmap, has_nmap, ctan, cbit, gbuffer.depth, gbuffer.albedo, gbuffer.normal,
-                           gbuffer.coverage, gbuffer.weight)
+                           tex_dims, has_tex, nmap, nmap_dims, has_nmap, ctan, cbit, gbuffer.depth, gbuffer.albedo,
+                           gbuffer.normal, gbuffer.coverage, gbuffer.weight)
