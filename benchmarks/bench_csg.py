@@ -2,7 +2,8 @@
 
 For the shipped scenes of Figs. 4.9 (spikes), 4.10 (icosahedron) and 4.8 (blob minus two
 spheres) at 512x512 and two zoom levels: frames per second of a full CSG frame (partners,
-classes, one splatting pass with the clipped edge surfels), the number of edge surfels and of
+classes, the clip tree folded for the camera and one splatting pass with the clipped edge
+surfels), the number of edge surfels and of
 pixels covered by them (edge pixels), the split of the frame, and the same surfels splatted
 without clipping. Then a fit of the clipped-splatting time against edge pixels, and the partner
 search for 100k edge surfels by both methods.
@@ -21,7 +22,9 @@ import numpy as np
 from unmesh import scenes
 from unmesh.csg import Patch, find_partners, prepare
 from unmesh.csg.draw import front_facing
+from unmesh.csg.fold import fold_for_camera
 from unmesh.csg.frame import EDGE, select
+from unmesh.csg.partners import METHODS
 from unmesh.csg.scene import load
 from unmesh.render import Camera, SplatRenderer, scene_points
 from unmesh.surfels import SurfelCloud
@@ -51,8 +54,13 @@ def frame_split(model, cam, repeat):
     arrays, clip = select(flat_frame.arrays, flat_frame.clip,
                           front_facing(flat_frame.arrays.positions, flat_frame.arrays.normals, cam))
     r = SplatRenderer(cam)
-    r.render(arrays, clip=clip)
-    t_clip, _ = _best(lambda: r.render(arrays, clip=clip), repeat)
+
+    def clipped():  # what draw_models does per camera: fold the tree per surfel, splat
+        fa, fc = fold_for_camera(arrays, clip, cam, r.options.filter_radius)
+        r.render(fa, clip=fc)
+
+    clipped()
+    t_clip, _ = _best(clipped, repeat)
     t_plain, _ = _best(lambda: r.render(arrays), repeat)
     t_resolve, _ = _best(lambda: r.gbuffer(), repeat)
     edge = np.asarray(clip.offsets[1:] > clip.offsets[:-1])
@@ -76,7 +84,7 @@ def partners_100k(quick):
     off, _ = find_partners(pos, radii, leaf, nrm, method="range")
     edge = int((np.diff(off) > 0).sum())
     out = {}
-    for method in ("clipbuffer", "range"):
+    for method in METHODS:
         find_partners(pos[:100], radii[:100], leaf[:100], nrm[:100], method=method)
         t, (_, i) = _best(lambda m=method: find_partners(pos, radii, leaf, nrm, method=m), 3)
         out[method] = (t, len(i))

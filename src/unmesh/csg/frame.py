@@ -89,13 +89,13 @@ class CSGFrame:
         return int((self.classes == EDGE).sum())
 
 
-def prepare(model: Node, method: str = "clipbuffer", rule: str = "two", reuse: bool = True) -> CSGFrame:
+def prepare(model: Node, method: str = "grid", rule: str = "two", reuse: bool = True) -> CSGFrame:
     """Evaluate ``model`` for its current transforms (see the module notes).
 
     Parameters
     ----------
     model : Node
-    method : {"clipbuffer", "range"}
+    method : {"grid", "clipbuffer", "range"}
         Partner search (4.2.1).
     rule : {"two", "closest"}
         insidePatch for the surfel centres (4.4 or 4.3).
