@@ -125,7 +125,7 @@ def test_grid_kernel_equals_numpy_reference(seed):
 
 def test_grid_result_does_not_depend_on_the_cell_size():
     """Coarsened grids (huge surfels, few cells) give the same pairs as fine ones."""
-    from unmesh.csg._kernels import grid_boxes, grid_csr
+    from unmesh.csg._kernels import disc_boxes, grid_boxes, grid_csr
 
     rng = np.random.default_rng(7)
     pos, nrm, radii, patch = _cloud(rng, 400, 3)
@@ -133,7 +133,8 @@ def test_grid_result_does_not_depend_on_the_cell_size():
     out = []
     for cell in (0.05, 0.3, 5.0):
         dims = (np.ptp(pos, axis=0) + 2.0) // cell + 1
-        half, box, _ = grid_boxes(pos, radii, nrm, lo, cell, dims.astype(np.int64))
+        half, _, _ = disc_boxes(pos, radii, nrm)
+        box, _ = grid_boxes(pos, half, lo, cell, dims.astype(np.int64))
         out.append(grid_csr(pos, radii, np.sort(patch).astype(np.int64), half, box, dims.astype(np.int64), 3))
     for off, idx in out[1:]:
         assert np.array_equal(off, out[0][0]) and np.array_equal(idx, out[0][1])

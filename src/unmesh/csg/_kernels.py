@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["cell_boxes", "clip_buffer_csr", "grid_boxes", "grid_csr"]
+__all__ = ["cell_boxes", "clip_buffer_csr", "disc_boxes", "grid_boxes", "grid_csr"]
 
 
 @njit(cache=True)
@@ -172,27 +172,41 @@ def clip_buffer_csr(pos, radii, patch, box, nu, nv, nchunks):
 
 
 @njit(cache=True)
-def grid_boxes(pos, radii, nrm, lo, cell, dims):
-    """3D boxes of the discs ``{c + t : t.n = 0, |t| <= r}`` (half-extent ``r sqrt(1 - n_k^2)``
-    along axis ``k``, padded like :func:`cell_boxes`): (N, 3) float64 half-extents and (N, 6)
-    int64 inclusive cell ranges ``i0, i1, j0, j1, k0, k1`` in the grid of cubes of edge ``cell``
-    from ``lo`` (3,) with ``dims`` (3,) cells per axis; and the number of (surfel, cell) entries."""
+def disc_boxes(pos, radii, nrm):
+    """Half-extents (N, 3) of the 3D boxes of the discs ``{c + t : t.n = 0, |t| <= r}``
+    (``r sqrt(1 - n_k^2)`` along axis ``k``, padded like :func:`cell_boxes`) and the corners
+    ``lo, hi`` (3,) of the box around all of them."""
     n = pos.shape[0]
     half = np.empty((n, 3))
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(n):
+        for k in range(3):
+            h = radii[i] * np.sqrt(min(max(1.0 - nrm[i, k] ** 2, 0.0), 1.0)) * (1 + 1e-9) + 1e-12
+            half[i, k] = h
+            lo[k] = min(lo[k], pos[i, k] - h)
+            hi[k] = max(hi[k], pos[i, k] + h)
+    return half, lo, hi
+
+
+@njit(cache=True)
+def grid_boxes(pos, half, lo, cell, dims):
+    """(N, 6) int64 inclusive cell ranges ``i0, i1, j0, j1, k0, k1`` of the disc boxes (``half``
+    from :func:`disc_boxes`) in the grid of cubes of edge ``cell`` from ``lo`` (3,) with ``dims``
+    (3,) cells per axis, and the number of (surfel, cell) entries."""
+    n = pos.shape[0]
     box = np.empty((n, 6), dtype=np.int64)
     total = 0
     for i in range(n):
         m = 1
         for k in range(3):
-            h = radii[i] * np.sqrt(min(max(1.0 - nrm[i, k] ** 2, 0.0), 1.0)) * (1 + 1e-9) + 1e-12
-            half[i, k] = h
-            a = max(int(np.floor((pos[i, k] - h - lo[k]) / cell)), 0)
-            b = min(int(np.floor((pos[i, k] + h - lo[k]) / cell)), dims[k] - 1)
+            a = max(int(np.floor((pos[i, k] - half[i, k] - lo[k]) / cell)), 0)
+            b = min(int(np.floor((pos[i, k] + half[i, k] - lo[k]) / cell)), dims[k] - 1)
             box[i, 2 * k] = a
             box[i, 2 * k + 1] = b
             m *= b - a + 1
         total += m
-    return half, box, total
+    return box, total
 
 
 @njit(cache=True)
@@ -275,7 +289,7 @@ def grid_csr(pos, radii, patch, half, box, dims, nchunks):
     """Clipping partners by a 3D clip grid as a symmetric CSR: :func:`clip_buffer_csr` with the
     clip buffer's cells split in depth (cubes instead of columns), so that surfels far apart in
     depth are never tested; pairs of different ``patch`` whose disc boxes overlap (``half``,
-    ``box`` from :func:`grid_boxes`) and whose bounding spheres overlap. ``patch`` must be
+    ``box`` from :func:`disc_boxes`, :func:`grid_boxes`) and whose bounding spheres overlap. ``patch`` must be
     non-decreasing (surfels ordered by patch). Returns ``offsets`` (N+1,) int64 and ``indices``
     int64, each row ascending."""
     n = pos.shape[0]

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.csg._kernels import cell_boxes, clip_buffer_csr, grid_boxes, grid_csr
+from unmesh.csg._kernels import cell_boxes, clip_buffer_csr, disc_boxes, grid_boxes, grid_csr
 from unmesh.errors import InputError
 from unmesh.spatial import KDTree
 
@@ -48,6 +48,10 @@ __all__ = ["METHODS", "clip_buffer_reference", "find_partners", "grid_reference"
 
 #: Partner search methods; the first is the default (faster in ``benchmarks/bench_csg.py``).
 METHODS = ("grid", "clipbuffer", "range")
+
+#: At most this many cells of the 3D clip grid per surfel (fewer, larger cells: faster in
+#: ``benchmarks/bench_csg.py``, the cells' items stay few in 3D).
+_CELLS_PER_SURFEL = 0.5
 
 
 def pairs_to_csr(pairs: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -156,16 +160,16 @@ def grid_reference(positions: Any, radii: Any, patch: Any, normals: Any) -> tupl
 
 def _grid(pos: np.ndarray, r: np.ndarray, nrm: np.ndarray) -> tuple:
     """Boxes and the 3D clip grid: cubes of twice the median radius, coarsened until there are at
-    most ~8N cells and ~16N (surfel, cell) entries (memory and time stay O(N))."""
+    most :data:`_CELLS_PER_SURFEL` cells per surfel and ~16 (surfel, cell) entries per surfel
+    (memory and time stay O(N))."""
     n = len(pos)
-    h = _disc_half_extents(r, nrm)
-    lo = (pos - h).min(axis=0)
-    ext = (pos + h).max(axis=0) - lo
+    half, lo, hi = disc_boxes(pos, r, nrm)
+    ext = hi - lo
     cell = max(2.0 * float(np.median(r)), float(ext.max()) / 4096, 1e-12)
     while True:
         dims = (ext / cell).astype(np.int64) + 1
-        if int(np.prod(dims)) <= 8 * n + 64:
-            half, box, total = grid_boxes(pos, r, nrm, lo, cell, dims)
+        if int(np.prod(dims)) <= _CELLS_PER_SURFEL * n + 64:
+            box, total = grid_boxes(pos, half, lo, cell, dims)
             if total <= 16 * n + 100000:
                 return half, box, dims
         cell *= 1.26
