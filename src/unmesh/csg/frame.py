@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh.csg._piece_kernels import piece_labels
 from unmesh.csg.cache import local_points, local_tree, overlap_pairs
 from unmesh.csg.classify import inside_patch, maybe_on_surface, tree_values
 from unmesh.csg.model import FlatTree, Node, flatten
@@ -188,6 +189,21 @@ def _pieces(leaves: list, sizes: list[int], edge: np.ndarray) -> np.ndarray:
     """(N,) int64 label of the connected piece (overlapping discs of one patch, edge surfels
     removed) of every non-edge surfel; -1 for edge surfels. The overlaps of each patch are
     cached per cloud (:func:`unmesh.csg.cache.overlap_pairs`)."""
+    comp = np.full(len(edge), -1, dtype=np.int64)
+    base = 0
+    start = 0
+    for patch, n in zip(leaves, sizes, strict=True):
+        ed = np.ascontiguousarray(edge[start:start + n])
+        labels, count = piece_labels(n, overlap_pairs(patch.cloud), ed)
+        comp[start:start + n] = np.where(labels >= 0, labels + base, -1)
+        base += count
+        start += n
+    return comp
+
+
+def pieces_reference(leaves: list, sizes: list[int], edge: np.ndarray) -> np.ndarray:
+    """scipy reference of :func:`_pieces` (the same partition, pieces numbered per patch in the
+    order of their lowest surfel)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -202,9 +218,11 @@ def _pieces(leaves: list, sizes: list[int], edge: np.ndarray) -> np.ndarray:
         _, labels = connected_components(graph, directed=False)
         labels = labels[~ed]
         if len(labels):
-            uniq, labels = np.unique(labels, return_inverse=True)
-            comp[start:start + n][~ed] = labels + base
-            base += len(uniq)
+            _, first, inv = np.unique(labels, return_index=True, return_inverse=True)
+            rank = np.empty(len(first), dtype=np.int64)
+            rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+            comp[start:start + n][~ed] = rank[inv] + base
+            base += len(first)
         start += n
     return comp
 
