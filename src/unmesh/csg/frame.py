@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from unmesh.csg._piece_kernels import piece_labels
-from unmesh.csg.cache import local_points, local_tree, overlap_pairs
+from unmesh.csg.cache import local_points, local_tree, overlap_pairs, patch_memo
 from unmesh.csg.classify import inside_patch, maybe_on_surface, tree_values
 from unmesh.csg.model import FlatTree, Node, flatten
 from unmesh.csg.partners import find_partners
@@ -261,25 +261,48 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
 
     Patches are asked one after the other, and a surfel whose centre is already off the
     surface whatever the patches not asked yet say is not asked again (Kleene logic is
-    monotone: more known values never turn *off* into *on* or *unknown*)."""
+    monotone: more known values never turn *off* into *on* or *unknown*). Values of earlier
+    frames are reused for pairs of patches that did not move (:func:`unmesh.csg.cache.patch_memo`)."""
     n = len(cloud)
     idx = np.flatnonzero(which)
     lw = leaf[idx]
     values = np.full((len(clouds), len(idx)), -1, dtype=np.int8)
     raw = np.full((len(clouds), n), -1, dtype=np.int8)
     open_ = np.ones(len(idx), dtype=bool)
+    starts = np.concatenate([[0], np.cumsum([len(c) for c in clouds])])
     for j, c in enumerate(clouds):
         ask = open_ & (lw != j) & ~meets[j, idx]
         if not ask.any():
             continue
         patch = flat.leaves[j]
-        pts = cloud.positions[idx[ask]]
-        x = local_points(patch.transform, pts)
-        if x is None:  # not a similarity: in world space
-            v = inside_patch(c, pts, rule)
-        else:
-            v = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
-        raw[j, idx[ask]] = v
+        sel = idx[ask]
+        v = np.empty(len(sel), dtype=bool)
+        # values of patches that did not move since an earlier frame are reused (cache.patch_memo)
+        todo = []
+        li = leaf[sel]
+        for i in np.unique(li):
+            m = np.flatnonzero(li == i)
+            memo = patch_memo(patch, flat.leaves[i], rule)
+            local = sel[m] - starts[i]
+            known = memo[local]
+            v[m] = known > 0
+            miss = known < 0
+            if miss.any():
+                todo.append((m[miss], memo, local[miss]))
+        if todo:
+            rows = np.concatenate([t[0] for t in todo])
+            pts = cloud.positions[sel[rows]]
+            x = local_points(patch.transform, pts)
+            if x is None:  # not a similarity: in world space
+                w = inside_patch(c, pts, rule)
+            else:
+                w = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
+            v[rows] = w
+            at = 0
+            for m, memo, local in todo:
+                memo[local] = w[at:at + len(m)]
+                at += len(m)
+        raw[j, sel] = v
         values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
         if len(idx) >= _DECIDE_EARLY:
             open_ &= _maybe_on(flat, values, lw) != 0
