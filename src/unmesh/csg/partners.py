@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from unmesh._threads import serial_if_small
 from unmesh.csg._kernels import cell_boxes, clip_buffer_csr, disc_boxes, grid_boxes, grid_csr
 from unmesh.errors import InputError
 from unmesh.spatial import KDTree
@@ -215,7 +216,8 @@ def find_partners(positions: Any, radii: Any, patch: Any, normals: Any = None,
             pos, r, p, nrm = pos[order], r[order], p[order], nrm[order]
         half, box, dims = _grid(pos, r, nrm)
         ncell = int(np.prod(dims))
-        off, idx = grid_csr(pos, r, p, half, box, dims, max(1, min(256, ncell // 256)))
+        with serial_if_small(n):  # no parallel launch for a few surfels
+            off, idx = grid_csr(pos, r, p, half, box, dims, max(1, min(256, ncell // 256)))
         if order is None:
             return off, idx
         rows = np.repeat(order, np.diff(off))
