@@ -51,6 +51,10 @@ SURFACE, EDGE, OUTSIDE = 0, 1, 2
 #: fewer the tree evaluation costs more than the queries it saves).
 _DECIDE_EARLY = 2048
 
+#: Surfels asked against one patch from which insidePatch values of earlier frames are looked up
+#: (:func:`unmesh.csg.cache.patch_memo`); fewer are asked directly.
+_MEMO_FROM = 256
+
 #: Frames of the models evaluated so far (held weakly), per (method, rule).
 _FRAMES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -280,6 +284,9 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
         # values of patches that did not move since an earlier frame are reused (cache.patch_memo)
         todo = []
         li = leaf[sel]
+        if len(sel) < _MEMO_FROM:  # few points: asking costs less than looking them up
+            todo.append((np.arange(len(sel)), None, None))
+            li = li[:0]
         for i in np.unique(li):
             m = np.flatnonzero(li == i)
             memo = patch_memo(patch, flat.leaves[i], rule)
@@ -300,7 +307,8 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
             v[rows] = w
             at = 0
             for m, memo, local in todo:
-                memo[local] = w[at:at + len(m)]
+                if memo is not None:
+                    memo[local] = w[at:at + len(m)]
                 at += len(m)
         raw[j, sel] = v
         values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
