@@ -113,3 +113,21 @@ def test_folded_frames_render_the_same_image(name, zoom):
     g2 = SplatRenderer(cam).render(fa, clip=fc).gbuffer()
     for k in ("albedo", "normal", "depth", "coverage", "weight"):
         assert np.array_equal(getattr(g1, k), getattr(g2, k)), k
+
+
+def test_surfels_beyond_the_tree_budget_keep_the_full_tree(monkeypatch):
+    """With no room for folded trees, surfels still drop or go plain where they may, the others
+    keep the full tree and all partners: the same image."""
+    from unmesh.csg import fold
+
+    monkeypatch.setattr(fold, "TREE_ROWS", 0)
+    fr = prepare(load(scenes.path("csg/icosahedron.toml")).model)
+    pts = scene_points(SurfelCloud(fr.arrays.positions, fr.arrays.normals, radii=fr.arrays.radii))
+    cam = Camera.fit(pts, 160, 160, fov=35)
+    arrays, clip = select(fr.arrays, fr.clip, front_facing(fr.arrays.positions, fr.arrays.normals, cam))
+    fa, fc = fold_for_camera(arrays, clip, cam)
+    assert len(fc.tree) <= 2 * len(clip.tree)
+    g1 = SplatRenderer(cam).render(arrays, clip=clip).gbuffer()
+    g2 = SplatRenderer(cam).render(fa, clip=fc).gbuffer()
+    for k in ("albedo", "normal", "depth", "coverage", "weight"):
+        assert np.array_equal(getattr(g1, k), getattr(g2, k)), k

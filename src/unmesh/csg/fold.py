@@ -48,6 +48,10 @@ VARIABLE = 2
 
 INTERSECTION, UNION, LEAF = 0, 1, 2
 
+#: Rows of all folded trees together (at least twice the full tree's): surfels whose folded tree
+#: does not fit keep the full one.
+TREE_ROWS = 1024
+
 
 def _tri(op: int, a: int, b: int) -> int:
     if a < 0:
@@ -205,19 +209,26 @@ def fold_for_camera(arrays: SurfelArrays, clip: ClipTree, camera: Camera,
     which = which.reshape(-1)
     trees = [tree]
     shift = K
-    folded = []  # per unique signature: None (drop), () (plain) or (shift, node_map)
-    for u in first:
-        s = idx[u]
+    # per unique signature: None (drop), () (plain), (shift, node_map), or "full" (the tree rows
+    # are spent: the kernel clears per-node scratch of the whole tree whenever the surfel
+    # changes, so the concatenated trees stay small; the most common signatures go first)
+    folded: list = [None] * len(first)
+    full = np.zeros(len(first), dtype=bool)
+    for q in np.argsort(-np.bincount(which, minlength=len(first)), kind="stable"):
+        s = idx[first[q]]
         res = fold_tree(tree, int(clip.leaf[s]), state[s])
         if res is None or res == ():
-            folded.append(res)
+            folded[q] = res
+        elif shift + len(res[0]) > max(TREE_ROWS, 2 * K):
+            full[q] = True
+            folded[q] = "full"
         else:
             rows, node_map = res
             rows = rows.copy()
             rows[:, 1] = np.where(rows[:, 1] >= 0, rows[:, 1] + shift, -1)
             rows[:, 2] += shift
             trees.append(rows)
-            folded.append((shift, node_map))
+            folded[q] = (shift, node_map)
             shift += len(rows)
     keep = np.ones(n, dtype=bool)
     new_leaf = clip.leaf.astype(np.int64).copy()
@@ -226,13 +237,14 @@ def fold_for_camera(arrays: SurfelArrays, clip: ClipTree, camera: Camera,
     for q, res in enumerate(folded):
         if res is None:
             drop_sig[q] = True
-        elif res != ():
+        elif res != () and res != "full":
             sh, node_map = res
             for old, new in node_map.items():
                 remap[q, old] = new + sh
     keep[idx[drop_sig[which]]] = False
     sig_of = np.full(n, -1, dtype=np.int64)
     sig_of[idx] = which
+    sig_of[idx[full[which]]] = -1  # unfolded: the full tree and all partners
     row_sig = sig_of[owner]
     folded_row = row_sig >= 0
     mapped = remap[np.maximum(row_sig, 0), node]
