@@ -71,3 +71,31 @@ def test_dropping_decided_surfels_between_patches_keeps_the_classes(monkeypatch)
     assert np.array_equal(early.clip.offsets, late.clip.offsets)
     assert np.array_equal(early.clip.partners, late.clip.partners)
     assert (early.classes == 2).sum() > 100 and (early.classes == 1).sum() > 50
+
+
+def test_values_of_unmoved_patches_are_reused_and_equal_a_fresh_evaluation(monkeypatch):
+    """Frames of a moving ball: the memo of the unmoved pairs gives exactly the fresh result,
+    and the moved ball is asked again (its values change)."""
+    from unmesh.csg import cache, frame
+
+    box = Patch.halfspace((0, 0, 0.4), (0, 0, 1), 2.0, 0.08) & Patch.halfspace((0, 0, -0.4), (0, 0, -1), 2.0, 0.08)
+    ball = Patch.from_shape(Sphere(radius=0.35), 0.05)
+    monkeypatch.setattr(frame, "_MEMO_FROM", 0)  # the memo for every set of points asked
+    calls = []
+    real = frame.inside_patch
+    monkeypatch.setattr(frame, "inside_patch", lambda c, x, *a, **k: calls.append(len(x)) or real(c, x, *a, **k))
+    frames = []
+    for k in range(3):
+        model = box - ball.moved(_rotation(0.3 * k, 1.0, (0.1 * k, 0.05 * k, 0.0)))
+        calls.clear()
+        f = prepare(model)
+        asked = sum(calls)
+        cache._MEMO.clear()  # the same frame from scratch
+        calls.clear()
+        g = prepare(model, reuse=False)
+        assert np.array_equal(f.classes, g.classes)
+        assert np.array_equal(f.clip.partners, g.clip.partners) and np.array_equal(f.clip.offsets, g.clip.offsets)
+        frames.append((asked, sum(calls)))
+    # frames 1 and 2 reuse the values between the box's half-spaces of the frame before, and
+    # ask only the pairs with the moved ball
+    assert all(0 < a < b for a, b in frames[1:]), frames

@@ -108,3 +108,46 @@ def test_clip_buffer_kernel_equals_numpy_reference(seed):
     off, idx = find_partners(pos, radii, patch, nrm, method="clipbuffer")
     assert len(ref[1]) > 500
     assert np.array_equal(off, ref[0]) and np.array_equal(idx, ref[1])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_grid_kernel_equals_numpy_reference(seed):
+    """The 3D clip grid returns exactly the pairs of the estimate whose disc boxes overlap."""
+    from unmesh.csg.partners import grid_reference
+
+    rng = np.random.default_rng(seed)
+    pos, nrm, radii, patch = _cloud(rng, 600, 3)
+    ref = grid_reference(pos, radii, patch, nrm)
+    off, idx = find_partners(pos, radii, patch, nrm, method="grid")
+    assert len(ref[1]) > 500
+    assert np.array_equal(off, ref[0]) and np.array_equal(idx, ref[1])
+
+
+def test_grid_result_does_not_depend_on_the_cell_size():
+    """Coarsened grids (huge surfels, few cells) give the same pairs as fine ones."""
+    from unmesh.csg._kernels import disc_boxes, grid_boxes, grid_csr
+
+    rng = np.random.default_rng(7)
+    pos, nrm, radii, patch = _cloud(rng, 400, 3)
+    lo = pos.min(axis=0) - 1.0
+    out = []
+    for cell in (0.05, 0.3, 5.0):
+        dims = (np.ptp(pos, axis=0) + 2.0) // cell + 1
+        half, _, _ = disc_boxes(pos, radii, nrm)
+        box, _ = grid_boxes(pos, half, lo, cell, dims.astype(np.int64))
+        out.append(grid_csr(pos, radii, np.sort(patch).astype(np.int64), half, box, dims.astype(np.int64), 3))
+    for off, idx in out[1:]:
+        assert np.array_equal(off, out[0][0]) and np.array_equal(idx, out[0][1])
+
+
+def test_grid_with_surfels_ordered_by_patch_equals_reference():
+    """The kernel's own path (surfels already ordered by patch, as in every CSG frame)."""
+    from unmesh.csg.partners import grid_reference
+
+    rng = np.random.default_rng(11)
+    pos, nrm, radii, patch = _cloud(rng, 600, 4)
+    patch = np.sort(patch)
+    ref = grid_reference(pos, radii, patch, nrm)
+    off, idx = find_partners(pos, radii, patch, nrm, method="grid")
+    assert len(ref[1]) > 300
+    assert np.array_equal(off, ref[0]) and np.array_equal(idx, ref[1])

@@ -4,7 +4,11 @@ Patches move rigidly (or by similarity transforms) between frames, so everything
 one patch is computed once per surfel cloud and reused while the patch moves: the k-d tree of
 its surfel centres in the patch's own frame (insidePatch queries are mapped into that frame:
 nearest surfels and the sides of their planes are invariant under similarity transforms) and
-the pairs of its overlapping surfels (the pieces of 4.1.2). The caches hold the clouds weakly.
+the pairs of its overlapping surfels (the pieces of 4.1.2). Patches are immutable (a moved
+patch is a new :class:`~unmesh.csg.model.Patch`), so the insidePatch values of one patch's
+surfel centres against another patch stay valid while neither moves: :func:`patch_memo` keeps
+them, and a frame in which one patch moves only asks the pairs involving it. The caches hold
+the clouds and patches weakly.
 
 Example
 -------
@@ -26,10 +30,40 @@ import numpy as np
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["local_points", "local_tree", "overlap_pairs"]
+__all__ = ["local_points", "local_tree", "overlap_pairs", "patch_memo"]
 
 _TREES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _PAIRS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_MEMO: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def patch_memo(target: Any, source: Any, rule: str) -> np.ndarray:
+    """(n,) int8 insidePatch values (1 inside, 0 outside, -1 not asked yet) of the ``n`` surfel
+    centres of patch ``source`` against patch ``target`` with ``rule``, filled in by the caller;
+    one array per (target, source, rule) while both patches live.
+
+    Example
+    -------
+    >>> from unmesh.csg.model import Patch
+    >>> a = Patch.halfspace((0, 0, 0), (0, 0, 1), extent=1.0, spacing=0.5)
+    >>> b = Patch.halfspace((0, 0, 0), (1, 0, 0), extent=1.0, spacing=0.5)
+    >>> m = patch_memo(a, b, "two")
+    >>> m.tolist(), patch_memo(a, b, "two") is m, patch_memo(a, b, "closest") is m
+    ([-1, -1, -1, -1], True, False)
+    """
+    per_target = _MEMO.get(target)
+    if per_target is None:
+        per_target = weakref.WeakKeyDictionary()
+        _MEMO[target] = per_target
+    per_source = per_target.get(source)
+    if per_source is None:
+        per_source = {}
+        per_target[source] = per_source
+    memo = per_source.get(rule)
+    if memo is None:
+        memo = np.full(len(source.cloud), -1, dtype=np.int8)
+        per_source[rule] = memo
+    return memo
 
 
 def local_tree(cloud: SurfelCloud) -> KDTree:

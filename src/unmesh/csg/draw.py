@@ -2,7 +2,8 @@
 
 A model is evaluated for the frame (:func:`unmesh.csg.frame.prepare`) and its surface and edge
 surfels facing the camera (back-face culling: a model is a closed oriented surface) are
-splatted in one pass with their :class:`unmesh.render.ClipTree`; edge surfels are
+splatted in one pass with their :class:`unmesh.render.ClipTree`, folded per surfel for the
+camera (:mod:`unmesh.csg.fold`: the same image, less work per fragment); edge surfels are
 clipped per fragment (Algorithm 4.2), and the scene's discontinuity surfels (4.3) travel with
 them. Models are drawn after plain surfel clouds, against their depth, so they can be mixed with
 any other objects in one image.
@@ -23,6 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from unmesh.csg.fold import fold_for_camera
 from unmesh.csg.frame import concatenate_frames, prepare, select
 from unmesh.csg.model import Node
 from unmesh.errors import InputError
@@ -55,6 +57,7 @@ def draw_models(gbuffer: GBuffer, models: Sequence[Node], context: DrawContext) 
         return None
     arrays, clip = concatenate_frames(frames)
     arrays, clip = select(arrays, clip, front_facing(arrays.positions, arrays.normals, context.camera))
+    arrays, clip = fold_for_camera(arrays, clip, context.camera, context.options.splat.filter_radius)
     renderer = SplatRenderer(context.camera, context.options.splat)
     return renderer._render_in_place(arrays, gbuffer, clip_surfels=context.clip_surfels, clip=clip)
 

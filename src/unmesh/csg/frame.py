@@ -33,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from unmesh.csg.cache import local_points, local_tree, overlap_pairs
+from unmesh.csg._piece_kernels import piece_labels
+from unmesh.csg.cache import local_points, local_tree, overlap_pairs, patch_memo
 from unmesh.csg.classify import inside_patch, maybe_on_surface, tree_values
 from unmesh.csg.model import FlatTree, Node, flatten
 from unmesh.csg.partners import find_partners
@@ -49,6 +50,10 @@ SURFACE, EDGE, OUTSIDE = 0, 1, 2
 #: Surfels to classify from which those already decided are dropped after each patch (for
 #: fewer the tree evaluation costs more than the queries it saves).
 _DECIDE_EARLY = 2048
+
+#: Surfels asked against one patch from which insidePatch values of earlier frames are looked up
+#: (:func:`unmesh.csg.cache.patch_memo`); fewer are asked directly.
+_MEMO_FROM = 256
 
 #: Frames of the models evaluated so far (held weakly), per (method, rule).
 _FRAMES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -89,13 +94,13 @@ class CSGFrame:
         return int((self.classes == EDGE).sum())
 
 
-def prepare(model: Node, method: str = "clipbuffer", rule: str = "two", reuse: bool = True) -> CSGFrame:
+def prepare(model: Node, method: str = "grid", rule: str = "two", reuse: bool = True) -> CSGFrame:
     """Evaluate ``model`` for its current transforms (see the module notes).
 
     Parameters
     ----------
     model : Node
-    method : {"clipbuffer", "range"}
+    method : {"grid", "clipbuffer", "range"}
         Partner search (4.2.1).
     rule : {"two", "closest"}
         insidePatch for the surfel centres (4.4 or 4.3).
@@ -188,6 +193,21 @@ def _pieces(leaves: list, sizes: list[int], edge: np.ndarray) -> np.ndarray:
     """(N,) int64 label of the connected piece (overlapping discs of one patch, edge surfels
     removed) of every non-edge surfel; -1 for edge surfels. The overlaps of each patch are
     cached per cloud (:func:`unmesh.csg.cache.overlap_pairs`)."""
+    comp = np.full(len(edge), -1, dtype=np.int64)
+    base = 0
+    start = 0
+    for patch, n in zip(leaves, sizes, strict=True):
+        ed = np.ascontiguousarray(edge[start:start + n])
+        labels, count = piece_labels(n, overlap_pairs(patch.cloud), ed)
+        comp[start:start + n] = np.where(labels >= 0, labels + base, -1)
+        base += count
+        start += n
+    return comp
+
+
+def pieces_reference(leaves: list, sizes: list[int], edge: np.ndarray) -> np.ndarray:
+    """scipy reference of :func:`_pieces` (the same partition, pieces numbered per patch in the
+    order of their lowest surfel)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -202,9 +222,11 @@ def _pieces(leaves: list, sizes: list[int], edge: np.ndarray) -> np.ndarray:
         _, labels = connected_components(graph, directed=False)
         labels = labels[~ed]
         if len(labels):
-            uniq, labels = np.unique(labels, return_inverse=True)
-            comp[start:start + n][~ed] = labels + base
-            base += len(uniq)
+            _, first, inv = np.unique(labels, return_index=True, return_inverse=True)
+            rank = np.empty(len(first), dtype=np.int64)
+            rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+            comp[start:start + n][~ed] = rank[inv] + base
+            base += len(first)
         start += n
     return comp
 
@@ -243,25 +265,52 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
 
     Patches are asked one after the other, and a surfel whose centre is already off the
     surface whatever the patches not asked yet say is not asked again (Kleene logic is
-    monotone: more known values never turn *off* into *on* or *unknown*)."""
+    monotone: more known values never turn *off* into *on* or *unknown*). Values of earlier
+    frames are reused for pairs of patches that did not move (:func:`unmesh.csg.cache.patch_memo`)."""
     n = len(cloud)
     idx = np.flatnonzero(which)
     lw = leaf[idx]
     values = np.full((len(clouds), len(idx)), -1, dtype=np.int8)
     raw = np.full((len(clouds), n), -1, dtype=np.int8)
     open_ = np.ones(len(idx), dtype=bool)
+    starts = np.concatenate([[0], np.cumsum([len(c) for c in clouds])])
     for j, c in enumerate(clouds):
         ask = open_ & (lw != j) & ~meets[j, idx]
         if not ask.any():
             continue
         patch = flat.leaves[j]
-        pts = cloud.positions[idx[ask]]
-        x = local_points(patch.transform, pts)
-        if x is None:  # not a similarity: in world space
-            v = inside_patch(c, pts, rule)
-        else:
-            v = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
-        raw[j, idx[ask]] = v
+        sel = idx[ask]
+        v = np.empty(len(sel), dtype=bool)
+        # values of patches that did not move since an earlier frame are reused (cache.patch_memo)
+        todo = []
+        li = leaf[sel]
+        if len(sel) < _MEMO_FROM:  # few points: asking costs less than looking them up
+            todo.append((np.arange(len(sel)), None, None))
+            li = li[:0]
+        for i in np.unique(li):
+            m = np.flatnonzero(li == i)
+            memo = patch_memo(patch, flat.leaves[i], rule)
+            local = sel[m] - starts[i]
+            known = memo[local]
+            v[m] = known > 0
+            miss = known < 0
+            if miss.any():
+                todo.append((m[miss], memo, local[miss]))
+        if todo:
+            rows = np.concatenate([t[0] for t in todo])
+            pts = cloud.positions[sel[rows]]
+            x = local_points(patch.transform, pts)
+            if x is None:  # not a similarity: in world space
+                w = inside_patch(c, pts, rule)
+            else:
+                w = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
+            v[rows] = w
+            at = 0
+            for m, memo, local in todo:
+                if memo is not None:
+                    memo[local] = w[at:at + len(m)]
+                at += len(m)
+        raw[j, sel] = v
         values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
         if len(idx) >= _DECIDE_EARLY:
             open_ &= _maybe_on(flat, values, lw) != 0

@@ -8,6 +8,12 @@ contain every pair of truly intersecting discs (tests check this by brute force)
     Range queries of :class:`unmesh.spatial.KDTree`, with the surfels grouped into radius
     classes (powers of two) so that the query radius stays tight for mixed sizes. Exactly the
     pairs of the estimate (:func:`partners_brute_force`).
+``"grid"``
+    Algorithm 4.1 with the clip buffer's cells also split in depth: a 3D grid of cubes, each
+    surfel entered in the cells of its disc's 3D box; surfels sharing a cell whose boxes and
+    bounding spheres overlap are partners (surfels far apart in depth, which share a column of
+    the 2D clip buffer, are never tested). Exactly the pairs of the estimate whose disc boxes
+    overlap (:func:`grid_reference`), whatever the cell size.
 ``"clipbuffer"``
     Algorithm 4.1: the surfels are splatted into a clip buffer (a 2D grid in an orthographic
     view along the axis of least extent, which sees every surfel); surfels sharing a cell are
@@ -33,14 +39,20 @@ from typing import Any
 
 import numpy as np
 
-from unmesh.csg._kernels import cell_boxes, clip_buffer_csr
+from unmesh._threads import serial_if_small
+from unmesh.csg._kernels import cell_boxes, clip_buffer_csr, disc_boxes, grid_boxes, grid_csr
 from unmesh.errors import InputError
 from unmesh.spatial import KDTree
 
-__all__ = ["METHODS", "clip_buffer_reference", "find_partners", "pairs_to_csr", "partners_brute_force"]
+__all__ = ["METHODS", "clip_buffer_reference", "find_partners", "grid_reference", "pairs_to_csr",
+           "partners_brute_force"]
 
 #: Partner search methods; the first is the default (faster in ``benchmarks/bench_csg.py``).
-METHODS = ("clipbuffer", "range")
+METHODS = ("grid", "clipbuffer", "range")
+
+#: At most this many cells of the 3D clip grid per surfel (fewer, larger cells: faster in
+#: ``benchmarks/bench_csg.py``, the cells' items stay few in 3D).
+_CELLS_PER_SURFEL = 0.5
 
 
 def pairs_to_csr(pairs: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -130,8 +142,42 @@ def clip_buffer_reference(positions: Any, radii: Any, patch: Any, normals: Any) 
     return pairs_to_csr(np.stack([rows[keep], idx[keep]], axis=1)[rows[keep] < idx[keep]], len(pos))
 
 
+def _disc_half_extents(r: np.ndarray, nrm: np.ndarray) -> np.ndarray:
+    """(N, 3) half-extents of the 3D boxes of the discs (as :func:`grid_boxes` pads them)."""
+    return r[:, None] * np.sqrt(np.clip(1.0 - nrm ** 2, 0.0, 1.0)) * (1 + 1e-9) + 1e-12
+
+
+def grid_reference(positions: Any, radii: Any, patch: Any, normals: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Plain numpy O(N^2) reference of the ``"grid"`` method: the pairs of the 4.2.1 estimate
+    whose disc boxes overlap."""
+    pos = np.ascontiguousarray(positions, dtype=np.float64)
+    r = np.ascontiguousarray(radii, dtype=np.float64)
+    h = _disc_half_extents(r, np.asarray(normals, dtype=np.float64))
+    off, idx = partners_brute_force(pos, r, patch)
+    rows = np.repeat(np.arange(len(pos)), np.diff(off))
+    keep = np.all(np.abs(pos[rows] - pos[idx]) <= h[rows] + h[idx], axis=1) & (rows < idx)
+    return pairs_to_csr(np.stack([rows[keep], idx[keep]], axis=1), len(pos))
+
+
+def _grid(pos: np.ndarray, r: np.ndarray, nrm: np.ndarray) -> tuple:
+    """Boxes and the 3D clip grid: cubes of twice the median radius, coarsened until there are at
+    most :data:`_CELLS_PER_SURFEL` cells per surfel and ~16 (surfel, cell) entries per surfel
+    (memory and time stay O(N))."""
+    n = len(pos)
+    half, lo, hi = disc_boxes(pos, r, nrm)
+    ext = hi - lo
+    cell = max(2.0 * float(np.median(r)), float(ext.max()) / 4096, 1e-12)
+    while True:
+        dims = (ext / cell).astype(np.int64) + 1
+        if int(np.prod(dims)) <= _CELLS_PER_SURFEL * n + 64:
+            box, total = grid_boxes(pos, half, lo, cell, dims)
+            if total <= 16 * n + 100000:
+                return half, box, dims
+        cell *= 1.26
+
+
 def find_partners(positions: Any, radii: Any, patch: Any, normals: Any = None,
-                  method: str = "clipbuffer") -> tuple[np.ndarray, np.ndarray]:
+                  method: str = "grid") -> tuple[np.ndarray, np.ndarray]:
     """Clipping partners of every surfel (4.2.1).
 
     Parameters
@@ -144,7 +190,7 @@ def find_partners(positions: Any, radii: Any, patch: Any, normals: Any = None,
     normals : (N, 3) float64, optional
         Needed by ``"clipbuffer"`` (the projected box); without them a surfel covers the box of
         its bounding sphere.
-    method : {"clipbuffer", "range"}
+    method : {"grid", "clipbuffer", "range"}
 
     Returns
     -------
@@ -162,6 +208,22 @@ def find_partners(positions: Any, radii: Any, patch: Any, normals: Any = None,
         return np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
     if method == "range":
         pairs = _range_pairs(pos, r, p)
+    elif method == "grid":
+        nrm = np.zeros_like(pos) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+        order = None
+        if np.any(p[1:] < p[:-1]):  # the kernel wants surfels ordered by patch
+            order = np.argsort(p, kind="stable")
+            pos, r, p, nrm = pos[order], r[order], p[order], nrm[order]
+        half, box, dims = _grid(pos, r, nrm)
+        ncell = int(np.prod(dims))
+        with serial_if_small(n):  # no parallel launch for a few surfels
+            off, idx = grid_csr(pos, r, p, half, box, dims, max(1, min(256, ncell // 256)))
+        if order is None:
+            return off, idx
+        rows = np.repeat(order, np.diff(off))
+        cols = order[idx]
+        keep = rows < cols
+        return pairs_to_csr(np.stack([rows[keep], cols[keep]], axis=1), n)
     else:
         nrm = np.zeros_like(pos) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
         axis = int(np.argmin(np.ptp(pos, axis=0)))
