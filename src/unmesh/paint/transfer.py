@@ -191,15 +191,19 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     off, ind = tree.radius_neighbors(o[None], ext * 1.5)
     fathers = ind[off[0]:off[1]]
     rows = surface.rows_of(fathers)
-    rel = surface.pos[rows] - o
+    pos_r = surface.pos[rows]
+    nrm_r = surface.nrm[rows]
+    rel = pos_r - o
     rh = rel @ N
-    ok = (surface.nrm[rows] @ N > 0.2) & (np.abs(rh) < reach)
+    ok = (nrm_r @ N > 0.2) & (np.abs(rh) < reach)
     rows = rows[ok]
     if len(rows) == 0:
         return empty
+    # the gathered rows' fields, fetched once (the values of surface.<field>[rows])
+    pos_r, nrm_r, rad_r = pos_r[ok], nrm_r[ok], surface.rad[rows]
     ou = np.stack([rel[ok] @ t1, rel[ok] @ t2], axis=1)
     # pixels about one brush surfel, but never coarser than the surface already is there
-    h = min(h, 0.7 * float(np.median(surface.rad[rows])))
+    h = min(h, 0.7 * float(np.median(rad_r)))
     # the buffer: centred on the brush footprint, margin of 3 object radii
     lo = bu.min(axis=0) - 3.0 * rmax
     hi = bu.max(axis=0) + 3.0 * rmax
@@ -212,7 +216,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     Z = 4.0 * reach + 1.0
     above = Camera(centre + N * Z, centre, up=t2, width=W, height=H, ortho=H * h)
     below = Camera(centre - N * Z, centre, up=t2, width=W, height=H, ortho=H * h)
-    ho, cov_o = _height_map(above, surface.pos[rows], surface.nrm[rows], surface.rad[rows], Z)
+    ho, cov_o = _height_map(above, pos_r, nrm_r, rad_r, Z)
     hb, cov_b = _height_map(below, bpos[sel], bnrm[sel], np.full(len(sel), brush.sk.spacing), Z, _SPLAT_BRUSH)
     hb = -hb  # heights along +N of the brush's lowest surface
     if np.dot(below.right, above.right) < 0:
@@ -230,14 +234,18 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # ownership: nearest object surfel in the plane, within its radius
     # ownership: among the nearest object surfels, the one covering the pixel best (smallest
     # distance / radius), so cells of small children and large originals tile what they cover
-    own, ratio = owners(ou, surface.rad[rows], pix, min(8, len(rows)))
+    own, ratio = owners(ou, rad_r, pix, min(8, len(rows)))
     covered = ratio <= 1.0
     # the object's height: splatted, or (where the clipped kernels leave a pixel centre
-    # uncovered, e.g. at a corner of touching splats) the owner's plane
-    on = surface.nrm[rows][own]
-    foot = o + pix[:, :1] * t1 + pix[:, 1:] * t2
-    ho_plane = np.einsum("ij,ij->i", on, surface.pos[rows][own] - foot) / np.maximum(on @ N, 0.2)
-    ho = np.where(cov_o.ravel(), ho.ravel(), ho_plane)
+    # uncovered, e.g. at a corner of touching splats) the owner's plane (row-wise arithmetic:
+    # computed for those pixels only)
+    ho = ho.ravel()
+    unc = np.flatnonzero(~cov_o.ravel())
+    if len(unc):
+        on = nrm_r[own[unc]]
+        pu_ = pix[unc]
+        foot = o + pu_[:, :1] * t1 + pu_[:, 1:] * t2
+        ho[unc] = np.einsum("ij,ij->i", on, pos_r[own[unc]] - foot) / np.maximum(on @ N, 0.2)
     # penetration and brush ownership
     depth = ho - hb.ravel()
     pen = covered & cov_b.ravel() & (depth > 0)
@@ -252,8 +260,9 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     if not pen.any():
         return empty
     # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer
-    inner = (ou[:, 0] - 1.5 * surface.rad[rows] > lo[0]) & (ou[:, 0] + 1.5 * surface.rad[rows] < lo[0] + W * h)
-    inner &= (ou[:, 1] - 1.5 * surface.rad[rows] > lo[1]) & (ou[:, 1] + 1.5 * surface.rad[rows] < lo[1] + H * h)
+    r15 = 1.5 * rad_r
+    inner = (ou[:, 0] - r15 > lo[0]) & (ou[:, 0] + r15 < lo[0] + W * h)
+    inner &= (ou[:, 1] - r15 > lo[1]) & (ou[:, 1] + r15 < lo[1] + H * h)
     # ... and surfels whose centre lies on a penetrated pixel but own no pixel (denser than the
     # buffer): their paint goes to the pixel under their centre
     ci = np.floor((ou[:, 0] - lo[0]) / h).astype(np.int64)
@@ -278,7 +287,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     vw = surface.vw[rq] * share
     vd = surface.vd[rq] * share
     dc = surface.dry[rq].copy()
-    props = {f: surface.__getattr__(f)[rq].copy() for f in _PROPS}
+    props = {f: surface.__getattr__(f)[rq] for f in _PROPS}  # fancy indexing copies
     orphans = rep_local[npix[rep_local] == 0]
     if len(orphans):
         qpos = np.full(W * H, -1, np.int64)
