@@ -31,14 +31,13 @@ import numpy as np
 
 from unmesh._threads import serial_if_small
 from unmesh.paint._buffer_kernels import grid_knn2d, pixel_owners
-from unmesh.paint.brush import BrushState
+from unmesh.paint.brush import BrushState, cross3
 from unmesh.paint.model import transfer
 from unmesh.paint.strokes import Paint
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render.splat import SurfelArrays
 from unmesh.spatial import KDTree
-from unmesh.surfels import tangent_frame
 
 __all__ = ["TransferResult", "lsq_plane", "paint_event", "plane_frame"]
 
@@ -71,9 +70,14 @@ class TransferResult:
 
 
 def plane_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents of a plane with unit ``normal`` (t1 x t2 = normal)."""
-    t1, t2 = tangent_frame(np.asarray(normal, float).reshape(1, 3))
-    return t1[0], t2[0]
+    """Two unit tangents of a plane with unit ``normal`` (t1 x t2 = normal): those of
+    :func:`unmesh.surfels.tangent_frame` (the same operations for one normal)."""
+    n = np.asarray(normal, float).reshape(3)
+    helper = np.zeros(3)
+    helper[int(np.argmin(np.abs(n)))] = 1.0
+    t1 = cross3(helper, n)
+    t1 = t1 / np.sqrt(np.add.reduce(t1 * t1))
+    return t1, cross3(n, t1)
 
 
 def lsq_plane(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -144,6 +148,28 @@ def nearest(points: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.nda
     with serial_if_small(len(queries)):
         grid_knn2d(np.ascontiguousarray(points), np.ascontiguousarray(queries), 1, dist, idx)
     return dist[:, 0], idx[:, 0]
+
+
+def _merge_orphans(surface: PaintSurface, ks: np.ndarray, rr: np.ndarray, cw: np.ndarray, vw: np.ndarray,
+                   dc: np.ndarray, vd: np.ndarray, props: dict[str, np.ndarray]) -> None:
+    """Add the paint of surface rows ``rr`` (surfels that own no pixel) to the pixel state at
+    distinct pixels ``ks`` (in place): volumes summed, colours and paint attributes mixed by volume."""
+    a = vw[ks] + vd[ks]
+    b = surface.vw[rr] + surface.vd[rr]
+    t = a + b
+    m = t > 0
+    for f in _PROPS:
+        props[f][ks[m]] = (a[m] * props[f][ks[m]] + b[m] * surface.__getattr__(f)[rr[m]]) / t[m]
+    a, b = vw[ks], surface.vw[rr]
+    t = a + b
+    m = t > 0
+    cw[ks[m]] = (a[m, None] * cw[ks[m]] + b[m, None] * surface.wet[rr[m]]) / t[m, None]
+    vw[ks] = t
+    a, b = vd[ks], surface.vd[rr]
+    t = a + b
+    m = t > 0
+    dc[ks[m]] = (a[m, None] * dc[ks[m]] + b[m, None] * surface.dry[rr[m]]) / t[m, None]
+    vd[ks] = t
 
 
 def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
@@ -292,22 +318,15 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     if len(orphans):
         qpos = np.full(W * H, -1, np.int64)
         qpos[Q] = np.arange(len(Q))
-        for r in orphans.tolist():
-            k = qpos[cpix[r]]
-            if k < 0:  # its pixel is not part of the resampled region: keep it
-                is_rep[r] = False
-                continue
-            row = rows[r]
-            a, b = vw[k] + vd[k], surface.vw[row] + surface.vd[row]
-            if a + b > 0:
-                for f in _PROPS:
-                    props[f][k] = (a * props[f][k] + b * surface.__getattr__(f)[row]) / (a + b)
-            a, b = vw[k], surface.vw[row]
-            cw[k] = (a * cw[k] + b * surface.wet[row]) / (a + b) if a + b > 0 else cw[k]
-            vw[k] = a + b
-            a, b = vd[k], surface.vd[row]
-            dc[k] = (a * dc[k] + b * surface.dry[row]) / (a + b) if a + b > 0 else dc[k]
-            vd[k] = a + b
+        ks = qpos[cpix[orphans]]
+        is_rep[orphans[ks < 0]] = False  # its pixel is not part of the resampled region: keep it
+        orphans, ks = orphans[ks >= 0], ks[ks >= 0]
+        state = (cw, vw, dc, vd, props)
+        if len(np.unique(ks)) == len(ks):  # distinct pixels: all at once
+            _merge_orphans(surface, ks, rows[orphans], *state)
+        else:  # in order, one after the other (the same arithmetic)
+            for j in range(len(ks)):
+                _merge_orphans(surface, ks[j:j + 1], rows[orphans[j:j + 1]], *state)
         rep_local = np.flatnonzero(is_rep)
     # brush pixel state on penetrated pixels
     bq = bown[Q][P]
@@ -359,7 +378,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         thick = (vw[P] + vd[P]) / area[P]
         dirn = direction - np.dot(direction, N) * N
         ln = np.linalg.norm(dirn)
-        across = np.cross(N, dirn / ln) if ln > 1e-12 else t1
+        across = cross3(N, dirn / ln) if ln > 1e-12 else t1
         coord = (pu[P] @ np.array([across @ t1, across @ t2]))
         lam = HAIR_WAVELENGTH * brush.sk.spacing
         phase = 2 * np.pi * coord / lam
