@@ -129,7 +129,7 @@ def test_orphan_merge_at_once_equals_one_after_the_other():
     of merging them one by one (replays stay byte-identical)."""
     from unmesh import SurfelCloud
     from unmesh.paint.surface import PaintSurface
-    from unmesh.paint.transfer import _PROPS, _merge_orphans
+    from unmesh.paint.transfer import _PROPS, _merge_orphans, merge_orphans
 
     rng = np.random.default_rng(3)
     m = 40
@@ -143,6 +143,8 @@ def test_orphan_merge_at_once_equals_one_after_the_other():
              rng.random(q) * (rng.random(q) > 0.3), {f: rng.random(q) for f in _PROPS})
     ks = rng.permutation(q)[:12]
     rr = rng.permutation(m)[:12]
+    ks_dup = rng.integers(0, 5, 30)  # several rows per pixel
+    rr_dup = rng.integers(0, m, 30)
 
     def state():
         cw, vw, dc, vd, props = start
@@ -158,3 +160,12 @@ def test_orphan_merge_at_once_equals_one_after_the_other():
         assert np.array_equal(a[4][f], b[4][f])
     # volume is conserved: the pixels gained exactly the rows' volumes
     np.testing.assert_allclose(a[1].sum() - start[1].sum(), surf.vw[rr].sum(), rtol=1e-12)
+    # several rows per pixel: rounds of distinct pixels give the one-after-the-other result
+    a, b = state(), state()
+    merge_orphans(surf, ks_dup, rr_dup, *a)
+    for j in range(len(ks_dup)):
+        _merge_orphans(surf, ks_dup[j:j + 1], rr_dup[j:j + 1], *b)
+    for x, y in zip(a[:4], b[:4], strict=True):
+        assert np.array_equal(x, y)
+    for f in _PROPS:
+        assert np.array_equal(a[4][f], b[4][f])

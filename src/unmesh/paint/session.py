@@ -204,7 +204,9 @@ class Session:
         a0, r0, p0 = st.added, st.removed, st.pixels
         for smp in _subdivide(st.last, samples, 0.5 * st.brush.size):
             p = np.array(smp.point)
-            d, N = force_shading(s.tree, s.pos[:no], s.nrm[:no], p[None])
+            # the brush's candidate ball of the last event answers exactly (or asks the tree)
+            ball = st.state.ball if st.state.ball is not None and st.state.ball.tree is s.tree else s.tree
+            d, N = force_shading(ball, s.pos[:no], s.nrm[:no], p[None])
             n = N[0]
             rx, ry = self.view_axes
             axis = _rotate(_rotate(n, rx, smp.tilt[0]), ry, smp.tilt[1])

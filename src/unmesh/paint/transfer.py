@@ -172,6 +172,21 @@ def _merge_orphans(surface: PaintSurface, ks: np.ndarray, rr: np.ndarray, cw: np
     vd[ks] = t
 
 
+def merge_orphans(surface: PaintSurface, ks: np.ndarray, rr: np.ndarray, cw: np.ndarray, vw: np.ndarray,
+                  dc: np.ndarray, vd: np.ndarray, props: dict[str, np.ndarray]) -> None:
+    """Merge surface rows ``rr`` (K,) into the pixel state at pixels ``ks`` (K,), in order (a
+    pixel may take several): the result of merging them one after the other, computed in rounds
+    of distinct pixels (round r merges the r-th row of every pixel)."""
+    order = np.argsort(ks, kind="stable")
+    sk = ks[order]
+    first = np.flatnonzero(np.r_[True, sk[1:] != sk[:-1]])
+    occ = np.empty(len(ks), np.int64)
+    occ[order] = np.arange(len(ks)) - np.repeat(first, np.diff(np.r_[first, len(ks)]))
+    for r in range(int(occ.max()) + 1 if len(ks) else 0):
+        j = np.flatnonzero(occ == r)
+        _merge_orphans(surface, ks[j], rr[j], cw, vw, dc, vd, props)
+
+
 def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
                 direction: np.ndarray, tip: np.ndarray | None = None, body: np.ndarray | None = None,
                 km: bool = False) -> TransferResult:
@@ -321,12 +336,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         ks = qpos[cpix[orphans]]
         is_rep[orphans[ks < 0]] = False  # its pixel is not part of the resampled region: keep it
         orphans, ks = orphans[ks >= 0], ks[ks >= 0]
-        state = (cw, vw, dc, vd, props)
-        if len(np.unique(ks)) == len(ks):  # distinct pixels: all at once
-            _merge_orphans(surface, ks, rows[orphans], *state)
-        else:  # in order, one after the other (the same arithmetic)
-            for j in range(len(ks)):
-                _merge_orphans(surface, ks[j:j + 1], rows[orphans[j:j + 1]], *state)
+        merge_orphans(surface, ks, rows[orphans], cw, vw, dc, vd, props)
         rep_local = np.flatnonzero(is_rep)
     # brush pixel state on penetrated pixels
     bq = bown[Q][P]
