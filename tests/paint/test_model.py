@@ -141,3 +141,30 @@ def test_downsampling_conserves_volume_and_colour(plane_cloud):
     assert not S.children  # thresholds 1: everything merges
     assert S.active[:S.n_original].all()
     assert abs(S.total_volume() - v0) <= 1e-12 * v0
+
+
+def test_children_attach_to_their_closest_original_and_merge_back_without_growing(plane_cloud):
+    """5.3: a child belongs to the closest original. Overlapping strokes resample the same place
+    again and again; children inheriting their owner's father drifted up to 3 father radii away
+    from it, and downsampling then grew the father to cover them (the dark rim of the
+    downsampled patch in the density map of the paint-downsampling example)."""
+    s = Session(plane_cloud, PaintOptions(haptics=False, color_variance=1.0, normal_variance=1.0))
+    paint = Paint("oil", (0.8, 0.35, 0.1), relief="none")
+    for k in range(4):  # overlapping strokes, each event overlapping the last
+        s.stroke(line(n=10, z=0.025 * k, pressure=1.0), brush=Brush("round", 0.05), paint=paint)
+    S = s.surface
+    no = S.n_original
+    kids = np.arange(no, S.n)[S.alive[no:S.n]]
+    assert len(kids) > 200
+    rad0 = S.rad[:no].copy()
+    dist = np.linalg.norm(S.pos[kids] - S.pos[S.father[kids]], axis=1)
+    _, nearest = S.tree.knn(S.pos[kids], 1)
+    d_near = np.linalg.norm(S.pos[kids] - S.pos[nearest[:, 0]], axis=1)
+    # the father is the closest original (ties within rounding) ...
+    assert np.all(dist <= d_near + 1e-12)
+    # ... so it covers the child
+    assert np.all(dist <= rad0[S.father[kids]])
+    s.advance(0.0)  # thresholds 1: every father merges its children back
+    assert not S.children
+    grown = S.rad[:no] / rad0
+    assert grown.max() <= 2.0

@@ -408,7 +408,16 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         nn = np.cos(a)[:, None] * fnr[P] + np.sin(a)[:, None] * tilt_dir
         nrm[P] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
     cpos = cpos + lift[:, None] * fnr
-    fat = surface.father[rq]
+    # each child is attached to its closest original (5.3), in the buffer's plane: the originals
+    # gathered around the buffer that face it (a child inheriting its owner's father drifts from
+    # it over repeated repaints, and downsampling then grows the father to cover far children)
+    fcand = fathers[onrm[fathers] @ N > 0.2]
+    if len(fcand):
+        rel_f = opos[fcand] - o
+        _, nf = nearest(np.stack([rel_f @ t1, rel_f @ t2], axis=1), pu)
+        fat = fcand[nf]
+    else:
+        fat = surface.father[rq]
     rad = CHILD_RADIUS * h / cosn
     new = {
         "pos": cpos, "nrm": nrm, "rad": rad, "father": fat, "active": np.ones(len(Q), bool),
