@@ -408,10 +408,14 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         nn = np.cos(a)[:, None] * fnr[P] + np.sin(a)[:, None] * tilt_dir
         nrm[P] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
     cpos = cpos + lift[:, None] * fnr
-    # each child is attached to its closest original (5.3), in the buffer's plane: the originals
-    # gathered around the buffer that face it (a child inheriting its owner's father drifts from
-    # it over repeated repaints, and downsampling then grows the father to cover far children)
-    fcand = fathers[onrm[fathers] @ N > 0.2]
+    # each child is attached to its closest original (5.3), in the buffer's plane, among the
+    # originals around the buffer that face it and are replaced (disabled, or by this event: a
+    # visible original never has children); the owner's father is one of them. (A child that
+    # inherited its owner's father drifted from it over repeated repaints, and downsampling then
+    # grew the father to cover far children.)
+    replaced = rows[rep_local]
+    hidden = ~surface.active[fathers] | np.isin(fathers, replaced[replaced < no])
+    fcand = fathers[hidden & (onrm[fathers] @ N > 0.2)]
     if len(fcand):
         rel_f = opos[fcand] - o
         _, nf = nearest(np.stack([rel_f @ t1, rel_f @ t2], axis=1), pu)
@@ -425,7 +429,6 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         "vw": vw, "vd": vd, "area": area, "rho": rho, "kappa": kap, "diff": dif,
         "refl": refl, "shin": shin, "metal": met, "lift": lift, "updates": surface.updates[rq] + 1,
     }
-    replaced = rows[rep_local]
     surface.delete(replaced)
     added = surface.append(new)
     return TransferResult(replaced, added, int(P.sum()))
