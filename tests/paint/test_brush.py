@@ -219,3 +219,12 @@ def test_internal_surfaces_exchange_paint_only_when_the_brush_is_split(plane_clo
     whole, tip0 = b.transfer_body(), b.transfer_body(0)
     assert not np.intersect1d(whole, np.flatnonzero(b.sk.internal)).size
     assert np.isin(np.flatnonzero(b.sk.internal & (b.sk.owner == 0)), tip0).all()
+
+
+def test_cross3_is_np_cross_bit_for_bit():
+    from unmesh.paint.brush import cross3
+
+    rng = np.random.default_rng(5)
+    for _ in range(2000):
+        a, b = rng.standard_normal((2, 3)) * 10.0 ** rng.integers(-6, 6, size=(2, 1))
+        assert np.array_equal(cross3(a, b), np.cross(a, b))

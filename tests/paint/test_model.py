@@ -141,3 +141,32 @@ def test_downsampling_conserves_volume_and_colour(plane_cloud):
     assert not S.children  # thresholds 1: everything merges
     assert S.active[:S.n_original].all()
     assert abs(S.total_volume() - v0) <= 1e-12 * v0
+
+
+def test_children_attach_to_their_closest_original_and_merge_back_without_growing(plane_cloud):
+    """5.3: a child belongs to the closest original (of those it replaces). Overlapping strokes
+    resample the same place again and again; children inheriting their owner's father drifted up
+    to 3 father radii away from it, and downsampling then grew the father to cover them (the dark
+    rim of the downsampled patch in the density map of the paint-downsampling example)."""
+    s = Session(plane_cloud, PaintOptions(haptics=False, color_variance=1.0, normal_variance=1.0))
+    paint = Paint("oil", (0.8, 0.35, 0.1), relief="none")
+    for k in range(4):  # overlapping strokes, each event overlapping the last
+        s.stroke(line(n=10, z=0.025 * k, pressure=1.0), brush=Brush("round", 0.05), paint=paint)
+    S = s.surface
+    no = S.n_original
+    kids = np.arange(no, S.n)[S.alive[no:S.n]]
+    assert len(kids) > 200
+    rad0 = S.rad[:no].copy()
+    fathers = S.father[kids]
+    # a visible original has no children (they replace it)
+    assert not S.active[fathers].any()
+    # the father was the closest replaced original when the child was made (a closer one may be
+    # replaced later), so it is near: before, children drifted up to 2.7 father radii (here)
+    dist = np.linalg.norm(S.pos[kids] - S.pos[fathers], axis=1)
+    assert np.all(dist <= 1.5 * rad0[fathers])
+    v0 = S.total_volume()
+    s.advance(0.0)  # thresholds 1: every father merges its children back
+    assert not S.children
+    assert abs(S.total_volume() - v0) <= 1e-12 * v0
+    grown = S.rad[:no] / rad0
+    assert grown.max() <= 2.0  # before: 3.0

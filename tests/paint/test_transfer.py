@@ -108,3 +108,64 @@ def test_sharp_edges_finer_than_the_sampling(plane_cloud):
     bare = mid & (np.abs(p[:, 2] - zc) > width / 2 + 0.01) & (np.abs(p[:, 2] - zc) < 0.05)
     assert bare.sum() > 10
     assert (c[bare].sum(axis=1) > 2.0).all()  # untouched light grey right next to it
+
+
+def test_plane_frame_is_tangent_frame_bit_for_bit():
+    from unmesh.paint.transfer import plane_frame
+    from unmesh.surfels import tangent_frame
+
+    rng = np.random.default_rng(7)
+    n = rng.standard_normal((300, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n[:3] = np.eye(3)
+    for v in n:
+        t1, t2 = plane_frame(v)
+        r1, r2 = tangent_frame(v[None])
+        assert np.array_equal(t1, r1[0]) and np.array_equal(t2, r2[0])
+
+
+def test_orphan_merge_at_once_equals_one_after_the_other():
+    """The surfels that own no pixel are merged into distinct pixels at once, with the arithmetic
+    of merging them one by one (replays stay byte-identical)."""
+    from unmesh import SurfelCloud
+    from unmesh.paint.surface import PaintSurface
+    from unmesh.paint.transfer import _PROPS, _merge_orphans, merge_orphans
+
+    rng = np.random.default_rng(3)
+    m = 40
+    surf = PaintSurface(SurfelCloud(rng.random((m, 3)), np.tile([0.0, 0.0, 1.0], (m, 1)), radii=np.full(m, 0.1)))
+    for f in ("vw", "vd", *_PROPS):
+        getattr(surf, f)[:] = rng.random(m) * (rng.random(m) > 0.3)
+    surf.wet[:] = rng.random((m, 3))
+    surf.dry[:] = rng.random((m, 3))
+    q = 25
+    start = (rng.random((q, 3)), rng.random(q) * (rng.random(q) > 0.3), rng.random((q, 3)),
+             rng.random(q) * (rng.random(q) > 0.3), {f: rng.random(q) for f in _PROPS})
+    ks = rng.permutation(q)[:12]
+    rr = rng.permutation(m)[:12]
+    ks_dup = rng.integers(0, 5, 30)  # several rows per pixel
+    rr_dup = rng.integers(0, m, 30)
+
+    def state():
+        cw, vw, dc, vd, props = start
+        return cw.copy(), vw.copy(), dc.copy(), vd.copy(), {f: v.copy() for f, v in props.items()}
+
+    a, b = state(), state()
+    _merge_orphans(surf, ks, rr, *a)
+    for j in range(len(ks)):
+        _merge_orphans(surf, ks[j:j + 1], rr[j:j + 1], *b)
+    for x, y in zip(a[:4], b[:4], strict=True):
+        assert np.array_equal(x, y)
+    for f in _PROPS:
+        assert np.array_equal(a[4][f], b[4][f])
+    # volume is conserved: the pixels gained exactly the rows' volumes
+    np.testing.assert_allclose(a[1].sum() - start[1].sum(), surf.vw[rr].sum(), rtol=1e-12)
+    # several rows per pixel: rounds of distinct pixels give the one-after-the-other result
+    a, b = state(), state()
+    merge_orphans(surf, ks_dup, rr_dup, *a)
+    for j in range(len(ks_dup)):
+        _merge_orphans(surf, ks_dup[j:j + 1], rr_dup[j:j + 1], *b)
+    for x, y in zip(a[:4], b[:4], strict=True):
+        assert np.array_equal(x, y)
+    for f in _PROPS:
+        assert np.array_equal(a[4][f], b[4][f])

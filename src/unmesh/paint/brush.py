@@ -35,7 +35,7 @@ from unmesh.paint.collide import BallKnn, collide
 from unmesh.paint.strokes import Brush
 from unmesh.spatial import KDTree
 
-__all__ = ["SPLIT_ANGLE", "BrushState", "Skeleton", "skeleton"]
+__all__ = ["SPLIT_ANGLE", "BrushState", "Skeleton", "cross3", "skeleton"]
 
 #: Splitting threshold of 5.4.3 (degrees between collision normals of the active masses).
 SPLIT_ANGLE = 60.0
@@ -172,13 +172,27 @@ def spring_forces_reference(x: np.ndarray, h: np.ndarray, springs: np.ndarray, r
     return out
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of two 3-vectors, (3,) float64: the same products and differences (so the
+    same bits) without its per-call cost (about 10x).
+
+    Example
+    -------
+    >>> cross3(np.array([1.0, 0, 0]), np.array([0, 1.0, 0])).tolist()
+    [0.0, 0.0, 1.0]
+    """
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], dtype=np.float64)
+
+
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rotation matrix taking unit ``a`` to unit ``b`` (Rodrigues)."""
-    v = np.cross(a, b)
+    v = cross3(a, b)
     c = float(np.dot(a, b))
     if c < -1 + 1e-12:
         h = np.array([1.0, 0, 0]) if abs(a[0]) < 0.9 else np.array([0, 1.0, 0])
-        u = np.cross(a, h)
+        u = cross3(a, h)
         u /= np.linalg.norm(u)
         return 2 * np.outer(u, u) - np.eye(3)
     vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])

@@ -26,7 +26,7 @@ import numpy as np
 
 from unmesh.errors import FormatError, InputError
 from unmesh.paint import background
-from unmesh.paint.brush import K_PENALTY, BrushState
+from unmesh.paint.brush import K_PENALTY, BrushState, cross3
 from unmesh.paint.collide import force_shading
 from unmesh.paint.haptic import HapticLoop, HapticProcess, haptic_force
 from unmesh.paint.strokes import Brush, Paint, Sample, check_samples, parse_strokes, stroke_dict
@@ -204,14 +204,16 @@ class Session:
         a0, r0, p0 = st.added, st.removed, st.pixels
         for smp in _subdivide(st.last, samples, 0.5 * st.brush.size):
             p = np.array(smp.point)
-            d, N = force_shading(s.tree, s.pos[:no], s.nrm[:no], p[None])
+            # the brush's candidate ball of the last event answers exactly (or asks the tree)
+            ball = st.state.ball if st.state.ball is not None and st.state.ball.tree is s.tree else s.tree
+            d, N = force_shading(ball, s.pos[:no], s.nrm[:no], p[None])
             n = N[0]
             rx, ry = self.view_axes
             axis = _rotate(_rotate(n, rx, smp.tilt[0]), ry, smp.tilt[1])
             move = p - st.last_point if st.last_point is not None else np.zeros(3)
             across = _across(axis, move, st.across, rx)
             st.across = across
-            R = np.stack([across, np.cross(axis, across), axis], axis=1)
+            R = np.stack([across, cross3(axis, across), axis], axis=1)
             b = st.state
             L = 3.0 * st.brush.size
             surface_pt = p + d[0] * n
@@ -587,14 +589,14 @@ def _rotate(v: np.ndarray, axis: np.ndarray, deg: float) -> np.ndarray:
         return v
     a = axis / np.linalg.norm(axis)
     t = np.radians(deg)
-    return v * np.cos(t) + np.cross(a, v) * np.sin(t) + a * np.dot(a, v) * (1 - np.cos(t))
+    return v * np.cos(t) + cross3(a, v) * np.sin(t) + a * np.dot(a, v) * (1 - np.cos(t))
 
 
 def _across(axis: np.ndarray, move: np.ndarray, prev: np.ndarray | None, fallback: np.ndarray) -> np.ndarray:
     """Unit vector perpendicular to the handle axis and to the motion (a flat brush's width)."""
     m = move - np.dot(move, axis) * axis
     if np.linalg.norm(m) > 1e-12:
-        c = np.cross(axis, m / np.linalg.norm(m))
+        c = cross3(axis, m / np.linalg.norm(m))
     elif prev is not None:
         c = prev - np.dot(prev, axis) * axis
     else:

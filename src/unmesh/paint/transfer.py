@@ -31,14 +31,13 @@ import numpy as np
 
 from unmesh._threads import serial_if_small
 from unmesh.paint._buffer_kernels import grid_knn2d, pixel_owners
-from unmesh.paint.brush import BrushState
+from unmesh.paint.brush import BrushState, cross3
 from unmesh.paint.model import transfer
 from unmesh.paint.strokes import Paint
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render.splat import SurfelArrays
 from unmesh.spatial import KDTree
-from unmesh.surfels import tangent_frame
 
 __all__ = ["TransferResult", "lsq_plane", "paint_event", "plane_frame"]
 
@@ -71,9 +70,14 @@ class TransferResult:
 
 
 def plane_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents of a plane with unit ``normal`` (t1 x t2 = normal)."""
-    t1, t2 = tangent_frame(np.asarray(normal, float).reshape(1, 3))
-    return t1[0], t2[0]
+    """Two unit tangents of a plane with unit ``normal`` (t1 x t2 = normal): those of
+    :func:`unmesh.surfels.tangent_frame` (the same operations for one normal)."""
+    n = np.asarray(normal, float).reshape(3)
+    helper = np.zeros(3)
+    helper[int(np.argmin(np.abs(n)))] = 1.0
+    t1 = cross3(helper, n)
+    t1 = t1 / np.sqrt(np.add.reduce(t1 * t1))
+    return t1, cross3(n, t1)
 
 
 def lsq_plane(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -146,6 +150,43 @@ def nearest(points: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.nda
     return dist[:, 0], idx[:, 0]
 
 
+def _merge_orphans(surface: PaintSurface, ks: np.ndarray, rr: np.ndarray, cw: np.ndarray, vw: np.ndarray,
+                   dc: np.ndarray, vd: np.ndarray, props: dict[str, np.ndarray]) -> None:
+    """Add the paint of surface rows ``rr`` (surfels that own no pixel) to the pixel state at
+    distinct pixels ``ks`` (in place): volumes summed, colours and paint attributes mixed by volume."""
+    a = vw[ks] + vd[ks]
+    b = surface.vw[rr] + surface.vd[rr]
+    t = a + b
+    m = t > 0
+    for f in _PROPS:
+        props[f][ks[m]] = (a[m] * props[f][ks[m]] + b[m] * surface.__getattr__(f)[rr[m]]) / t[m]
+    a, b = vw[ks], surface.vw[rr]
+    t = a + b
+    m = t > 0
+    cw[ks[m]] = (a[m, None] * cw[ks[m]] + b[m, None] * surface.wet[rr[m]]) / t[m, None]
+    vw[ks] = t
+    a, b = vd[ks], surface.vd[rr]
+    t = a + b
+    m = t > 0
+    dc[ks[m]] = (a[m, None] * dc[ks[m]] + b[m, None] * surface.dry[rr[m]]) / t[m, None]
+    vd[ks] = t
+
+
+def merge_orphans(surface: PaintSurface, ks: np.ndarray, rr: np.ndarray, cw: np.ndarray, vw: np.ndarray,
+                  dc: np.ndarray, vd: np.ndarray, props: dict[str, np.ndarray]) -> None:
+    """Merge surface rows ``rr`` (K,) into the pixel state at pixels ``ks`` (K,), in order (a
+    pixel may take several): the result of merging them one after the other, computed in rounds
+    of distinct pixels (round r merges the r-th row of every pixel)."""
+    order = np.argsort(ks, kind="stable")
+    sk = ks[order]
+    first = np.flatnonzero(np.r_[True, sk[1:] != sk[:-1]])
+    occ = np.empty(len(ks), np.int64)
+    occ[order] = np.arange(len(ks)) - np.repeat(first, np.diff(np.r_[first, len(ks)]))
+    for r in range(int(occ.max()) + 1 if len(ks) else 0):
+        j = np.flatnonzero(occ == r)
+        _merge_orphans(surface, ks[j], rr[j], cw, vw, dc, vd, props)
+
+
 def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
                 direction: np.ndarray, tip: np.ndarray | None = None, body: np.ndarray | None = None,
                 km: bool = False) -> TransferResult:
@@ -191,15 +232,19 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     off, ind = tree.radius_neighbors(o[None], ext * 1.5)
     fathers = ind[off[0]:off[1]]
     rows = surface.rows_of(fathers)
-    rel = surface.pos[rows] - o
+    pos_r = surface.pos[rows]
+    nrm_r = surface.nrm[rows]
+    rel = pos_r - o
     rh = rel @ N
-    ok = (surface.nrm[rows] @ N > 0.2) & (np.abs(rh) < reach)
+    ok = (nrm_r @ N > 0.2) & (np.abs(rh) < reach)
     rows = rows[ok]
     if len(rows) == 0:
         return empty
+    # the gathered rows' fields, fetched once (the values of surface.<field>[rows])
+    pos_r, nrm_r, rad_r = pos_r[ok], nrm_r[ok], surface.rad[rows]
     ou = np.stack([rel[ok] @ t1, rel[ok] @ t2], axis=1)
     # pixels about one brush surfel, but never coarser than the surface already is there
-    h = min(h, 0.7 * float(np.median(surface.rad[rows])))
+    h = min(h, 0.7 * float(np.median(rad_r)))
     # the buffer: centred on the brush footprint, margin of 3 object radii
     lo = bu.min(axis=0) - 3.0 * rmax
     hi = bu.max(axis=0) + 3.0 * rmax
@@ -212,7 +257,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     Z = 4.0 * reach + 1.0
     above = Camera(centre + N * Z, centre, up=t2, width=W, height=H, ortho=H * h)
     below = Camera(centre - N * Z, centre, up=t2, width=W, height=H, ortho=H * h)
-    ho, cov_o = _height_map(above, surface.pos[rows], surface.nrm[rows], surface.rad[rows], Z)
+    ho, cov_o = _height_map(above, pos_r, nrm_r, rad_r, Z)
     hb, cov_b = _height_map(below, bpos[sel], bnrm[sel], np.full(len(sel), brush.sk.spacing), Z, _SPLAT_BRUSH)
     hb = -hb  # heights along +N of the brush's lowest surface
     if np.dot(below.right, above.right) < 0:
@@ -230,14 +275,18 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # ownership: nearest object surfel in the plane, within its radius
     # ownership: among the nearest object surfels, the one covering the pixel best (smallest
     # distance / radius), so cells of small children and large originals tile what they cover
-    own, ratio = owners(ou, surface.rad[rows], pix, min(8, len(rows)))
+    own, ratio = owners(ou, rad_r, pix, min(8, len(rows)))
     covered = ratio <= 1.0
     # the object's height: splatted, or (where the clipped kernels leave a pixel centre
-    # uncovered, e.g. at a corner of touching splats) the owner's plane
-    on = surface.nrm[rows][own]
-    foot = o + pix[:, :1] * t1 + pix[:, 1:] * t2
-    ho_plane = np.einsum("ij,ij->i", on, surface.pos[rows][own] - foot) / np.maximum(on @ N, 0.2)
-    ho = np.where(cov_o.ravel(), ho.ravel(), ho_plane)
+    # uncovered, e.g. at a corner of touching splats) the owner's plane (row-wise arithmetic:
+    # computed for those pixels only)
+    ho = ho.ravel()
+    unc = np.flatnonzero(~cov_o.ravel())
+    if len(unc):
+        on = nrm_r[own[unc]]
+        pu_ = pix[unc]
+        foot = o + pu_[:, :1] * t1 + pu_[:, 1:] * t2
+        ho[unc] = np.einsum("ij,ij->i", on, pos_r[own[unc]] - foot) / np.maximum(on @ N, 0.2)
     # penetration and brush ownership
     depth = ho - hb.ravel()
     pen = covered & cov_b.ravel() & (depth > 0)
@@ -252,8 +301,9 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     if not pen.any():
         return empty
     # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer
-    inner = (ou[:, 0] - 1.5 * surface.rad[rows] > lo[0]) & (ou[:, 0] + 1.5 * surface.rad[rows] < lo[0] + W * h)
-    inner &= (ou[:, 1] - 1.5 * surface.rad[rows] > lo[1]) & (ou[:, 1] + 1.5 * surface.rad[rows] < lo[1] + H * h)
+    r15 = 1.5 * rad_r
+    inner = (ou[:, 0] - r15 > lo[0]) & (ou[:, 0] + r15 < lo[0] + W * h)
+    inner &= (ou[:, 1] - r15 > lo[1]) & (ou[:, 1] + r15 < lo[1] + H * h)
     # ... and surfels whose centre lies on a penetrated pixel but own no pixel (denser than the
     # buffer): their paint goes to the pixel under their centre
     ci = np.floor((ou[:, 0] - lo[0]) / h).astype(np.int64)
@@ -278,27 +328,15 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     vw = surface.vw[rq] * share
     vd = surface.vd[rq] * share
     dc = surface.dry[rq].copy()
-    props = {f: surface.__getattr__(f)[rq].copy() for f in _PROPS}
+    props = {f: surface.__getattr__(f)[rq] for f in _PROPS}  # fancy indexing copies
     orphans = rep_local[npix[rep_local] == 0]
     if len(orphans):
         qpos = np.full(W * H, -1, np.int64)
         qpos[Q] = np.arange(len(Q))
-        for r in orphans.tolist():
-            k = qpos[cpix[r]]
-            if k < 0:  # its pixel is not part of the resampled region: keep it
-                is_rep[r] = False
-                continue
-            row = rows[r]
-            a, b = vw[k] + vd[k], surface.vw[row] + surface.vd[row]
-            if a + b > 0:
-                for f in _PROPS:
-                    props[f][k] = (a * props[f][k] + b * surface.__getattr__(f)[row]) / (a + b)
-            a, b = vw[k], surface.vw[row]
-            cw[k] = (a * cw[k] + b * surface.wet[row]) / (a + b) if a + b > 0 else cw[k]
-            vw[k] = a + b
-            a, b = vd[k], surface.vd[row]
-            dc[k] = (a * dc[k] + b * surface.dry[row]) / (a + b) if a + b > 0 else dc[k]
-            vd[k] = a + b
+        ks = qpos[cpix[orphans]]
+        is_rep[orphans[ks < 0]] = False  # its pixel is not part of the resampled region: keep it
+        orphans, ks = orphans[ks >= 0], ks[ks >= 0]
+        merge_orphans(surface, ks, rows[orphans], cw, vw, dc, vd, props)
         rep_local = np.flatnonzero(is_rep)
     # brush pixel state on penetrated pixels
     bq = bown[Q][P]
@@ -350,7 +388,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         thick = (vw[P] + vd[P]) / area[P]
         dirn = direction - np.dot(direction, N) * N
         ln = np.linalg.norm(dirn)
-        across = np.cross(N, dirn / ln) if ln > 1e-12 else t1
+        across = cross3(N, dirn / ln) if ln > 1e-12 else t1
         coord = (pu[P] @ np.array([across @ t1, across @ t2]))
         lam = HAIR_WAVELENGTH * brush.sk.spacing
         phase = 2 * np.pi * coord / lam
@@ -370,7 +408,20 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         nn = np.cos(a)[:, None] * fnr[P] + np.sin(a)[:, None] * tilt_dir
         nrm[P] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
     cpos = cpos + lift[:, None] * fnr
-    fat = surface.father[rq]
+    # each child is attached to its closest original (5.3), in the buffer's plane, among the
+    # originals around the buffer that face it and are replaced (disabled, or by this event: a
+    # visible original never has children); the owner's father is one of them. (A child that
+    # inherited its owner's father drifted from it over repeated repaints, and downsampling then
+    # grew the father to cover far children.)
+    replaced = rows[rep_local]
+    hidden = ~surface.active[fathers] | np.isin(fathers, replaced[replaced < no])
+    fcand = fathers[hidden & (onrm[fathers] @ N > 0.2)]
+    if len(fcand):
+        rel_f = opos[fcand] - o
+        _, nf = nearest(np.stack([rel_f @ t1, rel_f @ t2], axis=1), pu)
+        fat = fcand[nf]
+    else:
+        fat = surface.father[rq]
     rad = CHILD_RADIUS * h / cosn
     new = {
         "pos": cpos, "nrm": nrm, "rad": rad, "father": fat, "active": np.ones(len(Q), bool),
@@ -378,7 +429,6 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         "vw": vw, "vd": vd, "area": area, "rho": rho, "kappa": kap, "diff": dif,
         "refl": refl, "shin": shin, "metal": met, "lift": lift, "updates": surface.updates[rq] + 1,
     }
-    replaced = rows[rep_local]
     surface.delete(replaced)
     added = surface.append(new)
     return TransferResult(replaced, added, int(P.sum()))
