@@ -65,7 +65,7 @@ def _camera_vector(frame, v):
             frame[2, 0] * v[0] + frame[2, 1] * v[1] + frame[2, 2] * v[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H, rfilter):
     """Pixel box of a surfel (inclusive ranges; ``x0 > x1`` when invisible).
 
@@ -126,6 +126,20 @@ def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, ne
 def _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
                   rfilter, P, box, group):
     """Row ``i`` of :func:`splat_setup`: parameters ``P[i]``, pixel box ``box[i]`` and ``group[i]``."""
+    x0, x1, y0, y1, g = _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near,
+                                   W, H, rfilter, P, i)
+    box[i, 0] = x0
+    box[i, 1] = x1
+    box[i, 2] = y0
+    box[i, 3] = y1
+    group[i] = g
+
+
+@njit(cache=True, inline="always")
+def _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
+               rfilter, P, j):
+    """The parameters of surfel ``i`` written to ``P[j]``; returns its pixel box ``x0, x1, y0, y1``
+    (inclusive, ``x0 > x1`` or ``y0 > y1`` when invisible) and its group (0 facing the camera)."""
     c0, c1, c2 = _camera_point(frame, eye, pos[i])
     n0, n1, n2 = _camera_vector(frame, nrm[i])
     if elliptical:
@@ -175,29 +189,29 @@ def _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, c
         b22 = (g00 * a12 - g01 * a02) * idet
     elif elliptical:
         b10 = b11 = b12 = b20 = b21 = b22 = 0.0
-    P[i, 0] = c2
-    P[i, 1] = n0
-    P[i, 2] = n1
-    P[i, 3] = n2
-    P[i, 4] = c0 * n0 + c1 * n1 + c2 * n2
-    P[i, 5] = b10
-    P[i, 6] = b11
-    P[i, 7] = b12
-    P[i, 8] = b20
-    P[i, 9] = b21
-    P[i, 10] = b22
-    P[i, 11] = c0 * b10 + c1 * b11 + c2 * b12 if valid else np.inf
-    P[i, 12] = c0 * b20 + c1 * b21 + c2 * b22 if valid else np.inf
+    P[j, 0] = c2
+    P[j, 1] = n0
+    P[j, 2] = n1
+    P[j, 3] = n2
+    P[j, 4] = c0 * n0 + c1 * n1 + c2 * n2
+    P[j, 5] = b10
+    P[j, 6] = b11
+    P[j, 7] = b12
+    P[j, 8] = b20
+    P[j, 9] = b21
+    P[j, 10] = b22
+    P[j, 11] = c0 * b10 + c1 * b11 + c2 * b12 if valid else np.inf
+    P[j, 12] = c0 * b20 + c1 * b21 + c2 * b22 if valid else np.inf
     if ortho:
-        P[i, 13] = cx + f * c0
-        P[i, 14] = cy - f * c1
+        P[j, 13] = cx + f * c0
+        P[j, 14] = cy - f * c1
     elif c2 > near:
-        P[i, 13] = cx + f * c0 / c2
-        P[i, 14] = cy - f * c1 / c2
+        P[j, 13] = cx + f * c0 / c2
+        P[j, 14] = cy - f * c1 / c2
     else:
-        P[i, 13] = np.nan
-        P[i, 14] = np.nan
-    P[i, 15] = r
+        P[j, 13] = np.nan
+        P[j, 14] = np.nan
+    P[j, 15] = r
     # depth range of the fragments: the ellipse itself (r) plus the screen filter footprint
     # (rfilter pixels in world units at the centre depth) on the tilted plane
     if ortho:
@@ -209,23 +223,19 @@ def _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, c
         cos = abs(c0 * n0 + c1 * n1 + c2 * n2) / cl if cl > 0.0 else 1.0
     sin = math.sqrt(max(1.0 - cos * cos, 0.0))
     if sin > EDGE_ON_TAN * cos:
-        P[i, 23] = -(r + fw * EDGE_ON_TAN)
+        P[j, 23] = -(r + fw * EDGE_ON_TAN)
     else:
-        P[i, 23] = r + fw * sin / cos
-    for j in range(3):
-        P[i, 16 + j] = colors[i, j]
+        P[j, 23] = r + fw * sin / cos
+    for k in range(3):
+        P[j, 16 + k] = colors[i, k]
     x0, x1, y0, y1 = _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H,
                                 rfilter)
-    box[i, 0] = x0
-    box[i, 1] = x1
-    box[i, 2] = y0
-    box[i, 3] = y1
-    P[i, 19] = x0
-    P[i, 20] = x1
-    P[i, 21] = y0
-    P[i, 22] = y1
+    P[j, 19] = x0
+    P[j, 20] = x1
+    P[j, 21] = y0
+    P[j, 22] = y1
     facing = n2 if ortho else c0 * n0 + c1 * n1 + c2 * n2
-    group[i] = 0 if facing <= 0.0 else 1
+    return x0, x1, y0, y1, 0 if facing <= 0.0 else 1
 
 
 @njit(cache=True, parallel=True)
@@ -700,7 +710,7 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
     return not anymode
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _accumulate(q, k, w, z, Pt, lw, lc, ln, ld, lcount):
     """Add one fragment of pair ``k`` with weight ``w`` and depth ``z`` to tile pixel ``q``."""
     lw[q] += w
@@ -719,7 +729,7 @@ def _accumulate(q, k, w, z, Pt, lw, lc, ln, ld, lcount):
 SPAN_MARGIN = 0.01
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interval(lo, hi, bx0, bx1):
     """Pixel indices ``[ceil(lo), floor(hi)]`` clamped to ``[bx0, bx1]`` (empty: first > last)."""
     lo = max(lo, bx0 - 1.0)
@@ -729,7 +739,7 @@ def _interval(lo, hi, bx0, bx1):
     return max(math.ceil(lo), bx0), min(math.floor(hi), bx1)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _row_span(qa, iqa, qb, qc, f, cx, lo, hi, bx0, bx1):
     """The pixels of one row that may hold a fragment: a superset of ``rho < 1``.
 
