@@ -26,7 +26,7 @@ import numpy as np
 
 from unmesh._validate import as_array, scalar
 from unmesh.errors import InputError
-from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, shade_pixels
+from unmesh.render._kernels import SERIAL_BELOW, clear_background, serial_if_small, shade_pixels
 from unmesh.render.camera import Camera
 
 __all__ = ["DEFAULT_LIGHTS", "GBuffer", "Light", "RenderResult", "Shading", "as_shading", "background_color", "shade"]
@@ -258,10 +258,15 @@ class RenderResult:
         """
         cov = gbuffer.coverage
         if not copy:
-            bg = ~cov
-            np.copyto(gbuffer.depth, np.inf, where=bg)
-            np.copyto(gbuffer.normal, 0.0, where=bg[..., None])
-            np.copyto(gbuffer.weight, 0.0, where=bg)
+            arrays = (cov, gbuffer.depth, gbuffer.normal, gbuffer.weight)
+            if all(a.flags.c_contiguous for a in arrays):
+                with serial_if_small(cov.size, 4 * SERIAL_BELOW):
+                    clear_background(*arrays)
+            else:
+                bg = ~cov
+                np.copyto(gbuffer.depth, np.inf, where=bg)
+                np.copyto(gbuffer.normal, 0.0, where=bg[..., None])
+                np.copyto(gbuffer.weight, 0.0, where=bg)
             return cls(color=color, depth=gbuffer.depth, normal=gbuffer.normal, coverage=cov, weight=gbuffer.weight,
                        albedo=gbuffer.albedo, camera=camera, color_range=color_range)
         return cls(color=color, depth=np.where(cov, gbuffer.depth, np.inf), normal=np.where(cov[..., None], gbuffer.normal, 0.0),
