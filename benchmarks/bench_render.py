@@ -11,10 +11,10 @@ kernels and the median of several calls:
   radius) with a depth test, nothing else; measured on the same surfels in the same run, with
   the ratio ``render() / fill-only`` (goal <= 3x; ``render()`` goal <= 0.2 s on 2 cores);
 * the stage split of ``render()`` (full updates without clipping take the band path,
-  :mod:`unmesh.render._band_kernels`): binning (counting the surfels of each row band,
-  :func:`~unmesh.render._band_kernels.band_count`), set-up (the surfel parameters written in band
-  order, :func:`~unmesh.render._band_kernels.band_setup`), the band kernel (visibility and
-  accumulation, :func:`~unmesh.render._band_kernels.splat_bands`), normalisation, shading, buffer
+  :mod:`unmesh.render._block_kernels`): binning (counting the surfels of each row band,
+  :func:`~unmesh.render._block_kernels.block_count`), set-up (the surfel parameters written in band
+  order, :func:`~unmesh.render._block_kernels.block_setup`), the band kernel (visibility and
+  accumulation, :func:`~unmesh.render._block_kernels.splat_blocks`), normalisation, shading, buffer
   allocation and copies, and the pipeline overhead (the rest of ``render()``);
 * the band kernel next to the fill-only tile kernel
   (:func:`~unmesh.render._splat_kernels.fill_tiles`, the pixels of the same surfels' boxes
@@ -98,11 +98,11 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
     import numba
 
     from unmesh.render import Camera, SplatRenderer, render, shade
-    from unmesh.render._band_kernels import band_count, band_setup, splat_bands
+    from unmesh.render._block_kernels import block_count, block_setup, splat_blocks
     from unmesh.render._kernels import tile_order
     from unmesh.render._splat_kernels import NPARAM, fill_tiles, gather_rows, splat_resolve, splat_setup_bin
     from unmesh.render.shading import GBuffer, RenderResult
-    from unmesh.render.splat import BAND_SHIFT
+    from unmesh.render.splat import BLOCK_SHIFT
 
     cloud, h = fibonacci_sphere(n, k)
     cam = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), width=size, height=size, ortho=2.5)
@@ -134,17 +134,17 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
     opt = renderer.options
     axes = np.zeros((1, 2, 3))
     geometry = (cloud.positions, cloud.normals, cloud.radii, axes, False)
-    view = (frame, cam.eye, f, cx, cy, ortho, near, size, size, opt.filter_radius, BAND_SHIFT)
+    view = (frame, cam.eye, f, cx, cy, ortho, near, size, size, opt.filter_radius, *BLOCK_SHIFT)
 
     def count():
-        return band_count(*geometry, *view, 8)
+        return block_count(*geometry, *view, 8)
 
     offsets, starts, total = count()
     rows = np.empty((total, NPARAM), dtype=renderer.param_dtype)
     items = np.empty(total, dtype=np.int32)
 
     def setup():
-        return band_setup(*geometry, cloud.colors, *view, starts, rows, items)
+        return block_setup(*geometry, cloud.colors, *view, starts, rows, items)
 
     frag_offsets = setup()
     m = int(frag_offsets[-1])
@@ -153,7 +153,7 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
 
     def bands():
         renderer.clear()
-        splat_bands(rows, items, offsets, border, size, size, f, cx, cy, ortho, near, opt.filter_radius, opt.kappa,
+        splat_blocks(rows, items, offsets, border, size, size, f, cx, cy, ortho, near, opt.filter_radius, opt.kappa,
                     opt.depth_tolerance, cam.eye, frame, renderer.zvis.reshape(-1), renderer.sum_weight.reshape(-1),
                     renderer.sum_color.reshape(-1, 3), renderer.sum_normal.reshape(-1, 3),
                     renderer.sum_depth.reshape(-1), renderer.count.reshape(-1), frag_offsets, *frags)
