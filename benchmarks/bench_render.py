@@ -10,15 +10,13 @@ kernels and the median of several calls:
   surfel, fill its footprint (the disc of the projected radius, at least the screen-filter
   radius) with a depth test, nothing else; measured on the same surfels in the same run, with
   the ratio ``render() / fill-only`` (goal <= 3x; ``render()`` goal <= 0.2 s on 2 cores);
-* the stage split of ``render()`` (full updates without clipping take the band path,
-  :mod:`unmesh.render._block_kernels`): binning (counting the surfels of each row band,
-  :func:`~unmesh.render._block_kernels.block_count`), set-up (the surfel parameters written in band
-  order, :func:`~unmesh.render._block_kernels.block_setup`), the band kernel (visibility and
-  accumulation, :func:`~unmesh.render._block_kernels.splat_blocks`), normalisation, shading, buffer
+* the stage split of ``render()``: set-up, binning (fused with the set-up in one pass,
+  :func:`~unmesh.render._splat_kernels.splat_setup_bin`; binning = fused pass minus set-up
+  alone), per-tile gathering of the parameter rows, tile kernel, normalisation, shading, buffer
   allocation and copies, and the pipeline overhead (the rest of ``render()``);
-* the band kernel next to the fill-only tile kernel
-  (:func:`~unmesh.render._splat_kernels.fill_tiles`, the pixels of the same surfels' boxes
-  without EWA arithmetic) and the single-thread CPU time of ``render()``, which is robust
+* the tile kernel next to the fill-only tile kernel
+  (:func:`~unmesh.render._splat_kernels.fill_tiles`, the same pixels of the same (surfel, tile)
+  pairs without EWA arithmetic) and the single-thread CPU time of ``render()``, which is robust
   to load on a shared machine (wall-clock times of parallel regions include waiting for
   descheduled threads; compare fractions there, not absolute times).
 
@@ -98,11 +96,17 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
     import numba
 
     from unmesh.render import Camera, SplatRenderer, render, shade
-    from unmesh.render._block_kernels import block_count, block_setup, splat_blocks
     from unmesh.render._kernels import tile_order
-    from unmesh.render._splat_kernels import NPARAM, fill_tiles, gather_rows, splat_resolve, splat_setup_bin
+    from unmesh.render._splat_kernels import (
+        NPARAM,
+        fill_tiles,
+        gather_rows,
+        splat_resolve,
+        splat_setup,
+        splat_setup_bin,
+        splat_tiles,
+    )
     from unmesh.render.shading import GBuffer, RenderResult
-    from unmesh.render.splat import BLOCK_SHIFT
 
     cloud, h = fibonacci_sphere(n, k)
     cam = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), width=size, height=size, ortho=2.5)
@@ -132,45 +136,34 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
     # stage split, with the kernels render() calls and its arguments
     renderer = SplatRenderer(cam)
     opt = renderer.options
+    tile = opt.tile
+    ntx = nty = (size + tile - 1) // tile
+    order = tile_order(ntx * nty)
+    P = np.empty((n, NPARAM), dtype=renderer.param_dtype)
+    box = np.empty((n, 4), dtype=np.int32)
+    group = np.empty(n, dtype=np.int8)
     axes = np.zeros((1, 2, 3))
-    geometry = (cloud.positions, cloud.normals, cloud.radii, axes, False)
-    view = (frame, cam.eye, f, cx, cy, ortho, near, size, size, opt.filter_radius, *BLOCK_SHIFT)
+    args = (cloud.positions, cloud.normals, cloud.radii, axes, False, cloud.colors, frame, cam.eye, f, cx, cy,
+            ortho, near, size, size, opt.filter_radius, P, box, group)
 
-    def count():
-        return block_count(*geometry, *view, 8)
+    def setup_bin():
+        return splat_setup_bin(*args, tile, ntx, nty, 8)
 
-    offsets, starts, total = count()
-    rows = np.empty((total, NPARAM), dtype=renderer.param_dtype)
-    items = np.empty(total, dtype=np.int32)
+    offsets, items, _ = setup_bin()
+    pt = np.empty((len(items), NPARAM), dtype=renderer.param_dtype)
+    gather_rows(P, items, pt)
+    coff, cpl, cmode = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8)
 
-    def setup():
-        return block_setup(*geometry, cloud.colors, *view, starts, rows, items)
-
-    frag_offsets = setup()
-    m = int(frag_offsets[-1])
-    frags = (np.empty(m, np.int32), np.empty(m, np.int64), np.empty(m), np.empty(m))
-    border = tile_order(len(offsets) - 1)
-
-    def bands():
+    def tiles():
         renderer.clear()
-        splat_blocks(rows, items, offsets, border, size, size, f, cx, cy, ortho, near, opt.filter_radius, opt.kappa,
-                    opt.depth_tolerance, cam.eye, frame, renderer.zvis.reshape(-1), renderer.sum_weight.reshape(-1),
-                    renderer.sum_color.reshape(-1, 3), renderer.sum_normal.reshape(-1, 3),
-                    renderer.sum_depth.reshape(-1), renderer.count.reshape(-1), frag_offsets, *frags)
+        splat_tiles(pt, items, offsets, order, tile, size, size, f, cx, cy, ortho, near, opt.filter_radius,
+                    opt.kappa, opt.depth_tolerance, False, cam.eye, frame, coff, cpl, cmode, None, None, True, 1.0,
+                    renderer.zvis, renderer.sum_weight, renderer.sum_color, renderer.sum_normal, renderer.sum_depth,
+                    renderer.count)
 
     def clear_only():
         renderer.clear()
 
-    # the fill-only tile kernel on the (surfel, tile) pairs of the same boxes
-    tile = opt.tile
-    ntx = (size + tile - 1) // tile
-    order = tile_order(ntx * ntx)
-    P = np.empty((n, NPARAM), dtype=renderer.param_dtype)
-    tile_offsets, tile_items, _ = splat_setup_bin(*geometry, cloud.colors, frame, cam.eye, f, cx, cy, ortho, near,
-                                                  size, size, opt.filter_radius, P, np.empty((n, 4), np.int32),
-                                                  np.empty(n, np.int8), tile, ntx, ntx, 8)
-    pt = np.empty((len(tile_items), NPARAM), dtype=renderer.param_dtype)
-    gather_rows(P, tile_items, pt)
     fill_out = np.zeros((size, size))
     g = GBuffer.empty(size, size)
 
@@ -184,21 +177,23 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
         gb.depth.copy()
         RenderResult.from_gbuffer(gb, cam, np.empty((size, size, 3)), copy=False)
 
-    bands()
+    tiles()
     resolve()
-    fill_tiles(pt, tile_offsets, order, tile, size, size, fill_out)
+    fill_tiles(pt, offsets, order, tile, size, size, fill_out)
     s = {
         "render": t_render,
         "fill_only": t_fill,
-        "binning": median_time(count, repeat),
-        "setup": median_time(setup, repeat),
-        "bands": median_time(bands, repeat) - median_time(clear_only, repeat),
-        "fill_tiles": median_time(lambda: fill_tiles(pt, tile_offsets, order, tile, size, size, fill_out), repeat),
+        "setup": median_time(lambda: splat_setup(*args), repeat),
+        "setup_bin": median_time(setup_bin, repeat),
+        "gather": median_time(lambda: gather_rows(P, items, pt), repeat),
+        "tiles": median_time(tiles, repeat) - median_time(clear_only, repeat),
+        "fill_tiles": median_time(lambda: fill_tiles(pt, offsets, order, tile, size, size, fill_out), repeat),
         "resolve": median_time(resolve, repeat),
         "shade": median_time(lambda: shade(res.gbuffer(), cam), repeat),
         "buffers": median_time(buffers, repeat),
     }
-    s["pipeline"] = t_render - (s["binning"] + s["setup"] + s["bands"] + s["resolve"] + s["shade"] + s["buffers"])
+    s["binning"] = max(s["setup_bin"] - s["setup"], 0.0)
+    s["pipeline"] = t_render - (s["setup_bin"] + s["gather"] + s["tiles"] + s["resolve"] + s["shade"] + s["buffers"])
     before = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
@@ -207,7 +202,7 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
         s["fill_only_cpu"] = median_time(fill, repeat, time.process_time)
     finally:
         numba.set_num_threads(before)
-    s["pairs"] = float(total)
+    s["pairs"] = float(len(items))
     s["covered"] = float(res.coverage.sum())
     s["radius_px"] = k * h * f
     return s
@@ -245,13 +240,13 @@ def main() -> None:
         ms = {key: 1e3 * v for key, v in s.items()}
         print(f"\nradii {k:.1f} x spacing ({s['radius_px']:.2f} px): render() {s['render']:.3f} s   fill-only "
               f"{s['fill_only']:.3f} s   ratio {s['render'] / s['fill_only']:.2f}x")
-        stages = [("binning", "binning"), ("set-up", "setup"), ("band kernel", "bands"),
+        stages = [("set-up", "setup"), ("binning", "binning"), ("gathering", "gather"), ("tile kernel", "tiles"),
                   ("normalisation", "resolve"), ("shading", "shade"), ("buffers/copies", "buffers"),
                   ("pipeline", "pipeline")]
         print("  stages of render() (median ms, % of render()):")
         print("   " + "   ".join(f"{label} {ms[key]:.1f} ({100 * s[key] / s['render']:.0f}%)" for label, key in stages))
-        print(f"  band kernel {ms['bands']:.1f} ms vs fill-only tiles {ms['fill_tiles']:.1f} ms "
-              f"({s['bands'] / s['fill_tiles']:.2f}x)   (surfel, band) rows {int(s['pairs'])}   "
+        print(f"  tile kernel {ms['tiles']:.1f} ms vs fill-only tiles {ms['fill_tiles']:.1f} ms "
+              f"({s['tiles'] / s['fill_tiles']:.2f}x)   (surfel, tile) pairs {int(s['pairs'])}   "
               f"covered pixels {int(s['covered'])}")
         print(f"  single-thread CPU time: render() {s['render_cpu1']:.3f} s   fill-only {s['fill_only_cpu']:.3f} s   "
               f"ratio {s['render_cpu1'] / s['fill_only_cpu']:.2f}x")

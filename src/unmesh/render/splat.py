@@ -47,7 +47,6 @@ import numpy as np
 
 from unmesh._validate import as_array, as_indices, scalar
 from unmesh.errors import InputError
-from unmesh.render._block_kernels import block_count, block_setup, splat_blocks
 from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, tile_order
 from unmesh.render._splat_kernels import NPARAM, gather_rows, splat_resolve, splat_setup_bin, splat_tiles
 from unmesh.render.camera import Camera
@@ -66,11 +65,6 @@ _SCRATCH = threading.local()
 #: Placeholder of the clip mode when splatting with a :class:`ClipTree` (without one the tree
 #: arguments of the kernels are None, which compiles the plain kernels without the tree code).
 _NO_MODE = np.zeros(1, dtype=np.int8)
-#: log2 of the height and width (pixels) of the screen blocks of a full update without clipping
-#: (a thread owns a block).
-BLOCK_SHIFT = (5, 5)
-#: Full updates without clipping take the block path (False: the tiled path, for comparisons).
-_USE_BLOCKS = True
 
 
 @dataclass(frozen=True)
@@ -517,11 +511,6 @@ class SplatRenderer:
         rf = opt.filter_radius
         elliptical = arrays.axes is not None
         axes = arrays.axes if elliptical else np.zeros((1, 2, 3))
-        if _USE_BLOCKS and visibility and clip is None and sign > 0 and all(
-                a.flags.c_contiguous for a in (self.zvis, self.sum_weight, self.sum_color, self.sum_normal,
-                                               self.sum_depth, self.count)):
-            self._run_blocks(arrays, axes, elliptical)
-            return
         params = self._scratch("params", (n, NPARAM), self.param_dtype)
         box = self._scratch("box", (n, 4), np.int32)
         group = self._scratch("group", (n,), np.int8)
@@ -547,31 +536,6 @@ class SplatRenderer:
                         opt.kappa, opt.depth_tolerance, has_clip, cam.eye, frame, coff, cpl, cmode, ctree, cleaf, visibility,
                         float(sign), self.zvis, self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth,
                         self.count)
-
-    def _run_blocks(self, arrays: SurfelArrays, axes: np.ndarray, elliptical: bool) -> None:
-        """Full update without clipping by screen blocks (:mod:`unmesh.render._block_kernels`):
-        the same fragments and sums as the tiled path, without its gather and tile buffers."""
-        cam = self.camera
-        opt = self.options
-        f, cx, cy, ortho, near = cam.kernel_params()
-        h, w = cam.shape
-        rf = opt.filter_radius
-        n = len(arrays)
-        geometry = (arrays.positions, arrays.normals, arrays.radii, axes, elliptical)
-        view = (cam.rotation, cam.eye, f, cx, cy, ortho, near, w, h, rf, *BLOCK_SHIFT)
-        with serial_if_small(n):
-            offsets, starts, total = block_count(*geometry, *view, 8)
-            rows = self._scratch("pairs", (int(total), NPARAM), self.param_dtype)
-            items = self._scratch("items", (int(total),), np.int32)
-            frag_offsets = block_setup(*geometry, arrays.colors, *view, starts, rows, items)
-        m = int(frag_offsets[-1])
-        frags = (self._scratch("frag_q", (m,), np.int32), self._scratch("frag_k", (m,), np.int64),
-                 self._scratch("frag_rho", (m,), np.float64), self._scratch("frag_z", (m,), np.float64))
-        with serial_if_small(int(total), SERIAL_BELOW // 4):
-            splat_blocks(rows, items, offsets, tile_order(len(offsets) - 1), w, h, f, cx, cy, ortho, near, rf,
-                        opt.kappa, opt.depth_tolerance, cam.eye, cam.rotation, self.zvis.reshape(-1),
-                        self.sum_weight.reshape(-1), self.sum_color.reshape(-1, 3), self.sum_normal.reshape(-1, 3),
-                        self.sum_depth.reshape(-1), self.count.reshape(-1), frag_offsets, *frags)
 
     @staticmethod
     def _scratch(name: str, shape: tuple[int, ...], dtype: Any) -> np.ndarray:
