@@ -274,21 +274,10 @@ def splat_setup_bin(pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx
     counts = np.zeros((nchunks, nslot), dtype=np.int64)
     cvisits = np.zeros(nchunks, dtype=np.int64)
     step = (n + nchunks - 1) // nchunks
-    for c in prange(nchunks):
+    for c in prange(nchunks):  # a thin parallel loop over a plain function (the set-up inlined there)
         lo = c * step
-        hi = min(n, lo + step)
-        v = 0
-        for i in range(lo, hi):
-            _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
-                          rfilter, P, box, group)
-            if box[i, 0] > box[i, 1] or box[i, 2] > box[i, 3]:
-                continue
-            v += np.int64(box[i, 1] - box[i, 0] + 1) * (box[i, 3] - box[i, 2] + 1)
-            g = group[i]
-            for ty in range(box[i, 2] // tile, box[i, 3] // tile + 1):
-                for tx in range(box[i, 0] // tile, box[i, 1] // tile + 1):
-                    counts[c, (ty * ntx + tx) * 2 + g] += 1
-        cvisits[c] = v
+        cvisits[c] = _setup_count(lo, min(n, lo + step), pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx,
+                                  cy, ortho, near, W, H, rfilter, P, box, group, tile, ntx, counts[c])
     offsets = np.zeros(ntiles + 1, dtype=np.int64)
     starts = np.zeros((nchunks, nslot), dtype=np.int64)
     total = 0
@@ -313,6 +302,29 @@ def splat_setup_bin(pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx
                     items[starts[c, q]] = i
                     starts[c, q] += 1
     return offsets, items, cvisits.sum()
+
+
+@njit(cache=True)
+def _setup_count(lo, hi, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H, rfilter,
+                 P, box, group, tile, ntx, counts):
+    """Surfels ``lo:hi`` of :func:`splat_setup_bin`: set-up, ``counts[2 * tile + group] += 1``
+    per tile met; returns the pixels of their boxes."""
+    v = 0
+    for i in range(lo, hi):
+        x0, x1, y0, y1, g = _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho,
+                                       near, W, H, rfilter, P, i)
+        box[i, 0] = x0
+        box[i, 1] = x1
+        box[i, 2] = y0
+        box[i, 3] = y1
+        group[i] = g
+        if x0 > x1 or y0 > y1:
+            continue
+        v += np.int64(x1 - x0 + 1) * (y1 - y0 + 1)
+        for ty in range(y0 // tile, y1 // tile + 1):
+            for tx in range(x0 // tile, x1 // tile + 1):
+                counts[(ty * ntx + tx) * 2 + g] += 1
+    return v
 
 
 @njit(cache=True, parallel=True)
