@@ -71,3 +71,18 @@ def test_bad_shading_arguments():
     with pytest.raises(InputError):
         background_color((2, 0, 0))
     assert background_color(0.5).tolist() == [0.5, 0.5, 0.5]
+
+
+def test_shade_into_out_equals_a_new_array(rng):
+    h, w = 9, 11
+    cam = Camera((0, 0, 3), (0, 0, 0), width=w, height=h)
+    n = rng.normal(size=(h, w, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    g = GBuffer(rng.random((h, w, 3)), n, rng.uniform(1, 4, (h, w)), rng.random((h, w)) < 0.7, np.ones((h, w)))
+    for model in ("phong", "none"):
+        out = np.empty((3, 4, 3))
+        res = shade(g, cam, model, window=(2, 5, 3, 7), out=out)
+        assert res is out
+        assert np.array_equal(out, shade(g, cam, model, window=(2, 5, 3, 7)))
+    with pytest.raises(InputError, match="out"):
+        shade(g, cam, out=np.empty((h, w, 2)))

@@ -22,7 +22,7 @@ from numba import njit, prange
 
 from unmesh._threads import SERIAL_BELOW, serial_if_small
 
-__all__ = ["SERIAL_BELOW", "bin_boxes", "box_visits", "clear_background", "load_tile", "serial_if_small", "shade_pixels", "sphere_box",
+__all__ = ["SERIAL_BELOW", "bin_boxes", "box_visits", "clear_background", "facing_rows", "load_tile", "serial_if_small", "shade_pixels", "sphere_box",
            "tile_order", "tile_rect"]
 
 # The thread policy (one thread below SERIAL_BELOW work items: launching a parallel region costs
@@ -169,6 +169,25 @@ def tile_order(ntiles: int) -> np.ndarray:
 @functools.lru_cache(maxsize=16)
 def _tile_order(ntiles: int) -> np.ndarray:
     return np.random.default_rng(20070101).permutation(ntiles).astype(np.int64)
+
+
+@njit(cache=True)
+def facing_rows(rows, pos, nrm, eye, forward, ortho):
+    """The entries ``i`` of ``rows`` (M,) int64, in order, whose normal ``nrm[i]`` faces the
+    camera: ``n . (eye - pos[i]) > 0``, or ``n . -forward > 0`` when ``ortho`` (``pos``, ``nrm``
+    (N, 3) float64; :meth:`unmesh.render.Camera.facing` without gathering the rows first)."""
+    out = np.empty(rows.shape[0], dtype=np.int64)
+    m = 0
+    for k in range(rows.shape[0]):
+        i = rows[k]
+        if ortho:
+            d = nrm[i, 0] * -forward[0] + nrm[i, 1] * -forward[1] + nrm[i, 2] * -forward[2]
+        else:
+            d = nrm[i, 0] * (eye[0] - pos[i, 0]) + nrm[i, 1] * (eye[1] - pos[i, 1]) + nrm[i, 2] * (eye[2] - pos[i, 2])
+        if d > 0.0:
+            out[m] = i
+            m += 1
+    return out[:m]
 
 
 @njit(cache=True, parallel=True)
