@@ -124,19 +124,6 @@ def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, ne
     return x0, x1, y0, y1
 
 
-@njit(cache=True)
-def _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
-                  rfilter, P, box, group):
-    """Row ``i`` of :func:`splat_setup`: parameters ``P[i]``, pixel box ``box[i]`` and ``group[i]``."""
-    x0, x1, y0, y1, g = _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near,
-                                   W, H, rfilter, P, i)
-    box[i, 0] = x0
-    box[i, 1] = x1
-    box[i, 2] = y0
-    box[i, 3] = y1
-    group[i] = g
-
-
 @njit(cache=True, inline="always")
 def _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
                rfilter, P, j):
@@ -252,9 +239,26 @@ def splat_setup(pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy
     ``group`` is 0 for surfels facing the camera, 1 otherwise (binned after the front-facing
     ones so that early depth rejection works).
     """
-    for i in prange(pos.shape[0]):
-        _setup_surfel(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
-                      rfilter, P, box, group)
+    n = pos.shape[0]
+    nchunks = 64
+    step = (n + nchunks - 1) // nchunks
+    for c in prange(nchunks):  # a thin parallel loop over a plain function (the set-up inlined there)
+        _setup_range(c * step, min(n, (c + 1) * step), pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy,
+                     ortho, near, W, H, rfilter, P, box, group)
+
+
+@njit(cache=True)
+def _setup_range(lo, hi, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H, rfilter,
+                 P, box, group):
+    """Surfels ``lo:hi`` of :func:`splat_setup`."""
+    for i in range(lo, hi):
+        x0, x1, y0, y1, g = _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho,
+                                       near, W, H, rfilter, P, i)
+        box[i, 0] = x0
+        box[i, 1] = x1
+        box[i, 2] = y0
+        box[i, 3] = y1
+        group[i] = g
 
 
 
