@@ -147,6 +147,28 @@ def test_kept_results_are_not_changed_by_later_frames(fine_plane):
     assert np.array_equal(albedo_view, before)
 
 
+def test_full_updates_reuse_free_buffers_and_keep_held_ones(fine_plane):
+    """A full update resolves into the view's last G-buffer unless a caller holds a result of it;
+    either way the image equals a fresh view's."""
+    s = Session(fine_plane, PaintOptions(haptics=False))
+    first = s.render(CAM, brush=False)
+    keep = {k: np.array(getattr(first, k)) for k in ("color", "depth", "coverage", "albedo", "normal", "weight")}
+    g_before = s._view._g
+    s.stroke(line(n=2, x0=-0.03, x1=0.03), brush=ROUND, paint=RED)
+    second = s.render(CAM.orbit(5), brush=False)  # a new camera: a full update
+    assert s.last_update == "full"
+    assert s._view._g is not g_before  # first's albedo, normal and weight are held
+    for k, v in keep.items():
+        assert np.array_equal(getattr(first, k), v), k
+    del first, second
+    g_free = s._view._g
+    again = s.render(CAM, brush=False)
+    assert s.last_update == "full" and s._view._g is g_free  # nothing held: reused
+    _, fresh = _fresh(s, CAM)
+    for k in ("color", "depth", "coverage", "albedo", "normal", "weight"):
+        assert np.array_equal(getattr(again, k), getattr(fresh, k)), k
+
+
 def test_shadow_map_against_brute_force():
     """A point is in the brush's shadow iff a brush surfel whose map cell is within 4 cells of
     the point's is above it (brute force over all pairs)."""

@@ -105,3 +105,16 @@ def test_framing_empty_bounds_and_orbit_and_zoom():
     assert z.pixels_per_unit == pytest.approx(4 * c.pixels_per_unit)
     zo = Camera((0, 0, 5), (0, 0, 0), width=32, height=32, ortho=2.0).zoomed(8)
     assert zo.ortho == pytest.approx(0.25)
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_facing_rows_kernel_equals_facing_mask(ortho):
+    from unmesh.render._kernels import facing_rows
+
+    rng = np.random.default_rng(3)
+    cam = Camera((0.5, 1.0, 3.0), (0, 0, 0), width=8, height=8, ortho=2.0 if ortho else None)
+    pos = rng.normal(size=(500, 3))
+    nrm = rng.normal(size=(500, 3))
+    rows = np.sort(rng.choice(500, 300, replace=False)).astype(np.int64)
+    got = facing_rows(rows, pos, nrm, np.asarray(cam.eye, float), np.asarray(cam.forward, float), ortho)
+    assert np.array_equal(got, rows[cam.facing(pos[rows], nrm[rows])])

@@ -377,3 +377,32 @@ def test_work_buffers_do_not_grow_when_precisions_alternate():
             r.render(cloud)
         sizes.append(sum(b.nbytes for b in splat_module._SCRATCH.buffers.values()))
     assert sizes[-1] == sizes[1]
+
+
+@pytest.mark.parametrize("tile", [16, 24])  # a power of two (shifts) and not (divisions)
+def test_setup_and_fused_setup_bin_agree_with_binning_the_boxes(tile):
+    from unmesh.render._kernels import bin_boxes
+    from unmesh.render._splat_kernels import NPARAM, splat_setup, splat_setup_bin
+
+    cam = CAMERAS["perspective"]
+    cloud = random_cloud(np.random.default_rng(5), n=300, elliptical=True)
+    a = surfel_arrays(cloud)
+    f, cx, cy, ortho, near = cam.kernel_params()
+    h, w = cam.shape
+    n = len(a)
+    out = []
+    for fused in (False, True):
+        P, box, group = np.empty((n, NPARAM)), np.empty((n, 4), np.int32), np.empty(n, np.int8)
+        args = (a.positions, a.normals, a.radii, a.axes, True, a.colors, cam.rotation, cam.eye, f, cx, cy, ortho, near,
+                w, h, 1.0, P, box, group)
+        if fused:
+            ntx, nty = (w + tile - 1) // tile, (h + tile - 1) // tile
+            offsets, items, _ = splat_setup_bin(*args, tile, ntx, nty, 3)
+        else:
+            splat_setup(*args)
+        out.append((P, box, group))
+    for x, y in zip(out[0], out[1], strict=True):
+        assert np.array_equal(x, y, equal_nan=True)
+    ref_offsets, ref_items = bin_boxes(out[0][1], out[0][2], 2, tile, ntx, nty, 3)
+    assert np.array_equal(offsets, ref_offsets)
+    assert np.array_equal(items, ref_items)

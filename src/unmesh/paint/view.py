@@ -36,6 +36,7 @@ from unmesh.errors import InputError
 from unmesh.paint._paint_kernels import gather_surfels, scatter_surfels
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
+from unmesh.render._kernels import facing_rows
 from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.render.splat import SurfelArrays
 
@@ -84,6 +85,10 @@ _p.a = np.empty(0)
 #: holds it (a result handed out earlier, or a view derived from one: views refer to their base).
 _FREE = _refs(_p, "a")
 del _p
+
+
+#: The arrays of a G-buffer (a full update reuses the view's last G-buffer when no caller holds any).
+GBUFFER_FIELDS = ("albedo", "normal", "depth", "coverage", "weight")
 
 
 def _held(owner: Any, name: str) -> bool:
@@ -174,7 +179,9 @@ class PaintView:
         if not self.cull_backfaces or not len(rows):
             return rows
         s = self.surface
-        return rows[(camera or self.camera).facing(s.pos[rows], s.nrm[rows])]
+        cam = camera or self.camera
+        return facing_rows(np.ascontiguousarray(rows, dtype=np.int64), s.pos, s.nrm, np.asarray(cam.eye, dtype=np.float64),
+                           np.asarray(cam.forward, dtype=np.float64), bool(cam.is_ortho))
 
     def _grow(self, n: int) -> None:
         if len(self._on) >= n:
@@ -240,7 +247,6 @@ class PaintView:
             self._mark = mark
             self._store(rows, arr)
             self.last_update, self.last_count = "full", len(rows)
-            self._g = None
             self._resolve(None)
             return self.renderer
         old = dirty[self._on[dirty]]
@@ -324,9 +330,12 @@ class PaintView:
         assert r is not None and cam is not None
         h, w = cam.shape
         if win is None or self._g is None:
-            self._g = GBuffer.empty(h, w)
+            # a full update: the last buffers again unless a caller holds them (resolve_window resets them)
+            if self._g is None or self._g.depth.shape != (h, w) or any(_held(self._g, a) for a in GBUFFER_FIELDS):
+                self._g = GBuffer.empty(h, w)
+            if getattr(self, "_color", None) is None or self._color.shape != (h, w, 3):
+                self._color = np.empty((h, w, 3))
             win = (0, h, 0, w)
-            self._color = np.empty((h, w, 3))
             self._stale = None
         elif self._stale is not None:
             self._stale.append(win)
@@ -336,6 +345,9 @@ class PaintView:
     def _shade(self, win: tuple[int, int, int, int], origin: tuple[int, int] = (0, 0)) -> None:
         """Shade the window ``win`` of the G-buffer; ``origin`` is the buffer's offset in the image."""
         r0, r1, c0, c1 = win
+        if (r0, r1, c0, c1) == (0, *self._color.shape[:1], 0, self._color.shape[1]) and self._color.flags.c_contiguous:
+            shade(self._g, self.camera, self.shading, self.background, window=win, origin=origin, out=self._color)
+            return
         self._color[r0:r1, c0:c1] = shade(self._g, self.camera, self.shading, self.background, window=win,
                                           origin=origin)
 

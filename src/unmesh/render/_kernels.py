@@ -22,7 +22,7 @@ from numba import njit, prange
 
 from unmesh._threads import SERIAL_BELOW, serial_if_small
 
-__all__ = ["SERIAL_BELOW", "bin_boxes", "box_visits", "load_tile", "serial_if_small", "shade_pixels", "sphere_box",
+__all__ = ["SERIAL_BELOW", "bin_boxes", "box_visits", "clear_background", "facing_rows", "load_tile", "serial_if_small", "shade_pixels", "sphere_box",
            "tile_order", "tile_rect"]
 
 # The thread policy (one thread below SERIAL_BELOW work items: launching a parallel region costs
@@ -171,6 +171,52 @@ def _tile_order(ntiles: int) -> np.ndarray:
     return np.random.default_rng(20070101).permutation(ntiles).astype(np.int64)
 
 
+@njit(cache=True)
+def facing_rows(rows, pos, nrm, eye, forward, ortho):
+    """The entries ``i`` of ``rows`` (M,) int64, in order, whose normal ``nrm[i]`` faces the
+    camera: ``n . (eye - pos[i]) > 0``, or ``n . -forward > 0`` when ``ortho`` (``pos``, ``nrm``
+    (N, 3) float64; :meth:`unmesh.render.Camera.facing` without gathering the rows first)."""
+    out = np.empty(rows.shape[0], dtype=np.int64)
+    m = 0
+    for k in range(rows.shape[0]):
+        i = rows[k]
+        if ortho:
+            d = nrm[i, 0] * -forward[0] + nrm[i, 1] * -forward[1] + nrm[i, 2] * -forward[2]
+        else:
+            d = nrm[i, 0] * (eye[0] - pos[i, 0]) + nrm[i, 1] * (eye[1] - pos[i, 1]) + nrm[i, 2] * (eye[2] - pos[i, 2])
+        if d > 0.0:
+            out[m] = i
+            m += 1
+    return out[:m]
+
+
+@njit(cache=True, parallel=True)
+def clear_background(covered, depth, normal, weight):
+    """Where ``covered`` (H,W) bool is false: ``depth`` (H,W) = inf, ``normal`` (H,W,3) = 0,
+    ``weight`` (H,W) = 0, in place (one pass; the G-buffer's background convention)."""
+    H, W = covered.shape
+    for py in prange(H):
+        for px in range(W):
+            if not covered[py, px]:
+                depth[py, px] = np.inf
+                normal[py, px, 0] = 0.0
+                normal[py, px, 1] = 0.0
+                normal[py, px, 2] = 0.0
+                weight[py, px] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _int_power(x, n):
+    """``x ** n`` for an integer ``n >= 0`` by repeated squaring (equal to ``pow`` up to round-off)."""
+    result = 1.0
+    while n > 0:
+        if n & 1:
+            result *= x
+        x *= x
+        n >>= 1
+    return result
+
+
 @njit(cache=True, parallel=True)
 def shade_pixels(albedo, normal, depth, covered, f, cx, cy, ortho, frame, light_dirs, light_cols,
                  ambient, specular, shininess, background, out):
@@ -184,6 +230,8 @@ def shade_pixels(albedo, normal, depth, covered, f, cx, cy, ortho, frame, light_
     """
     H, W = depth.shape
     nl = light_dirs.shape[0]
+    # integral exponents (the default 40) by repeated squaring: pow() was the costliest step
+    ishin = int(shininess) if shininess == math.floor(shininess) and 0.0 <= shininess <= 1024.0 else -1
     for py in prange(H):
         Y = -(py + 0.5 - cy) / f
         for px in range(W):
@@ -236,7 +284,7 @@ def shade_pixels(albedo, normal, depth, covered, f, cx, cy, ortho, frame, light_
                     if hl > 0.0:
                         ndh = (nx * hx + ny * hy + nz * hz) / hl
                         if ndh > 0.0:
-                            sp = ndh**shininess
+                            sp = _int_power(ndh, ishin) if ishin >= 0 else ndh**shininess
                             sr += light_cols[j, 0] * sp
                             sg += light_cols[j, 1] * sp
                             sb += light_cols[j, 2] * sp

@@ -26,7 +26,7 @@ import numpy as np
 
 from unmesh._validate import as_array, scalar
 from unmesh.errors import InputError
-from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, shade_pixels
+from unmesh.render._kernels import SERIAL_BELOW, clear_background, serial_if_small, shade_pixels
 from unmesh.render.camera import Camera
 
 __all__ = ["DEFAULT_LIGHTS", "GBuffer", "Light", "RenderResult", "Shading", "as_shading", "background_color", "shade"]
@@ -258,10 +258,15 @@ class RenderResult:
         """
         cov = gbuffer.coverage
         if not copy:
-            bg = ~cov
-            np.copyto(gbuffer.depth, np.inf, where=bg)
-            np.copyto(gbuffer.normal, 0.0, where=bg[..., None])
-            np.copyto(gbuffer.weight, 0.0, where=bg)
+            arrays = (cov, gbuffer.depth, gbuffer.normal, gbuffer.weight)
+            if all(a.flags.c_contiguous for a in arrays):
+                with serial_if_small(cov.size, 4 * SERIAL_BELOW):
+                    clear_background(*arrays)
+            else:
+                bg = ~cov
+                np.copyto(gbuffer.depth, np.inf, where=bg)
+                np.copyto(gbuffer.normal, 0.0, where=bg[..., None])
+                np.copyto(gbuffer.weight, 0.0, where=bg)
             return cls(color=color, depth=gbuffer.depth, normal=gbuffer.normal, coverage=cov, weight=gbuffer.weight,
                        albedo=gbuffer.albedo, camera=camera, color_range=color_range)
         return cls(color=color, depth=np.where(cov, gbuffer.depth, np.inf), normal=np.where(cov[..., None], gbuffer.normal, 0.0),
@@ -314,7 +319,8 @@ class RenderResult:
 
 
 def shade(gbuffer: GBuffer, camera: Camera, shading: str | Shading = "phong", background: Any = (1.0, 1.0, 1.0), *,
-          window: tuple[int, int, int, int] | None = None, origin: tuple[int, int] = (0, 0)) -> np.ndarray:
+          window: tuple[int, int, int, int] | None = None, origin: tuple[int, int] = (0, 0),
+          out: np.ndarray | None = None) -> np.ndarray:
     """Colour image (H,W,3) float64 in [0,1] from a G-buffer (deferred shading).
 
     Blinn-Phong: ``c = a (ambient + sum_l I_l max(0, n.l)) + specular sum_l I_l max(0, n.h)^shininess``
@@ -332,6 +338,8 @@ def shade(gbuffer: GBuffer, camera: Camera, shading: str | Shading = "phong", ba
         Shade only rows ``r0:r1`` and columns ``c0:c1`` of ``gbuffer`` (partial updates, 5.7).
     origin : (row, col)
         The image pixel of ``gbuffer[0, 0]`` when ``gbuffer`` is a part cut out of the image.
+    out : numpy.ndarray, optional
+        C-contiguous float64 array of the result's shape to write into (and return).
 
     Returns
     -------
@@ -352,10 +360,19 @@ def shade(gbuffer: GBuffer, camera: Camera, shading: str | Shading = "phong", ba
     r0, r1, c0, c1 = (0, h, 0, w) if window is None else _window(window, h, w)
     sl = (slice(r0, r1), slice(c0, c1))
     albedo, normal, depth, coverage = gbuffer.albedo[sl], gbuffer.normal[sl], gbuffer.depth[sl], gbuffer.coverage[sl]
+    shape = (r1 - r0, c1 - c0, 3)
+    if out is not None and (not isinstance(out, np.ndarray) or out.shape != shape or out.dtype != np.float64
+                            or not out.flags.c_contiguous):
+        raise InputError(f"out: expected a C-contiguous float64 array of shape {shape}, got "
+                         f"{getattr(out, 'shape', type(out).__name__)}")
     if sh.model == "none":
-        out = np.where(coverage[..., None], np.clip(albedo, 0.0, 1.0), bg)
-        return np.ascontiguousarray(out)
-    out = np.empty((r1 - r0, c1 - c0, 3))
+        flat = np.where(coverage[..., None], np.clip(albedo, 0.0, 1.0), bg)
+        if out is None:
+            return np.ascontiguousarray(flat)
+        out[...] = flat
+        return out
+    if out is None:
+        out = np.empty(shape)
     dirs = np.array([light.world_direction(camera) for light in sh.lights]).reshape(-1, 3)
     cols = np.array([light.color * light.intensity for light in sh.lights]).reshape(-1, 3)
     f, cx, cy, ortho, _ = camera.kernel_params()
