@@ -151,7 +151,7 @@ def test_tension_share_by_neighbour_count(dim, lattice, full):
     assert sim.full_neighbors == full
     counts = np.arange(full + 1)
     ref = pressure(np.full(full + 1, 0.5), 1.0, 100.0, 1.0, 0.5, counts=counts, full=full)
-    got = [K.pressure_eos(0.5, 1.0, 100.0, 1.0, 0.5 * K.tension_scale(c, float(full))) for c in counts]
+    got = [K.fluid_pressure(0.5, 1.0, 100.0, 1.0, 0.5, c, float(full)) for c in counts]
     assert np.allclose(got, ref, rtol=1e-14, atol=0)
     assert ref[0] == 0.0 and ref[full // 8] == 0.0 and ref[-1] == -100.0 * 0.5 * 0.5 * 0.25
     assert np.all(np.diff(ref) <= 0)
@@ -161,6 +161,8 @@ def test_pressure_equation_of_state():
     assert np.allclose(pressure([1.0, 1.1, 0.9], 1.0, 100.0, 1.0, 0.1), [0.0, 10.0, -0.81])
     assert np.isclose(pressure([1.1], 1.0, 100.0, 7.0)[0], 100.0 * (1.1**7 - 1.0))
     assert K.pressure_eos(0.9, 1.0, 100.0, 1.0, 0.0) == 0.0
+    assert K.pressure_eos(0.9, 1.0, 100.0, 1.0, 0.1) == pytest.approx(-1.0)  # solids: the law as it is
+    assert np.allclose(pressure([0.9], 1.0, 100.0, 1.0, 0.1, fluid=False), [-1.0])
 
 
 @pytest.mark.parametrize("dim", [2, 3])

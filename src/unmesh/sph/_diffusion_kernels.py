@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.sph import materials as M
-from unmesh.sph._kernels import PLAIN, SOLID, kernel_gradf, pressure_eos, tension_scale
+from unmesh.sph._kernels import PLAIN, SOLID, fluid_pressure, kernel_gradf
 
 __all__ = ["density_diffusion_pass", "laplacian_scale"]
 
@@ -162,8 +162,8 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
             if out[i] != rho[i]:
                 mt = matid[i]
                 rho[i] = out[i]
-                p[i] = pressure_eos(out[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA],
-                                   mats[mt, M.ZETA] * tension_scale(nnbr[i], full))
+                p[i] = fluid_pressure(out[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA],
+                                      nnbr[i], full)
 
 
 def empty_scratch(n: int) -> tuple[np.ndarray, np.ndarray]:

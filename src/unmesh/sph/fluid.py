@@ -64,10 +64,11 @@ def density_reference(x: Any, m: Any, h: float, dim: int) -> np.ndarray:
 
 
 def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 1.0,
-             counts: Any = None, full: float = 0.0) -> np.ndarray:
+             counts: Any = None, full: float = 0.0, fluid: bool = True) -> np.ndarray:
     """Eq. (8.15) ``K((ρ/ρ0)^Γ − 1)`` with negative values (tension) scaled by ζ (8.16).
 
-    The tension is bounded as in :func:`unmesh.sph._kernels.pressure_eos`: also scaled by
+    For fluids (``fluid=False``: the law as it is, solids) the tension is bounded as in
+    :func:`unmesh.sph._kernels.fluid_pressure`: also scaled by
     ``(ρ/ρ0)²``, and with the neighbour ``counts`` (N,) of the particles and the count ``full``
     on the rest lattice, by the share :data:`~unmesh.sph._kernels.TENSION_SUPPORT` ramps
     linearly from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``).
@@ -79,6 +80,8 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
     """
     r = np.asarray(rho, dtype=np.float64)
     p = k * ((r / rho0) ** gamma - 1.0)
+    if not fluid:
+        return np.where(p < 0, zeta * p, p)
     share = np.ones_like(p)
     if counts is not None and full > 0:
         lo, hi = TENSION_SUPPORT

@@ -536,7 +536,7 @@ class SPHSimulation(Simulation):
             K.density_pass(self.x, self.m, self.mat, self.mats, self.h, self.dim, g.origin, g.inv_cell, g.dims,
                            g.cell_keys, g.cell_start, dense, self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol,
                            bo, binv, bd, bk, bs, self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho,
-                           self.corners, self.corner_rho, self.rho, self.p, self.full_neighbors)
+                           self.corners, self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors)
             need = int(self.nnbr.max()) if len(self.nnbr) else 0
             bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
             if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1]:
