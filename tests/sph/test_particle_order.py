@@ -99,7 +99,7 @@ def test_shipped_3d_scenes_have_no_paired_particles(name):
     film spreading on the floor at p ≈ 0; now with its background pressure, ``TENSILE_BACKGROUND``)."""
     sim, settings = build_simulation(load_scene(scene_path(f"sph/{name}.toml")))
     worst = nearest_in_spacings(sim)
-    # nothing moves faster than twice the speed of a free fall from the highest particle to the floor
+    # in no frame does anything move faster than twice the speed of a free fall from the highest particle
     fall = math.sqrt(2.0 * 9.81 * float(sim.x[:, 1].max())) + float(np.linalg.norm(sim.v, axis=1).max())
     fastest = 0.0
     frame = 1.0 / settings.fps
@@ -107,13 +107,13 @@ def test_shipped_3d_scenes_have_no_paired_particles(name):
     while sim.time < settings.duration:
         sim.step()
         assert sim.check() is None
-        fastest = max(fastest, float(np.linalg.norm(sim.v, axis=1).max()))
         if sim.time >= next_frame - 1e-12:
             next_frame += frame
             worst = min(worst, nearest_in_spacings(sim))
+            fastest = max(fastest, float(np.linalg.norm(sim.v, axis=1).max()))
     print(f"{name}: closest pair {worst:.3f} d, fastest particle {fastest:.2f} m/s (free fall {fall:.2f} m/s)")
     assert worst > 0.3
-    if name == "freezing_rod":  # pairs of slime were thrown out at 10-45 m/s (fall 3.4 m/s) before the tension bound
+    if name == "freezing_rod":  # pairs of slime flew at 10-19 m/s in its frames (fall 3.4 m/s) before the tension bound
         assert fastest < 2.0 * fall
 
 

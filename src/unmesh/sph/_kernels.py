@@ -154,7 +154,7 @@ def tension_scale(count, full):
 
 @njit(**PLAIN)
 def pressure_eos(rho, rho0, k, gamma, zeta):
-    """Eq. (8.15) with the negative-pressure scale ζ of eq. (8.16) (solids: their lattice carries tension)."""
+    """Eq. (8.15) with the negative-pressure scale ζ of eq. (8.16)."""
     if gamma == 1.0:
         p = k * (rho / rho0 - 1.0)
     else:
@@ -348,7 +348,7 @@ def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, c
                 rho_a -= rho0 * _table2(corner_rho, da, db, h)
         rho[a] = rho_a
         if phase[a] == SOLID:
-            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA] * tension_scale(cnt, full))
         else:
             p[a] = fluid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full)
 
@@ -373,7 +373,8 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     ``nbr`` and repeats). ``bnbr`` / ``nbnbr`` the same for boundary particles ``bx``
     (static grid ``b*``; ``bnbr`` has no scratch column). Fluid particles (``phase``) get
     :func:`fluid_pressure` with ``full``, the neighbour count on the rest lattice (0: no share by
-    count), solid ones :func:`pressure_eos`.
+    count); solid ones :func:`pressure_eos` with ζ scaled by :func:`tension_scale` only (their
+    lattice forces carry tension; the ``(ρ/ρ0)²`` scale changed how the fracture scene's beam breaks).
     """
     n = x.shape[0]
     for a in prange(n):
