@@ -348,7 +348,7 @@ def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, c
                 rho_a -= rho0 * _table2(corner_rho, da, db, h)
         rho[a] = rho_a
         if phase[a] == SOLID:
-            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA] * tension_scale(cnt, full))
+            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
         else:
             p[a] = fluid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full)
 
@@ -373,8 +373,8 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     ``nbr`` and repeats). ``bnbr`` / ``nbnbr`` the same for boundary particles ``bx``
     (static grid ``b*``; ``bnbr`` has no scratch column). Fluid particles (``phase``) get
     :func:`fluid_pressure` with ``full``, the neighbour count on the rest lattice (0: no share by
-    count); solid ones :func:`pressure_eos` with ζ scaled by :func:`tension_scale` only (their
-    lattice forces carry tension; the ``(ρ/ρ0)²`` scale changed how the fracture scene's beam breaks).
+    count); solid ones :func:`pressure_eos` (their lattice forces carry tension: either bound changed
+    how the fracture scene's beam breaks or the melting blob's ear holds on).
     """
     n = x.shape[0]
     for a in prange(n):

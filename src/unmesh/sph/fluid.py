@@ -67,10 +67,10 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
              counts: Any = None, full: float = 0.0, fluid: bool = True) -> np.ndarray:
     """Eq. (8.15) ``K((ρ/ρ0)^Γ − 1)`` with negative values (tension) scaled by ζ (8.16).
 
-    The tension is bounded as in :func:`unmesh.sph._kernels.fluid_pressure`: with the neighbour
-    ``counts`` (N,) of the particles and the count ``full`` on the rest lattice, scaled by the share
-    :data:`~unmesh.sph._kernels.TENSION_SUPPORT` that ramps linearly from 0 (``counts ≤ full/8``)
-    to 1 (``counts ≥ full/4``), and for fluids also by ``(ρ/ρ0)²`` (``fluid=False``: solids).
+    For fluids the tension is bounded as in :func:`unmesh.sph._kernels.fluid_pressure`: scaled by
+    ``(ρ/ρ0)²`` and, with the neighbour ``counts`` (N,) of the particles and the count ``full`` on
+    the rest lattice, by the share :data:`~unmesh.sph._kernels.TENSION_SUPPORT` that ramps linearly
+    from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``). ``fluid=False`` (solids): the law as it is.
 
     Example
     -------
@@ -79,12 +79,12 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
     """
     r = np.asarray(rho, dtype=np.float64)
     p = k * ((r / rho0) ** gamma - 1.0)
-    share = np.ones_like(p)
+    if not fluid:
+        return np.where(p < 0, zeta * p, p)
+    share = (r / rho0) ** 2
     if counts is not None and full > 0:
         lo, hi = TENSION_SUPPORT
-        share = np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
-    if fluid:
-        share = share * (r / rho0) ** 2
+        share = share * np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
     return np.where(p < 0, zeta * share * p, p)
 
 
