@@ -149,10 +149,10 @@ def _approaching_blocks(loss: float) -> tuple[SPHSimulation, np.ndarray]:
     return sim, left
 
 
-DOCK_MAX = 1e4
+DOCK_MAX = 1e5  # λ_max Δt ≈ 20 at the contact step: an occupied slot docks with probability 1 - 2e-9
 
 
-@pytest.mark.parametrize("loss", [1e6, 10.0])
+@pytest.mark.parametrize("loss", [1e7, 10.0])
 def test_docking_rates_make_open_cracks_brittle_or_closable(loss):
     """Section 8.2.5: an empty lattice slot loses ``Δλ_d^-`` per second, an occupied one gains
     ``Δλ_d^+``; a particle assigned to a slot docks with probability ``1 − e^(−λ_d Δt)`` (8.34).

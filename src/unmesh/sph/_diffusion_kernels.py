@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from unmesh.sph import materials as M
-from unmesh.sph._kernels import PLAIN, SOLID, kernel_gradf, pressure_eos
+from unmesh.sph._kernels import PLAIN, SOLID, fluid_pressure, kernel_gradf
 
 __all__ = ["density_diffusion_pass", "laplacian_scale"]
 
@@ -124,7 +124,7 @@ def _diffusion(i, x, m, rho, phase, matid, nbr, nnbr, h, dim, grad):
 
 
 @njit(cache=True, parallel=True)
-def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, grad, out):
+def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, grad, out, full):
     """Filter the density of every fluid particle in place and recompute its pressure (8.15–8.16).
 
     ``nbr`` / ``nnbr``: the neighbour lists of :func:`unmesh.sph._kernels.density_pass`
@@ -133,7 +133,8 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
     ``δ`` is the material column ``DENSITY_DIFFUSION``, the number of filter passes (each
     on the result of the previous one) the column ``DENSITY_PASSES``; particles with
     ``δ = 0`` and solid particles are left unchanged (pairs are fluid–fluid of one material,
-    so a pair is filtered in the same passes from both sides).
+    so a pair is filtered in the same passes from both sides). ``full``: as in
+    :func:`unmesh.sph._kernels.density_pass` (the tension's share by neighbour count).
     """
     n = x.shape[0]
     lam = laplacian_scale(h, dim)
@@ -161,7 +162,8 @@ def density_diffusion_pass(x, m, rho, p, phase, matid, mats, nbr, nnbr, h, dim, 
             if out[i] != rho[i]:
                 mt = matid[i]
                 rho[i] = out[i]
-                p[i] = pressure_eos(out[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+                p[i] = fluid_pressure(out[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA],
+                                      nnbr[i], full)
 
 
 def empty_scratch(n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -134,6 +134,24 @@ def _corner_hydrostatic(ka, kb, da, db, h, hyd, gravity, plane_n, corner_mom, ou
         out[c] = hyd * ((q11 * ga + q12 * gb) * plane_n[ka, c] + (q12 * ga + q22 * gb) * plane_n[kb, c] + qee * ge)
 
 
+#: Fractions of the rest lattice's neighbour count between which a particle's tension (negative
+#: pressure, 8.16) fades in: none at or below the first (a particle of spray, an isolated pair or a
+#: clump of a few particles is not a continuum that can be under tension), all of it from the second.
+TENSION_SUPPORT = (0.125, 0.25)
+
+
+@njit(**PLAIN)
+def tension_scale(count, full):
+    """Share of the tension ζ a particle with ``count`` neighbours carries (:data:`TENSION_SUPPORT`).
+
+    ``full``: the neighbour count on the rest lattice (0: always 1).
+    """
+    if full <= 0.0:
+        return 1.0
+    f = (count / full - TENSION_SUPPORT[0]) / (TENSION_SUPPORT[1] - TENSION_SUPPORT[0])
+    return min(max(f, 0.0), 1.0)
+
+
 @njit(**PLAIN)
 def pressure_eos(rho, rho0, k, gamma, zeta):
     """Eq. (8.15) with the negative-pressure scale ζ of eq. (8.16)."""
@@ -144,6 +162,20 @@ def pressure_eos(rho, rho0, k, gamma, zeta):
     if p < 0.0:
         p *= zeta
     return p
+
+
+@njit(**PLAIN)
+def fluid_pressure(rho, rho0, k, gamma, zeta, count, full):
+    """:func:`pressure_eos` of a fluid particle with ``count`` neighbours, its tension bounded.
+
+    A negative pressure is scaled by ``(ρ/ρ0)²``: the pair forces (8.17) divide it by ``ρ²``, so at
+    the summation densities of a free surface (ρ far below ρ0) the linear law would give a tension
+    force growing like ``1/ρ²``, stiffer than the time step (set by the speed of sound) resolves;
+    scaled, ``|p|/ρ² ≤ ζK/ρ0²``. And ζ is scaled by :func:`tension_scale` (``full``: the neighbour
+    count on the rest lattice). Near ``ρ0`` in the bulk both changes are of second order.
+    """
+    s = rho / rho0
+    return pressure_eos(rho, rho0, k, gamma, zeta * tension_scale(count, full) * s * s)
 
 
 #: Cell edge of the particle grid in units of ``h``: with ``h/2`` cells the per-particle
@@ -213,7 +245,7 @@ def _axis_gaps(xa, c, reach, origin, cell, n, out):
 @njit(**PLAIN)
 def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, nbr, nnbr,
                    bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners,
-                   corner_rho, rho, p):
+                   corner_rho, rho, p, phase, full):
     """Particles ``r0 .. r1 - 1`` of :func:`density_pass` (one block, serial)."""
     h2 = h * h
     hr = h * (1.0 + 1e-9)  # conservative reach (round-off of the cell bounds)
@@ -315,13 +347,16 @@ def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, c
             if da < h and db < h:
                 rho_a -= rho0 * _table2(corner_rho, da, db, h)
         rho[a] = rho_a
-        p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+        if phase[a] == SOLID:
+            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+        else:
+            p[a] = fluid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full)
 
 
 @njit(cache=True, parallel=True)
 def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, xm, nbr, nnbr,
                  bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
-                 plane_p, plane_n, wall_rho, corners, corner_rho, rho, p):
+                 plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full):
     """Neighbour lists, density (8.4) and pressure (8.15–8.16) of every particle.
 
     ``x`` (N, 3) must be the grid's sorted points (z = 0 in 2D); any cell size works.
@@ -336,7 +371,10 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     neighbours within ``h`` (self excluded, ascending) in its first ``cap`` columns (the
     last column is scratch); ``nnbr`` the true counts (may exceed ``cap``: the caller grows
     ``nbr`` and repeats). ``bnbr`` / ``nbnbr`` the same for boundary particles ``bx``
-    (static grid ``b*``; ``bnbr`` has no scratch column).
+    (static grid ``b*``; ``bnbr`` has no scratch column). Fluid particles (``phase``) get
+    :func:`fluid_pressure` with ``full``, the neighbour count on the rest lattice (0: no share by
+    count); solid ones :func:`pressure_eos` (their lattice forces carry tension: either bound changed
+    how the fracture scene's beam breaks or the melting blob's ear holds on).
     """
     n = x.shape[0]
     for a in prange(n):
@@ -348,7 +386,7 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     for blk in prange(nblk):
         _density_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), x, xm, matid, mats, h, dim, origin, inv_cell, dims,
                        cell_keys, cell_start, dense, nbr, nnbr, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr,
-                       nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p)
+                       nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full)
 
 
 def cell_starts(grid, buffer=None):

@@ -37,7 +37,7 @@ import numpy as np
 
 from unmesh._validate import as_array, as_points
 from unmesh.kernels import poly6, spiky_derivative, spiky_gradient
-from unmesh.sph._kernels import TENSILE_BACKGROUND
+from unmesh.sph._kernels import TENSILE_BACKGROUND, TENSION_SUPPORT
 from unmesh.sph.collisions import penalty_projection
 
 __all__ = ["acceleration_reference", "density_diffusion_reference", "density_reference", "pressure", "xsph_reference"]
@@ -63,17 +63,29 @@ def density_reference(x: Any, m: Any, h: float, dim: int) -> np.ndarray:
     return (np.asarray(poly6(d, h, dim)) * mm[None, :]).sum(axis=1)
 
 
-def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 1.0) -> np.ndarray:
-    """Eq. (8.15) ``K((ρ/ρ0)^Γ − 1)`` with negative values scaled by ζ (8.16).
+def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 1.0,
+             counts: Any = None, full: float = 0.0, fluid: bool = True) -> np.ndarray:
+    """Eq. (8.15) ``K((ρ/ρ0)^Γ − 1)`` with negative values (tension) scaled by ζ (8.16).
+
+    For fluids the tension is bounded as in :func:`unmesh.sph._kernels.fluid_pressure`: scaled by
+    ``(ρ/ρ0)²`` and, with the neighbour ``counts`` (N,) of the particles and the count ``full`` on
+    the rest lattice, by the share :data:`~unmesh.sph._kernels.TENSION_SUPPORT` that ramps linearly
+    from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``). ``fluid=False`` (solids): the law as it is.
 
     Example
     -------
     >>> pressure(np.array([1.1, 0.9]), 1.0, 100.0, zeta=0.5).round(9).tolist()
-    [10.0, -5.0]
+    [10.0, -4.05]
     """
     r = np.asarray(rho, dtype=np.float64)
     p = k * ((r / rho0) ** gamma - 1.0)
-    return np.where(p < 0, zeta * p, p)
+    if not fluid:
+        return np.where(p < 0, zeta * p, p)
+    share = (r / rho0) ** 2
+    if counts is not None and full > 0:
+        lo, hi = TENSION_SUPPORT
+        share = share * np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
+    return np.where(p < 0, zeta * share * p, p)
 
 
 def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h: float, dim: int,

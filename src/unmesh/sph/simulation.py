@@ -317,6 +317,8 @@ class SPHSimulation(Simulation):
         self.bmat = lattice_basis(self.dim)
         self.tmat = SK.d3_transform(self.bmat) if self.dim == 3 else np.eye(3)
         self.frame = lattice_frame(self.dim)
+        # neighbours of a particle on the rest lattice: the tension's share by count (_kernels.tension_scale)
+        self.full_neighbors = float(len(lattice_points(self.dim, config.smoothing, config.lattice)))
         if config.gradient_correction:
             self.grad_scale = 1.0 / gradient_moment(self.dim, config.smoothing, config.lattice)
         else:
@@ -534,7 +536,7 @@ class SPHSimulation(Simulation):
             K.density_pass(self.x, self.m, self.mat, self.mats, self.h, self.dim, g.origin, g.inv_cell, g.dims,
                            g.cell_keys, g.cell_start, dense, self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol,
                            bo, binv, bd, bk, bs, self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho,
-                           self.corners, self.corner_rho, self.rho, self.p)
+                           self.corners, self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors)
             need = int(self.nnbr.max()) if len(self.nnbr) else 0
             bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
             if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1]:
@@ -543,7 +545,8 @@ class SPHSimulation(Simulation):
             self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
         if np.any(self.mats[:, MT.DENSITY_DIFFUSION] > 0):  # δ-SPH density filter of the fluids
             DK.density_diffusion_pass(self.x, self.m, self.rho, self.p, self.phase, self.mat, self.mats, self.nbr,
-                                      self.nnbr, self.h, self.dim, self._rows["dgrad"], self._rows["drho"])
+                                      self.nnbr, self.h, self.dim, self._rows["dgrad"], self._rows["drho"],
+                                      self.full_neighbors)
 
     def _update(self, prime: bool = False) -> None:
         """Sort, density, lattice and force passes at the current positions."""
