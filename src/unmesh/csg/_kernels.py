@@ -101,6 +101,39 @@ def _cell_pairs(c, nu, start, items, pos, radii, patch, box, out, base, write):
 
 
 @njit(cache=True, parallel=True)
+def _pairs_csr(buf, bound, counts, n):
+    """Symmetric CSR rows (ascending) of the pairs ``buf[bound[k] : bound[k] + counts[k]]`` of every chunk."""
+    nchunks = counts.shape[0]
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    for k in range(nchunks):
+        for q in range(bound[k], bound[k] + counts[k]):
+            offsets[buf[q, 0] + 1] += 1
+            offsets[buf[q, 1] + 1] += 1
+    for i in range(n):
+        offsets[i + 1] += offsets[i]
+    fill = offsets[:-1].copy()
+    out = np.empty(offsets[n], dtype=np.int64)
+    for k in range(nchunks):
+        for q in range(bound[k], bound[k] + counts[k]):
+            i = buf[q, 0]
+            j = buf[q, 1]
+            out[fill[i]] = j
+            fill[i] += 1
+            out[fill[j]] = i
+            fill[j] += 1
+    for i in prange(n):
+        lo = offsets[i]
+        for q in range(lo + 1, offsets[i + 1]):  # insertion sort: rows are short
+            x = out[q]
+            r = q - 1
+            while r >= lo and out[r] > x:
+                out[r + 1] = out[r]
+                r -= 1
+            out[r + 1] = x
+    return offsets, out
+
+
+@njit(cache=True, parallel=True)
 def clip_buffer_csr(pos, radii, patch, box, nu, nv, nchunks):
     """Clipping partners by the clip buffer (Algorithm 4.1) as a symmetric CSR.
 
@@ -142,33 +175,7 @@ def clip_buffer_csr(pos, radii, patch, box, nu, nv, nchunks):
         for c in range(k * step, min(ncell, (k + 1) * step)):
             m += _cell_pairs(c, nu, start, items, pos, radii, patch, box, buf, m, True)
         counts[k] = m - bound[k]
-    offsets = np.zeros(n + 1, dtype=np.int64)
-    for k in range(nchunks):
-        for q in range(bound[k], bound[k] + counts[k]):
-            offsets[buf[q, 0] + 1] += 1
-            offsets[buf[q, 1] + 1] += 1
-    for i in range(n):
-        offsets[i + 1] += offsets[i]
-    fill = offsets[:-1].copy()
-    out = np.empty(offsets[n], dtype=np.int64)
-    for k in range(nchunks):
-        for q in range(bound[k], bound[k] + counts[k]):
-            i = buf[q, 0]
-            j = buf[q, 1]
-            out[fill[i]] = j
-            fill[i] += 1
-            out[fill[j]] = i
-            fill[j] += 1
-    for i in prange(n):
-        lo = offsets[i]
-        for q in range(lo + 1, offsets[i + 1]):  # insertion sort: rows are short
-            x = out[q]
-            r = q - 1
-            while r >= lo and out[r] > x:
-                out[r + 1] = out[r]
-                r -= 1
-            out[r + 1] = x
-    return offsets, out
+    return _pairs_csr(buf, bound, counts, n)
 
 
 @njit(cache=True)
@@ -320,30 +327,4 @@ def grid_csr(pos, radii, patch, half, box, dims, nchunks):
         for c in range(t * step, min(ncell, (t + 1) * step)):
             m += _grid_cell_pairs(c, dims, start, items, pos, radii, half, patch, box, buf, m, True)
         counts[t] = m - bound[t]
-    offsets = np.zeros(n + 1, dtype=np.int64)
-    for t in range(nchunks):
-        for q in range(bound[t], bound[t] + counts[t]):
-            offsets[buf[q, 0] + 1] += 1
-            offsets[buf[q, 1] + 1] += 1
-    for s in range(n):
-        offsets[s + 1] += offsets[s]
-    fill = offsets[:-1].copy()
-    out = np.empty(offsets[n], dtype=np.int64)
-    for t in range(nchunks):
-        for q in range(bound[t], bound[t] + counts[t]):
-            a = buf[q, 0]
-            b = buf[q, 1]
-            out[fill[a]] = b
-            fill[a] += 1
-            out[fill[b]] = a
-            fill[b] += 1
-    for s in prange(n):
-        lo = offsets[s]
-        for q in range(lo + 1, offsets[s + 1]):  # insertion sort: rows are short
-            x = out[q]
-            r = q - 1
-            while r >= lo and out[r] > x:
-                out[r + 1] = out[r]
-                r -= 1
-            out[r + 1] = x
-    return offsets, out
+    return _pairs_csr(buf, bound, counts, n)
