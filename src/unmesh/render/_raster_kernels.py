@@ -174,21 +174,20 @@ def _lookup(flat, dims, u, v, lod, out, tmp):
         out[k] = out[k] * (1.0 - fr) + tmp[k] * fr
 
 
+@njit(cache=True, inline="always")
+def _ray(X, Y, ortho):
+    """Origin ``(ox, oy, 0)`` and direction ``(dx, dy, 1)`` of the ray through image-plane point (X, Y)."""
+    if ortho:
+        return X, Y, 0.0, 0.0
+    return 0.0, 0.0, X, Y
+
+
 @njit(cache=True)
 def _plane_bary(T, fi, X, Y, ortho):
     """Barycentrics (u, v) where the ray of the image-plane point (X, Y) meets the plane of
     triangle ``fi`` (no inside test); NaN when the ray is parallel to it or meets it behind
     the eye."""
-    if ortho:
-        ox = X
-        oy = Y
-        dx = 0.0
-        dy = 0.0
-    else:
-        ox = 0.0
-        oy = 0.0
-        dx = X
-        dy = Y
+    ox, oy, dx, dy = _ray(X, Y, ortho)
     e1x = T[fi, 3]
     e1y = T[fi, 4]
     e1z = T[fi, 5]
@@ -275,16 +274,7 @@ def _triangle_tile_loop(T, items, a, b, x0, y0, tw, th, f, cx, cy, ortho, near, 
             row = (py - y0) * tw - x0
             for px in range(bx0, bx1 + 1):
                 X = (px + 0.5 - cx) * invf
-                if ortho:
-                    ox = X
-                    oy = Y
-                    dx = 0.0
-                    dy = 0.0
-                else:
-                    ox = 0.0
-                    oy = 0.0
-                    dx = X
-                    dy = Y
+                ox, oy, dx, dy = _ray(X, Y, ortho)
                 # pvec = d x e2, with d = (dx, dy, 1)
                 pvx = dy * e2z - e2y
                 pvy = e2x - dx * e2z
