@@ -333,7 +333,7 @@ class PaintView:
             # a full update: the last buffers again unless a caller holds them (resolve_window resets them)
             if self._g is None or self._g.depth.shape != (h, w) or any(_held(self._g, a) for a in GBUFFER_FIELDS):
                 self._g = GBuffer.empty(h, w)
-            if getattr(self, "_color", None) is None or self._color.shape != (h, w, 3):
+            if self._color.shape != (h, w, 3):
                 self._color = np.empty((h, w, 3))
             win = (0, h, 0, w)
             self._stale = None
@@ -345,7 +345,7 @@ class PaintView:
     def _shade(self, win: tuple[int, int, int, int], origin: tuple[int, int] = (0, 0)) -> None:
         """Shade the window ``win`` of the G-buffer; ``origin`` is the buffer's offset in the image."""
         r0, r1, c0, c1 = win
-        if (r0, r1, c0, c1) == (0, *self._color.shape[:1], 0, self._color.shape[1]) and self._color.flags.c_contiguous:
+        if win == (0, self._color.shape[0], 0, self._color.shape[1]) and self._color.flags.c_contiguous:
             shade(self._g, self.camera, self.shading, self.background, window=win, origin=origin, out=self._color)
             return
         self._color[r0:r1, c0:c1] = shade(self._g, self.camera, self.shading, self.background, window=win,
