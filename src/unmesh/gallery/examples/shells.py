@@ -230,7 +230,8 @@ def plastic_drop(ctx: ExampleContext) -> None:
 @example("shell-tearing-poster", "A poster tears from a weak point (Fig. 7.8)", SECTION)
 def tearing_poster(ctx: ExampleContext) -> None:
     """A poster (F.1: K_s = 1000, K_b = 10000, gamma_s = 0.02, D = 0.3, dt = 0.001) pulled
-    apart at its clamped sides tears from a weak point at the top into two halves."""
+    apart at its corners, harder at the top, tears from a weak point at the top down into two
+    halves."""
     from unmesh.errors import UnstableSimulationError
 
     try:
