@@ -180,13 +180,11 @@ def downsample(surface: PaintSurface, color_variance: float, normal_variance: fl
     surface.set("vd", f, tdv)
     for p in PROPS:
         surface.set(p, f, gsum(a * getattr(surface, p)[kids]) / ta)
-    # the father stands for the children's area (the visible colour 5.8 stays the same) and
-    # covers the region they covered
+    # the father stands for the children's area (the visible colour 5.8 stays the same); it is
+    # reactivated as it was sampled (5.5.2): its children are those closest to it among the hidden
+    # originals, so its own splat covers their region together with its neighbours' (enlarging it
+    # to reach every child drew rings of oversized splats between painted strokes)
     surface.set("area", f, ta)
-    reach = np.linalg.norm(surface.pos[kids] - surface.pos[f][g], axis=1) + 0.7 * surface.rad[kids]
-    cover = np.zeros(k)
-    np.maximum.at(cover, g, reach)
-    surface.set("rad", f, np.maximum(surface.rad[f], cover))
     surface.set("active", f, True)
     surface.delete(kids)
     return nxt
