@@ -299,9 +299,9 @@ def _split_tail(masks: list[np.ndarray], angles: np.ndarray, chain: Placement, d
     """An atlas of smaller total area than ``chain``'s: its smallest page (edge e) replaced by
     three pages of e/2 (3/4 of the area), the pages of at least e packed smallest first (a
     large patch with small ones around it fills a small page better than the small patches
-    left over at the end), then the new tail pages. Tried with the given row settings, with
-    half the height tolerance and with four times the best-fit candidates; the first plan
-    that places every patch wins (None: none does)."""
+    left over at the end), then the new tail pages. Tried with half the height tolerance, with
+    the given row settings and with four times the best-fit candidates; the first plan that
+    places every patch wins (None: none does)."""
     pages = sorted(chain.pages)
     e = pages[0]
     if e < 32:
