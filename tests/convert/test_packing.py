@@ -186,3 +186,24 @@ def test_fill_bound_is_above_every_packing_and_exact_for_page_sized_patches():
     assert fill_bound([*wide[:1], np.ones((10, 10), bool)]) == pytest.approx((65 * 65 + 100) / (128 * 128))
     # page-sized patches: one page each, nothing wasted
     assert fill_bound([np.ones((64, 64), bool)] * 5) == 1.0
+
+
+def test_split_tail_packs_all_patches_into_a_smaller_atlas_or_keeps_the_chain():
+    """The tail split (the smallest page as three of half the edge, the larger pages smallest
+    first) is taken only when it places every patch, so the atlas never grows; it must place
+    them disjointly inside their pages, pages listed largest first."""
+    split = 0
+    for seed in range(2, 6):  # the split is taken for seeds 3 (random) and 4 (Igea-like)
+        for masks, angles in (_igea_like(1000, seed), _random_patches(300, seed)):
+            chain = pack(masks, angles, split_tail=False)
+            pl = pack(masks, angles)
+            assert _check(masks, pl) == sum(int(m.sum()) for m in masks)
+            assert sum(e * e for e in pl.pages) <= sum(e * e for e in chain.pages)
+            assert np.allclose(pl.fill, [sum(masks[i].sum() for i in np.flatnonzero(pl.page == k)) / e**2
+                                         for k, e in enumerate(pl.pages)])
+            if sum(e * e for e in pl.pages) < sum(e * e for e in chain.pages):
+                split += 1
+                assert pl.pages == sorted(pl.pages, reverse=True)
+                assert sorted(pl.pages) == sorted([*sorted(chain.pages)[1:], *[min(chain.pages) // 2] * 3])
+    print(f"split taken in {split} of 8")
+    assert split > 0
