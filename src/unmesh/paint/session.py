@@ -37,11 +37,14 @@ from unmesh.render import Camera
 from unmesh.render.shading import RenderResult
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["PaintOptions", "Session", "StrokeResult"]
+__all__ = ["DAB_STEP", "PaintOptions", "Session", "StrokeResult"]
 
 _META = "unmesh-paint "
 #: Interaction time of the first sample of a stroke (s).
 FIRST_DT = 1.0 / 30.0
+#: Largest distance between two paint events, in brush sizes: :meth:`Session.add_samples` adds
+#: events in between wherever consecutive samples are farther apart (the dab spacing).
+DAB_STEP = 0.5
 _BRISTLE = np.array([0.86, 0.8, 0.66])
 
 
@@ -202,7 +205,7 @@ class Session:
                 raise InputError(f"samples[{base + i}].point: misses the model (distance {dist[i, 0]:.4g} from the "
                                  f"surface, at most {limit:.4g})")
         a0, r0, p0 = st.added, st.removed, st.pixels
-        for smp in _subdivide(st.last, samples, 0.5 * st.brush.size):
+        for smp in _subdivide(st.last, samples, DAB_STEP * st.brush.size):
             p = np.array(smp.point)
             # the brush's candidate ball of the last event answers exactly (or asks the tree)
             ball = st.state.ball if st.state.ball is not None and st.state.ball.tree is s.tree else s.tree

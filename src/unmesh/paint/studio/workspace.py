@@ -48,6 +48,7 @@ from unmesh.io.atomic import atomic_write_json
 from unmesh.paint.palette import PALETTE_EXTENT, PALETTE_SIZE, Palette
 from unmesh.paint.studio.frames import FrameEncoder, to_uint8
 from unmesh.paint.studio.protocol import brush_spec, paint_spec, samples_spec
+from unmesh.paint.studio.resample import DabResampler
 from unmesh.paint.studio.security import output_path
 from unmesh.paint.studio.view import PRESETS, Framing, View, view_from_message
 from unmesh.render.camera import Camera
@@ -65,6 +66,11 @@ PREVIEW_SCALES = (2, 3, 4)
 PREVIEW_SURFELS = 60_000
 #: Render time (s) of a preview above which the next preview uses a coarser image, and below which a finer one.
 PREVIEW_SLOW, PREVIEW_FAST = 0.05, 0.015
+
+
+#: The studio's resampling distance in units of the engine's dab step (``DAB_STEP`` brush sizes):
+#: just below it, so that rounding never makes the engine add an event between two samples.
+DAB_SPACING = 1.0 - 1e-6
 
 
 def _engine():
@@ -177,6 +183,8 @@ class Workspace:
         raise InputError(f"target: expected 'model' or 'palette', got {name!r}")
 
     def _on_begin(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        from unmesh.paint.session import DAB_STEP
+
         Brush, Paint, _, _ = _engine()
         if self._stroke is not None:
             self._on_end({})
@@ -186,7 +194,8 @@ class Workspace:
         paint = Paint(**paint_spec(msg.get("paint")))
         self._force_session = session
         self._stroke = {"target": target, "session": session, "camera": camera, "brush": brush, "paint": paint,
-                        "sid": None, "t_server": time.monotonic() - self._t0, "t_client": None, "n": 0}
+                        "sid": None, "t_server": time.monotonic() - self._t0, "t_client": None, "t_ms": 0.0, "n": 0,
+                        "resampler": DabResampler(DAB_SPACING * DAB_STEP * brush.size)}
         return [{"type": "begun", "target": target}]
 
     def _on_samples(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
@@ -228,15 +237,22 @@ class Workspace:
         cam = st["camera"]
         # every received row is ray-cast now, before any of them is painted (as when all are
         # painted at once), so the points do not depend on how the samples are split into frames
+        # and resampled at the engine's dab spacing (:class:`DabResampler`: one paint event each)
         for (t_ms, x, y, pressure, tilt_x, tilt_y), mark in zip(self._rows, self._row_ts, strict=True):
             if st["t_client"] is None:
                 st["t_client"] = t_ms
             point = st["session"].pick(cam, x, y)
-            smp = None
+            st["t_ms"] = float(t_ms)
+            out = []
             if point is not None:
                 t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
-                smp = Sample(t=t, point=tuple(float(c) for c in point), pressure=pressure, tilt=(tilt_x, tilt_y))
-            self._ready.append((smp, float(t_ms), mark))
+                out = st["resampler"].push((t, tuple(float(c) for c in point), pressure, (tilt_x, tilt_y)))
+            self._ready.extend((Sample(*p), float(t_ms), None) for p in out)
+            if mark is not None:  # the message is shown once the samples it completed are painted
+                if out:
+                    self._ready[-1] = (self._ready[-1][0], float(t_ms), mark)
+                else:
+                    self._ready.append((None, float(t_ms), mark))
         self._rows, self._row_ts = [], []
         if not self._ready:
             return
@@ -262,6 +278,12 @@ class Workspace:
         self._sample_cost = cost if self._sample_cost is None else 0.5 * (self._sample_cost + cost)
 
     def _on_end(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        st = self._stroke
+        if st is not None:  # the pen's last point, beyond the last resampled one
+            self.flush()
+            _, _, Sample, _ = _engine()
+            self._ready.extend((Sample(*p), st["t_ms"], None) for p in st["resampler"].finish())
+            self.flush()
         st, self._stroke = self._stroke, None
         if st is None or st["sid"] is None:
             return [{"type": "ended", "painted": False}]
