@@ -179,3 +179,30 @@ def test_a_frame_paints_within_its_budget_and_the_rest_follows_in_the_next_frame
     assert len(a) == len(b)
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
     np.testing.assert_allclose(a.colors, b.colors, atol=1e-12)
+
+
+def test_autosave_writes_the_model_as_it_was_while_painting_goes_on(tmp_path):
+    """An autosave copies the model at the stroke's end and writes it on its own thread: the next
+    stroke paints meanwhile, the file reloads to the model of that moment, and the ``autosaved``
+    reply comes with the next ``sync`` (which waits for the write)."""
+    ws = Workspace(_session(), tmp_path / "p.ply", autosave_every=1, advance_every=None)
+    _begin(ws)
+    ws.handle({"type": "samples", "samples": _stroke_rows(6), "ts": 1.0})
+    assert [r["type"] for r in ws.handle({"type": "end"})] == ["ended"]
+    first = ws.session.cloud()
+    first = (first.positions.copy(), first.colors.copy())
+    ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.08},
+               "paint": {"type": "oil", "color": [0.1, 0.7, 0.1], "drying": 0.1}})
+    ws.handle({"type": "samples", "samples": [[10 * i, 40 + 3 * i, 60, 0.9, 0, 0] for i in range(6)], "ts": 2.0})
+    ws.frames()  # the second stroke painted (perhaps before the autosave was written)
+    assert [r["type"] for r in ws.handle({"type": "sync", "id": 1})] == ["autosaved", "synced"]
+    assert ws.notices() == []
+    saved = Session.load(tmp_path / "p.autosave.ply", PaintOptions(haptics=False))
+    np.testing.assert_array_equal(saved.cloud().positions, first[0])
+    np.testing.assert_array_equal(saved.cloud().colors, first[1])
+    assert len(saved.strokes_json()["strokes"]) == 1
+    ws.handle({"type": "end"})
+    assert [r["type"] for r in ws.handle({"type": "sync", "id": 2})] == ["autosaved", "synced"]
+    assert len(Session.load(tmp_path / "p.autosave.ply").strokes_json()["strokes"]) == 2
+    saved.close()
+    ws.shutdown()

@@ -27,7 +27,10 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
   newest pen event it shows, for the page's latency split.
 * Files are plain names inside the output file's folder (:func:`security.output_path`); all
   writes are atomic; the model is autosaved every ``autosave_every`` strokes (to
-  ``STEM.autosave.ply``) and by :meth:`Workspace.shutdown` (to the output file).
+  ``STEM.autosave.ply``) and by :meth:`Workspace.shutdown` (to the output file). An autosave
+  copies the model (``Session.snapshot``) and encodes and writes it on a thread of its own, so
+  painting goes on meanwhile; its ``autosaved`` reply comes from :meth:`Workspace.notices` when
+  the file is written (a ``sync`` waits for it).
 
 Example
 -------
@@ -36,6 +39,8 @@ Example
 
 from __future__ import annotations
 
+import concurrent.futures
+import copy
 import math
 import time
 from pathlib import Path
@@ -103,6 +108,8 @@ class Workspace:
         self._t0 = time.monotonic()
         self._stroke: dict[str, Any] | None = None
         self._since_autosave = 0
+        self._saver: concurrent.futures.ThreadPoolExecutor | None = None
+        self._saves: list[concurrent.futures.Future[dict[str, Any]]] = []
         self.changed_since_save = False
         self.strokes = 0
         self._pending: dict[str, str] = {"model": "full", "palette": "full"}
@@ -295,7 +302,7 @@ class Workspace:
             self.changed_since_save = True
             self._since_autosave += 1
             if self._since_autosave >= self.autosave_every:
-                replies.append(self.autosave())
+                self.autosave()
         return replies
 
     def _on_undo(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
@@ -368,7 +375,7 @@ class Workspace:
         return [{"type": "replayed", "name": path.name, "strokes": n}]
 
     def _on_sync(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
-        return [{"type": "synced", "id": msg.get("id") if isinstance(msg.get("id"), int) else None}]
+        return [*self.notices(wait=True), {"type": "synced", "id": msg.get("id") if isinstance(msg.get("id"), int) else None}]
 
     def _on_pick_color(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         x, y = msg.get("x"), msg.get("y")
@@ -479,13 +486,38 @@ class Workspace:
         self._pending.setdefault("model", "diff")
         return True
 
-    def autosave(self) -> dict[str, Any]:
-        """Save the model to ``STEM.autosave.ply`` and the strokes to ``STEM.autosave.json``."""
+    def autosave(self) -> None:
+        """Save the model to ``STEM.autosave.ply`` and the strokes to ``STEM.autosave.json``: copied
+        now, written on the autosave thread (the ``autosaved`` reply comes from :meth:`notices`)."""
+        _, _, _, Session = _engine()
         self._since_autosave = 0
         ply = self.folder / (self.out_path.stem + ".autosave.ply")
-        self._save_model(ply)
-        atomic_write_json(self.folder / (self.out_path.stem + ".autosave.json"), self.session.strokes_json())
-        return {"type": "autosaved", "name": ply.name}
+        snap = self.session.snapshot()
+        strokes = copy.deepcopy(self.session.strokes_json())
+
+        def write() -> dict[str, Any]:
+            Session.write_snapshot(ply, snap)
+            atomic_write_json(self.folder / (self.out_path.stem + ".autosave.json"), strokes)
+            return {"type": "autosaved", "name": ply.name}
+
+        if self._saver is None:
+            self._saver = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="unmesh-autosave")
+        self._saves.append(self._saver.submit(write))
+
+    def notices(self, wait: bool = False) -> list[dict[str, Any]]:
+        """Replies of the autosaves written since the last call (``wait``: of all started ones,
+        waiting for them); a failed write gives an ``error`` reply."""
+        out, pending = [], []
+        for f in self._saves:
+            if not (wait or f.done()):
+                pending.append(f)
+                continue
+            try:
+                out.append(f.result())
+            except Exception as exc:  # the session goes on; the page shows it
+                out.append({"type": "error", "message": f"autosave failed: {type(exc).__name__}: {exc}"})
+        self._saves = pending
+        return out
 
     def shutdown(self) -> Path | None:
         """Close an open stroke (painting its queued samples) and save the model to the output file
@@ -493,6 +525,10 @@ class Workspace:
         if self._stroke is not None:
             self.flush()
             self._on_end({})
+        self.notices(wait=True)
+        if self._saver is not None:
+            self._saver.shutdown(wait=True)
+            self._saver = None
         self.session.close()
         self.palette.session.close()
         if not self.changed_since_save:
