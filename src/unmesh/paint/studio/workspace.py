@@ -9,14 +9,17 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
   the brush like on the object (chapter 5's palette), and ``pick_color`` loads the brush with the
   paint under the pen. The page shows it in its own canvas beside the model.
 * Pen positions arrive in image pixels and are ray-cast onto the surface with
-  ``Session.pick``; samples that miss the surface are dropped. Sample times are the page's
+  ``Session.pick``; samples that miss the surface are dropped; the rest are resampled along
+  the surface at the engine's dab step (:class:`unmesh.paint.studio.resample.DabResampler`), so
+  each costs one paint event however the surface slants. Sample times are the page's
   clock mapped to seconds since the studio started, so drying follows real time and a
   recorded session replays exactly.
 * Pen samples are checked when their message arrives but painted in one engine call per frame
   (:meth:`Workspace.flush`, run before any other message and before rendering): the samples of
   every ``samples`` message queued while the engine was busy cost one ``add_samples`` and one
   render, so the server catches up with a fast pen instead of falling further behind. A frame
-  paints only what fits in :data:`PAINT_BUDGET` at the measured cost per sample (at least one
+  paints only what fits in :data:`PAINT_BUDGET` (less the last render's time: a frame every
+  :data:`FRAME_PERIOD`) at the measured cost per sample (at least one
   sample); the rest wait for the next frame, so a slow engine (a large model) shows the stroke
   growing at a steady frame rate instead of in one late frame per burst.
 * While painting, a frame converts and compares only the windows where the engine's image
@@ -62,6 +65,10 @@ __all__ = ["PALETTE_SIZE", "Workspace"]
 
 #: Seconds of painting per frame while pen samples queue up (:meth:`Workspace.flush`).
 PAINT_BUDGET = 0.05
+#: Seconds from frame to frame while pen samples queue: a frame paints for this long less the
+#: last differential render's time (at most :data:`PAINT_BUDGET`, at least a fifth of this), so
+#: that paint + render of a frame take about this long (20 frames per second).
+FRAME_PERIOD = 0.05
 #: Largest model image (pixels per side).
 MAX_SIDE = 2048
 #: Preview (view drag) resolution divisors: the studio picks one from the last preview's render time.
@@ -127,6 +134,7 @@ class Workspace:
         self.paint_budget = PAINT_BUDGET
         self._sample_cost: float | None = None
         self._paint_time = 0.0
+        self._render_cost: float | None = None
         self.preview_scale = PREVIEW_SCALES[0]
 
     # -- cameras ------------------------------------------------------------------------
@@ -394,7 +402,10 @@ class Workspace:
         wall-clock time in ms at which the server received it) go into the headers' ``srv``, with
         ``done``, the wall-clock time at which the image was rendered (the page, on the same
         machine, splits its latency with them)."""
-        self.flush(self.paint_budget)
+        budget = self.paint_budget
+        if budget is not None and self._render_cost is not None:
+            budget = min(budget, max(0.2 * FRAME_PERIOD, FRAME_PERIOD - self._render_cost))
+        self.flush(budget)
         out = []
         pending, self._pending = self._pending, {}
         for target, mode in pending.items():
@@ -417,6 +428,9 @@ class Workspace:
                     consecutive = serial == (id(self.session), self.session.render_serial - 1)
                     windows = self.session.last_windows if mode != "full" and consecutive else None
                     img = self._model_image(res.color, windows)
+                    if windows is not None:  # a painting frame's render time, for the next paint budget
+                        cost = time.perf_counter() - t0
+                        self._render_cost = cost if self._render_cost is None else 0.5 * (self._render_cost + cost)
             else:
                 res = self.palette.render(*PALETTE_SIZE)
                 img, scale = to_uint8(res.color), 1
