@@ -128,8 +128,9 @@ class Workspace:
         #: (perf counter s, wall clock ms) at which the server received the message being handled
         self.arrival: tuple[float, float] | None = None
         self._last_arrival: tuple[float, float] | None = None
-        # ray-cast samples waiting to be painted: (sample or None for a miss, row time, message ts)
-        self._ready: list[tuple[Any, float, tuple[float, Any] | None]] = []
+        # ray-cast samples waiting to be painted: (sample or None for a miss, row time (None: the
+        # stroke's last point), message ts)
+        self._ready: list[tuple[Any, float | None, tuple[float, Any] | None]] = []
         #: Seconds of engine work (ray casts + ``add_samples``) a frame may spend on pen samples.
         self.paint_budget = PAINT_BUDGET
         self._sample_cost: float | None = None
@@ -209,7 +210,7 @@ class Workspace:
         paint = Paint(**paint_spec(msg.get("paint")))
         self._force_session = session
         self._stroke = {"target": target, "session": session, "camera": camera, "brush": brush, "paint": paint,
-                        "sid": None, "t_server": time.monotonic() - self._t0, "t_client": None, "t_ms": 0.0, "n": 0,
+                        "sid": None, "t_server": time.monotonic() - self._t0, "t_client": None, "n": 0,
                         "resampler": DabResampler(DAB_SPACING * DAB_STEP * brush.size)}
         return [{"type": "begun", "target": target}]
 
@@ -257,7 +258,6 @@ class Workspace:
             if st["t_client"] is None:
                 st["t_client"] = t_ms
             point = st["session"].pick(cam, x, y)
-            st["t_ms"] = float(t_ms)
             out = []
             if point is not None:
                 t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
@@ -276,9 +276,10 @@ class Workspace:
             n = max(1, min(n, int(budget / max(self._sample_cost, 1e-6))))
         ready, self._ready = self._ready[:n], self._ready[n:]
         done = [m for _, _, m in ready if m is not None]
-        self._last_ts, arrival = done[-1] if done else (ready[-1][1], None)
-        # the newest painted message's wait for the engine (perf counter) and arrival (wall clock, ms)
-        self._last_arrival = None if arrival is None else (1000 * (t0 - arrival[0]), arrival[1])
+        if done or ready[-1][1] is not None:  # (the stroke's last point keeps the frame's time stamp)
+            self._last_ts, arrival = done[-1] if done else (ready[-1][1], None)
+            # the newest painted message's wait for the engine (perf counter) and arrival (wall clock, ms)
+            self._last_arrival = None if arrival is None else (1000 * (t0 - arrival[0]), arrival[1])
         samples = [smp for smp, _, _ in ready if smp is not None]
         t1 = time.perf_counter()
         if samples:
@@ -297,7 +298,9 @@ class Workspace:
         if st is not None:  # the pen's last point, beyond the last resampled one
             self.flush()
             _, _, Sample, _ = _engine()
-            self._ready.extend((Sample(*p), st["t_ms"], None) for p in st["resampler"].finish())
+            # no time stamp: the pen events were shown (their point lies within a dab step of the
+            # last painted sample, inside its footprint) and their latency counted
+            self._ready.extend((Sample(*p), None, None) for p in st["resampler"].finish())
             self.flush()
         st, self._stroke = self._stroke, None
         if st is None or st["sid"] is None:
