@@ -6,7 +6,9 @@ brush size 0.05) is resampled as the page does (two fifths of the brush size on 
 batched per animation frame (1/60 s); the messages are handed to the workspace when their time
 has come, like the server's worker takes them, and a frame is rendered after each batch. It
 prints the latency from a pen event to the frame that shows it (median, p90, max; no network,
-no page), the painted frames per second, the paint events per stroke (``add_samples`` samples),
+no page), the painted frames per second, the samples given to ``add_samples`` and the engine's paint
+events (``paint_event`` calls: the engine adds events between samples farther apart than its dab
+step) per stroke,
 the CPU time, and how long the ``end`` message took (the fifth stroke's starts an autosave).
 
 Usage::
@@ -36,6 +38,7 @@ def main() -> None:
     ap.add_argument("--strokes", type=int, default=4)
     args = ap.parse_args()
 
+    import unmesh.paint.session as session_module
     from unmesh.paint.session import PaintOptions, Session
     from unmesh.paint.studio.frames import decode
     from unmesh.paint.studio.workspace import Workspace
@@ -76,7 +79,15 @@ def main() -> None:
 
     step = max(1.0, 0.4 * 0.05 * ws.px_per_unit())  # the page's resampling distance (pixels)
     lat: list[float] = []
-    fps, events, ends = [], [], []
+    fps, samples, events, ends = [], [], [], []
+    calls = [0]
+    paint_event = session_module.paint_event
+
+    def counted(*a, **k):
+        calls[0] += 1
+        return paint_event(*a, **k)
+
+    session_module.paint_event = counted
 
     def stroke(k: int) -> None:
         row, x0, x1 = segment(0.35 + 0.08 * k, 0.45 + 0.08 * k)
@@ -92,7 +103,7 @@ def main() -> None:
         count = [0]
         add = ws.session.add_samples
         ws.session.add_samples = lambda sid, s: count.__setitem__(0, count[0] + len(s)) or add(sid, s)
-        t0, frames = time.perf_counter(), 0
+        t0, frames, calls[0] = time.perf_counter(), 0, 0
         while queue or ws.backlog:
             now = 1000 * (time.perf_counter() - t0)
             due = [b for t, b in queue if t <= now]
@@ -114,11 +125,13 @@ def main() -> None:
         ends.append(1000 * (time.perf_counter() - t))
         del ws.session.add_samples
         fps.append(frames / max(span, dur))
-        events.append(count[0])
+        samples.append(count[0])
+        events.append(calls[0])
 
     stroke(0)  # warm-up
     lat.clear()
     fps.clear()
+    samples.clear()
     events.clear()
     ends.clear()
     c0 = time.process_time()
@@ -128,7 +141,8 @@ def main() -> None:
     q = np.percentile(lat, [50, 90, 100])
     print(f"pen event -> frame: median {q[0]:.0f} ms, p90 {q[1]:.0f} ms, max {q[2]:.0f} ms ({len(lat)} frames)")
     print(f"painted frames per second: {statistics.median(fps):.1f} (median over strokes)")
-    print(f"paint events per stroke: {events}; CPU {cpu:.2f} s for {args.strokes} strokes of 0.49 s")
+    print(f"per stroke: {samples} samples to add_samples, {events} paint events (with the 'end' tail); "
+          f"CPU {cpu:.2f} s for {args.strokes} strokes of 0.49 s")
     print(f"'end' handled in (ms): {[round(e) for e in ends]} (the 5th stroke's end starts an autosave)")
     ws.shutdown()
 
