@@ -25,7 +25,7 @@ def _polyline(rng, n=40):
 
 
 def _run(points, spacing, cuts):
-    r = DabResampler(spacing)
+    r = DabResampler(spacing, max_gap=10.0)  # (no jumps here: test_jumps_... below)
     out, start = [], 0
     for c in [*cuts, len(points)]:
         for p in points[start:c]:
@@ -141,3 +141,35 @@ def test_resampled_stroke_paints_what_the_raw_samples_paint_within_the_dab_spaci
     ws.shutdown()
     for s in sessions:
         s.close()
+
+
+def test_jumps_are_not_resampled_and_a_miss_restarts_the_polyline(tmp_path):
+    """A segment longer than max_gap gives its two ends (the engine paints across it as before),
+    never resampled points in the air; in the studio a stroke off the model and back paints
+    without error, the samples on either side resampled separately."""
+    r = DabResampler(1.0, max_gap=3.0)
+    p = [(0.0, (0.0, 0.0, 0.0), 0.5, (0.0, 0.0)), (1.0, (2.5, 0.0, 0.0), 0.5, (0.0, 0.0)),
+         (2.0, (9.0, 0.0, 0.0), 0.5, (0.0, 0.0)), (3.0, (10.5, 0.0, 0.0), 0.5, (0.0, 0.0))]
+    out = [q[1][0] for q in r.push(p[0]) + r.push(p[1]) + r.push(p[2]) + r.push(p[3]) + r.finish()]
+    assert out == [0.0, 1.0, 2.0, 2.5, 9.0, 10.0, 10.5]
+    assert DabResampler(0.5).max_gap == 2.0
+    with pytest.raises(InputError, match="max_gap"):
+        DabResampler(1.0, max_gap=0.0)
+
+    session = Session(by_name("plane", size=1.0).surfels(0.05), PaintOptions(haptics=False))
+    ws = Workspace(session, tmp_path / "gap.ply", advance_every=None)
+    ws.handle({"type": "hello", "width": 120, "height": 90, "view": {"yaw": 0, "pitch": 60, "zoom": 1, "pan": [0, 0]}})
+    ws.frames()
+    cam = ws.camera()
+    xs = [34 + 2.5 * i for i in range(21)]
+    hits = [session.pick(cam, x, 45) is not None for x in xs]
+    ys = [45 if i < 8 or i > 12 else 5 for i in range(21)]  # rows 8-12 off the model (above it)
+    assert all(hits) and not any(session.pick(cam, xs[i], 5) is not None for i in range(8, 13))
+    before, after = session.pick(cam, xs[7], 45), session.pick(cam, xs[13], 45)  # (ray cast before painting)
+    ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.08}, "paint": {"type": "oil", "color": [0.8, 0.1, 0.1]}})
+    ws.handle({"type": "samples", "samples": [[10 * i, xs[i], ys[i], 0.7, 0, 0] for i in range(21)], "ts": 1.0})
+    assert ws.frames() and ws.handle({"type": "end"})[0]["painted"]
+    pts = np.array([s["point"] for s in ws.session.strokes_json()["strokes"][0]["samples"]])
+    k = int(np.flatnonzero(np.linalg.norm(pts - before, axis=1) < 1e-12)[0])
+    assert np.allclose(pts[k + 1], after, atol=1e-12)  # the gap's two ends follow each other
+    ws.shutdown()

@@ -12,6 +12,12 @@ event each, whatever the slant, and the stroke is sampled as densely as its dab 
 defines. The first point is emitted at once, the rest of the polyline beyond the last emitted
 sample (less than ``spacing``) by :meth:`DabResampler.finish` at the end of the stroke.
 
+A jump longer than ``max_gap`` (the pen crossed a hole or the silhouette, or the ray hit another
+part of the surface) is not resampled: both its ends are emitted and the polyline starts again,
+so the engine paints across it as before (its own in-between events), and no resampled point
+lies in the air far from the surface (``add_samples`` refuses those). The studio also ends the
+polyline where a sample misses the surface (:meth:`DabResampler.finish`).
+
 The output depends only on the sequence of points, not on how they were split into ``push``
 calls (the studio's messages and frames): the carried arc length is the only state.
 
@@ -45,13 +51,16 @@ class DabResampler:
     ----------
     spacing : float
         Arc length between emitted samples (world units), > 0.
+    max_gap : float, optional
+        Longest segment that is resampled (default ``4 * spacing``); longer ones restart the polyline.
     """
 
-    def __init__(self, spacing: float) -> None:
-        if isinstance(spacing, bool) or not isinstance(spacing, int | float) or not math.isfinite(spacing) \
-                or spacing <= 0:
-            raise InputError(f"spacing: expected a positive finite number, got {spacing!r}")
+    def __init__(self, spacing: float, max_gap: float | None = None) -> None:
+        for key, v in (("spacing", spacing), ("max_gap", spacing if max_gap is None else max_gap)):
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+                raise InputError(f"{key}: expected a positive finite number, got {v!r}")
         self.spacing = float(spacing)
+        self.max_gap = 4.0 * self.spacing if max_gap is None else float(max_gap)
         self._last: Point | None = None
         self._carry = 0.0  # arc length from the last emitted sample to self._last
 
@@ -62,6 +71,10 @@ class DabResampler:
         if a is None:
             return [p]
         seg = math.dist(a[1], p[1])
+        if seg > self.max_gap:  # not across a gap: its ends, then a new polyline
+            out = [a] if self._carry > 0.0 else []
+            self._carry = 0.0
+            return [*out, p]
         out: list[Point] = []
         d = self.spacing - self._carry  # arc length along this segment to the next sample
         while d <= seg:

@@ -258,10 +258,11 @@ class Workspace:
             if st["t_client"] is None:
                 st["t_client"] = t_ms
             point = st["session"].pick(cam, x, y)
-            out = []
             if point is not None:
                 t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
                 out = st["resampler"].push((t, tuple(float(c) for c in point), pressure, (tilt_x, tilt_y)))
+            else:  # a miss ends the polyline (never resampled across the gap)
+                out = st["resampler"].finish()
             self._ready.extend((Sample(*p), float(t_ms), None) for p in out)
             if mark is not None:  # the message is shown once the samples it completed are painted
                 if out:
