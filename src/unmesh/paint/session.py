@@ -37,11 +37,14 @@ from unmesh.render import Camera
 from unmesh.render.shading import RenderResult
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["PaintOptions", "Session", "StrokeResult"]
+__all__ = ["DAB_STEP", "PaintOptions", "Session", "StrokeResult"]
 
 _META = "unmesh-paint "
 #: Interaction time of the first sample of a stroke (s).
 FIRST_DT = 1.0 / 30.0
+#: Largest distance between two paint events, in brush sizes: :meth:`Session.add_samples` adds
+#: events in between wherever consecutive samples are farther apart (the dab spacing).
+DAB_STEP = 0.5
 _BRISTLE = np.array([0.86, 0.8, 0.66])
 
 
@@ -202,7 +205,7 @@ class Session:
                 raise InputError(f"samples[{base + i}].point: misses the model (distance {dist[i, 0]:.4g} from the "
                                  f"surface, at most {limit:.4g})")
         a0, r0, p0 = st.added, st.removed, st.pixels
-        for smp in _subdivide(st.last, samples, 0.5 * st.brush.size):
+        for smp in _subdivide(st.last, samples, DAB_STEP * st.brush.size):
             p = np.array(smp.point)
             # the brush's candidate ball of the last event answers exactly (or asks the tree)
             ball = st.state.ball if st.state.ball is not None and st.state.ball.tree is s.tree else s.tree
@@ -450,23 +453,39 @@ class Session:
 
         May be called in the middle of a stroke: the samples painted so far are recorded as a
         stroke of their own."""
+        self.write_snapshot(path, self._state(copy=False))
+
+    @_locked
+    def snapshot(self) -> tuple[SurfelCloud, bytes]:
+        """What :meth:`save` writes, copied now: :meth:`write_snapshot` encodes and writes it later,
+        on any thread, while painting goes on (the studio's autosave)."""
+        return self._state(copy=True)
+
+    @staticmethod
+    def write_snapshot(path: str | os.PathLike[str], snapshot: tuple[SurfelCloud, bytes]) -> None:
+        """Write a :meth:`snapshot` as :meth:`save` would have written it then (PLY, atomic)."""
         from unmesh.io.atomic import atomic_write_bytes
         from unmesh.io.ply import encode_surfels
 
+        cloud, line = snapshot
+        data = encode_surfels(cloud)
+        i = data.index(b"\n", data.index(b"format")) + 1
+        atomic_write_bytes(path, data[:i] + b"comment " + line + b"\n" + data[i:])
+
+    def _state(self, copy: bool) -> tuple[SurfelCloud, bytes]:
+        """The rows as a cloud with every paint attribute, and the metadata comment line."""
         s = self.surface
+        keep = (lambda a: np.array(a, copy=True)) if copy else (lambda a: a)
         attrs = {}
         for name in FIELDS:
             if name in ("pos", "rad"):
                 continue
             a = getattr(s, name)
-            attrs["p_" + name] = a.astype(np.uint8) if a.dtype == np.bool_ else a
-        cloud = SurfelCloud(s.pos, s.nrm, radii=s.rad, colors=s.colors(), attributes=attrs)
+            attrs["p_" + name] = a.astype(np.uint8) if a.dtype == np.bool_ else keep(a)
+        cloud = SurfelCloud(keep(s.pos), keep(s.nrm), radii=keep(s.rad), colors=s.colors(), attributes=attrs)
         meta = {"version": 1, "time": self.time, "cursor": self._cursor, "options": asdict(self.options),
                 "strokes": self._record_with_open()}
-        data = encode_surfels(cloud)
-        line = (_META + json.dumps(meta, separators=(",", ":"))).encode("utf-8")
-        i = data.index(b"\n", data.index(b"format")) + 1
-        atomic_write_bytes(path, data[:i] + b"comment " + line + b"\n" + data[i:])
+        return cloud, (_META + json.dumps(meta, separators=(",", ":"))).encode("utf-8")
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], options: PaintOptions | None = None) -> Session:

@@ -50,9 +50,19 @@ def _begin(ws):
                "paint": {"type": "oil", "color": [0.8, 0.1, 0.1], "drying": 0.1}})
 
 
+def _arc_samples(ws, rows):
+    """How many samples the studio's resampling gives the engine for ``rows`` before the stroke
+    ends: the first point, then one per dab spacing of arc length along the ray-cast polyline."""
+    cam = ws.camera()
+    pts = np.array([ws.session.pick(cam, r[1], r[2]) for r in rows])
+    spacing = ws._stroke["resampler"].spacing
+    return 1 + int(np.floor(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum() / spacing))
+
+
 def test_queued_samples_are_painted_in_one_engine_call_with_the_same_samples(tmp_path):
     """Three ``samples`` messages handled before a frame cost one ``add_samples``, which gets the
-    same samples as from a single message with all the rows (times relative to the stroke's start)."""
+    same samples as from a single message with all the rows (times relative to the stroke's start):
+    the ray-cast points resampled at the engine's dab spacing (test_resample.py)."""
     rows = _stroke_rows()
     got = []
     for split in ([rows], [rows[:3], rows[3:7], rows[7:]]):
@@ -64,8 +74,9 @@ def test_queued_samples_are_painted_in_one_engine_call_with_the_same_samples(tmp
         for part in split:
             ws.handle({"type": "samples", "samples": part, "ts": 1.0})
         assert calls == []  # checked, not painted yet
+        expected = _arc_samples(ws, rows)  # (ray cast before painting, as the frame does)
         frames = ws.frames(queue_ms=1.0, received_at=2.0)
-        assert len(calls) == 1 and len(calls[0]) == len(rows) and frames
+        assert len(calls) == 1 and len(calls[0]) == expected and frames
         t0 = calls[0][0].t
         got.append([(round(s.t - t0, 9), s.point, s.pressure, s.tilt) for s in calls[0]])
         ws.handle({"type": "end"})
@@ -145,19 +156,20 @@ def test_a_frame_paints_within_its_budget_and_the_rest_follows_in_the_next_frame
         ws.session.add_samples = lambda sid, samples, add=add, calls=calls: calls.append(len(samples)) or add(sid, samples)
         ws.handle({"type": "samples", "samples": rows[:1], "ts": 0.5})
         ws.frames()  # measures the cost of one sample
+        n = _arc_samples(ws, rows)  # samples the engine gets before the stroke ends (resampled)
         ws.handle({"type": "samples", "samples": rows[1:3], "ts": 25.0})
         ws.handle({"type": "samples", "samples": rows[3:], "ts": 55.0})
         if budget is None:
             ws.paint_budget = None
             heads = [decode(f)[0] for f in ws.frames() if decode(f)[0]["target"] == "model"]
-            assert calls == [1, 5] and ws.backlog == 0 and heads[-1]["ts"] == 55.0
+            assert calls == [1, n - 1] and ws.backlog == 0 and heads[-1]["ts"] == 55.0
         else:
             ws.paint_budget = 1.5 * ws._sample_cost  # about one sample a frame
             stamps = []
             while ws.backlog:
                 heads = [decode(f)[0] for f in ws.frames() if decode(f)[0]["target"] == "model"]
                 stamps.append(heads[-1]["ts"] if heads else None)
-            assert calls[0] == 1 and sum(calls) == 6 and len(calls) >= 3 and max(calls[1:]) <= 2
+            assert calls[0] == 1 and sum(calls) == n and len(calls) >= 3 and max(calls[1:]) <= 2
             assert stamps[-1] == 55.0 and stamps == sorted(stamps)
             assert set(stamps) <= {25.0, 55.0, *(float(r[0]) for r in rows)}
         ws.handle({"type": "end"})
@@ -167,3 +179,30 @@ def test_a_frame_paints_within_its_budget_and_the_rest_follows_in_the_next_frame
     assert len(a) == len(b)
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
     np.testing.assert_allclose(a.colors, b.colors, atol=1e-12)
+
+
+def test_autosave_writes_the_model_as_it_was_while_painting_goes_on(tmp_path):
+    """An autosave copies the model at the stroke's end and writes it on its own thread: the next
+    stroke paints meanwhile, the file reloads to the model of that moment, and the ``autosaved``
+    reply comes with the next ``sync`` (which waits for the write)."""
+    ws = Workspace(_session(), tmp_path / "p.ply", autosave_every=1, advance_every=None)
+    _begin(ws)
+    ws.handle({"type": "samples", "samples": _stroke_rows(6), "ts": 1.0})
+    assert [r["type"] for r in ws.handle({"type": "end"})] == ["ended"]
+    first = ws.session.cloud()
+    first = (first.positions.copy(), first.colors.copy())
+    ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.08},
+               "paint": {"type": "oil", "color": [0.1, 0.7, 0.1], "drying": 0.1}})
+    ws.handle({"type": "samples", "samples": [[10 * i, 40 + 3 * i, 60, 0.9, 0, 0] for i in range(6)], "ts": 2.0})
+    ws.frames()  # the second stroke painted (perhaps before the autosave was written)
+    assert [r["type"] for r in ws.handle({"type": "sync", "id": 1})] == ["autosaved", "synced"]
+    assert ws.notices() == []
+    saved = Session.load(tmp_path / "p.autosave.ply", PaintOptions(haptics=False))
+    np.testing.assert_array_equal(saved.cloud().positions, first[0])
+    np.testing.assert_array_equal(saved.cloud().colors, first[1])
+    assert len(saved.strokes_json()["strokes"]) == 1
+    ws.handle({"type": "end"})
+    assert [r["type"] for r in ws.handle({"type": "sync", "id": 2})] == ["autosaved", "synced"]
+    assert len(Session.load(tmp_path / "p.autosave.ply").strokes_json()["strokes"]) == 2
+    saved.close()
+    ws.shutdown()

@@ -225,6 +225,7 @@ class Studio:
             traceback.print_exc(file=sys.stderr)
             frames = []
             replies.append((None, {"type": "error", "message": f"render failed: {type(exc).__name__}: {exc}"}))
+        replies.extend((None, r) for r in self.workspace.notices())  # autosaves written meanwhile
         return replies, frames, done
 
     async def _worker(self) -> None:
@@ -260,17 +261,22 @@ class Studio:
             if not self.clients or self._queue:
                 continue
 
-            def tick() -> list[bytes]:
+            def tick() -> tuple[list[bytes], list[dict[str, Any]]]:
                 try:
-                    return self.workspace.frames() if self.workspace.tick() else []
+                    return (self.workspace.frames() if self.workspace.tick() else []), self.workspace.notices()
                 except Exception:
                     traceback.print_exc(file=sys.stderr)
-                    return []
+                    return [], []
 
-            for frame in await loop.run_in_executor(self.pool, tick):
+            frames, notices = await loop.run_in_executor(self.pool, tick)
+            for frame in frames:
                 for client in list(self.clients):
                     with contextlib.suppress(ConnectionError, RuntimeError):
                         await client.send_bytes(frame)
+            for notice in notices:
+                for client in list(self.clients):
+                    with contextlib.suppress(ConnectionError, RuntimeError):
+                        await client.send_json(notice)
 
     async def _forces(self) -> None:
         last_active = -1e9

@@ -9,14 +9,17 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
   the brush like on the object (chapter 5's palette), and ``pick_color`` loads the brush with the
   paint under the pen. The page shows it in its own canvas beside the model.
 * Pen positions arrive in image pixels and are ray-cast onto the surface with
-  ``Session.pick``; samples that miss the surface are dropped. Sample times are the page's
+  ``Session.pick``; samples that miss the surface are dropped; the rest are resampled along
+  the surface at the engine's dab step (:class:`unmesh.paint.studio.resample.DabResampler`), so
+  each costs one paint event however the surface slants. Sample times are the page's
   clock mapped to seconds since the studio started, so drying follows real time and a
   recorded session replays exactly.
 * Pen samples are checked when their message arrives but painted in one engine call per frame
   (:meth:`Workspace.flush`, run before any other message and before rendering): the samples of
   every ``samples`` message queued while the engine was busy cost one ``add_samples`` and one
   render, so the server catches up with a fast pen instead of falling further behind. A frame
-  paints only what fits in :data:`PAINT_BUDGET` at the measured cost per sample (at least one
+  paints only what fits in :data:`PAINT_BUDGET` (less the last render's time: a frame every
+  :data:`FRAME_PERIOD`) at the measured cost per sample (at least one
   sample); the rest wait for the next frame, so a slow engine (a large model) shows the stroke
   growing at a steady frame rate instead of in one late frame per burst.
 * While painting, a frame converts and compares only the windows where the engine's image
@@ -27,7 +30,10 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
   newest pen event it shows, for the page's latency split.
 * Files are plain names inside the output file's folder (:func:`security.output_path`); all
   writes are atomic; the model is autosaved every ``autosave_every`` strokes (to
-  ``STEM.autosave.ply``) and by :meth:`Workspace.shutdown` (to the output file).
+  ``STEM.autosave.ply``) and by :meth:`Workspace.shutdown` (to the output file). An autosave
+  copies the model (``Session.snapshot``) and encodes and writes it on a thread of its own, so
+  painting goes on meanwhile; its ``autosaved`` reply comes from :meth:`Workspace.notices` when
+  the file is written (a ``sync`` waits for it).
 
 Example
 -------
@@ -36,6 +42,8 @@ Example
 
 from __future__ import annotations
 
+import concurrent.futures
+import copy
 import math
 import time
 from pathlib import Path
@@ -48,6 +56,7 @@ from unmesh.io.atomic import atomic_write_json
 from unmesh.paint.palette import PALETTE_EXTENT, PALETTE_SIZE, Palette
 from unmesh.paint.studio.frames import FrameEncoder, to_uint8
 from unmesh.paint.studio.protocol import brush_spec, paint_spec, samples_spec
+from unmesh.paint.studio.resample import DabResampler
 from unmesh.paint.studio.security import output_path
 from unmesh.paint.studio.view import PRESETS, Framing, View, view_from_message
 from unmesh.render.camera import Camera
@@ -56,6 +65,10 @@ __all__ = ["PALETTE_SIZE", "Workspace"]
 
 #: Seconds of painting per frame while pen samples queue up (:meth:`Workspace.flush`).
 PAINT_BUDGET = 0.05
+#: Seconds from frame to frame while pen samples queue: a frame paints for this long less the
+#: last differential render's time (at most :data:`PAINT_BUDGET`, at least a fifth of this), so
+#: that paint + render of a frame take about this long (20 frames per second).
+FRAME_PERIOD = 0.05
 #: Largest model image (pixels per side).
 MAX_SIDE = 2048
 #: Preview (view drag) resolution divisors: the studio picks one from the last preview's render time.
@@ -65,6 +78,11 @@ PREVIEW_SCALES = (2, 3, 4)
 PREVIEW_SURFELS = 60_000
 #: Render time (s) of a preview above which the next preview uses a coarser image, and below which a finer one.
 PREVIEW_SLOW, PREVIEW_FAST = 0.05, 0.015
+
+
+#: The studio's resampling distance in units of the engine's dab step (``DAB_STEP`` brush sizes):
+#: just below it, so that rounding never makes the engine add an event between two samples.
+DAB_SPACING = 1.0 - 1e-6
 
 
 def _engine():
@@ -97,6 +115,8 @@ class Workspace:
         self._t0 = time.monotonic()
         self._stroke: dict[str, Any] | None = None
         self._since_autosave = 0
+        self._saver: concurrent.futures.ThreadPoolExecutor | None = None
+        self._saves: list[concurrent.futures.Future[dict[str, Any]]] = []
         self.changed_since_save = False
         self.strokes = 0
         self._pending: dict[str, str] = {"model": "full", "palette": "full"}
@@ -108,12 +128,14 @@ class Workspace:
         #: (perf counter s, wall clock ms) at which the server received the message being handled
         self.arrival: tuple[float, float] | None = None
         self._last_arrival: tuple[float, float] | None = None
-        # ray-cast samples waiting to be painted: (sample or None for a miss, row time, message ts)
-        self._ready: list[tuple[Any, float, tuple[float, Any] | None]] = []
+        # ray-cast samples waiting to be painted: (sample or None for a miss, row time (None: the
+        # stroke's last point), message ts)
+        self._ready: list[tuple[Any, float | None, tuple[float, Any] | None]] = []
         #: Seconds of engine work (ray casts + ``add_samples``) a frame may spend on pen samples.
         self.paint_budget = PAINT_BUDGET
         self._sample_cost: float | None = None
         self._paint_time = 0.0
+        self._render_cost: float | None = None
         self.preview_scale = PREVIEW_SCALES[0]
 
     # -- cameras ------------------------------------------------------------------------
@@ -177,6 +199,8 @@ class Workspace:
         raise InputError(f"target: expected 'model' or 'palette', got {name!r}")
 
     def _on_begin(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        from unmesh.paint.session import DAB_STEP
+
         Brush, Paint, _, _ = _engine()
         if self._stroke is not None:
             self._on_end({})
@@ -186,7 +210,8 @@ class Workspace:
         paint = Paint(**paint_spec(msg.get("paint")))
         self._force_session = session
         self._stroke = {"target": target, "session": session, "camera": camera, "brush": brush, "paint": paint,
-                        "sid": None, "t_server": time.monotonic() - self._t0, "t_client": None, "n": 0}
+                        "sid": None, "t_server": time.monotonic() - self._t0, "t_client": None, "n": 0,
+                        "resampler": DabResampler(DAB_SPACING * DAB_STEP * brush.size)}
         return [{"type": "begun", "target": target}]
 
     def _on_samples(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
@@ -228,15 +253,22 @@ class Workspace:
         cam = st["camera"]
         # every received row is ray-cast now, before any of them is painted (as when all are
         # painted at once), so the points do not depend on how the samples are split into frames
+        # and resampled at the engine's dab spacing (:class:`DabResampler`: one paint event each)
         for (t_ms, x, y, pressure, tilt_x, tilt_y), mark in zip(self._rows, self._row_ts, strict=True):
             if st["t_client"] is None:
                 st["t_client"] = t_ms
             point = st["session"].pick(cam, x, y)
-            smp = None
             if point is not None:
                 t = st["t_server"] + max(0.0, (t_ms - st["t_client"]) / 1000.0)
-                smp = Sample(t=t, point=tuple(float(c) for c in point), pressure=pressure, tilt=(tilt_x, tilt_y))
-            self._ready.append((smp, float(t_ms), mark))
+                out = st["resampler"].push((t, tuple(float(c) for c in point), pressure, (tilt_x, tilt_y)))
+            else:  # a miss ends the polyline (never resampled across the gap)
+                out = st["resampler"].finish()
+            self._ready.extend((Sample(*p), float(t_ms), None) for p in out)
+            if mark is not None:  # the message is shown once the samples it completed are painted
+                if out:
+                    self._ready[-1] = (self._ready[-1][0], float(t_ms), mark)
+                else:
+                    self._ready.append((None, float(t_ms), mark))
         self._rows, self._row_ts = [], []
         if not self._ready:
             return
@@ -245,9 +277,10 @@ class Workspace:
             n = max(1, min(n, int(budget / max(self._sample_cost, 1e-6))))
         ready, self._ready = self._ready[:n], self._ready[n:]
         done = [m for _, _, m in ready if m is not None]
-        self._last_ts, arrival = done[-1] if done else (ready[-1][1], None)
-        # the newest painted message's wait for the engine (perf counter) and arrival (wall clock, ms)
-        self._last_arrival = None if arrival is None else (1000 * (t0 - arrival[0]), arrival[1])
+        if done or ready[-1][1] is not None:  # (the stroke's last point keeps the frame's time stamp)
+            self._last_ts, arrival = done[-1] if done else (ready[-1][1], None)
+            # the newest painted message's wait for the engine (perf counter) and arrival (wall clock, ms)
+            self._last_arrival = None if arrival is None else (1000 * (t0 - arrival[0]), arrival[1])
         samples = [smp for smp, _, _ in ready if smp is not None]
         t1 = time.perf_counter()
         if samples:
@@ -262,6 +295,14 @@ class Workspace:
         self._sample_cost = cost if self._sample_cost is None else 0.5 * (self._sample_cost + cost)
 
     def _on_end(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
+        st = self._stroke
+        if st is not None:  # the pen's last point, beyond the last resampled one
+            self.flush()
+            _, _, Sample, _ = _engine()
+            # no time stamp: the pen events were shown (their point lies within a dab step of the
+            # last painted sample, inside its footprint) and their latency counted
+            self._ready.extend((Sample(*p), None, None) for p in st["resampler"].finish())
+            self.flush()
         st, self._stroke = self._stroke, None
         if st is None or st["sid"] is None:
             return [{"type": "ended", "painted": False}]
@@ -273,7 +314,7 @@ class Workspace:
             self.changed_since_save = True
             self._since_autosave += 1
             if self._since_autosave >= self.autosave_every:
-                replies.append(self.autosave())
+                self.autosave()
         return replies
 
     def _on_undo(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
@@ -346,7 +387,7 @@ class Workspace:
         return [{"type": "replayed", "name": path.name, "strokes": n}]
 
     def _on_sync(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
-        return [{"type": "synced", "id": msg.get("id") if isinstance(msg.get("id"), int) else None}]
+        return [*self.notices(wait=True), {"type": "synced", "id": msg.get("id") if isinstance(msg.get("id"), int) else None}]
 
     def _on_pick_color(self, msg: dict[str, Any]) -> list[dict[str, Any]]:
         x, y = msg.get("x"), msg.get("y")
@@ -365,7 +406,10 @@ class Workspace:
         wall-clock time in ms at which the server received it) go into the headers' ``srv``, with
         ``done``, the wall-clock time at which the image was rendered (the page, on the same
         machine, splits its latency with them)."""
-        self.flush(self.paint_budget)
+        budget = self.paint_budget
+        if budget is not None and self._render_cost is not None:
+            budget = min(budget, max(0.2 * FRAME_PERIOD, FRAME_PERIOD - self._render_cost))
+        self.flush(budget)
         out = []
         pending, self._pending = self._pending, {}
         for target, mode in pending.items():
@@ -388,6 +432,9 @@ class Workspace:
                     consecutive = serial == (id(self.session), self.session.render_serial - 1)
                     windows = self.session.last_windows if mode != "full" and consecutive else None
                     img = self._model_image(res.color, windows)
+                    if windows is not None:  # a painting frame's render time, for the next paint budget
+                        cost = time.perf_counter() - t0
+                        self._render_cost = cost if self._render_cost is None else 0.5 * (self._render_cost + cost)
             else:
                 res = self.palette.render(*PALETTE_SIZE)
                 img, scale = to_uint8(res.color), 1
@@ -457,13 +504,38 @@ class Workspace:
         self._pending.setdefault("model", "diff")
         return True
 
-    def autosave(self) -> dict[str, Any]:
-        """Save the model to ``STEM.autosave.ply`` and the strokes to ``STEM.autosave.json``."""
+    def autosave(self) -> None:
+        """Save the model to ``STEM.autosave.ply`` and the strokes to ``STEM.autosave.json``: copied
+        now, written on the autosave thread (the ``autosaved`` reply comes from :meth:`notices`)."""
+        _, _, _, Session = _engine()
         self._since_autosave = 0
         ply = self.folder / (self.out_path.stem + ".autosave.ply")
-        self._save_model(ply)
-        atomic_write_json(self.folder / (self.out_path.stem + ".autosave.json"), self.session.strokes_json())
-        return {"type": "autosaved", "name": ply.name}
+        snap = self.session.snapshot()
+        strokes = copy.deepcopy(self.session.strokes_json())
+
+        def write() -> dict[str, Any]:
+            Session.write_snapshot(ply, snap)
+            atomic_write_json(self.folder / (self.out_path.stem + ".autosave.json"), strokes)
+            return {"type": "autosaved", "name": ply.name}
+
+        if self._saver is None:
+            self._saver = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="unmesh-autosave")
+        self._saves.append(self._saver.submit(write))
+
+    def notices(self, wait: bool = False) -> list[dict[str, Any]]:
+        """Replies of the autosaves written since the last call (``wait``: of all started ones,
+        waiting for them); a failed write gives an ``error`` reply."""
+        out, pending = [], []
+        for f in self._saves:
+            if not (wait or f.done()):
+                pending.append(f)
+                continue
+            try:
+                out.append(f.result())
+            except Exception as exc:  # the session goes on; the page shows it
+                out.append({"type": "error", "message": f"autosave failed: {type(exc).__name__}: {exc}"})
+        self._saves = pending
+        return out
 
     def shutdown(self) -> Path | None:
         """Close an open stroke (painting its queued samples) and save the model to the output file
@@ -471,6 +543,10 @@ class Workspace:
         if self._stroke is not None:
             self.flush()
             self._on_end({})
+        self.notices(wait=True)
+        if self._saver is not None:
+            self._saver.shutdown(wait=True)
+            self._saver = None
         self.session.close()
         self.palette.session.close()
         if not self.changed_since_save:
