@@ -701,7 +701,7 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     return keep
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, work):
     """Per-fragment clip test of surfel ``s`` at depth ``z`` (chapter 4).
 
@@ -726,6 +726,17 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
     wy = eye[1] + px * frame[0, 1] + py * frame[1, 1] + z * frame[2, 1]
     wz = eye[2] + px * frame[0, 2] + py * frame[1, 2] + z * frame[2, 2]
     if clip_tree is not None:  # None (plain splatting) prunes this branch at compile time
+        # the cache hits of keep_tree_cached here, in the fragment loop: a call per fragment
+        # costs more than the look-up itself
+        K = clip_tree.shape[0]
+        if work[K, 6] == s:
+            for row in range(K, K + 2):
+                if work[row, 0] == s:
+                    dx = wx - work[row, 1]
+                    dy = wy - work[row, 2]
+                    dz = wz - work[row, 3]
+                    if dx * dx + dy * dy + dz * dz < work[row, 4]:
+                        return work[row, 5] > 0.0
         return keep_tree_cached(s, wx, wy, wz, clip_offsets, clip_planes, clip_tree, clip_leaf, work)
     anymode = clip_mode[s] != 0
     for j in range(a, b):
