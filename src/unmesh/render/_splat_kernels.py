@@ -646,6 +646,52 @@ def _cache_hit(work, row, s, x0, x1, x2):
 
 
 @njit(cache=True)
+def _keep_single(s, x0, x1, x2, partners, tree, leaf, work):
+    """:func:`keep_tree` for a surfel ``s`` with at most one partner per leaf (half-spaces, the
+    faces of Fig. 4.10): insidePatch of a leaf is the side of its one plane (4.3, no search for
+    the closest partners). The walk of :func:`keep_tree_cached` without its short-circuits inside
+    a sibling's sub-tree (the siblings of folded trees are mostly single leaves); returns
+    ``(keep, margin)`` with the margin of the planes tested. ``work[k, 1]`` holds the partner
+    row of leaf node ``k`` (-1: none, unknown); insideTree values go to column 0."""
+    own = leaf[s]
+    tol = COPLANAR_EPS * (1.0 + abs(x0) + abs(x1) + abs(x2))
+    margin = np.inf
+    node = own
+    while tree[node, 1] >= 0:
+        p = tree[node, 1]
+        right = p - 1
+        sib = tree[right, 2] - 1 if node == right else right
+        for k in range(tree[sib, 2], sib + 1):  # insideTree of the sibling's sub-tree, post order
+            op = tree[k, 0]
+            if op == 2:
+                j = int(work[k, 1])
+                if j < 0:
+                    v = -1
+                else:  # _clips_fragment and _plane_margin of row j
+                    d = ((x0 - partners[j, 0]) * partners[j, 3] + (x1 - partners[j, 1]) * partners[j, 4]
+                         + (x2 - partners[j, 2]) * partners[j, 5])
+                    if abs(d) <= tol:
+                        inside = not (own > partners[j, 6])
+                    else:
+                        inside = not (d >= 0.0)
+                    if tree[k, 3] != 0:
+                        inside = not inside
+                    v = 1 if inside else 0
+                    margin = min(margin, max(abs(d) - tol, 0.0) / (1.0 + 4.0 * COPLANAR_EPS) * (1.0 - 1e-9))
+            else:
+                r = k - 1
+                a = int(work[tree[r, 2] - 1, 0])
+                b = int(work[r, 0])
+                v = _tri_and(a, b) if op == 0 else _tri_or(a, b)
+            work[k, 0] = v
+        v = int(work[sib, 0])
+        if v >= 0 and not (v > 0 if tree[p, 0] == 0 else v == 0):
+            return False, margin
+        node = p
+    return True, margin
+
+
+@njit(cache=True)
 def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     """:func:`keep_tree` with the traversal short-circuited and its result reused between
     neighbouring fragments (4.2.3: "past results of the traversal are cached and reused").
@@ -669,27 +715,34 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     if work[K, 6] != s:  # partner lists of the leaves, each in ascending row order
         for k in range(K):
             work[k, 1] = -1.0
+        single = 1.0
         for j in range(clip_offsets[s + 1] - 1, clip_offsets[s] - 1, -1):
             node = int(partners[j, 6])
+            if work[node, 1] >= 0.0:
+                single = 0.0
             work[base + j, 0] = work[node, 1]
             work[node, 1] = j
         work[K, 6] = s
+        work[K, 7] = single
     elif _cache_hit(work, K, s, x0, x1, x2):
         return work[K, 5] > 0.0
     elif _cache_hit(work, K + 1, s, x0, x1, x2):
         return work[K + 1, 5] > 0.0
-    margin = np.inf
-    keep = True
-    node = leaf[s]
-    while tree[node, 1] >= 0:
-        p = tree[node, 1]
-        right = p - 1
-        sib = tree[right, 2] - 1 if node == right else right
-        v, margin = _subtree_value(tree[sib, 2], sib, s, x0, x1, x2, partners, tree, leaf, work, base, margin)
-        if v >= 0 and not (v > 0 if tree[p, 0] == 0 else v == 0):
-            keep = False
-            break
-        node = p
+    if work[K, 7] > 0.0:
+        keep, margin = _keep_single(s, x0, x1, x2, partners, tree, leaf, work)
+    else:
+        margin = np.inf
+        keep = True
+        node = leaf[s]
+        while tree[node, 1] >= 0:
+            p = tree[node, 1]
+            right = p - 1
+            sib = tree[right, 2] - 1 if node == right else right
+            v, margin = _subtree_value(tree[sib, 2], sib, s, x0, x1, x2, partners, tree, leaf, work, base, margin)
+            if v >= 0 and not (v > 0 if tree[p, 0] == 0 else v == 0):
+                keep = False
+                break
+            node = p
     for c in range(6):  # the last result moves to the second slot
         work[K + 1, c] = work[K, c]
     work[K, 0] = s
