@@ -558,18 +558,30 @@ def _plane_margin(P, j, x0, x1, x2):
 def _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base):
     """insidePatch (4.3/4.4) of leaf node ``k`` for the fragment of surfel ``s`` at ``x``, from
     the partner list of ``k`` (linked in ``work``): ``(value, margin)`` with value -1 unknown,
-    and ``margin`` the distance ``x`` may move without changing the value."""
+    and ``margin`` the distance ``x`` may move without changing the value (no plane of the
+    leaf's partners changing side when they all agree on ``x``, otherwise also the two closest
+    staying the two closest)."""
     d1 = np.inf
     d2 = np.inf
     d3 = np.inf
     i1 = -1
     i2 = -1
+    own = leaf[s]
+    tol = COPLANAR_EPS * (1.0 + abs(x0) + abs(x1) + abs(x2))
+    rows = 0
+    clipping = 0
+    gap = np.inf
     j = int(work[k, 1])
     while j >= 0:  # the same scan order and ties as keep_tree
         dx = x0 - partners[j, 0]
         dy = x1 - partners[j, 1]
         dz = x2 - partners[j, 2]
         d = dx * dx + dy * dy + dz * dz
+        e = dx * partners[j, 3] + dy * partners[j, 4] + dz * partners[j, 5]  # _clips_fragment
+        if (own > partners[j, 6]) if abs(e) <= tol else (e >= 0.0):
+            clipping += 1
+        rows += 1
+        gap = min(gap, abs(e) - tol)
         if d < d1:
             d3 = d2
             d2 = d1
@@ -585,7 +597,13 @@ def _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base):
         j = int(work[base + j, 0])
     if i1 < 0:
         return -1, np.inf
-    own = leaf[s]
+    if clipping == 0 or clipping == rows:
+        # every partner clips x, or none does: the value whichever two are closest (4.3/4.4),
+        # while no plane changes side (the _plane_margin of the nearest plane)
+        inside = clipping == 0
+        if tree[k, 3] != 0:
+            inside = not inside
+        return (1 if inside else 0), max(gap, 0.0) / (1.0 + 4.0 * COPLANAR_EPS) * (1.0 - 1e-9)
     c1 = _clips_fragment(partners, i1, x0, x1, x2, own)
     margin = _plane_margin(partners, i1, x0, x1, x2)
     if i2 < 0:
@@ -700,7 +718,9 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     fragment off the surface ends the walk; a deciding left operand skips the right one). With
     the result, the distance ``margin`` that ``x`` may move without changing any value used is
     kept (the distance to the nearest plane tested, and half the gap between the second and
-    third closest partner of every leaf evaluated); a later fragment of the same surfel
+    third closest partner of every leaf evaluated whose partners disagree on the fragment:
+    when all of a leaf's partners clip it, or none does, the value is the same whichever two
+    are closest, and only their planes bound the margin); a later fragment of the same surfel
     within ``margin`` of a cached one gets the cached result, exactly the one a new traversal
     would give. Two slots: the last result and the one before (the start of the previous
     pixel row, typically).
