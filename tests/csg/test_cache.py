@@ -73,6 +73,39 @@ def test_dropping_decided_surfels_between_patches_keeps_the_classes(monkeypatch)
     assert (early.classes == 2).sum() > 100 and (early.classes == 1).sum() > 50
 
 
+def test_asking_representatives_of_pieces_keeps_the_classes(monkeypatch):
+    """insidePatch valued per piece of the asked surfels (a few representatives asked, pieces
+    whose representatives disagree asked whole) gives the classes and partner rows of asking
+    every surfel, for spheres cut by spheres and for moved patches (memo path)."""
+    from unmesh.csg import cache, frame
+
+    calls = []
+    real = frame.inside_patch
+    monkeypatch.setattr(frame, "inside_patch", lambda c, x, *a, **k: calls.append(len(x)) or real(c, x, *a, **k))
+    monkeypatch.setattr(frame, "_MEMO_FROM", 0)
+    ball = Patch.from_shape(Sphere(radius=1.0), 0.06)
+    cuts = [Patch.from_shape(Sphere(radius=1.6, center=c), 0.1) for c in ((1.4, 1.4, 0.0), (-1.4, 0.0, 1.4),
+                                                                          (0.0, -1.5, -1.2))]
+    models = [ball - cuts[0] - cuts[1] - cuts[2],
+              (ball.moved(_rotation(0.4, 1.1, (0.1, 0, 0))) - cuts[0]) | (cuts[1] & cuts[2].moved(_rotation(0.2)))]
+    for model in models:
+        monkeypatch.setattr(frame, "_PIECES_FROM", 0)
+        cache._MEMO.clear()
+        calls.clear()
+        pieced = prepare(model, reuse=False)
+        asked = sum(calls)
+        cache._MEMO.clear()
+        monkeypatch.setattr(frame, "_PIECES_FROM", 10**9)
+        calls.clear()
+        every = prepare(model, reuse=False)
+        cache._MEMO.clear()
+        assert np.array_equal(pieced.classes, every.classes)
+        assert np.array_equal(pieced.clip.offsets, every.clip.offsets)
+        assert np.array_equal(pieced.clip.partners, every.clip.partners)
+        assert asked < sum(calls)
+        assert (every.classes == 1).sum() > 50 and (every.classes == 2).sum() > 100
+
+
 def test_values_of_unmoved_patches_are_reused_and_equal_a_fresh_evaluation(monkeypatch):
     """Frames of a moving ball: the memo of the unmoved pairs gives exactly the fresh result,
     and the moved ball is asked again (its values change)."""

@@ -25,7 +25,7 @@ def _tree(draw, nleaves):
 
 
 @st.composite
-def fragments(draw):
+def fragments(draw, most=3, sheet=False):
     nleaves = draw(st.integers(1, 6))
     flat = flatten(_tree(draw, nleaves))
     table = flat.table()
@@ -35,9 +35,12 @@ def fragments(draw):
     for j in range(L):
         if j == s_leaf:
             continue
-        for _ in range(draw(st.integers(0, 3))):
+        base_n = np.array(draw(st.lists(st.floats(-1, 1), min_size=3, max_size=3))) if sheet else None
+        for _ in range(draw(st.integers(0, most))):
             c = draw(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
             n = draw(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
+            if sheet:  # samples of one smooth patch: nearly parallel normals
+                n = base_n + 0.05 * np.array(n)
             if np.linalg.norm(n) < 1e-3:
                 n = [0, 0, 1.0]
             rows.append([*c, *(np.array(n) / np.linalg.norm(n)), flat.leaf_node[j]])
@@ -152,6 +155,25 @@ def test_cached_short_circuit_traversal_equals_full_traversal(case, seed):
     """keep_tree_cached (short-circuited, results reused between neighbouring fragments, 4.2.3)
     gives exactly keep_tree's answer on a walk of nearby fragments (pixel-sized steps, some
     landing on partner planes and on ties between partners)."""
+    _walk_cached(case, seed)
+
+
+@settings(max_examples=150, deadline=None)
+@given(fragments(most=1), st.integers(0, 2**31 - 1))
+def test_cached_traversal_with_one_partner_per_leaf_equals_full_traversal(case, seed):
+    """The same with at most one partner per leaf (keep_tree_cached's plane-per-leaf path)."""
+    _walk_cached(case, seed)
+
+
+@settings(max_examples=150, deadline=None)
+@given(fragments(most=5, sheet=True), st.integers(0, 2**31 - 1))
+def test_cached_traversal_with_sheets_of_partners_equals_full_traversal(case, seed):
+    """The same with several partners of nearly one orientation per leaf (a sampled surface):
+    all of a leaf's partners then often agree on the fragment, whichever two are closest."""
+    _walk_cached(case, seed)
+
+
+def _walk_cached(case, seed):
     from unmesh.render._splat_kernels import clip_work, keep_tree_cached, max_rows
 
     x, offsets, partners, table, leaf, _ = case

@@ -73,6 +73,21 @@ def test_kdtree_class_reuse(rng):
         assert_knn_equal(tree.knn(q, 6), brute_knn(p, 6, q))
 
 
+@pytest.mark.parametrize("leafsize", [1, 5, 64, 2000])
+def test_leafsize_does_not_change_results(rng, leafsize):
+    # queries near the points and far from them (a sphere seen from outside, where leaf size matters)
+    p = rng.normal(size=(1500, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    q = np.concatenate([p[:100] * 1.01, rng.normal(size=(100, 3)) * 4.0])
+    assert_knn_equal(KDTree(p, leafsize=leafsize).knn(q, 3), brute_knn(p, 3, q))
+
+
+@pytest.mark.parametrize("leafsize", [0, -3, 2.5, True])
+def test_bad_leafsize(leafsize):
+    with pytest.raises(InputError, match="leafsize"):
+        KDTree(np.zeros((3, 3)), leafsize=leafsize)
+
+
 @pytest.mark.parametrize("k", [0, -1, 1.5, "3", None, True])
 def test_bad_k(k):
     with pytest.raises(InputError, match="k"):

@@ -66,11 +66,16 @@ def patch_memo(target: Any, source: Any, rule: str) -> np.ndarray:
     return memo
 
 
+#: Leaf size of the patch k-d trees: insidePatch asks many centres far from the patch (the
+#: surfels of other patches), where larger leaves cost less (docs/performance.md, stop 34).
+LEAF_SIZE = 64
+
+
 def local_tree(cloud: SurfelCloud) -> KDTree:
-    """The k-d tree of ``cloud.positions``, built once per cloud."""
+    """The k-d tree of ``cloud.positions`` (leaves of :data:`LEAF_SIZE` points), built once per cloud."""
     tree = _TREES.get(cloud)
     if tree is None:
-        tree = KDTree(cloud.positions)
+        tree = KDTree(cloud.positions, leafsize=LEAF_SIZE)
         _TREES[cloud] = tree
     return tree
 

@@ -55,6 +55,11 @@ _DECIDE_EARLY = 2048
 #: (:func:`unmesh.csg.cache.patch_memo`); fewer are asked directly.
 _MEMO_FROM = 256
 
+#: Surfels of one patch asked against another from which only representatives of their pieces
+#: are asked (insidePatch of the other patch is constant over a piece of surfels that do not
+#: meet it, as over the pieces of 4.1.2; pieces whose representatives disagree are asked whole).
+_PIECES_FROM = 256
+
 #: Frames of the models evaluated so far (held weakly), per (method, rule).
 _FRAMES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -283,6 +288,7 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
         v = np.empty(len(sel), dtype=bool)
         # values of patches that did not move since an earlier frame are reused (cache.patch_memo)
         todo = []
+        pieced = []  # surfels of one patch valued by pieces (cf. _pieces): (rows, labels, representatives, memo, local)
         li = leaf[sel]
         if len(sel) < _MEMO_FROM:  # few points: asking costs less than looking them up
             todo.append((np.arange(len(sel)), None, None))
@@ -294,22 +300,25 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
             known = memo[local]
             v[m] = known > 0
             miss = known < 0
-            if miss.any():
+            if miss.any() and miss.sum() >= _PIECES_FROM:  # the pieces of these surfels: ask a few of each
+                lab = _asked_pieces(flat.leaves[i].cloud, local[miss])
+                rep = _representatives(lab)
+                todo.append((m[miss][rep], memo, local[miss][rep]))
+                pieced.append((m[miss], lab, rep, memo, local[miss]))
+            elif miss.any():
                 todo.append((m[miss], memo, local[miss]))
         if todo:
-            rows = np.concatenate([t[0] for t in todo])
-            pts = cloud.positions[sel[rows]]
-            x = local_points(patch.transform, pts)
-            if x is None:  # not a similarity: in world space
-                w = inside_patch(c, pts, rule)
-            else:
-                w = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
-            v[rows] = w
-            at = 0
-            for m, memo, local in todo:
-                if memo is not None:
-                    memo[local] = w[at:at + len(m)]
-                at += len(m)
+            _ask(patch, c, cloud, sel, rule, v, todo)
+        for m, lab, rep, memo, local in pieced:
+            on_rep = np.zeros(len(m), dtype=bool)
+            on_rep[rep] = v[m[rep]]
+            mixed = _disagreeing(lab, rep, on_rep)
+            first = np.full(lab.max() + 1, -1)
+            first[lab[rep]] = np.flatnonzero(rep)
+            same = ~rep & ~mixed
+            v[m[same]] = v[m[first[lab[same]]]]
+            if mixed.any():
+                _ask(patch, c, cloud, sel, rule, v, [(m[mixed], memo, local[mixed])])
         raw[j, sel] = v
         values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
         if len(idx) >= _DECIDE_EARLY:
@@ -317,6 +326,33 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
     on = np.ones(n, dtype=bool)
     on[idx] = _maybe_on(flat, values, lw) != 0
     return on, raw
+
+
+def _ask(patch, c: SurfelCloud, cloud: SurfelCloud, sel: np.ndarray, rule: str, v: np.ndarray, todo: list) -> None:
+    """insidePatch of ``patch`` (world cloud ``c``) at the centres ``cloud.positions[sel[rows]]``
+    of every ``(rows, memo, local)`` of ``todo`` into ``v[rows]`` (and ``memo[local]``)."""
+    rows = np.concatenate([t[0] for t in todo])
+    pts = cloud.positions[sel[rows]]
+    x = local_points(patch.transform, pts)
+    if x is None:  # not a similarity: in world space
+        w = inside_patch(c, pts, rule)
+    else:
+        w = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
+    v[rows] = w
+    at = 0
+    for m, memo, local in todo:
+        if memo is not None:
+            memo[local] = w[at:at + len(m)]
+        at += len(m)
+
+
+def _asked_pieces(source: SurfelCloud, local: np.ndarray) -> np.ndarray:
+    """Labels (M,) int64 of the connected pieces (overlapping discs, :func:`_pieces`) that the
+    surfels ``local`` (M,) of the patch cloud ``source`` form among themselves."""
+    out = np.ones(len(source), dtype=bool)
+    out[local] = False
+    labels, _ = piece_labels(len(source), overlap_pairs(source), out)
+    return labels[local]
 
 
 def _maybe_on(flat: FlatTree, values: np.ndarray, lw: np.ndarray) -> np.ndarray:

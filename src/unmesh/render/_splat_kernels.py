@@ -558,18 +558,30 @@ def _plane_margin(P, j, x0, x1, x2):
 def _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base):
     """insidePatch (4.3/4.4) of leaf node ``k`` for the fragment of surfel ``s`` at ``x``, from
     the partner list of ``k`` (linked in ``work``): ``(value, margin)`` with value -1 unknown,
-    and ``margin`` the distance ``x`` may move without changing the value."""
+    and ``margin`` the distance ``x`` may move without changing the value (no plane of the
+    leaf's partners changing side when they all agree on ``x``, otherwise also the two closest
+    staying the two closest)."""
     d1 = np.inf
     d2 = np.inf
     d3 = np.inf
     i1 = -1
     i2 = -1
+    own = leaf[s]
+    tol = COPLANAR_EPS * (1.0 + abs(x0) + abs(x1) + abs(x2))
+    rows = 0
+    clipping = 0
+    gap = np.inf
     j = int(work[k, 1])
     while j >= 0:  # the same scan order and ties as keep_tree
         dx = x0 - partners[j, 0]
         dy = x1 - partners[j, 1]
         dz = x2 - partners[j, 2]
         d = dx * dx + dy * dy + dz * dz
+        e = dx * partners[j, 3] + dy * partners[j, 4] + dz * partners[j, 5]  # _clips_fragment
+        if (own > partners[j, 6]) if abs(e) <= tol else (e >= 0.0):
+            clipping += 1
+        rows += 1
+        gap = min(gap, abs(e) - tol)
         if d < d1:
             d3 = d2
             d2 = d1
@@ -585,7 +597,13 @@ def _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base):
         j = int(work[base + j, 0])
     if i1 < 0:
         return -1, np.inf
-    own = leaf[s]
+    if clipping == 0 or clipping == rows:
+        # every partner clips x, or none does: the value whichever two are closest (4.3/4.4),
+        # while no plane changes side (the _plane_margin of the nearest plane)
+        inside = clipping == 0
+        if tree[k, 3] != 0:
+            inside = not inside
+        return (1 if inside else 0), max(gap, 0.0) / (1.0 + 4.0 * COPLANAR_EPS) * (1.0 - 1e-9)
     c1 = _clips_fragment(partners, i1, x0, x1, x2, own)
     margin = _plane_margin(partners, i1, x0, x1, x2)
     if i2 < 0:
@@ -646,6 +664,52 @@ def _cache_hit(work, row, s, x0, x1, x2):
 
 
 @njit(cache=True)
+def _keep_single(s, x0, x1, x2, partners, tree, leaf, work):
+    """:func:`keep_tree` for a surfel ``s`` with at most one partner per leaf (half-spaces, the
+    faces of Fig. 4.10): insidePatch of a leaf is the side of its one plane (4.3, no search for
+    the closest partners). The walk of :func:`keep_tree_cached` without its short-circuits inside
+    a sibling's sub-tree (the siblings of folded trees are mostly single leaves); returns
+    ``(keep, margin)`` with the margin of the planes tested. ``work[k, 1]`` holds the partner
+    row of leaf node ``k`` (-1: none, unknown); insideTree values go to column 0."""
+    own = leaf[s]
+    tol = COPLANAR_EPS * (1.0 + abs(x0) + abs(x1) + abs(x2))
+    margin = np.inf
+    node = own
+    while tree[node, 1] >= 0:
+        p = tree[node, 1]
+        right = p - 1
+        sib = tree[right, 2] - 1 if node == right else right
+        for k in range(tree[sib, 2], sib + 1):  # insideTree of the sibling's sub-tree, post order
+            op = tree[k, 0]
+            if op == 2:
+                j = int(work[k, 1])
+                if j < 0:
+                    v = -1
+                else:  # _clips_fragment and _plane_margin of row j
+                    d = ((x0 - partners[j, 0]) * partners[j, 3] + (x1 - partners[j, 1]) * partners[j, 4]
+                         + (x2 - partners[j, 2]) * partners[j, 5])
+                    if abs(d) <= tol:
+                        inside = not (own > partners[j, 6])
+                    else:
+                        inside = not (d >= 0.0)
+                    if tree[k, 3] != 0:
+                        inside = not inside
+                    v = 1 if inside else 0
+                    margin = min(margin, max(abs(d) - tol, 0.0) / (1.0 + 4.0 * COPLANAR_EPS) * (1.0 - 1e-9))
+            else:
+                r = k - 1
+                a = int(work[tree[r, 2] - 1, 0])
+                b = int(work[r, 0])
+                v = _tri_and(a, b) if op == 0 else _tri_or(a, b)
+            work[k, 0] = v
+        v = int(work[sib, 0])
+        if v >= 0 and not (v > 0 if tree[p, 0] == 0 else v == 0):
+            return False, margin
+        node = p
+    return True, margin
+
+
+@njit(cache=True)
 def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     """:func:`keep_tree` with the traversal short-circuited and its result reused between
     neighbouring fragments (4.2.3: "past results of the traversal are cached and reused").
@@ -654,7 +718,9 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     fragment off the surface ends the walk; a deciding left operand skips the right one). With
     the result, the distance ``margin`` that ``x`` may move without changing any value used is
     kept (the distance to the nearest plane tested, and half the gap between the second and
-    third closest partner of every leaf evaluated); a later fragment of the same surfel
+    third closest partner of every leaf evaluated whose partners disagree on the fragment:
+    when all of a leaf's partners clip it, or none does, the value is the same whichever two
+    are closest, and only their planes bound the margin); a later fragment of the same surfel
     within ``margin`` of a cached one gets the cached result, exactly the one a new traversal
     would give. Two slots: the last result and the one before (the start of the previous
     pixel row, typically).
@@ -669,27 +735,34 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     if work[K, 6] != s:  # partner lists of the leaves, each in ascending row order
         for k in range(K):
             work[k, 1] = -1.0
+        single = 1.0
         for j in range(clip_offsets[s + 1] - 1, clip_offsets[s] - 1, -1):
             node = int(partners[j, 6])
+            if work[node, 1] >= 0.0:
+                single = 0.0
             work[base + j, 0] = work[node, 1]
             work[node, 1] = j
         work[K, 6] = s
+        work[K, 7] = single
     elif _cache_hit(work, K, s, x0, x1, x2):
         return work[K, 5] > 0.0
     elif _cache_hit(work, K + 1, s, x0, x1, x2):
         return work[K + 1, 5] > 0.0
-    margin = np.inf
-    keep = True
-    node = leaf[s]
-    while tree[node, 1] >= 0:
-        p = tree[node, 1]
-        right = p - 1
-        sib = tree[right, 2] - 1 if node == right else right
-        v, margin = _subtree_value(tree[sib, 2], sib, s, x0, x1, x2, partners, tree, leaf, work, base, margin)
-        if v >= 0 and not (v > 0 if tree[p, 0] == 0 else v == 0):
-            keep = False
-            break
-        node = p
+    if work[K, 7] > 0.0:
+        keep, margin = _keep_single(s, x0, x1, x2, partners, tree, leaf, work)
+    else:
+        margin = np.inf
+        keep = True
+        node = leaf[s]
+        while tree[node, 1] >= 0:
+            p = tree[node, 1]
+            right = p - 1
+            sib = tree[right, 2] - 1 if node == right else right
+            v, margin = _subtree_value(tree[sib, 2], sib, s, x0, x1, x2, partners, tree, leaf, work, base, margin)
+            if v >= 0 and not (v > 0 if tree[p, 0] == 0 else v == 0):
+                keep = False
+                break
+            node = p
     for c in range(6):  # the last result moves to the second slot
         work[K + 1, c] = work[K, c]
     work[K, 0] = s
@@ -701,7 +774,7 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     return keep
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, work):
     """Per-fragment clip test of surfel ``s`` at depth ``z`` (chapter 4).
 
@@ -726,6 +799,17 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
     wy = eye[1] + px * frame[0, 1] + py * frame[1, 1] + z * frame[2, 1]
     wz = eye[2] + px * frame[0, 2] + py * frame[1, 2] + z * frame[2, 2]
     if clip_tree is not None:  # None (plain splatting) prunes this branch at compile time
+        # the cache hits of keep_tree_cached here, in the fragment loop: a call per fragment
+        # costs more than the look-up itself
+        K = clip_tree.shape[0]
+        if work[K, 6] == s:
+            for row in range(K, K + 2):
+                if work[row, 0] == s:
+                    dx = wx - work[row, 1]
+                    dy = wy - work[row, 2]
+                    dz = wz - work[row, 3]
+                    if dx * dx + dy * dy + dz * dz < work[row, 4]:
+                        return work[row, 5] > 0.0
         return keep_tree_cached(s, wx, wy, wz, clip_offsets, clip_planes, clip_tree, clip_leaf, work)
     anymode = clip_mode[s] != 0
     for j in range(a, b):

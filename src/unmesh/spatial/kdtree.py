@@ -55,6 +55,10 @@ class KDTree:
     ----------
     points : array_like, shape (N, 3) or (N, 2)
         Point positions (finite); a copy is kept.
+    leafsize : int, optional
+        Points per leaf of SciPy's tree (default 16). Results do not depend on it; larger
+        leaves cost less for queries far from the points (fewer boxes to rule out) and a
+        little more for close ones.
 
     Example
     -------
@@ -64,12 +68,14 @@ class KDTree:
     ([[1, 0]], [0.1, 0.9])
     """
 
-    def __init__(self, points: object) -> None:
+    def __init__(self, points: object, leafsize: int = 16) -> None:
         from unmesh.spatial.cellgrid import _dim_of
 
+        if isinstance(leafsize, bool) or not isinstance(leafsize, (int, np.integer)) or leafsize < 1:
+            raise InputError(f"leafsize: expected a positive integer, got {leafsize!r}")
         self.dim = _dim_of(points)
         self.points = as_points(points, "points", dim=self.dim)
-        self._tree = cKDTree(self.points) if len(self.points) else None
+        self._tree = cKDTree(self.points, leafsize=int(leafsize)) if len(self.points) else None
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
