@@ -243,48 +243,54 @@ def _axis_gaps(xa, c, reach, origin, cell, n, out):
 
 
 @njit(**PLAIN)
-def _density_rest(a, rho_a, cnt, x, matid, mats, h, c6, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr,
-                  nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, branges):
-    """Particle ``a`` of :func:`density_pass` once its particle sum ``rho_a`` and neighbour count ``cnt`` are
-    known: boundary particles, analytic walls, density and pressure."""
+def _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full):
+    """Particles ``r0 .. r1 - 1`` of :func:`density_pass` once ``rho`` holds their particle sums and ``nnbr``
+    their neighbour counts: boundary particles, analytic walls, density and pressure (one call per block:
+    a call per particle would pass its two dozen arguments each time)."""
     h2 = h * h
-    xa0 = x[a, 0]
-    xa1 = x[a, 1]
-    xa2 = x[a, 2]
+    c6 = poly6_coef(h, dim)
     bcap = bnbr.shape[1]
-    mt = matid[a]
-    rho0 = mats[mt, M.RHO0]
-    bcnt = 0
-    if bx.shape[0] > 0:
-        bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
-        nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
-        for s in range(nbs):
-            for b in range(branges[s, 0], branges[s, 1]):
-                d0 = xa0 - bx[b, 0]
-                d1 = xa1 - bx[b, 1]
-                d2 = xa2 - bx[b, 2]
-                r2 = d0 * d0 + d1 * d1 + d2 * d2
-                if r2 < h2:
-                    t6 = h2 - r2
-                    rho_a += rho0 * bvol[b] * (c6 * t6 * t6 * t6)
-                    if bcnt < bcap:
-                        bnbr[a, bcnt] = b
-                    bcnt += 1
-    nbnbr[a] = bcnt
-    for k in range(plane_p.shape[0]):
-        dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
-        if dist < h:
-            rho_a += rho0 * _table(wall_rho, dist, h)
-    for k in range(corners.shape[0]):
-        da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
-        db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
-        if da < h and db < h:
-            rho_a -= rho0 * _table2(corner_rho, da, db, h)
-    rho[a] = rho_a
-    if phase[a] == SOLID:
-        p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
-    else:
-        p[a] = fluid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full)
+    branges = np.empty((9, 2), np.int64)
+    for a in range(r0, r1):
+        rho_a = rho[a]
+        cnt = nnbr[a]
+        xa0 = x[a, 0]
+        xa1 = x[a, 1]
+        xa2 = x[a, 2]
+        mt = matid[a]
+        rho0 = mats[mt, M.RHO0]
+        bcnt = 0
+        if bx.shape[0] > 0:
+            bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
+            nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
+            for s in range(nbs):
+                for b in range(branges[s, 0], branges[s, 1]):
+                    d0 = xa0 - bx[b, 0]
+                    d1 = xa1 - bx[b, 1]
+                    d2 = xa2 - bx[b, 2]
+                    r2 = d0 * d0 + d1 * d1 + d2 * d2
+                    if r2 < h2:
+                        t6 = h2 - r2
+                        rho_a += rho0 * bvol[b] * (c6 * t6 * t6 * t6)
+                        if bcnt < bcap:
+                            bnbr[a, bcnt] = b
+                        bcnt += 1
+        nbnbr[a] = bcnt
+        for k in range(plane_p.shape[0]):
+            dist = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, k)
+            if dist < h:
+                rho_a += rho0 * _table(wall_rho, dist, h)
+        for k in range(corners.shape[0]):
+            da = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 0])
+            db = _plane_dist(xa0, xa1, xa2, plane_p, plane_n, corners[k, 1])
+            if da < h and db < h:
+                rho_a -= rho0 * _table2(corner_rho, da, db, h)
+        rho[a] = rho_a
+        if phase[a] == SOLID:
+            p[a] = pressure_eos(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA])
+        else:
+            p[a] = fluid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full)
 
 
 @njit(**PLAIN)
@@ -312,7 +318,6 @@ def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, c
     g1 = np.empty(width)
     g2 = np.empty(width)
     ranges = np.empty((rows, 2), np.int64)
-    branges = np.empty((9, 2), np.int64)
     for a in range(r0, r1):
         xa0 = xm[a, 0]
         xa1 = xm[a, 1]
@@ -382,10 +387,11 @@ def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, c
                         cand[a, min(cc, ccap)] = b
                         cc += r2 < hs2
         nnbr[a] = cnt
+        rho[a] = rho_a
         if want:
             ncand[a] = cc
-        _density_rest(a, rho_a, cnt, x, matid, mats, h, c6, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr,
-                      nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, branges)
+    _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full)
 
 
 @njit(cache=True, parallel=True)
@@ -437,7 +443,6 @@ def _density_list_block(r0, r1, x, xm, matid, mats, h, dim, cand, ncand, nbr, nn
     h2 = h * h
     cap = nbr.shape[1] - 1
     c6 = poly6_coef(h, dim)
-    branges = np.empty((9, 2), np.int64)
     for a in range(r0, r1):
         xa0 = xm[a, 0]
         xa1 = xm[a, 1]
@@ -455,8 +460,9 @@ def _density_list_block(r0, r1, x, xm, matid, mats, h, dim, cand, ncand, nbr, nn
             nbr[a, min(cnt, cap)] = b
             cnt += (r2 < h2) & (b != a)
         nnbr[a] = cnt
-        _density_rest(a, rho_a, cnt, x, matid, mats, h, c6, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr,
-                      nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, branges)
+        rho[a] = rho_a
+    _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full)
 
 
 @njit(cache=True, parallel=True)

@@ -341,6 +341,7 @@ class SPHSimulation(Simulation):
         self.skin = 0.0 if self.elastic or self.phase_changes else float(config.neighbor_skin) * self.h
         self.neighbor_scans = 0  # cell scans (re-sorts) so far; the other steps used the stored candidates
         self._build_particles()
+        self._present = np.unique(self.mat)  # materials present (fixed: particles never change material)
         self._build_boundary_grid()
         self.time = 0.0
         self.steps = 0
@@ -660,7 +661,7 @@ class SPHSimulation(Simulation):
     def max_sound_speed(self) -> float:
         """Largest wave speed of the materials present: ``√(ΓK/ρ0)``, elastic ``√((λ+2μ)/ρ0)``."""
         c = 0.0
-        for k in np.unique(self.mat):
+        for k in self._present:
             mat = self.materials[int(k)]
             mu, lam = mat.lame
             c = max(c, mat.sound_speed, math.sqrt(max(lam + 2 * mu, 0.0) / mat.density))
@@ -677,7 +678,7 @@ class SPHSimulation(Simulation):
         c = self.max_sound_speed()
         limits = [(1.2 * self.h / (c + vmax) if c + vmax > 0 else math.inf,
                    f"speed of sound {c:.3g} m/s, h = {self.h:.4g} m")]
-        present = [self.materials[int(k)] for k in np.unique(self.mat)]
+        present = [self.materials[int(k)] for k in self._present]
         ke = max((m.elastic_stiffness for m in present), default=0.0)
         if ke > 0 and np.any(self.phase == SOLID):
             limits.append((1.2 / math.sqrt(ke), f"elastic stiffness K_e = {ke:.4g}/s²"))
@@ -959,6 +960,7 @@ class SPHSimulation(Simulation):
             if name not in state:
                 raise InputError(f"checkpoint lacks {name!r}; it belongs to a different scene")
             setattr(self, name, np.ascontiguousarray(np.asarray(state[name]).astype(getattr(self, name).dtype)))
+        self._present = np.unique(self.mat)
         self.time = float(state["time"])
         self.steps = int(state["steps"])
         self.dt_last = float(state["dt_last"])
