@@ -8,8 +8,10 @@ One step (velocity Verlet in kick-drift-kick form, one force evaluation):
 
 1. ``v ← v + ½Δt a``; ``x ← x + Δt (v + Δv_XSPH)`` (XSPH, eq. 8.19, moves the
    particles with smoothed velocities); walls push back particles that crossed them.
-2. Particles are re-sorted by grid cell (``unmesh.spatial`` cell grid of edge ``h``).
-3. Density pass: neighbour lists, density (8.4), pressure (8.15–8.16).
+2. Particles are re-sorted by grid cell (``unmesh.spatial`` cell grid of edge ``h/2``), unless the
+   Verlet candidates of the last cell scan still cover every neighbourhood (``SPHConfig.neighbor_skin``).
+3. Density pass: neighbour lists (by a cell scan or from the candidates), density (8.4), pressure
+   (8.15–8.16).
 4. Lattice pass (if any solid): assignment (8.21), docking, shape matching
    (8.23–8.24), goal positions (8.29–8.30), strain stress, exact torque correction.
 5. Force pass: pressure (8.17), viscosity (8.18), elastic forces, collisions
