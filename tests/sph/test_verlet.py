@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from unmesh.errors import InputError
 from unmesh.sph import Material, SPHConfig, SPHObject, SPHSimulation, box_planes
 from unmesh.sph import _kernels as K
 from unmesh.sph.fluid import density_reference
@@ -132,5 +133,5 @@ def test_skin_is_off_for_elastic_and_phase_change_scenes():
 
 
 def test_negative_skin_is_refused():
-    with pytest.raises(Exception, match="neighbor_skin"):
+    with pytest.raises(InputError, match="neighbor_skin: expected a number >= 0"):
         SPHConfig(dim=2, spacing=0.05, dt=1e-4, neighbor_skin=-0.1)
