@@ -21,6 +21,10 @@ untimed step before each turn), in the order fluid, CCP, elastic, then elastic, 
 on: a load on the shared machine that changes during the run weighs on every case alike, so the
 ratios compare the cases under the same conditions.
 
+First the shipped 3D dam break (``examples/sph/dam_break.toml``, 17 600 particles) between t = 0.1 and
+0.2 s with and without Verlet neighbour lists (``neighbor_skin`` 0.2 and 0), with the split of its step
+(issue 22 item 4: >= 1.5 M particle-steps/s on 2 cores); ``--shipped-only`` stops there.
+
 Then validates the shipped 3D dam break (``examples/sph/dam_break.toml``, a = 0.25 m,
 spacing a/20, no-slip tank walls) against Martin & Moyce (1952), n² = 2: the surge front Z = x/a at the
 experiment's times T = t·√(2g/a), with the relative error per point and the largest error
@@ -29,6 +33,7 @@ for T ≤ 3 (goal: 10 %). This part takes a few minutes; skip it with ``--no-val
 Usage::
 
     python benchmarks/bench_sph.py [--steps 60] [--spacing 0.01] [--no-splishsplash] [--no-validation]
+                                   [--shipped-only]
 """
 
 from __future__ import annotations
@@ -125,6 +130,87 @@ def unmesh_rates(spacing: float, steps: int, threads: int, cases: tuple[str, ...
         count = len(sims[case].x)
         out[case] = (count, count * n / wall, count * n / cpu, float(sims[case].nnbr.mean()))
     return out
+
+
+#: Kernels of the step whose time :func:`shipped_dam_break` splits out (the rest is Python, sorting, integration).
+SPLIT = ("density_pass", "density_list_pass", "force_pass")
+
+
+def shipped_dam_break(threads: int, skins: tuple[float, ...] = (0.2, 0.0), t0: float = 0.1, t1: float = 0.2,
+                      turn: int = 25) -> None:
+    """Particle-steps/s of the shipped dam break (``examples/sph/dam_break.toml``) between ``t0`` and ``t1``.
+
+    Issue 22 item 4 measures the shipped scene (17 600 particles, about 42 neighbours, no-slip walls) through
+    ``unmesh sph`` (0.2 s run less 0.1 s run); here the same steps run in process, one simulation per
+    ``neighbor_skin`` in ``skins`` (0: a cell scan and re-sort every step), advanced untimed to ``t0`` and then
+    stepped to ``t1`` in alternating turns of ``turn`` steps. Prints wall and CPU time per step, particle-steps
+    per wall second, the cell scans per step and the wall time split among the density scan, the density pass
+    over the stored Verlet candidates, the force pass and the rest.
+    """
+    import numba
+
+    import unmesh  # noqa: F401  (before numba starts its threads: unmesh's GOMP_SPINCOUNT default)
+    from unmesh.scene import load_scene
+    from unmesh.scenes import path as scene_path
+    from unmesh.sph import _kernels as K
+    from unmesh.sph.scene import build_simulation
+
+    numba.set_num_threads(threads)
+    split: dict[str, float] = {}
+    originals = {name: getattr(K, name) for name in SPLIT}
+
+    def timed(name):
+        def call(*args):
+            w = time.perf_counter()
+            out = originals[name](*args)
+            split[name] = split.get(name, 0.0) + time.perf_counter() - w
+            return out
+        return call
+
+    sims = {}
+    for skin in skins:
+        sim, _ = build_simulation(load_scene(scene_path("sph/dam_break.toml"), {"simulation.neighbor_skin": skin}))
+        while sim.time < t0:
+            sim.step()
+        sims[skin] = sim
+    stats = {skin: {"wall": 0.0, "cpu": 0.0, "steps": 0, "scans": 0, **dict.fromkeys(SPLIT, 0.0)} for skin in skins}
+    for name in SPLIT:
+        setattr(K, name, timed(name))
+    try:
+        k = 0
+        while any(sim.time < t1 for sim in sims.values()):
+            for skin in (skins if k % 2 == 0 else skins[::-1]):
+                sim, st = sims[skin], stats[skin]
+                split.clear()
+                s0 = sim.neighbor_scans
+                w, c = time.perf_counter(), time.process_time()
+                n = 0
+                while n < turn and sim.time < t1:
+                    sim.step()
+                    n += 1
+                st["wall"] += time.perf_counter() - w
+                st["cpu"] += time.process_time() - c
+                st["steps"] += n
+                st["scans"] += sim.neighbor_scans - s0
+                for name in SPLIT:
+                    st[name] += split.get(name, 0.0)
+            k += 1
+    finally:
+        for name in SPLIT:
+            setattr(K, name, originals[name])
+    print(f"\nShipped dam break (examples/sph/dam_break.toml), t = {t0}-{t1} s, {threads} thread(s), "
+          f"load average {os.getloadavg()[0]:.1f}")
+    print(f"{'neighbor_skin':>13s} {'particles':>9s} {'steps':>6s} {'ms/step':>8s} {'CPU ms/step':>11s} "
+          f"{'M particle-steps/s':>19s} {'scans/step':>10s} {'scan':>6s} {'list':>6s} {'force':>6s} {'rest':>6s}")
+    for skin, st in stats.items():
+        n = st["steps"]
+        ms = {name: st[name] / n * 1e3 for name in SPLIT}
+        rest = st["wall"] / n * 1e3 - sum(ms.values())
+        count = len(sims[skin].x)
+        print(f"{skin:13g} {count:9d} {n:6d} {st['wall'] / n * 1e3:8.2f} {st['cpu'] / n * 1e3:11.2f} "
+              f"{count * n / st['wall'] / 1e6:19.3f} {st['scans'] / n:10.3f} {ms['density_pass']:6.2f} "
+              f"{ms['density_list_pass']:6.2f} {ms['force_pass']:6.2f} {rest:6.2f}")
+    print("goal: >= 1.5 M particle-steps/s on 2 quiet cores (#22.4); scan/list/force/rest: wall ms per step")
 
 
 #: Martin & Moyce (1952), n² = 2, a = 2.25 in: surge front Z = x/a at T = t·√(2g/a) (issue 4).
@@ -273,8 +359,14 @@ def main() -> None:
     parser.add_argument("--no-splishsplash", action="store_true")
     parser.add_argument("--no-validation", action="store_true", help="skip the dam-break surge-front validation")
     parser.add_argument("--validation-resolution", type=int, default=20, help="dam break spacing a/N (default 20)")
+    parser.add_argument("--shipped-only", action="store_true",
+                        help="only the shipped dam break's rate (with and without Verlet lists)")
     args = parser.parse_args()
     threads = [int(t) for t in args.threads.split(",")]
+    for t in threads:
+        shipped_dam_break(t)
+    if args.shipped_only:
+        return
     names = {"fluid": "unmesh WCSPH (fluid)", "fluid-ccp": "unmesh WCSPH (fluid, CCP)",
              "elastic": "unmesh WCSPH + elasticity", "splish": "SPlisHSPlasH WCSPH"}
     load0 = os.getloadavg()[0]

@@ -262,23 +262,29 @@ def test_no_slip_boundary_particles_match_channel_decay():
     assert 0.0 < ubar / ref - 1.0 < 0.10, (ubar, ref)
 
 
+@pytest.mark.parametrize("skin", [0.0, 0.2])
 @pytest.mark.parametrize("dim", [2, 3])
-def test_dense_and_sparse_cell_search_agree(dim, monkeypatch):
+def test_dense_and_sparse_cell_search_agree(dim, skin, monkeypatch):
     """The per-particle cell scan (dense cell starts) and the sparse cell-list fallback (large, sparse
-    grids) find the same neighbour lists and densities."""
+    grids) find the same neighbour lists and densities (and, with Verlet lists, the same candidates)."""
     x = _disordered(dim, 3)
     mat = Material("w", stiffness=100.0)
-    sim = SPHSimulation(SPHConfig(dim=dim, spacing=0.05, dt=1e-4), {"w": mat}, [SPHObject("w", x, "w")])
-    sim._update()
+    sim = SPHSimulation(SPHConfig(dim=dim, spacing=0.05, dt=1e-4, neighbor_skin=skin), {"w": mat},
+                        [SPHObject("w", x, "w")])
+    sim._update(rescan=True)
     assert len(K.cell_starts(sim.grid)) > 0
     nbr, nnbr, rho = sim.nbr.copy(), sim.nnbr.copy(), sim.rho.copy()
+    cand, ncand = sim.cand.copy(), sim.ncand.copy()
     monkeypatch.setattr(K, "DENSE_CELLS_PER_PARTICLE", -10**9)
     assert len(K.cell_starts(sim.grid)) == 0
-    sim._update()
+    sim._update(rescan=True)
     assert np.array_equal(nnbr, sim.nnbr)
     for i in range(len(x)):
         assert np.array_equal(nbr[i, : nnbr[i]], sim.nbr[i, : nnbr[i]])
     assert np.allclose(rho, sim.rho, rtol=1e-13)
+    assert np.array_equal(ncand, sim.ncand)
+    for i in range(len(ncand)):
+        assert np.array_equal(cand[i, : ncand[i]], sim.cand[i, : ncand[i]])
 
 
 def test_corner_tables_inclusion_exclusion():

@@ -243,85 +243,25 @@ def _axis_gaps(xa, c, reach, origin, cell, n, out):
 
 
 @njit(**PLAIN)
-def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, nbr, nnbr,
-                   bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners,
-                   corner_rho, rho, p, phase, full):
-    """Particles ``r0 .. r1 - 1`` of :func:`density_pass` (one block, serial)."""
+def _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full):
+    """Particles ``r0 .. r1 - 1`` of :func:`density_pass` once ``rho`` holds their particle sums and ``nnbr``
+    their neighbour counts: boundary particles, analytic walls, density and pressure (one call per block:
+    a call per particle would pass its two dozen arguments each time)."""
     h2 = h * h
-    hr = h * (1.0 + 1e-9)  # conservative reach (round-off of the cell bounds)
-    hr2 = hr * hr
-    cell = 1.0 / inv_cell
-    cap = nbr.shape[1] - 1
-    bcap = bnbr.shape[1]
-    nb = bx.shape[0]
     c6 = poly6_coef(h, dim)
-    use_dense = dense.shape[0] > 0
-    reach = math.ceil(hr * inv_cell)
-    width = 2 * reach + 1
-    rows = width * width
-    d0_, d1_, d2_ = dims[0], dims[1], dims[2]
-    o0, o1, o2 = origin[0], origin[1], origin[2]
-    g0 = np.empty(width)
-    g1 = np.empty(width)
-    g2 = np.empty(width)
-    ranges = np.empty((rows, 2), np.int64)
+    bcap = bnbr.shape[1]
     branges = np.empty((9, 2), np.int64)
     for a in range(r0, r1):
-        xa0 = xm[a, 0]
-        xa1 = xm[a, 1]
-        xa2 = xm[a, 2]
-        rho_a = 0.0
-        cnt = 0
-        if use_dense:
-            c0 = _cell_index((xa0 - o0) * inv_cell, d0_)
-            c1 = _cell_index((xa1 - o1) * inv_cell, d1_)
-            c2 = _cell_index((xa2 - o2) * inv_cell, d2_)
-            _axis_gaps(xa0, c0, reach, o0, cell, d0_, g0)
-            _axis_gaps(xa1, c1, reach, o1, cell, d1_, g1)
-            _axis_gaps(xa2, c2, reach, o2, cell, d2_, g2)
-            for si in range(width):
-                rem = hr2 - g0[si]
-                if not rem > 0.0:
-                    continue
-                ii = c0 - reach + si
-                for sj in range(width):
-                    rem2 = rem - g1[sj]
-                    if not rem2 > 0.0:
-                        continue
-                    # the z slabs within reach: squared gaps grow away from c2 on both sides
-                    klo = c2 - reach
-                    khi = c2 + reach
-                    for s in range(reach):
-                        klo += g2[s] >= rem2
-                        khi -= g2[width - 1 - s] >= rem2
-                    base = (ii * d1_ + sj + c1 - reach) * d2_
-                    for b in range(dense[base + klo], dense[base + khi + 1]):
-                        d0 = xa0 - xm[b, 0]
-                        d1 = xa1 - xm[b, 1]
-                        d2 = xa2 - xm[b, 2]
-                        r2 = d0 * d0 + d1 * d1 + d2 * d2
-                        t6 = max(h2 - r2, 0.0)
-                        rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
-                        nbr[a, min(cnt, cap)] = b
-                        cnt += (r2 < h2) & (b != a)
-        else:
-            ci, cj, ck = point_cell(x[a], origin, inv_cell, dims)
-            ns = stencil_ranges(ci, cj, ck, reach, dims, cell_keys, cell_start, ranges)
-            for s in range(ns):
-                for b in range(ranges[s, 0], ranges[s, 1]):
-                    d0 = xa0 - xm[b, 0]
-                    d1 = xa1 - xm[b, 1]
-                    d2 = xa2 - xm[b, 2]
-                    r2 = d0 * d0 + d1 * d1 + d2 * d2
-                    t6 = max(h2 - r2, 0.0)
-                    rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
-                    nbr[a, min(cnt, cap)] = b
-                    cnt += (r2 < h2) & (b != a)
-        nnbr[a] = cnt
+        rho_a = rho[a]
+        cnt = nnbr[a]
+        xa0 = x[a, 0]
+        xa1 = x[a, 1]
+        xa2 = x[a, 2]
         mt = matid[a]
         rho0 = mats[mt, M.RHO0]
         bcnt = 0
-        if nb > 0:
+        if bx.shape[0] > 0:
             bi, bj, bk = point_cell(x[a], borigin, binv_cell, bdims)
             nbs = stencil_ranges(bi, bj, bk, 1, bdims, bkeys, bstart, branges)
             for s in range(nbs):
@@ -353,10 +293,111 @@ def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, c
             p[a] = fluid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full)
 
 
+@njit(**PLAIN)
+def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, nbr, nnbr,
+                   bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners,
+                   corner_rho, rho, p, phase, full, hs, cand, ncand):
+    """Particles ``r0 .. r1 - 1`` of :func:`density_pass` (one block, serial)."""
+    h2 = h * h
+    want = cand.shape[0] > 0  # also store the candidates within hs (Verlet lists)
+    reach_r = hs if want else h
+    hs2 = hs * hs
+    hr = reach_r * (1.0 + 1e-9)  # conservative reach (round-off of the cell bounds)
+    hr2 = hr * hr
+    cell = 1.0 / inv_cell
+    cap = nbr.shape[1] - 1
+    ccap = cand.shape[1] - 1
+    c6 = poly6_coef(h, dim)
+    use_dense = dense.shape[0] > 0
+    reach = math.ceil(hr * inv_cell)
+    width = 2 * reach + 1
+    rows = width * width
+    d0_, d1_, d2_ = dims[0], dims[1], dims[2]
+    o0, o1, o2 = origin[0], origin[1], origin[2]
+    g0 = np.empty(width)
+    g1 = np.empty(width)
+    g2 = np.empty(width)
+    ranges = np.empty((rows, 2), np.int64)
+    for a in range(r0, r1):
+        xa0 = xm[a, 0]
+        xa1 = xm[a, 1]
+        xa2 = xm[a, 2]
+        rho_a = 0.0
+        cnt = 0
+        cc = 0
+        if use_dense:
+            c0 = _cell_index((xa0 - o0) * inv_cell, d0_)
+            c1 = _cell_index((xa1 - o1) * inv_cell, d1_)
+            c2 = _cell_index((xa2 - o2) * inv_cell, d2_)
+            _axis_gaps(xa0, c0, reach, o0, cell, d0_, g0)
+            _axis_gaps(xa1, c1, reach, o1, cell, d1_, g1)
+            _axis_gaps(xa2, c2, reach, o2, cell, d2_, g2)
+            for si in range(width):
+                rem = hr2 - g0[si]
+                if not rem > 0.0:
+                    continue
+                ii = c0 - reach + si
+                for sj in range(width):
+                    rem2 = rem - g1[sj]
+                    if not rem2 > 0.0:
+                        continue
+                    # the z slabs within reach: squared gaps grow away from c2 on both sides
+                    klo = c2 - reach
+                    khi = c2 + reach
+                    for s in range(reach):
+                        klo += g2[s] >= rem2
+                        khi -= g2[width - 1 - s] >= rem2
+                    base = (ii * d1_ + sj + c1 - reach) * d2_
+                    if want:
+                        for b in range(dense[base + klo], dense[base + khi + 1]):
+                            d0 = xa0 - xm[b, 0]
+                            d1 = xa1 - xm[b, 1]
+                            d2 = xa2 - xm[b, 2]
+                            r2 = d0 * d0 + d1 * d1 + d2 * d2
+                            t6 = max(h2 - r2, 0.0)
+                            rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
+                            nbr[a, min(cnt, cap)] = b
+                            cnt += (r2 < h2) & (b != a)
+                            cand[a, min(cc, ccap)] = b
+                            cc += r2 < hs2
+                    else:
+                        for b in range(dense[base + klo], dense[base + khi + 1]):
+                            d0 = xa0 - xm[b, 0]
+                            d1 = xa1 - xm[b, 1]
+                            d2 = xa2 - xm[b, 2]
+                            r2 = d0 * d0 + d1 * d1 + d2 * d2
+                            t6 = max(h2 - r2, 0.0)
+                            rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
+                            nbr[a, min(cnt, cap)] = b
+                            cnt += (r2 < h2) & (b != a)
+        else:
+            ci, cj, ck = point_cell(x[a], origin, inv_cell, dims)
+            ns = stencil_ranges(ci, cj, ck, reach, dims, cell_keys, cell_start, ranges)
+            for s in range(ns):
+                for b in range(ranges[s, 0], ranges[s, 1]):
+                    d0 = xa0 - xm[b, 0]
+                    d1 = xa1 - xm[b, 1]
+                    d2 = xa2 - xm[b, 2]
+                    r2 = d0 * d0 + d1 * d1 + d2 * d2
+                    t6 = max(h2 - r2, 0.0)
+                    rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
+                    nbr[a, min(cnt, cap)] = b
+                    cnt += (r2 < h2) & (b != a)
+                    if want:
+                        cand[a, min(cc, ccap)] = b
+                        cc += r2 < hs2
+        nnbr[a] = cnt
+        rho[a] = rho_a
+        if want:
+            ncand[a] = cc
+    _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full)
+
+
 @njit(cache=True, parallel=True)
 def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, xm, nbr, nnbr,
                  bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
-                 plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full):
+                 plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, hs, cand, ncand):
     """Neighbour lists, density (8.4) and pressure (8.15–8.16) of every particle.
 
     ``x`` (N, 3) must be the grid's sorted points (z = 0 in 2D); any cell size works.
@@ -375,6 +416,11 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     :func:`fluid_pressure` with ``full``, the neighbour count on the rest lattice (0: no share by
     count); solid ones :func:`pressure_eos` (their lattice forces carry tension: either bound changed
     how the fracture scene's beam breaks or the melting blob's ear holds on).
+
+    Verlet lists: with ``cand`` (N, ccap + 1) int32 non-empty (``(0, 1)``: none) the scan reaches
+    ``hs >= h`` instead of ``h`` and also stores every particle within ``hs`` (itself included, ascending)
+    in ``cand`` and their true count in ``ncand`` (N,) int64 (may exceed ``ccap``: grow and repeat), for
+    :func:`density_list_pass`. Density, pressure and neighbour lists are the same as without.
     """
     n = x.shape[0]
     for a in prange(n):
@@ -386,7 +432,74 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     for blk in prange(nblk):
         _density_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), x, xm, matid, mats, h, dim, origin, inv_cell, dims,
                        cell_keys, cell_start, dense, nbr, nnbr, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr,
-                       nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full)
+                       nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, hs, cand, ncand)
+
+
+@njit(**PLAIN)
+def _density_list_block(r0, r1, x, xm, matid, mats, h, dim, cand, ncand, nbr, nnbr, bx, bvol, borigin, binv_cell,
+                        bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p,
+                        phase, full):
+    """Particles ``r0 .. r1 - 1`` of :func:`density_list_pass` (one block, serial)."""
+    h2 = h * h
+    cap = nbr.shape[1] - 1
+    c6 = poly6_coef(h, dim)
+    for a in range(r0, r1):
+        xa0 = xm[a, 0]
+        xa1 = xm[a, 1]
+        xa2 = xm[a, 2]
+        rho_a = 0.0
+        cnt = 0
+        for t in range(ncand[a]):
+            b = cand[a, t]
+            d0 = xa0 - xm[b, 0]
+            d1 = xa1 - xm[b, 1]
+            d2 = xa2 - xm[b, 2]
+            r2 = d0 * d0 + d1 * d1 + d2 * d2
+            t6 = max(h2 - r2, 0.0)
+            rho_a += xm[b, 3] * (c6 * t6 * t6 * t6)
+            nbr[a, min(cnt, cap)] = b
+            cnt += (r2 < h2) & (b != a)
+        nnbr[a] = cnt
+        rho[a] = rho_a
+    _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full)
+
+
+@njit(cache=True, parallel=True)
+def density_list_pass(x, m, matid, mats, h, dim, cand, ncand, xm, nbr, nnbr, bx, bvol, borigin, binv_cell, bdims,
+                      bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full):
+    """:func:`density_pass` over stored candidates (Verlet lists) instead of the cell scan.
+
+    ``cand`` / ``ncand``: the candidates of :func:`density_pass` (radius ``hs``), stored when the
+    particles were in the same order; as long as no particle has moved more than ``(hs − h)/2`` since,
+    they contain every pair closer than ``h``, and the exact test ``r < h`` gives the same neighbour
+    lists, densities and pressures as the cell scan (the same sums in the same order: a candidate
+    beyond ``h`` adds exactly 0). The caller checks the displacement (:func:`max_displacement`).
+    Other arguments and outputs as :func:`density_pass`.
+    """
+    n = x.shape[0]
+    for a in prange(n):
+        xm[a, 0] = x[a, 0]
+        xm[a, 1] = x[a, 1]
+        xm[a, 2] = x[a, 2]
+        xm[a, 3] = m[a]
+    nblk = (n + BLOCK - 1) // BLOCK
+    for blk in prange(nblk):
+        _density_list_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), x, xm, matid, mats, h, dim, cand, ncand, nbr, nnbr,
+                            bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n,
+                            wall_rho, corners, corner_rho, rho, p, phase, full)
+
+
+@njit(cache=True, parallel=True)
+def max_displacement(x, xref):
+    """Largest ``|x_i − xref_i|`` over the particles ((N, 3) float64 both; 0 for none)."""
+    d2 = 0.0
+    for i in prange(x.shape[0]):
+        a = x[i, 0] - xref[i, 0]
+        b = x[i, 1] - xref[i, 1]
+        c = x[i, 2] - xref[i, 2]
+        d2 = max(d2, a * a + b * b + c * c)
+    return math.sqrt(d2)
 
 
 def cell_starts(grid, buffer=None):

@@ -162,9 +162,10 @@ def build_simulation(scene: Table) -> tuple[SPHSimulation, RunSettings]:
     lattice = sim_t.string("lattice", default="closest", choices=LATTICES)
     tensile = sim_t.number("tensile_correction", default=4.0, nonnegative=True)
     damping = sim_t.number("contact_damping", default=0.0, nonnegative=True)
+    neighbor_skin = sim_t.number("neighbor_skin", default=0.2, nonnegative=True)
     config = sim_t.call(None, SPHConfig, dim=dim, spacing=spacing, dt=dt, smoothing=smoothing, cfl=cfl,
                         gravity=gravity, seed=seed, wall_pressure=wall_pressure, lattice=lattice,
-                        tensile_correction=tensile, contact_damping=damping)
+                        tensile_correction=tensile, contact_damping=damping, neighbor_skin=neighbor_skin)
     out_t = scene.table("output", required=False)
     surfaces = "none"
     resolution = 0.5

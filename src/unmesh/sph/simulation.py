@@ -8,8 +8,10 @@ One step (velocity Verlet in kick-drift-kick form, one force evaluation):
 
 1. ``v ← v + ½Δt a``; ``x ← x + Δt (v + Δv_XSPH)`` (XSPH, eq. 8.19, moves the
    particles with smoothed velocities); walls push back particles that crossed them.
-2. Particles are re-sorted by grid cell (``unmesh.spatial`` cell grid of edge ``h``).
-3. Density pass: neighbour lists, density (8.4), pressure (8.15–8.16).
+2. Particles are re-sorted by grid cell (``unmesh.spatial`` cell grid of edge ``h/2``), unless the
+   Verlet candidates of the last cell scan still cover every neighbourhood (``SPHConfig.neighbor_skin``).
+3. Density pass: neighbour lists (by a cell scan or from the candidates), density (8.4), pressure
+   (8.15–8.16).
 4. Lattice pass (if any solid): assignment (8.21), docking, shape matching
    (8.23–8.24), goal positions (8.29–8.30), strain stress, exact torque correction.
 5. Force pass: pressure (8.17), viscosity (8.18), elastic forces, collisions
@@ -131,6 +133,13 @@ class SPHConfig:
         correction. ``"cubic"`` (the simple cubic grid, 26 neighbours at rest instead of 42)
         is for fluids only: solid objects and freezing materials need the closest packing
         (lattice shape matching, section 8.2).
+    neighbor_skin : float
+        Skin ``s`` of the Verlet neighbour lists, in units of ``h`` (0: off). The cell scan then reaches
+        ``h + s h`` and stores those candidates; the following steps test only them (exactly, ``r < h``)
+        and skip the re-sort, until some particle has moved more than ``s h/2`` since the scan: the
+        neighbour lists, densities and forces are those of a scan every step, up to the summation order
+        of the particles between re-sorts (round-off). Used only in scenes without elastic materials or
+        phase changes (their lattice state follows the re-sort every step).
 
     Example
     -------
@@ -151,6 +160,7 @@ class SPHConfig:
     lattice: str = "closest"
     tensile_correction: float = 4.0
     contact_damping: float = 0.0
+    neighbor_skin: float = 0.2
 
     def __post_init__(self) -> None:
         if self.dim not in (2, 3):
@@ -163,6 +173,8 @@ class SPHConfig:
                 raise InputError(f"{key}: expected a positive number, got {v!r}")
         if not (isinstance(self.tensile_correction, int | float) and 0 <= self.tensile_correction < math.inf):
             raise InputError(f"tensile_correction: expected a number >= 0, got {self.tensile_correction!r}")
+        if not (isinstance(self.neighbor_skin, int | float) and 0 <= self.neighbor_skin < math.inf):
+            raise InputError(f"neighbor_skin: expected a number >= 0, got {self.neighbor_skin!r}")
         if not (isinstance(self.contact_damping, int | float) and 0 <= self.contact_damping <= 1):
             raise InputError(f"contact_damping: expected a number in [0, 1], got {self.contact_damping!r}")
         if self.smoothing <= 1.0:
@@ -327,7 +339,11 @@ class SPHSimulation(Simulation):
         if config.lattice != "closest":
             self._check_fluid_lattice()
         self.phase_changes = any(m.melt_rate > 0 or m.freeze_rate > 0 for m in self.materials)
+        # Verlet lists (SPHConfig.neighbor_skin): fluids only, the lattice state follows every re-sort
+        self.skin = 0.0 if self.elastic or self.phase_changes else float(config.neighbor_skin) * self.h
+        self.neighbor_scans = 0  # cell scans (re-sorts) so far; the other steps used the stored candidates
         self._build_particles()
+        self._present = np.unique(self.mat)  # materials present (fixed: particles never change material)
         self._build_boundary_grid()
         self.time = 0.0
         self.steps = 0
@@ -425,6 +441,11 @@ class SPHSimulation(Simulation):
         self.nnbr = np.zeros(n, np.int64)
         self.bnbr = np.zeros((n, 32 if len(self.boundary) else 1), np.int32)
         self.nbnbr = np.zeros(n, np.int64)
+        # Verlet candidates within h + skin (K.density_pass) and the positions they were found at
+        ccap = int(1.2 * (1.0 + self.config.neighbor_skin) ** self.dim * cap) + 8
+        self.cand = np.zeros((n, ccap + 1) if self.skin > 0.0 else (0, 1), np.int32)
+        self.ncand = np.zeros(n if self.skin > 0.0 else 0, np.int64)
+        self._xref: np.ndarray | None = None
         self._scratch = None
         self._rows: dict[str, np.ndarray] | None = None  # packed per-particle rows of the density and force passes
         self._spare: dict[str, np.ndarray] = {}  # re-sort buffers, reused every step
@@ -524,7 +545,13 @@ class SPHSimulation(Simulation):
                 "fel": np.zeros((n, 3)), "pmat_out": np.zeros(self.pmat.shape),
             }
 
-    def _density(self) -> None:
+    def _density(self, scan: bool = True) -> None:
+        """Neighbour lists, density and pressure: by a cell scan of the current (sorted) grid, or, with
+        ``scan=False``, from the Verlet candidates of the last scan (valid while no particle has moved more
+        than half the skin since, :meth:`_update`)."""
+        if not scan:
+            self._density_from_candidates()
+            return
         g = self.grid
         bo, binv, bd, bk, bs = self.bgrid
         self._dense = dense = K.cell_starts(g, getattr(self, "_dense", None))
@@ -532,26 +559,85 @@ class SPHSimulation(Simulation):
         if self._rows is None or self._rows["xm"].shape[0] != n:
             self._rows = {"xm": np.empty((n, 4)), "pk": np.empty((n, K.PK_COLS)), "dgrad": np.empty((n, 3)),
                           "drho": np.empty(n)}
+        self.neighbor_scans += 1
         while True:
             K.density_pass(self.x, self.m, self.mat, self.mats, self.h, self.dim, g.origin, g.inv_cell, g.dims,
                            g.cell_keys, g.cell_start, dense, self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol,
                            bo, binv, bd, bk, bs, self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho,
-                           self.corners, self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors)
+                           self.corners, self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors,
+                           self.h + self.skin, self.cand, self.ncand)
+            need = int(self.nnbr.max()) if len(self.nnbr) else 0
+            bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
+            cneed = int(self.ncand.max()) if len(self.ncand) else 0
+            if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1] and cneed <= self.cand.shape[1] - 1:
+                break
+            self.nbr = np.zeros((n, max(need + 9, self.nbr.shape[1])), np.int32)
+            self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
+            if cneed > self.cand.shape[1] - 1:
+                self.cand = np.zeros((n, cneed + 17), np.int32)
+        if self.skin > 0.0:
+            if self._xref is None or self._xref.shape != self.x.shape:
+                self._xref = np.empty_like(self.x)
+            self._xref[:] = self.x
+        self._diffuse()
+
+    def _density_from_candidates(self) -> None:
+        bo, binv, bd, bk, bs = self.bgrid
+        while True:
+            K.density_list_pass(self.x, self.m, self.mat, self.mats, self.h, self.dim, self.cand, self.ncand,
+                                self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol, bo, binv, bd, bk, bs,
+                                self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho, self.corners,
+                                self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors)
             need = int(self.nnbr.max()) if len(self.nnbr) else 0
             bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
             if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1]:
                 break
-            self.nbr = np.zeros((n, max(need + 9, self.nbr.shape[1])), np.int32)
+            self.nbr = np.zeros((len(self.x), max(need + 9, self.nbr.shape[1])), np.int32)
             self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
+        self._diffuse()
+
+    def _restore_candidates(self, xref: Any) -> bool:
+        """Rebuild the Verlet candidates of a checkpoint from the positions of its last cell scan ``xref``
+        (the particles are still in that scan's order), then the density at the current positions: the
+        run continues exactly as without the interruption. False (nothing done) if ``xref`` does not fit."""
+        from unmesh.spatial import build_cell_grid
+
+        xref = np.ascontiguousarray(np.asarray(xref, dtype=np.float64))
+        if xref.shape != self.x.shape:
+            return False
+        g = build_cell_grid(xref, K.CELL_FRACTION * self.h)
+        if not np.array_equal(g.order, np.arange(len(xref))):  # not in scan order: scan afresh
+            return False
+        x_now = self.x
+        self.x, self.grid = xref, g
+        self._density()
+        self.x = x_now
+        self._density(scan=False)
+        return True
+
+    def _candidates_valid(self) -> bool:
+        """True when the stored Verlet candidates still hold every pair closer than ``h``: no particle has
+        moved more than half the skin since the scan (two particles then came at most one skin closer)."""
+        if self.skin <= 0.0 or self._xref is None or self._xref.shape != self.x.shape:
+            return False
+        return bool(K.max_displacement(self.x, self._xref) <= 0.5 * self.skin * (1.0 - 1e-6))
+
+    def _diffuse(self) -> None:
         if np.any(self.mats[:, MT.DENSITY_DIFFUSION] > 0):  # δ-SPH density filter of the fluids
             DK.density_diffusion_pass(self.x, self.m, self.rho, self.p, self.phase, self.mat, self.mats, self.nbr,
                                       self.nnbr, self.h, self.dim, self._rows["dgrad"], self._rows["drho"],
                                       self.full_neighbors)
 
-    def _update(self, prime: bool = False) -> None:
-        """Sort, density, lattice and force passes at the current positions."""
-        self._sort(full=False)
-        self._density()
+    def _update(self, prime: bool = False, rescan: bool = False) -> None:
+        """Sort, density, lattice and force passes at the current positions.
+
+        With Verlet lists (``self.skin > 0``) the sort and the cell scan run only when the stored
+        candidates no longer cover the neighbourhoods (or ``prime`` / ``rescan``).
+        """
+        scan = prime or rescan or not self._candidates_valid()
+        if scan:
+            self._sort(full=False)
+        self._density(scan)
         self._ensure_scratch()
         s = self._scratch
         if self.elastic:
@@ -577,7 +663,7 @@ class SPHSimulation(Simulation):
     def max_sound_speed(self) -> float:
         """Largest wave speed of the materials present: ``√(ΓK/ρ0)``, elastic ``√((λ+2μ)/ρ0)``."""
         c = 0.0
-        for k in np.unique(self.mat):
+        for k in self._present:
             mat = self.materials[int(k)]
             mu, lam = mat.lame
             c = max(c, mat.sound_speed, math.sqrt(max(lam + 2 * mu, 0.0) / mat.density))
@@ -594,7 +680,7 @@ class SPHSimulation(Simulation):
         c = self.max_sound_speed()
         limits = [(1.2 * self.h / (c + vmax) if c + vmax > 0 else math.inf,
                    f"speed of sound {c:.3g} m/s, h = {self.h:.4g} m")]
-        present = [self.materials[int(k)] for k in np.unique(self.mat)]
+        present = [self.materials[int(k)] for k in self._present]
         ke = max((m.elastic_stiffness for m in present), default=0.0)
         if ke > 0 and np.any(self.phase == SOLID):
             limits.append((1.2 / math.sqrt(ke), f"elastic stiffness K_e = {ke:.4g}/s²"))
@@ -863,6 +949,8 @@ class SPHSimulation(Simulation):
         """Every array and counter needed to continue the run exactly."""
         state: dict[str, Any] = {name: getattr(self, name) for name in self._arrays()}
         state.update(time=float(self.time), steps=int(self.steps), dt_last=float(self.dt_last), n=len(self.x))
+        if self.skin > 0.0 and self._xref is not None:
+            state["verlet_xref"] = self._xref  # positions of the last cell scan (the candidates are rebuilt from them)
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -874,13 +962,16 @@ class SPHSimulation(Simulation):
             if name not in state:
                 raise InputError(f"checkpoint lacks {name!r}; it belongs to a different scene")
             setattr(self, name, np.ascontiguousarray(np.asarray(state[name]).astype(getattr(self, name).dtype)))
+        self._present = np.unique(self.mat)
         self.time = float(state["time"])
         self.steps = int(state["steps"])
         self.dt_last = float(state["dt_last"])
         self._problem = None
         # neighbour lists for diagnostics and surfaces at the restored positions
         with serial_if_small(len(self.x), PARALLEL_MIN):
-            self._sort()
-            self._density()
+            xref = state.get("verlet_xref")
+            if not (self.skin > 0.0 and xref is not None and self._restore_candidates(xref)):
+                self._sort()
+                self._density()
             self._ensure_scratch()
             self._diag = K.diagnostics(self.x, self.v, self.a, self.m, self.rho, self.mat, self.mats)
