@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 
 from unmesh import SurfelCloud
 from unmesh.csg import Patch, flatten
-from unmesh.csg.classify import on_surface_reference
+from unmesh.csg.classify import on_surface_reference, same_plane_reference
 from unmesh.csg.model import INTERSECTION, LEAF
 from unmesh.render._splat_kernels import COPLANAR_EPS, keep_tree
 
@@ -25,7 +25,7 @@ def _tree(draw, nleaves):
 
 
 @st.composite
-def fragments(draw, most=3, sheet=False):
+def fragments(draw, most=3, sheet=False, planes=False):
     nleaves = draw(st.integers(1, 6))
     flat = flatten(_tree(draw, nleaves))
     table = flat.table()
@@ -43,6 +43,11 @@ def fragments(draw, most=3, sheet=False):
                 n = base_n + 0.05 * np.array(n)
             if np.linalg.norm(n) < 1e-3:
                 n = [0, 0, 1.0]
+            if planes and rows and rows[-1][6] == flat.leaf_node[j] and draw(st.booleans()):
+                # on the plane of the previous partner of this leaf (a line of border surfels)
+                prev = np.array(rows[-1][:6])
+                t = np.array(c) - np.dot(np.array(c) - prev[:3], prev[3:]) * prev[3:]
+                c, n = list(t), prev[3:]
             rows.append([*c, *(np.array(n) / np.linalg.norm(n)), flat.leaf_node[j]])
     partners = np.array(rows, dtype=np.float64).reshape(-1, 7)
     x = np.array(draw(st.lists(st.floats(-1, 1), min_size=3, max_size=3)))
@@ -83,11 +88,13 @@ def _inside_values(flat, x, partners, own):
                     return own > r[6]
                 return d >= 0
 
-            c1 = clips_x(mine[o[0]])
-            if len(mine) == 1:
+            a = mine[o[0]]
+            c1 = clips_x(a)
+            off = [r for r in mine[o[1:]] if not same_plane_reference(a, r)]  # s2 off s1's plane
+            if not off:
                 v = not c1
             else:
-                a, b = mine[o[0]], mine[o[1]]
+                b = off[0]
                 c2 = clips_x(b)
                 v = (not c1 or not c2) if (clips(a, b[:3]) and clips(b, a[:3])) else (not c1 and not c2)
             vals[k] = v != bool(table[k, 3])
@@ -192,3 +199,68 @@ def _walk_cached(case, seed):
             p = p + rng.normal(scale=10.0 ** rng.uniform(-4, -1), size=3)
         want = keep_tree(0, p[0], p[1], p[2], offsets, partners, table, leaf, full)
         assert keep_tree_cached(0, p[0], p[1], p[2], offsets, partners, table, leaf, work) == want
+
+
+@settings(max_examples=150, deadline=None)
+@given(fragments(planes=True))
+def test_kernel_matches_reference_with_partners_on_one_plane(case):
+    """keep_tree against the reference with lines of partners on one plane (s2 is the closest
+    partner off s1's plane)."""
+    x, offsets, partners, table, leaf, _ = case
+    work = np.empty((len(table), 5))
+    ref = on_surface_reference(x, 0, offsets, partners, table, leaf)
+    assert keep_tree(0, x[0], x[1], x[2], offsets, partners, table, leaf, work) == ref
+
+
+@settings(max_examples=150, deadline=None)
+@given(fragments(most=5, planes=True), st.integers(0, 2**31 - 1))
+def test_cached_traversal_with_partners_on_one_plane_equals_full_traversal(case, seed):
+    """keep_tree_cached equals keep_tree with lines of partners on one plane (its margin keeps
+    s1 the closest and s2 the closest off s1's plane)."""
+    _walk_cached(case, seed)
+
+
+def _corner_partners():
+    """Partners of one leaf along two border lines meeting at a corner (Fig. 4.6, a surfel
+    outside the painted square next to its corner): the line ``x = 0`` (normals +x) with
+    surfels every 0.05 for ``y`` in [-1, -0.05], and the line ``y = 0`` (normals -y) for ``x``
+    in [-1, -0.05]; the patch is the quadrant x < 0, y > 0."""
+    t = -np.arange(1, 21) * 0.05
+    a = np.stack([np.zeros_like(t), t, np.zeros_like(t)], axis=1)
+    b = np.stack([t, np.zeros_like(t), np.zeros_like(t)], axis=1)
+    rows = np.zeros((2 * len(t), 7))
+    rows[:len(t), :3] = a
+    rows[:len(t), 3] = 1.0
+    rows[len(t):, :3] = b
+    rows[len(t):, 4] = -1.0
+    rows[:, 6] = 1.0
+    return rows
+
+
+def test_corner_of_two_border_lines_fig_4_6():
+    """Fragments near the corner of two lines of partners: outside beyond either line. Before,
+    the two closest partners of a fragment beside the line ``x = 0`` but beyond ``y = 0`` both
+    came from the first line, and 4.4 reduced to its half-space, keeping the fragment."""
+    from unmesh.render._splat_kernels import clip_work, keep_tree_cached, max_rows
+
+    partners = _corner_partners()
+    offsets = np.array([0, len(partners)], dtype=np.int64)
+    table = np.array([[2, 2, 0, 0], [2, 2, 1, 0], [0, -1, 0, 0]], dtype=np.int32)  # surface & D
+    leaf = np.array([0], dtype=np.int32)
+    rng = np.random.default_rng(1)
+    x = rng.uniform(-0.3, 0.3, (4000, 3))
+    x[:, 2] *= 0.1
+    exact = (x[:, 0] < 0) & (x[:, 1] > 0)
+    full = np.empty((3, 5))
+    work = clip_work(3, max_rows(offsets))
+    got = np.array([keep_tree(0, *p, offsets, partners, table, leaf, full) for p in x])
+    cached = np.array([keep_tree_cached(0, *p, offsets, partners, table, leaf, work) for p in x])
+    ref = np.array([on_surface_reference(p, 0, offsets, partners, table, leaf) for p in x])
+    # beside the line x = 0 (inside its half-space) but beyond y = 0
+    near = (x[:, 0] < 0) & (x[:, 0] > -0.03) & (x[:, 1] < -0.02)
+    assert near.sum() > 20
+    assert not got[near].any()
+    assert (got == exact).all() and (cached == got).all() and (ref == got).all()
+    cloud = SurfelCloud(partners[:, :3], partners[:, 3:6], radii=np.full(len(partners), 0.05))
+    from unmesh.csg import inside_patch
+    assert (inside_patch(cloud, x) == exact).all()

@@ -28,12 +28,12 @@ import numpy as np
 from unmesh._validate import as_points
 from unmesh.csg.model import INTERSECTION, LEAF, FlatTree, Node, flatten
 from unmesh.errors import InputError
-from unmesh.render._splat_kernels import COPLANAR_EPS
+from unmesh.render._splat_kernels import COPLANAR_EPS, SAME_PLANE_TOL
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 
 __all__ = ["RULES", "inside", "inside_patch", "kleene_and", "kleene_or", "maybe_on_surface", "on_surface_reference",
-           "tree_values", "tri_and", "tri_or", "walk_up"]
+           "same_plane_reference", "tree_values", "tri_and", "tri_or", "walk_up"]
 
 #: Patch classification rules: the closest surfel (4.3) or the two closest (4.4).
 RULES = ("closest", "two")
@@ -42,9 +42,11 @@ RULES = ("closest", "two")
 def inside_patch(cloud: SurfelCloud, points: Any, rule: str = "two", tree: KDTree | None = None) -> np.ndarray:
     """Whether ``points`` (M,3) are inside the patch ``cloud`` (outward normals): (M,) bool.
 
-    ``rule="closest"``: (4.3), behind the closest surfel's plane. ``rule="two"``: (4.4), the two
-    closest surfels ``s1, s2``; when they are concave (each clips the other's centre) the point
-    is inside if either does not clip it, otherwise only if neither clips it.
+    ``rule="closest"``: (4.3), behind the closest surfel's plane. ``rule="two"``: (4.4), the
+    closest surfel ``s1`` and the closest ``s2`` not on one plane with it (two surfels of one
+    plane say no more than one; see :func:`unmesh.render._splat_kernels.same_plane`); when they
+    are concave (each clips the other's centre) the point is inside if either does not clip
+    it, otherwise only if neither clips it; without such an ``s2``, (4.3).
 
     Example
     -------
@@ -65,10 +67,43 @@ def inside_patch(cloud: SurfelCloud, points: Any, rule: str = "two", tree: KDTre
     clips1 = np.einsum("ij,ij->i", x - c[i1], n[i1]) >= 0.0
     if k == 1:
         return ~clips1
-    i2 = idx[:, 1]
+    i2 = _second_surfel(c, n, x, idx, tree)
+    two = i2 >= 0
+    i2 = np.where(two, i2, i1)
     clips2 = np.einsum("ij,ij->i", x - c[i2], n[i2]) >= 0.0
     concave = (np.einsum("ij,ij->i", c[i2] - c[i1], n[i1]) >= 0.0) & (np.einsum("ij,ij->i", c[i1] - c[i2], n[i2]) >= 0.0)
-    return np.where(concave, ~clips1 | ~clips2, ~clips1 & ~clips2)
+    return np.where(two, np.where(concave, ~clips1 | ~clips2, ~clips1 & ~clips2), ~clips1)
+
+
+def _same_plane(c: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`unmesh.render._splat_kernels.same_plane` of surfels ``a`` and ``b`` (index arrays)."""
+    t2 = SAME_PLANE_TOL * SAME_PLANE_TOL
+    d = c[b] - c[a]
+    dd = np.einsum("ij,ij->i", d, d)
+    ea = np.einsum("ij,ij->i", d, n[a])
+    eb = np.einsum("ij,ij->i", d, n[b])
+    return (np.einsum("ij,ij->i", n[a], n[b]) >= 1.0 - 0.5 * t2) & (ea * ea <= t2 * dd) & (eb * eb <= t2 * dd)
+
+
+def _second_surfel(c: np.ndarray, n: np.ndarray, x: np.ndarray, idx: np.ndarray, tree: KDTree) -> np.ndarray:
+    """For each point, the closest surfel not on one plane with its closest ``idx[:, 0]`` (from
+    the two nearest ``idx``, asking more neighbours where those are on one plane): (M,) int64,
+    -1 where every surfel is on that plane."""
+    i1 = idx[:, 0]
+    out = np.where(_same_plane(c, n, i1, idx[:, 1]), -1, idx[:, 1]).astype(np.int64)
+    rows = np.flatnonzero(out < 0)
+    k = 2
+    while len(rows) and k < len(c):
+        k = min(4 * k, len(c))
+        _, more = tree.knn(x[rows], k)
+        found = np.full(len(rows), -1, dtype=np.int64)
+        for col in range(k - 1, 0, -1):  # the nearest one off the plane wins
+            j = more[:, col]
+            ok = (j != i1[rows]) & ~_same_plane(c, n, i1[rows], j)
+            found = np.where(ok, j, found)
+        out[rows] = found
+        rows = rows[found < 0]
+    return out
 
 
 def tri_and(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -168,6 +203,19 @@ def inside(model: Node | FlatTree, points: Any, rule: str = "two") -> np.ndarray
     return tree_values(flat, leaf_values)[-1] > 0
 
 
+def same_plane_reference(a: np.ndarray, b: np.ndarray, tol: float = SAME_PLANE_TOL) -> bool:
+    """Plain-Python :func:`unmesh.render._splat_kernels.same_plane` of two partner rows
+    ``(cx, cy, cz, nx, ny, nz, ...)``: parallel normals and each centre on the other's plane."""
+    t2 = tol * tol
+    if float(a[3]) * float(b[3]) + float(a[4]) * float(b[4]) + float(a[5]) * float(b[5]) < 1.0 - 0.5 * t2:
+        return False
+    dx, dy, dz = float(b[0]) - float(a[0]), float(b[1]) - float(a[1]), float(b[2]) - float(a[2])
+    dd = dx * dx + dy * dy + dz * dz
+    ea = dx * float(a[3]) + dy * float(a[4]) + dz * float(a[5])
+    eb = dx * float(b[3]) + dy * float(b[4]) + dz * float(b[5])
+    return ea * ea <= t2 * dd and eb * eb <= t2 * dd
+
+
 def on_surface_reference(x: Any, s: int, offsets: np.ndarray, partners: np.ndarray, tree: np.ndarray,
                          leaf: np.ndarray) -> bool:
     """Plain-Python Algorithm 4.2 (with 4.3, 4.4, 4.9, 4.10) for a fragment of surfel ``s`` at
@@ -197,11 +245,13 @@ def on_surface_reference(x: Any, s: int, offsets: np.ndarray, partners: np.ndarr
                 continue
             d = ((mine[:, :3] - x) ** 2).sum(axis=1)
             order = np.argsort(d, kind="stable")
-            c1 = clips_x(mine[order[0]])
-            if len(mine) == 1:
+            a = mine[order[0]]
+            c1 = clips_x(a)
+            off = [r for r in mine[order[1:]] if not same_plane_reference(a, r)]
+            if not off:
                 ins = not c1
             else:
-                a, b = mine[order[0]], mine[order[1]]
+                b = off[0]
                 c2 = clips_x(b)
                 ins = (not c1 or not c2) if (clips(a, b[:3]) and clips(b, a[:3])) else (not c1 and not c2)
             vals[k] = int(ins != bool(tree[k, 3]))

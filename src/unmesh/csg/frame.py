@@ -42,7 +42,7 @@ from unmesh.errors import InputError
 from unmesh.render.splat import ClipTree, SurfelArrays
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "centre_classified", "concatenate_frames", "prepare", "select"]
+__all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "centre_classified", "concatenate_frames", "prepare", "select", "world_cloud"]
 
 #: Surfel classes of 4.1.2.
 SURFACE, EDGE, OUTSIDE = 0, 1, 2
@@ -126,18 +126,69 @@ def prepare(model: Node, method: str = "grid", rule: str = "two", reuse: bool = 
     return frame
 
 
+def _similarity(transform: np.ndarray) -> float | None:
+    """The scale of the linear part of ``transform`` (4,4) when it is a similarity (the test of
+    :meth:`SurfelCloud.transformed`), else None."""
+    lin = transform[:3, :3]
+    gram = lin.T @ lin
+    scale = float(np.sqrt(np.trace(gram) / 3.0))
+    if np.allclose(gram, scale**2 * np.eye(3), rtol=1e-9, atol=1e-12 * scale**2):
+        return scale
+    return None
+
+
+def world_cloud(leaves: list) -> SurfelCloud:
+    """The world clouds of the patches ``leaves`` concatenated (what
+    ``SurfelCloud.concatenate([p.world_cloud() for p in leaves], attributes="none")`` gives).
+
+    Circular patches under similarity transforms (every shipped scene) are written straight
+    into preallocated arrays: positions ``p L^T + t``, normals ``n s L^-1`` (unit for a
+    similarity ``L`` of scale ``s``, not normalised again), radii ``s r``; the result is
+    :meth:`SurfelCloud.unchecked`. Other patches take the general path."""
+    scales = []
+    for p in leaves:
+        if p.cloud.is_elliptical:
+            scales = None
+            break
+        scales.append(1.0 if p.transform is None else _similarity(p.transform))
+    if len(leaves) == 1 or scales is None or any(s is None for s in scales):
+        clouds = [p.world_cloud() for p in leaves]
+        return SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]
+    n = sum(len(p.cloud) for p in leaves)
+    pos = np.empty((n, 3))
+    nrm = np.empty((n, 3))
+    radii = np.empty(n)
+    colors = np.empty((n, 3))
+    a = 0
+    for p, scale in zip(leaves, scales, strict=True):
+        c = p.cloud
+        b = a + len(c)
+        colors[a:b] = c.colors
+        if p.transform is None:
+            pos[a:b] = c.positions
+            nrm[a:b] = c.normals
+            radii[a:b] = c.radii
+        else:
+            lin = p.transform[:3, :3]
+            np.matmul(c.positions, lin.T, out=pos[a:b])
+            pos[a:b] += p.transform[:3, 3]
+            np.matmul(c.normals, np.linalg.inv(lin) * scale, out=nrm[a:b])
+            np.multiply(c.radii, scale, out=radii[a:b])
+        a = b
+    return SurfelCloud.unchecked(pos, nrm, radii, colors)
+
+
 def _evaluate(model: Node, method: str, rule: str) -> CSGFrame:
     flat = flatten(model)
-    clouds = [p.world_cloud() for p in flat.leaves]
-    cloud = SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]
-    sizes = [len(c) for c in clouds]
-    leaf = np.repeat(np.arange(len(clouds)), sizes)
+    cloud = world_cloud(flat.leaves)
+    sizes = [len(p.cloud) for p in flat.leaves]
+    leaf = np.repeat(np.arange(len(sizes)), sizes)
     radii = np.asarray(cloud.radii, dtype=np.float64)
     offsets, partners = find_partners(cloud.positions, radii, leaf, cloud.normals, method)
     n = len(cloud)
     # which leaves each surfel intersects
     rows = np.repeat(np.arange(n), np.diff(offsets))
-    meets = np.zeros((len(clouds), n), dtype=bool)
+    meets = np.zeros((len(sizes), n), dtype=bool)
     meets[leaf[partners], rows] = True
     has = np.diff(offsets) > 0
     # surfels between edges keep one class: classify the edge surfels and a few
@@ -145,10 +196,10 @@ def _evaluate(model: Node, method: str, rule: str) -> CSGFrame:
     # (every member) where the representatives disagree
     comp = _pieces(flat.leaves, sizes, has)
     rep = _representatives(comp)
-    on, raw = _classify(flat, clouds, cloud, leaf, meets, has | rep, rule)
+    on, raw = _classify(flat, sizes, cloud, leaf, meets, has | rep, rule)
     mixed = _disagreeing(comp, rep, on)
     if mixed.any():
-        on2, _ = _classify(flat, clouds, cloud, leaf, meets, mixed, rule)
+        on2, _ = _classify(flat, sizes, cloud, leaf, meets, mixed, rule)
         on[mixed] = on2[mixed]
     members = (comp >= 0) & ~rep & ~mixed
     if members.any():
@@ -183,11 +234,11 @@ def centre_classified(model: Node, rule: str = "two") -> SurfelCloud:
     16
     """
     flat = flatten(model)
-    clouds = [p.world_cloud() for p in flat.leaves]
-    cloud = SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]
-    leaf = np.repeat(np.arange(len(clouds)), [len(c) for c in clouds])
-    none = np.zeros((len(clouds), len(cloud)), dtype=bool)
-    on, _ = _classify(flat, clouds, cloud, leaf, none, np.ones(len(cloud), dtype=bool), rule)
+    cloud = world_cloud(flat.leaves)
+    sizes = [len(p.cloud) for p in flat.leaves]
+    leaf = np.repeat(np.arange(len(sizes)), sizes)
+    none = np.zeros((len(sizes), len(cloud)), dtype=bool)
+    on, _ = _classify(flat, sizes, cloud, leaf, none, np.ones(len(cloud), dtype=bool), rule)
     flip = flat.invert[flat.leaf_node[leaf]].astype(bool)
     nrm = cloud.normals.copy()
     nrm[flip] *= -1.0
@@ -262,9 +313,10 @@ def _disagreeing(comp: np.ndarray, rep: np.ndarray, on: np.ndarray) -> np.ndarra
     return (comp >= 0) & bad[np.maximum(comp, 0)] & ~rep
 
 
-def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, leaf: np.ndarray, meets: np.ndarray,
+def _classify(flat: FlatTree, sizes: list[int], cloud: SurfelCloud, leaf: np.ndarray, meets: np.ndarray,
               which: np.ndarray, rule: str) -> tuple[np.ndarray, np.ndarray]:
-    """Centre classification of the surfels ``which``: (N,) on-surface flags (Kleene logic,
+    """Centre classification of the surfels ``which`` of the world cloud ``cloud`` (the patches'
+    surfels in leaf order, ``sizes`` of them each): (N,) on-surface flags (Kleene logic,
     unknown for the patches a surfel intersects) and the raw insidePatch values (L, N) int8
     (-1 where not asked).
 
@@ -275,11 +327,11 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
     n = len(cloud)
     idx = np.flatnonzero(which)
     lw = leaf[idx]
-    values = np.full((len(clouds), len(idx)), -1, dtype=np.int8)
-    raw = np.full((len(clouds), n), -1, dtype=np.int8)
+    values = np.full((len(sizes), len(idx)), -1, dtype=np.int8)
+    raw = np.full((len(sizes), n), -1, dtype=np.int8)
     open_ = np.ones(len(idx), dtype=bool)
-    starts = np.concatenate([[0], np.cumsum([len(c) for c in clouds])])
-    for j, c in enumerate(clouds):
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    for j in range(len(sizes)):
         ask = open_ & (lw != j) & ~meets[j, idx]
         if not ask.any():
             continue
@@ -308,7 +360,7 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
             elif miss.any():
                 todo.append((m[miss], memo, local[miss]))
         if todo:
-            _ask(patch, c, cloud, sel, rule, v, todo)
+            _ask(patch, cloud, sel, rule, v, todo)
         for m, lab, rep, memo, local in pieced:
             on_rep = np.zeros(len(m), dtype=bool)
             on_rep[rep] = v[m[rep]]
@@ -318,7 +370,7 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
             same = ~rep & ~mixed
             v[m[same]] = v[m[first[lab[same]]]]
             if mixed.any():
-                _ask(patch, c, cloud, sel, rule, v, [(m[mixed], memo, local[mixed])])
+                _ask(patch, cloud, sel, rule, v, [(m[mixed], memo, local[mixed])])
         raw[j, sel] = v
         values[j, ask] = v != bool(flat.invert[flat.leaf_node[j]])
         if len(idx) >= _DECIDE_EARLY:
@@ -328,14 +380,14 @@ def _classify(flat: FlatTree, clouds: list[SurfelCloud], cloud: SurfelCloud, lea
     return on, raw
 
 
-def _ask(patch, c: SurfelCloud, cloud: SurfelCloud, sel: np.ndarray, rule: str, v: np.ndarray, todo: list) -> None:
-    """insidePatch of ``patch`` (world cloud ``c``) at the centres ``cloud.positions[sel[rows]]``
+def _ask(patch, cloud: SurfelCloud, sel: np.ndarray, rule: str, v: np.ndarray, todo: list) -> None:
+    """insidePatch of ``patch`` at the centres ``cloud.positions[sel[rows]]``
     of every ``(rows, memo, local)`` of ``todo`` into ``v[rows]`` (and ``memo[local]``)."""
     rows = np.concatenate([t[0] for t in todo])
     pts = cloud.positions[sel[rows]]
     x = local_points(patch.transform, pts)
     if x is None:  # not a similarity: in world space
-        w = inside_patch(c, pts, rule)
+        w = inside_patch(patch.world_cloud(), pts, rule)
     else:
         w = inside_patch(patch.cloud, x, rule, tree=local_tree(patch.cloud))
     v[rows] = w

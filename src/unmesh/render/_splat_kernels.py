@@ -419,12 +419,34 @@ def _tri_or(a, b):
 #: on it: coplanar patches (4.5) then break the tie by leaf order, so that exactly one of two
 #: coincident surfaces is drawn instead of none.
 COPLANAR_EPS = 1e-6
+#: Two partners of one patch lie on one plane when their normals differ by less than about this
+#: angle (radians) and each centre is off the other's plane by less than this fraction of the
+#: distance between the centres. Such a pair carries no more than either surfel alone, so the
+#: second surfel of insidePatch (4.4) is the closest partner not on one plane with the first.
+SAME_PLANE_TOL = 1e-3
 
 
 @njit(cache=True)
 def _clips(P, j, x0, x1, x2):
     """Whether partner row ``j`` (centre ``P[j, 0:3]``, normal ``P[j, 3:6]``) clips ``x`` (4.3)."""
     return (x0 - P[j, 0]) * P[j, 3] + (x1 - P[j, 1]) * P[j, 4] + (x2 - P[j, 2]) * P[j, 5] >= 0.0
+
+
+@njit(cache=True)
+def same_plane(P, a, b):
+    """Whether partner rows ``a`` and ``b`` lie on one plane (:data:`SAME_PLANE_TOL`): parallel
+    normals (``n_a.n_b >= 1 - tol^2/2``) and each centre on the other's plane
+    (``((c_b - c_a).n)^2 <= tol^2 |c_b - c_a|^2`` for both normals)."""
+    t2 = SAME_PLANE_TOL * SAME_PLANE_TOL
+    if P[a, 3] * P[b, 3] + P[a, 4] * P[b, 4] + P[a, 5] * P[b, 5] < 1.0 - 0.5 * t2:
+        return False
+    dx = P[b, 0] - P[a, 0]
+    dy = P[b, 1] - P[a, 1]
+    dz = P[b, 2] - P[a, 2]
+    dd = dx * dx + dy * dy + dz * dz
+    ea = dx * P[a, 3] + dy * P[a, 4] + dz * P[a, 5]
+    eb = dx * P[b, 3] + dy * P[b, 4] + dz * P[b, 5]
+    return ea * ea <= t2 * dd and eb * eb <= t2 * dd
 
 
 @njit(cache=True)
@@ -448,9 +470,12 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     1 union, 2 leaf; the sub-tree of node k is ``first[k] .. k``; ``invert`` complements a leaf,
     4.3); ``leaf[s]`` is the leaf node of ``s``. ``work`` (K, 5) float64 scratch.
 
-    insidePatch (Algorithm 4.4) uses the two partners of the patch closest to ``x`` (a fragment
-    on a partner's plane, coplanar patches 4.5, is inside the lower leaf's patch): none gives
-    unknown, one the closest-surfel test (4.3), two the concave/convex rule (4.4); insideTree
+    insidePatch (Algorithm 4.4) uses the partner ``s1`` of the patch closest to ``x`` and the
+    closest ``s2`` of the others not on one plane with ``s1`` (:func:`same_plane`; two surfels
+    of one plane say no more than one, and would reduce 4.4 to that plane's half-space); a
+    fragment on a partner's plane (coplanar patches, 4.5) is inside the lower leaf's patch.
+    No partner gives unknown, no ``s2`` the closest-surfel test (4.3), both the concave/convex
+    rule (4.4); first partners in row order win ties; insideTree
     (Algorithm 4.3) combines them with the three-valued logic (4.9, 4.10), evaluated for every
     node in post order; then the walk from ``leaf[s]`` to the root applies (4.5)/(4.6).
     """
@@ -460,18 +485,25 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
         work[k, 1] = np.inf
         work[k, 2] = -1.0
         work[k, 3] = -1.0
-    for j in range(clip_offsets[s], clip_offsets[s + 1]):
+    for j in range(clip_offsets[s], clip_offsets[s + 1]):  # s1 of every leaf
         node = int(partners[j, 6])
         dx = x0 - partners[j, 0]
         dy = x1 - partners[j, 1]
         dz = x2 - partners[j, 2]
         d = dx * dx + dy * dy + dz * dz
         if d < work[node, 0]:
-            work[node, 1] = work[node, 0]
-            work[node, 3] = work[node, 2]
             work[node, 0] = d
             work[node, 2] = j
-        elif d < work[node, 1]:
+    for j in range(clip_offsets[s], clip_offsets[s + 1]):  # s2: the closest not on s1's plane
+        node = int(partners[j, 6])
+        i1 = int(work[node, 2])
+        if j == i1 or same_plane(partners, i1, j):
+            continue
+        dx = x0 - partners[j, 0]
+        dy = x1 - partners[j, 1]
+        dz = x2 - partners[j, 2]
+        d = dx * dx + dy * dy + dz * dz
+        if d < work[node, 1]:
             work[node, 1] = d
             work[node, 3] = j
     for k in range(K):
@@ -559,8 +591,10 @@ def _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base):
     """insidePatch (4.3/4.4) of leaf node ``k`` for the fragment of surfel ``s`` at ``x``, from
     the partner list of ``k`` (linked in ``work``): ``(value, margin)`` with value -1 unknown,
     and ``margin`` the distance ``x`` may move without changing the value (no plane of the
-    leaf's partners changing side when they all agree on ``x``, otherwise also the two closest
-    staying the two closest)."""
+    leaf's partners changing side when they all agree on ``x``, otherwise also ``s1`` and ``s2``
+    of :func:`keep_tree` staying what they are: the two closest staying the two closest when
+    they are off each other's plane, else ``s1`` staying the closest and ``s2`` the closest of
+    the partners off its plane)."""
     d1 = np.inf
     d2 = np.inf
     d3 = np.inf
@@ -606,12 +640,37 @@ def _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base):
         return (1 if inside else 0), max(gap, 0.0) / (1.0 + 4.0 * COPLANAR_EPS) * (1.0 - 1e-9)
     c1 = _clips_fragment(partners, i1, x0, x1, x2, own)
     margin = _plane_margin(partners, i1, x0, x1, x2)
+    if i2 >= 0 and same_plane(partners, i1, i2):
+        # s2 is the closest partner not on s1's plane (keep_tree): while s1 stays the closest
+        # (half the gap to the second closest) the partners off its plane stay the same, and
+        # s2 stays their closest (half the gap to the next of them)
+        margin = min(margin, 0.5 * (math.sqrt(d2) - math.sqrt(d1)) * (1.0 - 1e-9))
+        e1 = np.inf
+        e2 = np.inf
+        i2 = -1
+        j = int(work[k, 1])
+        while j >= 0:  # the same scan order and ties as keep_tree
+            if j != i1 and not same_plane(partners, i1, j):
+                dx = x0 - partners[j, 0]
+                dy = x1 - partners[j, 1]
+                dz = x2 - partners[j, 2]
+                d = dx * dx + dy * dy + dz * dz
+                if d < e1:
+                    e2 = e1
+                    e1 = d
+                    i2 = j
+                elif d < e2:
+                    e2 = d
+            j = int(work[base + j, 0])
+        if i2 >= 0 and e2 < np.inf:
+            margin = min(margin, 0.5 * (math.sqrt(e2) - math.sqrt(e1)) * (1.0 - 1e-9))
+        d3 = np.inf  # the gap bound above replaces that of the two closest
     if i2 < 0:
         inside = not c1
     else:
         c2 = _clips_fragment(partners, i2, x0, x1, x2, own)
         margin = min(margin, _plane_margin(partners, i2, x0, x1, x2))
-        if d3 < np.inf:  # the two closest stay the two closest
+        if d3 < np.inf:  # the two closest (s1 and s2, off each other's plane) stay the two closest
             margin = min(margin, 0.5 * (math.sqrt(d3) - math.sqrt(d2)) * (1.0 - 1e-9))
         concave = (_clips(partners, i1, partners[i2, 0], partners[i2, 1], partners[i2, 2])
                    and _clips(partners, i2, partners[i1, 0], partners[i1, 1], partners[i1, 2]))
@@ -717,10 +776,10 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     Only the sub-trees Algorithm 4.2 needs are evaluated, lazily (a sibling that puts the
     fragment off the surface ends the walk; a deciding left operand skips the right one). With
     the result, the distance ``margin`` that ``x`` may move without changing any value used is
-    kept (the distance to the nearest plane tested, and half the gap between the second and
-    third closest partner of every leaf evaluated whose partners disagree on the fragment:
-    when all of a leaf's partners clip it, or none does, the value is the same whichever two
-    are closest, and only their planes bound the margin); a later fragment of the same surfel
+    kept (the distance to the nearest plane tested, and for every leaf evaluated whose
+    partners disagree on the fragment the gaps that keep its ``s1``/``s2`` in place, see
+    :func:`_leaf_value`: when all of a leaf's partners clip it, or none does, the value is the
+    same whichever two are chosen, and only their planes bound the margin); a later fragment of the same surfel
     within ``margin`` of a cached one gets the cached result, exactly the one a new traversal
     would give. Two slots: the last result and the one before (the start of the previous
     pixel row, typically).

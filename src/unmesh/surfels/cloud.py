@@ -203,6 +203,22 @@ class SurfelCloud:
         extra = f", attributes={sorted(self.attributes)}" if self.attributes else ""
         return f"SurfelCloud({len(self)} {kind} surfels{extra})"
 
+    @classmethod
+    def unchecked(cls, positions: np.ndarray, normals: np.ndarray, radii: np.ndarray, colors: np.ndarray) -> SurfelCloud:
+        """A circular cloud from arrays already as construction leaves them, taken as they are
+        (no validation, no copies, no normalisation): positions and normals (N,3) float64
+        C-contiguous with unit normals, radii (N,) > 0, colours (N,3) in [0, 1]. For callers
+        that built them from valid clouds (the world cloud of a CSG frame,
+        :func:`unmesh.csg.frame.world_cloud`); anything else should use the constructor."""
+        obj = object.__new__(cls)
+        object.__setattr__(obj, "positions", positions)
+        object.__setattr__(obj, "normals", normals)
+        object.__setattr__(obj, "radii", radii)
+        object.__setattr__(obj, "axes", None)
+        object.__setattr__(obj, "colors", colors)
+        object.__setattr__(obj, "attributes", {})
+        return obj
+
     @property
     def is_elliptical(self) -> bool:
         """True when the surfels carry explicit tangent axes."""

@@ -72,7 +72,8 @@ def _sampling(model: Any, camera: Any) -> np.ndarray:
 def fig41_example(ctx: ExampleContext) -> None:
     """Inside/outside classification near a convex edge whose two faces are sampled differently.
     A slice through the edge: blue marks points wrongly classified outside, red wrongly inside;
-    left the closest surfel (4.3), right the two closest surfels with the concave/convex rule (4.4)."""
+    left the closest surfel (4.3), right the closest surfel and the closest one off its plane with the
+    concave/convex rule (4.4)."""
     from unmesh.csg import inside_patch
     from unmesh.render import save_image
     from unmesh.surfels import SurfelCloud
@@ -102,7 +103,7 @@ def fig41_example(ctx: ExampleContext) -> None:
                    int((got != exact).sum()))
     path = save_image(ctx.path("fig41.png"), side_by_side(*panels))
     ctx.image(path, "a slice through the edge: grey inside; red wrongly inside, blue wrongly outside; "
-                    "left closest surfel, right two closest surfels")
+                    "left closest surfel, right two surfels (4.4)")
 
 
 @example("csg-fig43", "Discarding surfels vs edge clipping (Fig. 4.3)", section="CSG")
@@ -221,9 +222,9 @@ def fig410_example(ctx: ExampleContext) -> None:
 def painted_sphere(a: float = 0.4, h: float = 0.03, discontinuities: bool = True) -> Any:
     """A unit sphere sampled at spacing ``h``, red inside the square ``|x|, |y| < a`` on its
     ``z > 0`` side, with texture-discontinuity surfels (4.3) along the square's border: a pair
-    facing either way every ``h/2`` on the arcs ``x = +-a`` and ``y = +-a`` (none on a corner,
-    so that the two closest of a corner come from its two sides and the concave/convex rule of
-    4.4 applies). Surfels within ``1.5 h`` of the border are enlarged to ``1.3 h`` so that the
+    facing either way every ``h/2`` on the arcs ``x = +-a`` and ``y = +-a`` (none on a corner;
+    near a corner the second surfel of 4.4 is the closest one off the first one's plane, so it
+    comes from the other side and the concave/convex rule applies). Surfels within ``1.5 h`` of the border are enlarged to ``1.3 h`` so that the
     surfels of each colour cover the border strip up to the border (they are clipped there).
     Returns ``[sphere, discontinuity surfels]`` or the sphere alone."""
     from unmesh.shapes import Sphere
@@ -277,8 +278,7 @@ def fig46_example(ctx: ExampleContext) -> None:
     images = [_still(sharp, cam), _still(soft, cam), _still(sharp, zoom), _still(soft, zoom)]
     path = save_image(ctx.path("fig46.png"), side_by_side(*images))
     ctx.image(path, "a red square painted on a sphere; left to right: with texture-discontinuity surfels, "
-                    "without, and both magnified 6x at a corner of the square (with them, a faint light arc "
-                    "remains inside the red next to the corner)")
+                    "without, and both magnified 6x at a corner of the square")
 
 
 #: Offsets of the second sphere in :func:`coplanar_limits`: crossing angles of about 17, 6, 1.7
