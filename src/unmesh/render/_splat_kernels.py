@@ -897,6 +897,10 @@ def _accumulate(q, k, w, z, Pt, lw, lc, ln, ld, lcount):
 #: Margin (pixels) of the per-row pixel spans of :func:`_row_span` beyond their analytic ends:
 #: the spans only skip pixels that cannot hold a fragment, every pixel inside is still tested.
 SPAN_MARGIN = 0.01
+#: Box rows at most this many pixels wide (within the tile) are visited whole instead of
+#: through :func:`_row_span`: the span costs more than testing the few pixels it would skip (the
+#: fragments and their order are the same either way). See docs/performance.md, stop 34.
+SPAN_MIN_WIDTH = 8
 
 
 @njit(cache=True, inline="always")
@@ -947,9 +951,11 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
 
     A surfel that cannot reach ``lz`` anywhere in its box (``cz - |zr| > lz``) is skipped
     before any fragment work; in each box row only the span that may hold fragments
-    (:func:`_row_span`) is visited. The fragment model is that of :func:`_fragment`, evaluated
-    with the per-row constants taken out (the ray-plane intersection, ``u`` and ``v`` are
-    affine in the pixel column ``X`` in orthographic views). Chapter 4's clipped splatting
+    (:func:`_row_span`) is visited (the whole row when the box is at most
+    :data:`SPAN_MIN_WIDTH` pixels wide within the tile). The fragment model is that of
+    :func:`_fragment`, evaluated with the per-row constants taken out (the ray-plane
+    intersection, ``u`` and ``v`` are affine in the pixel column ``X`` in orthographic views).
+    Chapter 4's clipped splatting
     tests each fragment here (:func:`_keep`, surfel ``items[k]``).
     """
     nrec = 0
@@ -1035,7 +1041,9 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
                     V0 = cn * e20 - cb2 * dn0
                     qb = UX * U0 + VX * V0 - nx * dn0
                     qc = U0 * U0 + V0 * V0 - dn0 * dn0
-            if ey2 < rf2x:
+            if bx1 - bx0 < SPAN_MIN_WIDTH:  # narrow boxes: testing every pixel is cheaper
+                first, last = bx0, bx1
+            elif ey2 < rf2x:
                 first, last = _row_span(qa, iqa, qb, qc, f, cx, flo, fhi, bx0, bx1)
             else:
                 first, last = _row_span(qa, iqa, qb, qc, f, cx, np.inf, -np.inf, bx0, bx1)
