@@ -29,6 +29,7 @@ import numpy as np
 
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
+from unmesh.surfels.cloud import similarity_scale
 
 __all__ = ["local_points", "local_tree", "overlap_pairs", "patch_memo"]
 
@@ -103,8 +104,6 @@ def local_points(transform: Any, points: np.ndarray) -> np.ndarray | None:
     if transform is None:
         return points
     lin = transform[:3, :3]
-    gram = lin.T @ lin
-    s2 = np.trace(gram) / 3.0
-    if not np.allclose(gram, s2 * np.eye(3), rtol=1e-9, atol=1e-12 * s2):
+    if similarity_scale(lin) is None:
         return None
     return np.ascontiguousarray((points - transform[:3, 3]) @ np.linalg.inv(lin).T)

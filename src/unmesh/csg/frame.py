@@ -41,6 +41,7 @@ from unmesh.csg.partners import find_partners
 from unmesh.errors import InputError
 from unmesh.render.splat import ClipTree, SurfelArrays
 from unmesh.surfels import SurfelCloud
+from unmesh.surfels.cloud import similarity_scale
 
 __all__ = ["EDGE", "OUTSIDE", "SURFACE", "CSGFrame", "centre_classified", "concatenate_frames", "prepare", "select", "world_cloud"]
 
@@ -126,17 +127,6 @@ def prepare(model: Node, method: str = "grid", rule: str = "two", reuse: bool = 
     return frame
 
 
-def _similarity(transform: np.ndarray) -> float | None:
-    """The scale of the linear part of ``transform`` (4,4) when it is a similarity (the test of
-    :meth:`SurfelCloud.transformed`), else None."""
-    lin = transform[:3, :3]
-    gram = lin.T @ lin
-    scale = float(np.sqrt(np.trace(gram) / 3.0))
-    if np.allclose(gram, scale**2 * np.eye(3), rtol=1e-9, atol=1e-12 * scale**2):
-        return scale
-    return None
-
-
 def world_cloud(leaves: list) -> SurfelCloud:
     """The world clouds of the patches ``leaves`` concatenated (what
     ``SurfelCloud.concatenate([p.world_cloud() for p in leaves], attributes="none")`` gives).
@@ -150,7 +140,7 @@ def world_cloud(leaves: list) -> SurfelCloud:
         if p.cloud.is_elliptical:
             scales = None
             break
-        scales.append(1.0 if p.transform is None else _similarity(p.transform))
+        scales.append(1.0 if p.transform is None else similarity_scale(p.transform[:3, :3]))
     if len(leaves) == 1 or scales is None or any(s is None for s in scales):
         clouds = [p.world_cloud() for p in leaves]
         return SurfelCloud.concatenate(clouds, attributes="none") if len(clouds) > 1 else clouds[0]

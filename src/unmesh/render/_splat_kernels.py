@@ -261,7 +261,6 @@ def _setup_range(lo, hi, pos, nrm, radii, axes, elliptical, colors, frame, eye, 
         group[i] = g
 
 
-
 @njit(cache=True, parallel=True)
 def splat_setup_bin(pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H, rfilter,
                     P, box, group, tile, ntx, nty, nchunks):
@@ -711,7 +710,7 @@ def _subtree_value(lo, hi, s, x0, x1, x2, partners, tree, leaf, work, base, marg
     return int(work[hi, 0]), margin
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cache_hit(work, row, s, x0, x1, x2):
     """Whether cache slot ``row`` holds a result of surfel ``s`` valid at ``x``."""
     if work[row, 0] != s:
@@ -863,12 +862,8 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
         K = clip_tree.shape[0]
         if work[K, 6] == s:
             for row in range(K, K + 2):
-                if work[row, 0] == s:
-                    dx = wx - work[row, 1]
-                    dy = wy - work[row, 2]
-                    dz = wz - work[row, 3]
-                    if dx * dx + dy * dy + dz * dz < work[row, 4]:
-                        return work[row, 5] > 0.0
+                if _cache_hit(work, row, s, wx, wy, wz):
+                    return work[row, 5] > 0.0
         return keep_tree_cached(s, wx, wy, wz, clip_offsets, clip_planes, clip_tree, clip_leaf, work)
     anymode = clip_mode[s] != 0
     for j in range(a, b):

@@ -566,15 +566,8 @@ class SPHSimulation(Simulation):
                            bo, binv, bd, bk, bs, self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho,
                            self.corners, self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors,
                            self.h + self.skin, self.cand, self.ncand)
-            need = int(self.nnbr.max()) if len(self.nnbr) else 0
-            bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
-            cneed = int(self.ncand.max()) if len(self.ncand) else 0
-            if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1] and cneed <= self.cand.shape[1] - 1:
+            if self._lists_fit():
                 break
-            self.nbr = np.zeros((n, max(need + 9, self.nbr.shape[1])), np.int32)
-            self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
-            if cneed > self.cand.shape[1] - 1:
-                self.cand = np.zeros((n, cneed + 17), np.int32)
         if self.skin > 0.0:
             if self._xref is None or self._xref.shape != self.x.shape:
                 self._xref = np.empty_like(self.x)
@@ -588,13 +581,24 @@ class SPHSimulation(Simulation):
                                 self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol, bo, binv, bd, bk, bs,
                                 self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho, self.corners,
                                 self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors)
-            need = int(self.nnbr.max()) if len(self.nnbr) else 0
-            bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
-            if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1]:
+            if self._lists_fit():
                 break
-            self.nbr = np.zeros((len(self.x), max(need + 9, self.nbr.shape[1])), np.int32)
-            self.bnbr = np.zeros((len(self.x), max(bneed + 8, self.bnbr.shape[1])), np.int32)
         self._diffuse()
+
+    def _lists_fit(self) -> bool:
+        """True when the last density pass's neighbour and candidate lists held every entry (their
+        true counts ``nnbr``, ``nbnbr``, ``ncand``); otherwise they are grown for a repeat of the pass."""
+        n = len(self.x)
+        need = int(self.nnbr.max()) if len(self.nnbr) else 0
+        bneed = int(self.nbnbr.max()) if len(self.nbnbr) else 0
+        cneed = int(self.ncand.max()) if len(self.ncand) else 0
+        if need <= self.nbr.shape[1] - 1 and bneed <= self.bnbr.shape[1] and cneed <= self.cand.shape[1] - 1:
+            return True
+        self.nbr = np.zeros((n, max(need + 9, self.nbr.shape[1])), np.int32)
+        self.bnbr = np.zeros((n, max(bneed + 8, self.bnbr.shape[1])), np.int32)
+        if cneed > self.cand.shape[1] - 1:
+            self.cand = np.zeros((n, cneed + 17), np.int32)
+        return False
 
     def _restore_candidates(self, xref: Any) -> bool:
         """Rebuild the Verlet candidates of a checkpoint from the positions of its last cell scan ``xref``

@@ -48,6 +48,7 @@ __all__ = [
     "SURFACE",
     "TEXTURE_DISCONTINUITY",
     "SurfelCloud",
+    "similarity_scale",
 ]
 
 DEFAULT_COLOR = (0.8, 0.8, 0.8)
@@ -69,6 +70,22 @@ def _unit_rows(vectors: np.ndarray, name: str) -> np.ndarray:
     if bad.any():
         raise InputError(f"{name}: expected non-zero vectors, got length {norms[bad][0]:.3g} at index {first_index(bad)}")
     return np.ascontiguousarray(vectors / norms[:, None])
+
+
+def similarity_scale(linear: np.ndarray) -> float | None:
+    """The scale ``s`` of a linear map (3,3) when it is a similarity (``L^T L = s^2 I``, relative
+    tolerance 1e-9), else None: circular surfels stay circular under it, radii scale by ``s``.
+
+    Example
+    -------
+    >>> similarity_scale(np.diag([2.0, 2.0, 2.0])), similarity_scale(np.diag([1.0, 2.0, 1.0]))
+    (2.0, None)
+    """
+    gram = linear.T @ linear
+    scale = float(np.sqrt(np.trace(gram) / 3.0))
+    if np.allclose(gram, scale**2 * np.eye(3), rtol=1e-9, atol=1e-12 * scale**2):
+        return scale
+    return None
 
 
 def tangent_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -361,9 +378,8 @@ class SurfelCloud:
             raise InputError("matrix: expected an invertible linear part")
         pos = self.positions @ lin.T + trans
         nrm = self.normals @ np.linalg.inv(lin)
-        gram = lin.T @ lin
-        scale = np.sqrt(np.trace(gram) / 3.0)
-        if self.axes is None and np.allclose(gram, scale**2 * np.eye(3), rtol=1e-9, atol=1e-12 * scale**2):
+        scale = similarity_scale(lin) if self.axes is None else None
+        if scale is not None:
             return SurfelCloud(pos, nrm, radii=self.radii * scale, colors=self.colors,  # type: ignore[operator]
                                attributes=self.attributes)
         axes = np.einsum("ij,nkj->nki", lin, self.tangent_axes())
