@@ -138,8 +138,8 @@ class SPHConfig:
         ``h + s h`` and stores those candidates; the following steps test only them (exactly, ``r < h``)
         and skip the re-sort, until some particle has moved more than ``s h/2`` since the scan: the
         neighbour lists, densities and forces are those of a scan every step, up to the summation order
-        of the particles between re-sorts (round-off). Used only in scenes without elastic materials or
-        phase changes (their lattice state follows the re-sort every step).
+        of the particles between re-sorts (round-off). Elastic solids too (the lattice pass then reads its
+        previous state row for row); scenes with phase changes scan every step.
 
     Example
     -------
@@ -339,8 +339,9 @@ class SPHSimulation(Simulation):
         if config.lattice != "closest":
             self._check_fluid_lattice()
         self.phase_changes = any(m.melt_rate > 0 or m.freeze_rate > 0 for m in self.materials)
-        # Verlet lists (SPHConfig.neighbor_skin): fluids only, the lattice state follows every re-sort
-        self.skin = 0.0 if self.elastic or self.phase_changes else float(config.neighbor_skin) * self.h
+        # Verlet lists (SPHConfig.neighbor_skin): fluids and elastic solids; phase changes scan every step
+        self.skin = 0.0 if self.phase_changes else float(config.neighbor_skin) * self.h
+        self._identity: np.ndarray | None = None  # the lattice pass's order on steps without a re-sort
         self.neighbor_scans = 0  # cell scans (re-sorts) so far; the other steps used the stored candidates
         self._build_particles()
         self._present = np.unique(self.mat)  # materials present (fixed: particles never change material)
@@ -641,6 +642,10 @@ class SPHSimulation(Simulation):
         scan = prime or rescan or not self._candidates_valid()
         if scan:
             self._sort(full=False)
+        elif self.elastic:  # no re-sort: the lattice pass reads its previous state row for row
+            if self._identity is None or len(self._identity) != len(self.x):
+                self._identity = np.arange(len(self.x), dtype=np.int64)
+            self._order = self._identity
         self._density(scan)
         self._ensure_scratch()
         s = self._scratch
