@@ -259,6 +259,9 @@ class Session:
         self._undo.append(([rec], d))
         self._redo.clear()
         self._last_brush = None
+        # grow the row capacity between strokes when it runs low (never in the middle of one)
+        if self.surface.reserve_ahead() and self._view is not None:
+            self._view._grow(self.surface.n)
         return StrokeResult(st.added + st.removed, st.added, st.removed, st.pixels, len(st.samples))
 
     @_locked

@@ -146,6 +146,7 @@ class PaintView:
         self._rad = np.zeros(0)
         self._col = np.zeros((0, 3))
         self._partial = np.zeros(0, np.int64)
+        self._used = 0  # rows < _used may hold state (the largest surface.n seen)
         self.last_update = "none"
         self.last_count = 0
         #: Pixel windows ``(r0, r1, c0, c1)`` of the composed image that the last :meth:`result`
@@ -184,13 +185,17 @@ class PaintView:
                            np.asarray(cam.forward, dtype=np.float64), bool(cam.is_ortho))
 
     def _grow(self, n: int) -> None:
-        if len(self._on) >= n:
+        """Room for rows ``< n`` and as many as the surface's capacity (which grows rarely, by
+        a factor: fresh zero pages cost no memory until written), copying the rows used so far."""
+        m = max(n, self.surface.capacity)
+        used = self._used
+        self._used = max(used, n)
+        if len(self._on) >= m:
             return
-        m = max(n, int(1.5 * len(self._on)) + 16)
 
         def g(a: np.ndarray) -> np.ndarray:
             out = np.zeros((m, *a.shape[1:]), a.dtype)
-            out[:len(a)] = a
+            out[:used] = a[:used]
             return out
         self._on, self._pos, self._nrm, self._rad, self._col, self._partial = (
             g(self._on), g(self._pos), g(self._nrm), g(self._rad), g(self._col), g(self._partial))
@@ -242,8 +247,8 @@ class PaintView:
             rows = self._facing(rows)
             arr = self._arrays(rows, False)
             self.renderer.render(arr)
-            self._on[:] = False
-            self._partial[:] = 0
+            self._on[:self._used] = False
+            self._partial[:self._used] = 0
             self._mark = mark
             self._store(rows, arr)
             self.last_update, self.last_count = "full", len(rows)
