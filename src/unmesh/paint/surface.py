@@ -33,7 +33,7 @@ from unmesh.paint._paint_kernels import visible_colors_rows
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["FIELDS", "VISUAL_FIELDS", "PaintSurface", "visible_colors"]
+__all__ = ["FIELDS", "VISUAL_FIELDS", "PaintSurface", "state_colors", "visible_colors"]
 
 #: Per-surfel fields: trailing shape and dtype. Paint attributes of 5.6: wet/dry colour and
 #: volume, optical density ``rho`` (1/length: alpha = min(rho * V_w / area, 1), eq. 5.8),
@@ -95,6 +95,18 @@ def visible_colors(wet: np.ndarray, dry: np.ndarray, vw: np.ndarray, rho: np.nda
         beta = np.minimum(rho * vd / area, 1.0)[:, None]
         dry = beta * dry + (1.0 - beta) * base
     return np.clip(alpha * wet + (1.0 - alpha) * dry, 0.0, 1.0)
+
+
+def state_colors(fields: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Visible colour (5.8) of every row of a surface's fields (the rows of
+    :meth:`PaintSurface.state`, or a copy of them), (N, 3): :meth:`PaintSurface.colors` of those rows."""
+    n = len(fields["wet"])
+    out = np.empty((n, 3))
+    c = {k: np.ascontiguousarray(fields[k]) for k in ("wet", "dry", "vw", "rho", "area", "vd", "base")}
+    with serial_if_small(n):
+        visible_colors_rows(np.arange(n, dtype=np.int64), c["wet"], c["dry"], c["vw"], c["rho"], c["area"], c["vd"],
+                            c["base"], out)
+    return out
 
 
 class PaintSurface:
