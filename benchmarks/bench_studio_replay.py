@@ -11,10 +11,16 @@ events (``paint_event`` calls: the engine adds events between samples farther ap
 step) per stroke,
 the CPU time, and how long the ``end`` message took (the fifth stroke's starts an autosave).
 
+``--steady`` replays the same strokes without real time (every message is handled and a frame
+rendered at once, the studio's clock stopped, no autosave), so that the work is the same on every
+run: it prints the CPU time of each stroke (the row capacity's growth and other hitches show as
+one slow stroke), where it went, and a digest of the final rows and image (equal digests: the
+same painting, for A/B runs of two versions).
+
 Usage::
 
     NUMBA_NUM_THREADS=1 python benchmarks/bench_studio_replay.py [--surfels 500000] [--cache DIR]
-        [--haptics off|thread|process] [--strokes 4]
+        [--haptics off|thread|process] [--strokes 4] [--steady]
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ def main() -> None:
     ap.add_argument("--cache", help="folder for the sampled model (PLY), as bench_studio.py")
     ap.add_argument("--haptics", choices=("thread", "process", "off"), default="off")
     ap.add_argument("--strokes", type=int, default=4)
+    ap.add_argument("--steady", action="store_true", help="no real time: CPU per stroke and a digest of the result")
     args = ap.parse_args()
 
     import unmesh.paint.session as session_module
@@ -60,8 +67,18 @@ def main() -> None:
             cached.parent.mkdir(parents=True, exist_ok=True)
             save(cached, cloud)
     haptics = {"thread": "thread", "process": "process", "off": False}[args.haptics]
+    if args.steady:
+        import unmesh.paint.studio.workspace as workspace_module
+
+        class StoppedClock:  # the studio's clock (sample times) stands still; timers run
+            perf_counter, time = staticmethod(time.perf_counter), staticmethod(time.time)
+            monotonic = staticmethod(lambda: 0.0)
+
+        workspace_module.time = StoppedClock
     ws = Workspace(Session(cloud, PaintOptions(haptics=haptics)), Path(tempfile.mkdtemp()) / "o.ply",
-                   advance_every=None)
+                   advance_every=None, autosave_every=10**9 if args.steady else 5)
+    if args.steady:
+        ws.paint_budget = None  # every frame paints all its samples
     ws.handle({"type": "hello", "width": 956, "height": 760})  # bench_studio's model image
     ws.frames()
     cov = ws.session.render(ws.camera(), brush=False).coverage
@@ -88,6 +105,62 @@ def main() -> None:
         return paint_event(*a, **k)
 
     session_module.paint_event = counted
+
+    spent: dict[str, float] = {}
+
+    def timed(obj, name, key):
+        f = getattr(obj, name)
+
+        def g(*a, **kw):
+            t = time.process_time()
+            try:
+                return f(*a, **kw)
+            finally:
+                spent[key] = spent.get(key, 0.0) + time.process_time() - t
+        setattr(obj, name, g)
+
+    def steady_stroke(k: int) -> None:
+        row, x0, x1 = segment(0.35 + 0.08 * k, 0.45 + 0.08 * k)
+        n, dur = int((x1 - x0) / step), 59 / 120
+        rows = [[1000 * dur * i * step / (x1 - x0), x0 + i * step, row, 0.3 + 0.6 * i * step / (x1 - x0), 0, 0]
+                for i in range(n + 1)]
+        batches: dict[int, list] = {}
+        for r in rows:
+            batches.setdefault(int(r[0] / (1000 / 60)) + 1, []).append(r)
+        ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.05},
+                   "paint": {"type": "oil", "color": [0.14, 0.18, 0.62]}})
+        for _, b in sorted(batches.items()):
+            ws.handle({"type": "samples", "samples": b, "ts": b[-1][0]})
+            ws.frames()
+        ws.handle({"type": "end"})
+        ws.frames()
+
+    if args.steady:
+        import hashlib
+
+        from unmesh.paint.brush import BrushState
+
+        steady_stroke(0)  # warm-up
+        timed(session_module.Session, "add_samples", "add_samples")
+        timed(session_module, "paint_event", "paint_event")
+        timed(BrushState, "simulate", "simulate")
+        timed(session_module.Session, "render", "render")
+        cpu = []
+        for k in range(args.strokes):
+            c0, calls[0] = time.process_time(), 0
+            steady_stroke(k % 4)
+            cpu.append(time.process_time() - c0)
+            print(f"stroke {k + 1}: CPU {1000 * cpu[-1]:.0f} ms, {calls[0]} paint events, {ws.session.surface.n} rows")
+        s = ws.session.surface
+        h = hashlib.sha1()
+        for name in sorted(session_module.FIELDS):
+            h.update(np.ascontiguousarray(getattr(s, name)).tobytes())
+        img = ws.session.render(ws.camera(), brush=False).color
+        print(f"CPU {sum(cpu):.2f} s for {args.strokes} strokes (min {1000 * min(cpu):.0f}, max {1000 * max(cpu):.0f} ms); "
+              "of it (s): " + ", ".join(f"{k} {v:.2f}" for k, v in spent.items()))
+        print(f"digest: rows {h.hexdigest()[:16]}, image {hashlib.sha1(np.ascontiguousarray(img).tobytes()).hexdigest()[:16]}")
+        ws.shutdown()
+        return
 
     def stroke(k: int) -> None:
         row, x0, x1 = segment(0.35 + 0.08 * k, 0.45 + 0.08 * k)

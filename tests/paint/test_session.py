@@ -153,3 +153,38 @@ def test_kubelka_munk_session_conserves_volume(plane_cloud):
     assert abs(s.surface.total_volume() - v2) <= 1e-12 * v2
     with pytest.raises(InputError, match=r"options\.mixing"):
         PaintOptions(mixing="cmyk")
+
+
+def test_row_capacity_grows_between_strokes_without_changing_anything(plane_cloud, monkeypatch):
+    """Growing the row capacity (in a stroke when it is full, ahead of the next stroke at
+    end_stroke when it runs low) changes neither the painted state nor the differential image:
+    the same strokes on a surface that never grows give the same rows and pixels."""
+    import unmesh.paint.surface as surface_module
+    from unmesh.render import Camera
+
+    cam = Camera((0.3, 1.2, 0.8), (0, 0, 0), width=160, height=120, fov=40)
+    strokes = [(line(n=8, z=z), RED if k % 2 else BLUE) for k, z in enumerate((-0.1, 0.0, 0.1, 0.05))]
+
+    def paint(reserve):
+        monkeypatch.setattr(surface_module, "RESERVE", reserve)
+        s = Session(plane_cloud, PaintOptions(haptics=False))
+        s.render(cam)
+        caps, kinds, imgs = [s.surface.capacity], [], []
+        for samples, p in strokes:
+            sid = s.begin_stroke(ROUND, p)
+            for smp in samples:  # a frame per sample: differential updates across the growth
+                s.add_samples(sid, [smp])
+                imgs.append(s.render(cam).color.copy())
+                kinds.append(s.last_update)
+            s.end_stroke(sid)
+            caps.append(s.surface.capacity)
+            assert s.surface.capacity - s.surface.n >= surface_module.AHEAD * s.surface.n_original
+        return s, caps, kinds, imgs
+
+    grown, caps, kinds, imgs = paint(1.0)
+    fixed, fixed_caps, fixed_kinds, fixed_imgs = paint(1000.0)
+    assert len(set(caps)) > 2 and len(set(fixed_caps)) == 1  # grew more than once; never
+    assert "differential" in kinds and kinds == fixed_kinds
+    _same(_state(grown), _state(fixed))
+    for a, b in zip(imgs, fixed_imgs, strict=True):
+        assert np.array_equal(a, b)

@@ -260,3 +260,33 @@ def test_preview_level_of_detail():
     assert s.last_update == "differential"  # the previews did not disturb the view
     with pytest.raises(InputError, match="stride"):
         s.preview(CAM, 0)
+
+
+def test_shadow_and_disc_kernels_equal_their_numpy_references():
+    """The brush's shadow map and its discs with a z-test (kernels of _draw_brush) equal the numpy
+    references bit for bit, ties between equal depths included (the last fragment wins)."""
+    from unmesh.paint._view_kernels import brush_discs
+    from unmesh.paint.view import brush_discs_reference, shadow_test, shadow_test_reference
+
+    rng = np.random.default_rng(5)
+    brush = np.column_stack([rng.normal(0, 0.2, (300, 2)), rng.uniform(0.0, 0.3, 300)])
+    pts = np.column_stack([rng.uniform(-1, 1, (4000, 2)), rng.uniform(-0.1, 0.4, 4000)])
+    assert np.array_equal(shadow_test(brush, pts, 0.05), shadow_test_reference(brush, pts, 0.05))
+    for ties in (False, True):
+        n, r0, r1, c0, c1 = 200, 5, 60, 3, 70
+        pr = rng.integers(0, 70, n)
+        pc = rng.integers(0, 75, n)
+        rpx = rng.uniform(0.3, 3.5, n)
+        z = np.round(rng.uniform(1, 2, n + 7), 1) if ties else rng.uniform(1, 2, n + 7)
+        src = np.sort(rng.choice(n + 7, n, replace=False))
+        col, nrm = rng.random((n + 7, 3)), rng.random((n + 7, 3))
+        P = (r1 - r0) * (c1 - c0)
+        base = (rng.random((P, 3)), rng.random((P, 3)), rng.uniform(1.3, 3, P), rng.random(P) < 0.5)
+        want = [a.copy() for a in base]
+        got = [a.copy() for a in base]
+        args = (pr, pc, (rpx + 0.5) ** 2, z, src, int(np.ceil(rpx.max())), r0, r1, c0, c1, col, nrm)
+        brush_discs_reference(*args, *want)
+        brush_discs(*args, *got)
+        for a, b in zip(got, want, strict=True):
+            assert np.array_equal(a, b)
+        assert (want[2] != base[2]).sum() > 100

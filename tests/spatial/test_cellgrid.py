@@ -106,6 +106,18 @@ def test_knn_finish_and_gather_vs_reference(rng):
     np.testing.assert_array_equal(K.gather_rows(x, np.ascontiguousarray(idx[:, 0])), x[idx[:, 0]])
 
 
+def test_pairs_within_vs_reference(rng):
+    for dim in (2, 3):
+        x = np.round(rng.random((300, dim)) * 4) / 4  # many distances exactly equal to the radius
+        q = np.round(rng.random((50, dim)) * 4) / 4
+        i = rng.integers(0, 300, 2000)
+        j = rng.integers(0, 50, 2000)
+        keep = np.empty(2000, np.bool_)
+        K.pairs_within(x, i, q, j, 0.25, keep)
+        np.testing.assert_array_equal(keep, kdtree._sq_dist(x, i, q, j) <= 0.25)
+        assert 0 < keep.sum() < 2000 and (kdtree._sq_dist(x, i, q, j) == 0.25).any()
+
+
 def test_empty_grid_and_errors():
     g = build_cell_grid(np.empty((0, 3)), 1.0)
     assert g.n_points == 0 and g.n_cells == 0 and g.cell_start.tolist() == [0]

@@ -191,3 +191,18 @@ def test_unsorted_pairs_are_the_same_set(rng, method, dim):
     assert (got[:, 0] < got[:, 1]).all()
     np.testing.assert_array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], ref)
     assert radius_pairs(pts[:1], r, sort=False).shape == (0, 2)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_kdtree_one_and_few_queries_match_brute_force(rng, dim):
+    # one query and up to 16 (asked of SciPy per query, unsorted) on a lattice with duplicates:
+    # many distances exactly equal to the radius
+    from unmesh.spatial import KDTree
+
+    g = np.stack(np.meshgrid(*[np.arange(6)] * dim, indexing="ij"), -1).reshape(-1, dim) * 0.25
+    p = np.concatenate([g, g[::3], rng.random((400, dim)) * 1.25])
+    tree = KDTree(p)
+    for nq in (1, 2, 16):
+        q = np.concatenate([g[rng.integers(0, len(g), nq - nq // 2)], rng.random((nq // 2, dim)) * 1.25])
+        for r in (0.25, 0.5, 0.3):
+            assert_csr_equal(tree.radius_neighbors(q, r), brute_radius(p, r, q))

@@ -30,7 +30,7 @@ from unmesh.paint.brush import K_PENALTY, BrushState, cross3
 from unmesh.paint.collide import force_shading
 from unmesh.paint.haptic import HapticLoop, HapticProcess, haptic_force
 from unmesh.paint.strokes import Brush, Paint, Sample, check_samples, parse_strokes, stroke_dict
-from unmesh.paint.surface import FIELDS, PaintSurface
+from unmesh.paint.surface import FIELDS, PaintSurface, state_colors
 from unmesh.paint.transfer import paint_event
 from unmesh.paint.view import PaintView, unproject
 from unmesh.render import Camera
@@ -259,6 +259,9 @@ class Session:
         self._undo.append(([rec], d))
         self._redo.clear()
         self._last_brush = None
+        # grow the row capacity between strokes when it runs low (never in the middle of one)
+        if self.surface.reserve_ahead() and self._view is not None:
+            self._view._grow(self.surface.n)
         return StrokeResult(st.added + st.removed, st.added, st.removed, st.pixels, len(st.samples))
 
     @_locked
@@ -456,36 +459,34 @@ class Session:
         self.write_snapshot(path, self._state(copy=False))
 
     @_locked
-    def snapshot(self) -> tuple[SurfelCloud, bytes]:
-        """What :meth:`save` writes, copied now: :meth:`write_snapshot` encodes and writes it later,
-        on any thread, while painting goes on (the studio's autosave)."""
-        return self._state(copy=True)
+    def snapshot(self) -> tuple[dict[str, np.ndarray], bytes]:
+        """What :meth:`save` writes, copied now: every field's rows and the metadata line.
+        :meth:`write_snapshot` makes the cloud of them (checks, visible colours), encodes and
+        writes it later, on any thread, while painting goes on (the studio's autosave)."""
+        s = self.surface
+        return {name: np.array(getattr(s, name), copy=True) for name in FIELDS}, self._meta_line()
 
     @staticmethod
-    def write_snapshot(path: str | os.PathLike[str], snapshot: tuple[SurfelCloud, bytes]) -> None:
+    def write_snapshot(path: str | os.PathLike[str], snapshot: tuple[dict[str, np.ndarray], bytes]) -> None:
         """Write a :meth:`snapshot` as :meth:`save` would have written it then (PLY, atomic)."""
         from unmesh.io.atomic import atomic_write_bytes
         from unmesh.io.ply import encode_surfels
 
-        cloud, line = snapshot
-        data = encode_surfels(cloud)
+        fields, line = snapshot
+        data = encode_surfels(_cloud_of(fields))
         i = data.index(b"\n", data.index(b"format")) + 1
         atomic_write_bytes(path, data[:i] + b"comment " + line + b"\n" + data[i:])
 
-    def _state(self, copy: bool) -> tuple[SurfelCloud, bytes]:
-        """The rows as a cloud with every paint attribute, and the metadata comment line."""
+    def _state(self, copy: bool) -> tuple[dict[str, np.ndarray], bytes]:
+        """Every field's rows (views, or copies) and the metadata comment line."""
         s = self.surface
-        keep = (lambda a: np.array(a, copy=True)) if copy else (lambda a: a)
-        attrs = {}
-        for name in FIELDS:
-            if name in ("pos", "rad"):
-                continue
-            a = getattr(s, name)
-            attrs["p_" + name] = a.astype(np.uint8) if a.dtype == np.bool_ else keep(a)
-        cloud = SurfelCloud(keep(s.pos), keep(s.nrm), radii=keep(s.rad), colors=s.colors(), attributes=attrs)
+        return {name: np.array(getattr(s, name), copy=True) if copy else getattr(s, name) for name in FIELDS}, \
+            self._meta_line()
+
+    def _meta_line(self) -> bytes:
         meta = {"version": 1, "time": self.time, "cursor": self._cursor, "options": asdict(self.options),
                 "strokes": self._record_with_open()}
-        return cloud, (_META + json.dumps(meta, separators=(",", ":"))).encode("utf-8")
+        return (_META + json.dumps(meta, separators=(",", ":"))).encode("utf-8")
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], options: PaintOptions | None = None) -> Session:
@@ -572,6 +573,19 @@ def _subdivide(last: Sample | None, samples: list[Sample], step: float) -> list[
         out.append(smp)
         prev = smp
     return out
+
+
+def _cloud_of(fields: dict[str, np.ndarray]) -> SurfelCloud:
+    """The rows of a surface's fields (:meth:`Session.snapshot`) as a cloud with every paint
+    attribute (``p_<field>``; booleans as uint8) and the visible colours (5.8)."""
+    attrs = {}
+    for name in FIELDS:
+        if name in ("pos", "rad"):
+            continue
+        a = fields[name]
+        attrs["p_" + name] = a.astype(np.uint8) if a.dtype == np.bool_ else a
+    return SurfelCloud(fields["pos"], fields["nrm"], radii=fields["rad"], colors=state_colors(fields),
+                       attributes=attrs)
 
 
 def _num(v: Any, key: str) -> float:

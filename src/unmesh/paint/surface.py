@@ -33,7 +33,7 @@ from unmesh.paint._paint_kernels import visible_colors_rows
 from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["FIELDS", "VISUAL_FIELDS", "PaintSurface", "visible_colors"]
+__all__ = ["FIELDS", "VISUAL_FIELDS", "PaintSurface", "state_colors", "visible_colors"]
 
 #: Per-surfel fields: trailing shape and dtype. Paint attributes of 5.6: wet/dry colour and
 #: volume, optical density ``rho`` (1/length: alpha = min(rho * V_w / area, 1), eq. 5.8),
@@ -57,6 +57,16 @@ VISUAL_FIELDS = frozenset({"pos", "nrm", "rad", "active", "alive", "base", "wet"
 
 #: Original surfels stand for ``AREA_FACTOR * pi * r^2`` of surface (splats overlap).
 AREA_FACTOR = 0.5
+#: Row capacity reserved at the start, in original surfels. Painting appends children (a stroke
+#: across a 500k-surfel model appends ~60k rows; rows are never reused), so the capacity is
+#: reserved generously: the arrays come from ``np.zeros`` (fresh pages from the system), so
+#: rows never written cost no memory, and growing (a copy of every field) is rare.
+RESERVE = 4.0
+#: :meth:`PaintSurface.reserve_ahead` grows the capacity (by :data:`GROWTH`) once fewer rows than
+#: this fraction of the original surfels are free, so that a stroke never stops for a copy.
+AHEAD = 1.0
+#: Capacity growth factor.
+GROWTH = 2.0
 
 
 def visible_colors(wet: np.ndarray, dry: np.ndarray, vw: np.ndarray, rho: np.ndarray, area: np.ndarray,
@@ -87,6 +97,18 @@ def visible_colors(wet: np.ndarray, dry: np.ndarray, vw: np.ndarray, rho: np.nda
     return np.clip(alpha * wet + (1.0 - alpha) * dry, 0.0, 1.0)
 
 
+def state_colors(fields: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Visible colour (5.8) of every row of a surface's fields (the rows of
+    :meth:`PaintSurface.state`, or a copy of them), (N, 3): :meth:`PaintSurface.colors` of those rows."""
+    n = len(fields["wet"])
+    out = np.empty((n, 3))
+    c = {k: np.ascontiguousarray(fields[k]) for k in ("wet", "dry", "vw", "rho", "area", "vd", "base")}
+    with serial_if_small(n):
+        visible_colors_rows(np.arange(n, dtype=np.int64), c["wet"], c["dry"], c["vw"], c["rho"], c["area"], c["vd"],
+                            c["base"], out)
+    return out
+
+
 class PaintSurface:
     """Originals in a static kd-tree, children attached to fathers, paint attributes per row.
 
@@ -113,7 +135,7 @@ class PaintSurface:
         n0 = len(cloud)
         self.n_original = n0
         self._data: dict[str, np.ndarray] = {}
-        cap = max(16, int(n0 * 1.5))
+        cap = max(16, int(n0 * RESERVE))
         for name, (tail, dt) in FIELDS.items():
             self._data[name] = np.zeros((cap, *tail), dtype=dt)
         self.n = n0
@@ -162,14 +184,20 @@ class PaintSurface:
         """Copies of all fields of the rows in use."""
         return {k: v[:self.n].copy() for k, v in self._data.items()}
 
+    @property
+    def capacity(self) -> int:
+        """Rows the arrays hold before they must grow (rows past :attr:`n` are zero)."""
+        return len(self._data["pos"])
+
     def _reserve(self, n: int) -> None:
         cap = len(self._data["pos"])
         if n <= cap:
             return
-        new = max(n, int(cap * 1.5))
+        new = max(n, int(cap * GROWTH))
+        used = self.n
         for name, arr in self._data.items():
             grown = np.zeros((new, *arr.shape[1:]), dtype=arr.dtype)
-            grown[:cap] = arr
+            grown[:used] = arr[:used]  # rows past n are zero (never written, or zeroed by _truncate)
             self._data[name] = grown
         links = self.__dict__.get("_links")
         if links is not None:
@@ -177,6 +205,15 @@ class PaintSurface:
                 grown = np.full(new, -1 if arr.dtype == np.int64 else False, dtype=arr.dtype)
                 grown[:cap] = arr
                 links[name] = grown
+
+    def reserve_ahead(self) -> bool:
+        """Grow the capacity now if fewer than :data:`AHEAD` times the original surfels' rows are
+        free (between strokes, where a copy of every field is no hitch in a stroke); True when
+        it grew."""
+        if self.capacity - self.n >= AHEAD * self.n_original:
+            return False
+        self._reserve(self.n + int(np.ceil(AHEAD * self.n_original)))
+        return True
 
     def rows_of(self, fathers: np.ndarray) -> np.ndarray:
         """The visible rows (active and alive) among ``fathers`` and their children, ascending.

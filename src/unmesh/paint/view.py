@@ -34,6 +34,7 @@ import numpy as np
 from unmesh._threads import serial_if_small
 from unmesh.errors import InputError
 from unmesh.paint._paint_kernels import gather_surfels, scatter_surfels
+from unmesh.paint._view_kernels import brush_discs, shadow_lookup
 from unmesh.paint.surface import PaintSurface
 from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render._kernels import facing_rows
@@ -146,6 +147,7 @@ class PaintView:
         self._rad = np.zeros(0)
         self._col = np.zeros((0, 3))
         self._partial = np.zeros(0, np.int64)
+        self._used = 0  # rows < _used may hold state (the largest surface.n seen)
         self.last_update = "none"
         self.last_count = 0
         #: Pixel windows ``(r0, r1, c0, c1)`` of the composed image that the last :meth:`result`
@@ -184,13 +186,17 @@ class PaintView:
                            np.asarray(cam.forward, dtype=np.float64), bool(cam.is_ortho))
 
     def _grow(self, n: int) -> None:
-        if len(self._on) >= n:
+        """Room for rows ``< n`` and as many as the surface's capacity (which grows rarely, by
+        a factor: fresh zero pages cost no memory until written), copying the rows used so far."""
+        m = max(n, self.surface.capacity)
+        used = self._used
+        self._used = max(used, n)
+        if len(self._on) >= m:
             return
-        m = max(n, int(1.5 * len(self._on)) + 16)
 
         def g(a: np.ndarray) -> np.ndarray:
             out = np.zeros((m, *a.shape[1:]), a.dtype)
-            out[:len(a)] = a
+            out[:used] = a[:used]
             return out
         self._on, self._pos, self._nrm, self._rad, self._col, self._partial = (
             g(self._on), g(self._pos), g(self._nrm), g(self._rad), g(self._col), g(self._partial))
@@ -242,8 +248,8 @@ class PaintView:
             rows = self._facing(rows)
             arr = self._arrays(rows, False)
             self.renderer.render(arr)
-            self._on[:] = False
-            self._partial[:] = 0
+            self._on[:self._used] = False
+            self._partial[:self._used] = 0
             self._mark = mark
             self._store(rows, arr)
             self.last_update, self.last_count = "full", len(rows)
@@ -476,6 +482,18 @@ def shadow_test(brush: np.ndarray, points: np.ndarray, rad: float) -> np.ndarray
     lo = brush[:, :2].min(axis=0) - (_SHADOW_REACH + 0.5) * cell
     cells = np.floor((brush[:, :2] - lo) / cell).astype(np.int64)
     nu, nv = (int(v) + _SHADOW_REACH + 1 for v in cells.max(axis=0))
+    out = np.empty(len(points), bool)
+    shadow_lookup(cells, np.ascontiguousarray(brush[:, 2]), _SHADOW_STENCIL[0], _SHADOW_STENCIL[1], nu, nv,
+                  np.ascontiguousarray(points, dtype=np.float64), float(lo[0]), float(lo[1]), cell, out)
+    return out
+
+
+def shadow_test_reference(brush: np.ndarray, points: np.ndarray, rad: float) -> np.ndarray:
+    """:func:`shadow_test` in numpy (the reference of its kernel)."""
+    cell = 0.5 * rad
+    lo = brush[:, :2].min(axis=0) - (_SHADOW_REACH + 0.5) * cell
+    cells = np.floor((brush[:, :2] - lo) / cell).astype(np.int64)
+    nu, nv = (int(v) + _SHADOW_REACH + 1 for v in cells.max(axis=0))
     du, dv = _SHADOW_STENCIL
     flat = ((cells[:, 0, None] + du) * nv + (cells[:, 1, None] + dv)).ravel()
     smap = np.full(nu * nv, -np.inf)
@@ -485,6 +503,32 @@ def shadow_test(brush: np.ndarray, points: np.ndarray, rad: float) -> np.ndarray
     out = np.zeros(len(points), bool)
     out[inside] = smap[pc[inside, 0] * nv + pc[inside, 1]] > points[inside, 2] + 1e-9
     return out
+
+
+def brush_discs_reference(pr: np.ndarray, pc: np.ndarray, thr: np.ndarray, z: np.ndarray, src: np.ndarray, R: int,
+                          r0: int, r1: int, c0: int, c1: int, col: np.ndarray, nrm: np.ndarray, albedo: np.ndarray,
+                          normal: np.ndarray, depth: np.ndarray, coverage: np.ndarray) -> None:
+    """:func:`unmesh.paint._view_kernels.brush_discs` in numpy (its reference): surfel ``i``'s
+    disc of pixels ``(pr[i] + oy, pc[i] + ox)``, ``oy^2 + ox^2 <= thr[i]``, nearest fragment in
+    front of ``depth`` per pixel; ``albedo``, ``normal`` (P, 3), ``depth``, ``coverage`` (P,) are
+    the flat window, written in place."""
+    oy, ox = np.mgrid[-R:R + 1, -R:R + 1]
+    oy, ox = oy.ravel(), ox.ravel()
+    pr = pr[:, None] + oy[None]
+    pc = pc[:, None] + ox[None]
+    inside = (oy[None] ** 2 + ox[None] ** 2 <= thr[:, None]) & (pr >= r0) & (pr < r1) & (pc >= c0) & (pc < c1)
+    src = np.broadcast_to(src[:, None], pr.shape)[inside]
+    flat = (pr[inside] - r0) * (c1 - c0) + (pc[inside] - c0)
+    zz = z[src]
+    # nearest fragment per pixel (a z-buffer), in front of the object
+    zb = np.full((r1 - r0) * (c1 - c0), np.inf)
+    np.minimum.at(zb, flat, zz)
+    front = (zz == zb[flat]) & (zz < depth[flat])
+    flat, src, zz = flat[front], src[front], zz[front]
+    albedo[flat] = col[src]
+    normal[flat] = nrm[src]
+    depth[flat] = zz
+    coverage[flat] = True
 
 
 def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.ndarray, camera: Camera,
@@ -531,25 +575,11 @@ def _draw_brush(g: GBuffer, color: np.ndarray, depth: np.ndarray, coverage: np.n
         centre = pos.mean(axis=0)
         shadow = shadow_test((pos - centre) @ frame.T, (world - centre) @ frame.T, rad)
         win.albedo[rr[shadow], cc[shadow]] *= 0.55
-    # brush surfels as small discs with a z-test
-    R = int(np.ceil(rpx.max()))
-    oy, ox = np.mgrid[-R:R + 1, -R:R + 1]
-    oy, ox = oy.ravel(), ox.ravel()
-    pr = np.floor(row[ok])[:, None].astype(np.int64) + oy[None]
-    pc = np.floor(cl[ok])[:, None].astype(np.int64) + ox[None]
-    inside = (oy[None] ** 2 + ox[None] ** 2 <= (rpx[:, None] + 0.5) ** 2) & (pr >= r0) & (pr < r1) & (pc >= c0) & (pc < c1)
-    src = np.broadcast_to(np.flatnonzero(ok)[:, None], pr.shape)[inside]
-    flat = (pr[inside] - r0) * (c1 - c0) + (pc[inside] - c0)
-    zz = z[src]
-    # nearest fragment per pixel (a z-buffer), in front of the object
-    zb = np.full((r1 - r0) * (c1 - c0), np.inf)
-    np.minimum.at(zb, flat, zz)
-    front = (zz == zb[flat]) & (zz < win.depth.reshape(-1)[flat])
-    flat, src, zz = flat[front], src[front], zz[front]
-    win.albedo.reshape(-1, 3)[flat] = col[src]
-    win.normal.reshape(-1, 3)[flat] = nrm[src]
-    win.depth.reshape(-1)[flat] = zz
-    win.coverage.reshape(-1)[flat] = True
+    # brush surfels as small discs with a z-test (nearest fragment per pixel, in front of the object)
+    brush_discs(np.floor(row[ok]).astype(np.int64), np.floor(cl[ok]).astype(np.int64), (rpx + 0.5) ** 2,
+                np.ascontiguousarray(z), np.flatnonzero(ok), int(np.ceil(rpx.max())), r0, r1, c0, c1,
+                np.ascontiguousarray(col, dtype=np.float64), np.ascontiguousarray(nrm, dtype=np.float64),
+                win.albedo.reshape(-1, 3), win.normal.reshape(-1, 3), win.depth.reshape(-1), win.coverage.reshape(-1))
     # shade the window
     out = np.empty((r1 - r0, c1 - c0, 3))
     saved_g, saved_c = view._g, view._color

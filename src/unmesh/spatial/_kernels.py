@@ -367,6 +367,14 @@ def radius_fill(
 
 
 @njit(cache=True, parallel=True)
+def pairs_within(points, i, queries, q, r2, keep):
+    """``keep[t] = sum((points[i[t]] - queries[q[t]])**2) <= r2`` (summed in axis order, as
+    numpy's ``((points[i] - queries[q]) ** 2).sum(axis=1)``, without its temporaries)."""
+    for t in prange(i.shape[0]):
+        keep[t] = _dist2(points, i[t], queries, q[t]) <= r2
+
+
+@njit(cache=True, parallel=True)
 def knn_finish(points, queries, idx, dist):
     """Recompute ``dist[q, t] = |points[idx[q, t]] - queries[q]|`` and sort each row
     by (distance, index).  Rows are nearly sorted on entry (kd-tree order)."""

@@ -39,6 +39,15 @@ def _sq_dist(points: np.ndarray, i: np.ndarray, queries: np.ndarray, q: np.ndarr
     return ((points[i] - queries[q]) ** 2).sum(axis=1)
 
 
+def _within(points: np.ndarray, i: np.ndarray, queries: np.ndarray, q: np.ndarray, r2: float) -> np.ndarray:
+    """``_sq_dist(points, i, queries, q) <= r2`` (the same sums) by a kernel, (P,) bool."""
+    keep = np.empty(len(i), np.bool_)
+    with serial_if_small(len(i)):
+        K.pairs_within(points, np.ascontiguousarray(i, dtype=np.int64), np.ascontiguousarray(queries),
+                       np.ascontiguousarray(q, dtype=np.int64), float(r2), keep)
+    return keep
+
+
 def _csr_from_pairs(rows: np.ndarray, cols: np.ndarray, nrows: int, ncols: int) -> tuple[np.ndarray, np.ndarray]:
     """CSR (offsets, indices) of the (row, col) pairs, each row sorted ascending."""
     order = np.argsort(rows * np.int64(max(ncols, 1)) + cols, kind="stable")
@@ -184,8 +193,14 @@ class KDTree:
             rows = np.concatenate([pairs[:, 0], pairs[:, 1], ar])
             cols = np.concatenate([pairs[:, 1], pairs[:, 0], ar])
             return _csr_from_pairs(rows, cols, n, n)
+        if nq == 1:  # one query (a paint event's neighbourhood): sorted indices without pairing
+            found = self._tree.query_ball_point(q[0], radius * (1.0 + _SLACK), workers=1, return_sorted=False)
+            cols = np.array(found, dtype=np.int64)
+            cols = np.sort(cols[_within(self.points, cols, q, np.zeros(len(cols), np.int64), r2)])
+            return np.array([0, len(cols)], np.int64), cols
         if nq <= _FEW_QUERIES:  # building a tree of the queries costs more than asking per query
-            found = self._tree.query_ball_point(q, radius * (1.0 + _SLACK), workers=1)
+            # (unsorted: _csr_from_pairs sorts each row)
+            found = self._tree.query_ball_point(q, radius * (1.0 + _SLACK), workers=1, return_sorted=False)
             counts = np.fromiter((len(f) for f in found), np.int64, nq)
             rows = np.repeat(np.arange(nq, dtype=np.int64), counts)
             cols = np.fromiter(itertools.chain.from_iterable(found), np.int64, int(counts.sum()))
@@ -193,7 +208,7 @@ class KDTree:
             sdm = cKDTree(q).sparse_distance_matrix(self._tree, radius * (1.0 + _SLACK), output_type="ndarray")
             rows = np.ascontiguousarray(sdm["i"], dtype=np.int64)
             cols = np.ascontiguousarray(sdm["j"], dtype=np.int64)
-        keep = _sq_dist(self.points, cols, q, rows) <= r2
+        keep = _within(self.points, cols, q, rows, r2)
         return _csr_from_pairs(rows[keep], cols[keep], nq, n)
 
     def radius_pairs(self, radius: float) -> np.ndarray:
@@ -209,7 +224,7 @@ class KDTree:
         if len(self) < 2:
             return np.empty((0, 2), np.int64)
         pairs = self._tree.query_pairs(radius * (1.0 + _SLACK), output_type="ndarray").astype(np.int64, copy=False)
-        pairs = pairs[_sq_dist(self.points, pairs[:, 0], self.points, pairs[:, 1]) <= radius * radius]
+        pairs = pairs[_within(self.points, pairs[:, 0], self.points, pairs[:, 1], radius * radius)]
         lo = np.minimum(pairs[:, 0], pairs[:, 1])
         hi = np.maximum(pairs[:, 0], pairs[:, 1])
         order = np.argsort(lo * np.int64(len(self)) + hi, kind="stable")

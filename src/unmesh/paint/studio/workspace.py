@@ -31,7 +31,7 @@ thread at a time (the server's worker thread); nothing here knows about HTTP.
 * Files are plain names inside the output file's folder (:func:`security.output_path`); all
   writes are atomic; the model is autosaved every ``autosave_every`` strokes (to
   ``STEM.autosave.ply``) and by :meth:`Workspace.shutdown` (to the output file). An autosave
-  copies the model (``Session.snapshot``) and encodes and writes it on a thread of its own, so
+  copies the model's fields (``Session.snapshot``) and builds, encodes and writes the cloud on a thread of its own, so
   painting goes on meanwhile; its ``autosaved`` reply comes from :meth:`Workspace.notices` when
   the file is written (a ``sync`` waits for it).
 
