@@ -50,13 +50,14 @@ def test_children_lists_equal_the_dict_reference():
     pts = np.c_[rng.random((n0, 2)), np.zeros(n0)]
     s = PaintSurface(SurfelCloud(pts, np.tile([0, 0, 1.0], (n0, 1)), radii=np.full(n0, 0.1)))
     ref = DictChildren(s.father, s.alive)
+    cap0 = s.capacity
     s.begin_record()
     for _ in range(30):
         m = int(rng.integers(1, 25))
         fa = rng.integers(0, n0, m)
         new = {"pos": np.c_[rng.random((m, 2)), np.zeros(m)], "nrm": np.tile([0, 0, 1.0], (m, 1)),
                "rad": np.full(m, 0.05), "father": fa, "active": np.ones(m, bool), "alive": np.ones(m, bool)}
-        rows = s.append(new)  # grows the row capacity past the initial 1.5 n0
+        rows = s.append(new)  # grows the row capacity past the initial RESERVE n0
         ref.append(rows, s.father)
         _check(s, ref)
         vis = s.visible_rows()
@@ -65,6 +66,7 @@ def test_children_lists_equal_the_dict_reference():
         s.delete(gone)
         ref.delete(gone[gone >= n0].tolist(), s.father)
         _check(s, ref)
+    assert s.capacity > cap0  # the appends grew the capacity on the way
     rec = s.end_record()
     red = s.revert(rec)
     _check(s, DictChildren(s.father, s.alive))
