@@ -168,15 +168,15 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
     gather_rows(P, items, pt)
     coff, cpl, cmode = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8)
 
-    def tiles():
-        renderer.clear()
+    def tiles():  # a full update overwrites the sums: render() does not clear them (SplatRenderer._reset)
+        renderer._reset(None)
         splat_tiles(pt, items, offsets, order, tile, size, size, f, cx, cy, ortho, near, opt.filter_radius,
                     opt.kappa, opt.depth_tolerance, False, cam.eye, frame, coff, cpl, cmode, None, None, True, 1.0,
                     renderer.zvis, renderer.sum_weight, renderer.sum_color, renderer.sum_normal, renderer.sum_depth,
-                    renderer.count)
+                    renderer.count, renderer._dirty)
 
     def clear_only():
-        renderer.clear()
+        renderer._reset(None)
 
     fill_out = np.zeros((size, size))
     g = GBuffer.empty(size, size)

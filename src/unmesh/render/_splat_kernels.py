@@ -1109,16 +1109,21 @@ def _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_
 @njit(cache=True, parallel=True)
 def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, rfilter, kappa, eps_factor, has_clip,
                 eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z,
-                count):
+                count, dirty):
     """Visibility (optional) and accumulation passes over all tiles, in parallel.
 
     ``Pt`` (P, NPARAM) pair parameters and ``items`` (P,) surfel indices in tile order with
-    ``offsets`` from :func:`unmesh.render._kernels.bin_boxes`; ``order`` the tile permutation.
-    ``zvis`` (H,W) is the visibility buffer: updated when ``visibility`` is true (full update),
-    otherwise only read (partial updates, 5.7). ``acc_n`` sums camera-space normals.
-    Accumulators (H,W) / (H,W,3) float64 and ``count`` (H,W) int32 get ``sign`` (+1 splat,
-    -1 unsplat) times the contributions; pixels whose count returns to zero are reset to exact
-    zeros.
+    ``offsets`` from :func:`unmesh.render._kernels.bin_boxes`; ``order`` the tile permutation
+    (every tile once when ``visibility``). ``zvis`` (H,W) is the visibility buffer: updated when
+    ``visibility`` is true (full update), otherwise only read (partial updates, 5.7). ``acc_n``
+    sums camera-space normals. Partial updates add ``sign`` (+1 splat, -1 unsplat) times the
+    contributions to the accumulators (H,W) / (H,W,3) float64 and ``count`` (H,W) int32; pixels
+    whose count returns to zero are reset to exact zeros. A full update (``visibility``,
+    ``sign`` +1) *overwrites* them instead, so they need not be cleared before: each tile with
+    pairs writes all its pixels (exact zeros where no fragment), and a tile without pairs is
+    zeroed only if ``dirty`` says it may hold values. ``dirty`` (ntiles,) uint8 is 1 for the
+    tiles of the accumulators that may be nonzero: read and updated here (a tile that received
+    fragments becomes 1; a full update sets the others to 0).
     """
     ntx = (W + tile - 1) // tile
     invf = 1.0 / f
@@ -1129,17 +1134,28 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
     for kk in prange(order.shape[0]):
         _splat_tile(order[kk], Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa,
                     eps_factor, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, rmax,
-                    visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z, count)
+                    visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z, count, dirty)
 
 
 @njit(cache=True)
 def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa, eps_factor, has_clip,
                 eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, rmax, visibility, sign, zvis,
-                acc_w, acc_c, acc_n, acc_z, count):
+                acc_w, acc_c, acc_n, acc_z, count, dirty):
     """One tile of :func:`splat_tiles` (tile ``t``; it owns its pixels)."""
     a = offsets[t]
     b = offsets[t + 1]
     if a == b:
+        if visibility and dirty[t] != 0:  # a full update leaves no stale values in empty tiles
+            x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
+            for i in range(y0, y0 + th):
+                for j in range(x0, x0 + tw):
+                    count[i, j] = 0
+                    acc_w[i, j] = 0.0
+                    acc_z[i, j] = 0.0
+                    for k3 in range(3):
+                        acc_c[i, j, k3] = 0.0
+                        acc_n[i, j, k3] = 0.0
+            dirty[t] = 0
         return
     x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
     m = tw * th
@@ -1175,6 +1191,24 @@ def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, nea
             for j in range(tw):
                 zvis[y0 + i, x0 + j] = lz[i * tw + j]
         _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
+        # full update: overwrite the tile (the tile-local sums start from zero, so these are the
+        # values that clearing and adding would give, bit for bit)
+        touched = 0
+        for i in range(th):
+            for j in range(tw):
+                q = i * tw + j
+                gy = y0 + i
+                gx = x0 + j
+                count[gy, gx] = lcount[q]
+                acc_w[gy, gx] = lw[q]
+                acc_z[gy, gx] = ld[q]
+                for k3 in range(3):
+                    acc_c[gy, gx, k3] = lc[q, k3]
+                    acc_n[gy, gx, k3] = ln[q, k3]
+                if lcount[q] != 0:
+                    touched = 1
+        dirty[t] = touched
+        return
     for i in range(th):
         for j in range(tw):
             q = i * tw + j
@@ -1184,6 +1218,7 @@ def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, nea
             gx = x0 + j
             c = count[gy, gx] + (lcount[q] if sign > 0 else -lcount[q])
             count[gy, gx] = c
+            dirty[t] = 1
             if c <= 0:
                 count[gy, gx] = 0
                 acc_w[gy, gx] = 0.0
