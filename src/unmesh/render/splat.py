@@ -48,7 +48,7 @@ import numpy as np
 from unmesh._validate import as_array, as_indices, scalar
 from unmesh.errors import InputError
 from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, tile_order
-from unmesh.render._splat_kernels import NPARAM, gather_rows, splat_resolve, splat_setup_bin, splat_tiles
+from unmesh.render._splat_kernels import NPARAM, splat_resolve, splat_setup_bin, splat_tiles
 from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.render.shading import _window as _check_window
@@ -58,9 +58,12 @@ from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCON
 
 __all__ = ["DISCONTINUITY_MIN_ANGLE", "ClipPlanes", "ClipSurfels", "ClipTree", "SplatOptions", "SplatRenderer", "SurfelArrays", "discontinuity_clip", "surfel_arrays"]
 
-#: Per-thread work arrays of :meth:`SplatRenderer._run` (surfel parameters, boxes, groups, pair
-#: rows), shared by all renderers of a thread: their contents live only during one update, and
-#: reusing them spares every ``render()`` call the page faults of ~200 MB per 10^6 surfels.
+#: Per-thread work arrays of :meth:`SplatRenderer._run` (surfel parameters, boxes, groups) and of
+#: ``render()``'s spent renderers (visibility buffer; the sums of :func:`_thread_sums`), shared
+#: by all renderers of a thread, so that repeated ``render()`` calls neither allocate nor page
+#: in ~190 MB per 10^6 surfels and 1024x1024 pixels. Each thread has its own (the studio renders
+#: from a worker thread); memory: one set per thread, the largest sizes met (the sums: the last
+#: image shape), freed with the thread.
 _SCRATCH = threading.local()
 #: The buffers of a :class:`SplatRenderer`, allocated by its first :meth:`~SplatRenderer.clear`.
 _BUFFERS = frozenset({"_opaque", "zvis", "sum_weight", "sum_color", "sum_normal", "sum_depth", "count", "_dirty",
@@ -570,8 +573,6 @@ class SplatRenderer:
             offsets, items, visits = splat_setup_bin(arrays.positions, arrays.normals, arrays.radii, axes, elliptical,
                                                      arrays.colors, frame, cam.eye, f, cx, cy, ortho, near, w, h, rf,
                                                      params, box, group, tile, ntx, nty, 8)
-            pt = self._scratch("pairs", (len(items), NPARAM), self.param_dtype)
-            gather_rows(params, items, pt)
         ctree, cleaf = None, None
         if clip is None:
             coff, cpl, cmode, has_clip = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8), False
@@ -581,7 +582,7 @@ class SplatRenderer:
         else:
             coff, cpl, cmode, has_clip = clip.offsets, clip.planes, clip.mode, True
         with serial_if_small(int(visits), 20 * SERIAL_BELOW):
-            splat_tiles(pt, items, offsets, tile_order(ntx * nty), tile, w, h, f, cx, cy, ortho, near, rf,
+            splat_tiles(params, items, offsets, tile_order(ntx * nty), tile, w, h, f, cx, cy, ortho, near, rf,
                         opt.kappa, opt.depth_tolerance, has_clip, cam.eye, frame, coff, cpl, cmode, ctree, cleaf, visibility,
                         float(sign), self.zvis, self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth,
                         self.count, self._dirty)
