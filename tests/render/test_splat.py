@@ -244,6 +244,11 @@ def test_full_update_into_reused_buffers_equals_a_fresh_renderer():
     assert all(np.array_equal(getattr(r, k), getattr(fresh, k)) for k in keys)
     r.render(SurfelCloud(np.zeros((0, 3)), np.zeros((0, 3)), radii=np.zeros(0)))  # nothing splatted
     assert not r.count.any() and not r.sum_weight.any() and np.isinf(r.zvis).all()
+    shared = SplatRenderer(cam)  # a new renderer splatting against another's visibility buffer
+    shared.zvis = fresh.zvis
+    shared.splat(right)
+    assert shared.zvis is fresh.zvis
+    assert all(np.array_equal(getattr(shared, k), getattr(fresh, k)) for k in keys)
     g = fresh.gbuffer()
     render(sphere, cam)
     res = render(right, cam, shading="none")

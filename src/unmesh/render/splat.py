@@ -449,9 +449,12 @@ class SplatRenderer:
         # and _render_in_place takes this thread's work buffers instead
 
     def __getattr__(self, name: str) -> Any:
-        # only called for attributes not set yet: the buffers of a new renderer (see clear())
+        # only called for attributes not set yet: the buffers of a new renderer, allocated as the
+        # constructor's clear() did, and buffers assigned since (e.g. a shared zvis) kept
         if name in _BUFFERS and "camera" in self.__dict__:
+            given = {k: v for k, v in self.__dict__.items() if k in _BUFFERS}
             self.clear()
+            self.__dict__.update(given)
             return self.__dict__[name]
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
