@@ -12,8 +12,9 @@ kernels and the median of several calls:
   the ratio ``render() / fill-only`` (goal <= 3x; ``render()`` goal <= 0.2 s on 2 cores);
 * the stage split of ``render()``: set-up, binning (fused with the set-up in one pass,
   :func:`~unmesh.render._splat_kernels.splat_setup_bin`; binning = fused pass minus set-up
-  alone), per-tile gathering of the parameter rows, tile kernel, normalisation, shading, buffer
-  allocation and copies, and the pipeline overhead (the rest of ``render()``);
+  alone), tile kernel (which gathers each tile's parameter rows itself; the same gathering as
+  one separate pass is printed beside it), normalisation, shading, buffer allocation and
+  copies, and the pipeline overhead (the rest of ``render()``);
 * the tile kernel next to the fill-only tile kernel
   (:func:`~unmesh.render._splat_kernels.fill_tiles`, the same pixels of the same (surfel, tile)
   pairs without EWA arithmetic) and the single-thread CPU time of ``render()``, which is robust
@@ -95,6 +96,8 @@ def median_time(fn, repeat: int, clock=time.perf_counter) -> float:
 #: untimed render() calls before the first case's timed ones (see bench_case)
 WARM_CALLS = 8
 _WARMED: list[list[float]] = []
+#: the first full-size render() call of the process (after compiling the kernels on a small image)
+_FIRST: list[float] = []
 
 
 def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
@@ -122,11 +125,19 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
     def frame_render():
         return render(cloud, cam)
 
-    frame_render()  # compile (or load from cache) and warm up
+    if not _WARMED:
+        # compile (or load from the cache) every kernel on a small image first, so that the first
+        # full-size call below is what a user's first render() in a process costs (cold memory)
+        render(fibonacci_sphere(20_000, k)[0], cam.resized(64, 64))
+        t0 = time.perf_counter()
+        frame_render()
+        _FIRST.append(time.perf_counter() - t0)
+    else:
+        frame_render()  # warm up
     # the process's first calls are slower: glibc serves the large temporaries by mmap (fresh
-    # pages, page faults) until its mmap threshold has risen to their size (measured: calls 2-6
-    # 160 ms, then 110-115 ms at 0.7x; with MALLOC_MMAP_THRESHOLD_ set high, 115 ms from call 2).
-    # The timed calls are the steady state; the warm-up calls are printed with the first case.
+    # pages, page faults) until its mmap threshold has risen to their size (measured at stop 34:
+    # calls 2-6 160 ms, then 110-115 ms at 0.7x). The timed calls are the steady state; the first
+    # call and the warm-up calls are printed with the first case.
     warm = []
     for _ in range(WARM_CALLS if not _WARMED else 1):
         t0 = time.perf_counter()
@@ -168,15 +179,15 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
     gather_rows(P, items, pt)
     coff, cpl, cmode = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8)
 
-    def tiles():
-        renderer.clear()
-        splat_tiles(pt, items, offsets, order, tile, size, size, f, cx, cy, ortho, near, opt.filter_radius,
+    def tiles():  # a full update overwrites the sums: render() does not clear them (SplatRenderer._reset)
+        renderer._reset(None)
+        splat_tiles(P, items, offsets, order, tile, size, size, f, cx, cy, ortho, near, opt.filter_radius,
                     opt.kappa, opt.depth_tolerance, False, cam.eye, frame, coff, cpl, cmode, None, None, True, 1.0,
                     renderer.zvis, renderer.sum_weight, renderer.sum_color, renderer.sum_normal, renderer.sum_depth,
-                    renderer.count)
+                    renderer.count, renderer._dirty)
 
     def clear_only():
-        renderer.clear()
+        renderer._reset(None)
 
     fill_out = np.zeros((size, size))
     g = GBuffer.empty(size, size)
@@ -187,7 +198,7 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
 
     def buffers():  # what render() allocates and copies around the kernels
         gb = GBuffer.empty(size, size)
-        SplatRenderer(cam)  # its sums and visibility buffer
+        SplatRenderer(cam)  # (its buffers are allocated on first use: render() takes the thread's)
         gb.depth.copy()
         RenderResult.from_gbuffer(gb, cam, np.empty((size, size, 3)), copy=False)
 
@@ -207,7 +218,7 @@ def bench_case(n: int, size: int, k: float, repeat: int) -> dict[str, float]:
         "buffers": median_time(buffers, repeat),
     }
     s["binning"] = max(s["setup_bin"] - s["setup"], 0.0)
-    s["pipeline"] = t_render - (s["setup_bin"] + s["gather"] + s["tiles"] + s["resolve"] + s["shade"] + s["buffers"])
+    s["pipeline"] = t_render - (s["setup_bin"] + s["tiles"] + s["resolve"] + s["shade"] + s["buffers"])
     before = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
@@ -253,16 +264,17 @@ def main() -> None:
         rows.append((k, s))
         ms = {key: 1e3 * v for key, v in s.items()}
         if len(_WARMED) == 1:
-            print("warm-up: the process's first render() calls (ms), untimed: "
-                  + " ".join(f"{1e3 * t:.0f}" for t in _WARMED[0]))
+            print(f"first render() call of the process (kernels loaded): {1e3 * _FIRST[0]:.0f} ms; then the "
+                  "warm-up calls (ms), untimed: " + " ".join(f"{1e3 * t:.0f}" for t in _WARMED[0]))
         print(f"\nradii {k:.1f} x spacing ({s['radius_px']:.2f} px): render() {s['render']:.3f} s   fill-only "
               f"{s['fill_only']:.3f} s   ratio {s['render'] / s['fill_only']:.2f}x")
-        stages = [("set-up", "setup"), ("binning", "binning"), ("gathering", "gather"), ("tile kernel", "tiles"),
+        stages = [("set-up", "setup"), ("binning", "binning"), ("tile kernel", "tiles"),
                   ("normalisation", "resolve"), ("shading", "shade"), ("buffers/copies", "buffers"),
                   ("pipeline", "pipeline")]
         print("  stages of render() (median ms, % of render()):")
         print("   " + "   ".join(f"{label} {ms[key]:.1f} ({100 * s[key] / s['render']:.0f}%)" for label, key in stages))
-        print(f"  tile kernel {ms['tiles']:.1f} ms vs fill-only tiles {ms['fill_tiles']:.1f} ms "
+        print(f"  tile kernel {ms['tiles']:.1f} ms (its gathering as one pass: {ms['gather']:.1f} ms) "
+              f"vs fill-only tiles {ms['fill_tiles']:.1f} ms "
               f"({s['tiles'] / s['fill_tiles']:.2f}x)   (surfel, tile) pairs {int(s['pairs'])}   "
               f"covered pixels {int(s['covered'])}")
         print(f"  single-thread CPU time: render() {s['render_cpu1']:.3f} s   fill-only {s['fill_only_cpu']:.3f} s   "

@@ -226,6 +226,36 @@ def test_unsplat_everything_returns_to_exact_zero(sphere5k):
     assert not r.gbuffer().coverage.any()
 
 
+def test_full_update_into_reused_buffers_equals_a_fresh_renderer():
+    """A full update does not clear the sums first: it overwrites the tiles it splats into and
+    zeroes the others that held values (per-tile flags). Re-rendering other surfels, after a
+    full update and after partial ones, into the same renderer, and render() after render() in
+    one thread, give bit for bit what a fresh renderer gives."""
+    cam = Camera((0.3, 0.2, 3), (0, 0, 0), width=96, height=80, fov=45)
+    sphere = fibonacci_sphere(3000)
+    left, right = sphere.subset(sphere.positions[:, 0] < -0.2), sphere.subset(sphere.positions[:, 0] > 0.4)
+    keys = ("zvis", "sum_weight", "sum_color", "sum_normal", "sum_depth", "count")
+    fresh = SplatRenderer(cam).render(right)
+    r = SplatRenderer(cam).render(sphere)
+    r.render(right)
+    assert all(np.array_equal(getattr(r, k), getattr(fresh, k)) for k in keys)
+    r.render(left).splat(right).unsplat(left.subset(np.arange(0, len(left), 2)))
+    r.render(right)
+    assert all(np.array_equal(getattr(r, k), getattr(fresh, k)) for k in keys)
+    r.render(SurfelCloud(np.zeros((0, 3)), np.zeros((0, 3)), radii=np.zeros(0)))  # nothing splatted
+    assert not r.count.any() and not r.sum_weight.any() and np.isinf(r.zvis).all()
+    shared = SplatRenderer(cam)  # a new renderer splatting against another's visibility buffer
+    shared.zvis = fresh.zvis
+    shared.splat(right)
+    assert shared.zvis is fresh.zvis
+    assert all(np.array_equal(getattr(shared, k), getattr(fresh, k)) for k in keys)
+    g = fresh.gbuffer()
+    render(sphere, cam)
+    res = render(right, cam, shading="none")
+    for k in ("albedo", "normal", "depth", "coverage", "weight"):
+        assert np.array_equal(getattr(res, k), getattr(g, k)), k
+
+
 # -- clipping hook (chapter 4) ---------------------------------------------------------------
 def test_clip_planes_cut_fragments():
     cloud = SurfelCloud([[0, 0, 0]], [[0, 0, 1]], radii=[0.8], colors=[[1, 0, 0]])

@@ -5,8 +5,9 @@ Pipeline (all camera conventions as in :mod:`unmesh.render._kernels`):
 1. :func:`splat_setup` (parallel over surfels) writes per-surfel parameters ``P`` (N, NPARAM)
    and a pixel box (N, 4).
 2. :func:`unmesh.render._kernels.bin_boxes` buckets surfels into screen tiles (front-facing
-   surfels first); :func:`splat_setup_bin` fuses steps 1 and 2 into one pass; then
-   :func:`gather_rows` copies the parameter rows into tile order (tiles read them contiguously).
+   surfels first); :func:`splat_setup_bin` fuses steps 1 and 2 into one pass. Each tile of
+   step 3 copies its pairs' parameter rows into a tile-local array first (so its passes read
+   them contiguously; :func:`gather_rows` is that copy for all pairs at once).
 3. :func:`splat_tiles` (parallel over tiles; a tile owns its pixels, so there are no write
    races) runs the visibility pass (extended depth test, 3.2.1: the buffer keeps
    ``min(z_f + eps_s)``; fragments that may still pass are recorded) and the accumulation pass
@@ -1107,18 +1108,24 @@ def _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_
 
 
 @njit(cache=True, parallel=True)
-def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, rfilter, kappa, eps_factor, has_clip,
+def splat_tiles(P, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, rfilter, kappa, eps_factor, has_clip,
                 eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z,
-                count):
+                count, dirty):
     """Visibility (optional) and accumulation passes over all tiles, in parallel.
 
-    ``Pt`` (P, NPARAM) pair parameters and ``items`` (P,) surfel indices in tile order with
-    ``offsets`` from :func:`unmesh.render._kernels.bin_boxes`; ``order`` the tile permutation.
-    ``zvis`` (H,W) is the visibility buffer: updated when ``visibility`` is true (full update),
-    otherwise only read (partial updates, 5.7). ``acc_n`` sums camera-space normals.
-    Accumulators (H,W) / (H,W,3) float64 and ``count`` (H,W) int32 get ``sign`` (+1 splat,
-    -1 unsplat) times the contributions; pixels whose count returns to zero are reset to exact
-    zeros.
+    ``P`` (N, NPARAM) per-surfel parameters (:func:`splat_setup`) and ``items`` (pairs,) surfel
+    indices in tile order with ``offsets`` from :func:`unmesh.render._kernels.bin_boxes` (each
+    tile gathers its pairs' rows of ``P`` into a tile-local array); ``order`` the tile permutation
+    (every tile once when ``visibility``). ``zvis`` (H,W) is the visibility buffer: updated when
+    ``visibility`` is true (full update), otherwise only read (partial updates, 5.7). ``acc_n``
+    sums camera-space normals. Partial updates add ``sign`` (+1 splat, -1 unsplat) times the
+    contributions to the accumulators (H,W) / (H,W,3) float64 and ``count`` (H,W) int32; pixels
+    whose count returns to zero are reset to exact zeros. A full update (``visibility``,
+    ``sign`` +1) *overwrites* them instead, so they need not be cleared before: each tile with
+    pairs writes all its pixels (exact zeros where no fragment), and a tile without pairs is
+    zeroed only if ``dirty`` says it may hold values. ``dirty`` (ntiles,) uint8 is 1 for the
+    tiles of the accumulators that may be nonzero: read and updated here (a tile that received
+    fragments becomes 1; a full update sets the others to 0).
     """
     ntx = (W + tile - 1) // tile
     invf = 1.0 / f
@@ -1127,22 +1134,42 @@ def splat_tiles(Pt, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, r
     # a thin parallel loop over a plain function: the tile body is typed and optimised once, not
     # as part of the parfor (its array allocations would each become a parfor of their own)
     for kk in prange(order.shape[0]):
-        _splat_tile(order[kk], Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa,
+        _splat_tile(order[kk], P, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa,
                     eps_factor, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, rmax,
-                    visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z, count)
+                    visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z, count, dirty)
 
 
 @njit(cache=True)
-def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa, eps_factor, has_clip,
+def _splat_tile(t, P, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa, eps_factor, has_clip,
                 eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, rmax, visibility, sign, zvis,
-                acc_w, acc_c, acc_n, acc_z, count):
+                acc_w, acc_c, acc_n, acc_z, count, dirty):
     """One tile of :func:`splat_tiles` (tile ``t``; it owns its pixels)."""
     a = offsets[t]
     b = offsets[t + 1]
     if a == b:
+        if visibility and dirty[t] != 0:  # a full update leaves no stale values in empty tiles
+            x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
+            for i in range(y0, y0 + th):
+                for j in range(x0, x0 + tw):
+                    count[i, j] = 0
+                    acc_w[i, j] = 0.0
+                    acc_z[i, j] = 0.0
+                    for k3 in range(3):
+                        acc_c[i, j, k3] = 0.0
+                        acc_n[i, j, k3] = 0.0
+            dirty[t] = 0
         return
     x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
     m = tw * th
+    # the tile's pair rows, gathered here into a tile-local (cache-resident) array
+    npair = b - a
+    ncol = P.shape[1]
+    Pt = np.empty((npair, ncol), dtype=P.dtype)
+    for k in range(npair):
+        s = items[a + k]
+        for j in range(ncol):
+            Pt[k, j] = P[s, j]
+    its = items[a:b]
     lz = load_tile(zvis, x0, y0, tw, th)
     lw = np.zeros(m)
     lc = np.zeros((m, 3))
@@ -1158,7 +1185,7 @@ def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, nea
     mode = 1
     if visibility:
         mode = 0
-        for k in range(a, b):
+        for k in range(npair):
             w_ = min(int(Pt[k, 20]), x0 + tw - 1) - max(int(Pt[k, 19]), x0) + 1
             h_ = min(int(Pt[k, 22]), y0 + th - 1) - max(int(Pt[k, 21]), y0) + 1
             if w_ > 0 and h_ > 0:
@@ -1167,7 +1194,7 @@ def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, nea
     frag_k = np.empty(cap, dtype=np.int64)
     frag_rho = np.empty(cap)
     frag_z = np.empty(cap)
-    nrec = _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
+    nrec = _tile_pass(mode, Pt, its, 0, npair, x0, y0, tw, th, invf, cx, cy, ortho, near, inv_rf2, kappa,
                       eps_factor, sign, has_clip, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
                       clip_leaf, work, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
     if visibility:
@@ -1175,6 +1202,24 @@ def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, nea
             for j in range(tw):
                 zvis[y0 + i, x0 + j] = lz[i * tw + j]
         _accumulate_records(nrec, Pt, kappa, sign, lz, lw, lc, ln, ld, lcount, frag_q, frag_k, frag_rho, frag_z)
+        # full update: overwrite the tile (the tile-local sums start from zero, so these are the
+        # values that clearing and adding would give, bit for bit)
+        touched = 0
+        for i in range(th):
+            for j in range(tw):
+                q = i * tw + j
+                gy = y0 + i
+                gx = x0 + j
+                count[gy, gx] = lcount[q]
+                acc_w[gy, gx] = lw[q]
+                acc_z[gy, gx] = ld[q]
+                for k3 in range(3):
+                    acc_c[gy, gx, k3] = lc[q, k3]
+                    acc_n[gy, gx, k3] = ln[q, k3]
+                if lcount[q] != 0:
+                    touched = 1
+        dirty[t] = touched
+        return
     for i in range(th):
         for j in range(tw):
             q = i * tw + j
@@ -1184,6 +1229,7 @@ def _splat_tile(t, Pt, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, nea
             gx = x0 + j
             c = count[gy, gx] + (lcount[q] if sign > 0 else -lcount[q])
             count[gy, gx] = c
+            dirty[t] = 1
             if c <= 0:
                 count[gy, gx] = 0
                 acc_w[gy, gx] = 0.0

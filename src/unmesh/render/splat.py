@@ -48,7 +48,7 @@ import numpy as np
 from unmesh._validate import as_array, as_indices, scalar
 from unmesh.errors import InputError
 from unmesh.render._kernels import SERIAL_BELOW, serial_if_small, tile_order
-from unmesh.render._splat_kernels import NPARAM, gather_rows, splat_resolve, splat_setup_bin, splat_tiles
+from unmesh.render._splat_kernels import NPARAM, splat_resolve, splat_setup_bin, splat_tiles
 from unmesh.render.camera import Camera
 from unmesh.render.shading import GBuffer, RenderResult, shade
 from unmesh.render.shading import _window as _check_window
@@ -58,13 +58,35 @@ from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCON
 
 __all__ = ["DISCONTINUITY_MIN_ANGLE", "ClipPlanes", "ClipSurfels", "ClipTree", "SplatOptions", "SplatRenderer", "SurfelArrays", "discontinuity_clip", "surfel_arrays"]
 
-#: Per-thread work arrays of :meth:`SplatRenderer._run` (surfel parameters, boxes, groups, pair
-#: rows), shared by all renderers of a thread: their contents live only during one update, and
-#: reusing them spares every ``render()`` call the page faults of ~200 MB per 10^6 surfels.
+#: Per-thread work arrays of :meth:`SplatRenderer._run` (surfel parameters, boxes, groups) and of
+#: ``render()``'s spent renderers (visibility buffer; the sums of :func:`_thread_sums`), shared
+#: by all renderers of a thread, so that repeated ``render()`` calls neither allocate nor page
+#: in ~190 MB per 10^6 surfels and 1024x1024 pixels. Each thread has its own (the studio renders
+#: from a worker thread); memory: one set per thread, the largest sizes met (the sums: the last
+#: image shape), freed with the thread.
 _SCRATCH = threading.local()
+#: The buffers of a :class:`SplatRenderer`, allocated by its first :meth:`~SplatRenderer.clear`.
+_BUFFERS = frozenset({"_opaque", "zvis", "sum_weight", "sum_color", "sum_normal", "sum_depth", "count", "_dirty",
+                      "_stale"})
 #: Placeholder of the clip mode when splatting with a :class:`ClipTree` (without one the tree
 #: arguments of the kernels are None, which compiles the plain kernels without the tree code).
 _NO_MODE = np.zeros(1, dtype=np.int8)
+
+
+def _thread_sums(h: int, w: int, tile: int) -> tuple[np.ndarray, ...]:
+    """This thread's sums for ``render()``'s spent renderers (see :data:`_SCRATCH`):
+    ``sum_weight, sum_color, sum_normal, sum_depth, count`` of shape (h, w) and their per-tile
+    ``dirty`` flags (:func:`~unmesh.render._splat_kernels.splat_tiles`), kept between calls
+    with their contents, so a full update needs to overwrite only its tiles. One set per thread:
+    a call with another image shape or tile edge drops it and allocates zeroed arrays."""
+    key = (h, w, tile)
+    sums = getattr(_SCRATCH, "sums", None)
+    if sums is None or sums[0] != key:
+        _SCRATCH.sums = None  # the old set is freed before the new one is allocated
+        ntiles = ((w + tile - 1) // tile) * ((h + tile - 1) // tile)
+        sums = _SCRATCH.sums = (key, np.zeros((h, w)), np.zeros((h, w, 3)), np.zeros((h, w, 3)), np.zeros((h, w)),
+                                np.zeros((h, w), dtype=np.int32), np.zeros(ntiles, dtype=np.uint8))
+    return sums[1:]
 
 
 @dataclass(frozen=True)
@@ -423,35 +445,64 @@ class SplatRenderer:
         self.param_dtype = np.float32 if self.options.precision == "single" else np.float64
         self.clip_surfels: ClipSurfels | None = None
         self._adopt_opaque = False  # set by _render_in_place: clear() takes the opaque layer without a copy
-        self.clear()
+        # the buffers are allocated on first use (__getattr__): render() replaces them anyway,
+        # and _render_in_place takes this thread's work buffers instead
+
+    def __getattr__(self, name: str) -> Any:
+        # only called for attributes not set yet: the buffers of a new renderer, allocated as the
+        # constructor's clear() did, and buffers assigned since (e.g. a shared zvis) kept
+        if name in _BUFFERS and "camera" in self.__dict__:
+            given = {k: v for k, v in self.__dict__.items() if k in _BUFFERS}
+            self.clear()
+            self.__dict__.update(given)
+            return self.__dict__[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     # -- buffers -------------------------------------------------------------------------
     def clear(self, opaque: GBuffer | None = None) -> SplatRenderer:
         """Empty the buffers. ``opaque`` (meshes, particles) occludes splats and shows where none are."""
+        self._reset(opaque)
+        if self._stale:
+            self._zero_sums()
+        return self
+
+    def _reset(self, opaque: GBuffer | None) -> None:
+        """:meth:`clear` without zeroing reused sums: they are only marked stale (``_stale``),
+        and the next full update overwrites them tile by tile (:func:`splat_tiles` with the
+        per-tile ``_dirty`` flags), which spares ``render()`` a serial pass over 68 MB of sums
+        per 1024x1024 frame. Whoever calls this must end with a full update or
+        :meth:`_zero_sums` (see :meth:`render`)."""
         h, w = self.camera.shape
         self._opaque = GBuffer.empty(h, w) if opaque is None else opaque if self._adopt_opaque else opaque.copy()
         if self._opaque.depth.shape != (h, w):
             raise InputError(f"opaque: expected buffers of shape {(h, w)}, got {self._opaque.depth.shape}")
+        tile = self.options.tile
+        ntiles = ((w + tile - 1) // tile) * ((h + tile - 1) // tile)
         if self._adopt_opaque:  # a spent renderer of render(): this thread's reused buffers (no page faults)
             self.zvis = self._scratch("zvis", (h, w), np.float64)
             np.copyto(self.zvis, self._opaque.depth)
-            self.sum_weight = self._scratch("sum_weight", (h, w), np.float64)
-            self.sum_color = self._scratch("sum_color", (h, w, 3), np.float64)
-            self.sum_normal = self._scratch("sum_normal", (h, w, 3), np.float64)
-            self.sum_depth = self._scratch("sum_depth", (h, w), np.float64)
-            self.count = self._scratch("count", (h, w), np.int32)
-        else:
-            self.zvis = self._opaque.depth.copy()
-        if getattr(self, "count", None) is not None and self.count.shape == (h, w):
-            for arr in (self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth, self.count):
-                arr.fill(0)
-        else:
-            self.sum_weight = np.zeros((h, w))
-            self.sum_color = np.zeros((h, w, 3))
-            self.sum_normal = np.zeros((h, w, 3))
-            self.sum_depth = np.zeros((h, w))
-            self.count = np.zeros((h, w), dtype=np.int32)
-        return self
+            (self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth, self.count,
+             self._dirty) = _thread_sums(h, w, tile)
+            self._stale = True
+            return
+        self.zvis = self._opaque.depth.copy()
+        count, dirty = self.__dict__.get("count"), self.__dict__.get("_dirty")  # (no __getattr__)
+        if count is not None and dirty is not None and count.shape == (h, w) and len(dirty) == ntiles:
+            self._stale = True
+            return
+        self.sum_weight = np.zeros((h, w))
+        self.sum_color = np.zeros((h, w, 3))
+        self.sum_normal = np.zeros((h, w, 3))
+        self.sum_depth = np.zeros((h, w))
+        self.count = np.zeros((h, w), dtype=np.int32)
+        self._dirty = np.zeros(ntiles, dtype=np.uint8)
+        self._stale = False
+
+    def _zero_sums(self) -> None:
+        """Zero the sums (after :meth:`_reset` when no full update followed)."""
+        for arr in (self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth, self.count, self._dirty):
+            arr.fill(0)
+        self._stale = False
 
     # -- updates -------------------------------------------------------------------------
     def render(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, opaque: GBuffer | None = None,
@@ -475,13 +526,17 @@ class SplatRenderer:
         """
         if clip_surfels is not None and not isinstance(clip_surfels, ClipSurfels):
             raise InputError(f"clip_surfels: expected ClipSurfels, got {type(clip_surfels).__name__}")
-        self.clear(opaque)
-        self.clip_surfels = clip_surfels
-        if clip is None and clip_surfels is not None and len(clip_surfels):
-            arrays = clouds if isinstance(clouds, SurfelArrays) else surfel_arrays(clouds)
-            clip = discontinuity_clip(arrays, clip_surfels)
-            clouds = arrays
-        self._run(clouds, clip, visibility=True, sign=1)
+        self._reset(opaque)
+        try:
+            self.clip_surfels = clip_surfels
+            if clip is None and clip_surfels is not None and len(clip_surfels):
+                arrays = clouds if isinstance(clouds, SurfelArrays) else surfel_arrays(clouds)
+                clip = discontinuity_clip(arrays, clip_surfels)
+                clouds = arrays
+            self._run(clouds, clip, visibility=True, sign=1)
+        finally:
+            if self._stale:  # nothing splatted (or an error): the sums are cleared the plain way
+                self._zero_sums()
         return self
 
     def splat(self, clouds: SurfelCloud | Sequence[SurfelCloud] | SurfelArrays, clip: ClipPlanes | ClipTree | None = None) -> SplatRenderer:
@@ -521,8 +576,6 @@ class SplatRenderer:
             offsets, items, visits = splat_setup_bin(arrays.positions, arrays.normals, arrays.radii, axes, elliptical,
                                                      arrays.colors, frame, cam.eye, f, cx, cy, ortho, near, w, h, rf,
                                                      params, box, group, tile, ntx, nty, 8)
-            pt = self._scratch("pairs", (len(items), NPARAM), self.param_dtype)
-            gather_rows(params, items, pt)
         ctree, cleaf = None, None
         if clip is None:
             coff, cpl, cmode, has_clip = np.zeros(1, dtype=np.int64), np.zeros((0, 4)), np.zeros(1, dtype=np.int8), False
@@ -532,10 +585,12 @@ class SplatRenderer:
         else:
             coff, cpl, cmode, has_clip = clip.offsets, clip.planes, clip.mode, True
         with serial_if_small(int(visits), 20 * SERIAL_BELOW):
-            splat_tiles(pt, items, offsets, tile_order(ntx * nty), tile, w, h, f, cx, cy, ortho, near, rf,
+            splat_tiles(params, items, offsets, tile_order(ntx * nty), tile, w, h, f, cx, cy, ortho, near, rf,
                         opt.kappa, opt.depth_tolerance, has_clip, cam.eye, frame, coff, cpl, cmode, ctree, cleaf, visibility,
                         float(sign), self.zvis, self.sum_weight, self.sum_color, self.sum_normal, self.sum_depth,
-                        self.count)
+                        self.count, self._dirty)
+        if visibility:
+            self._stale = False  # the full update overwrote every tile that could hold values
 
     @staticmethod
     def _scratch(name: str, shape: tuple[int, ...], dtype: Any) -> np.ndarray:
