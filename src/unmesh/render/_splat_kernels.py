@@ -43,9 +43,8 @@ __all__ = ["NPARAM", "fill_tiles", "gather_rows", "splat_resolve", "splat_setup"
 #: 0 cz, 1-3 n (camera), 4 c.n, 5-7 b1 = a1/|a1|^2, 8-10 b2 = a2/|a2|^2, 11 c.b1, 12 c.b2
 #: (``inf`` for degenerate ellipses, which then only reach pixels through the screen filter),
 #: 13-14 projected centre (col, row), 15 radius, 16-18 colour, 19-22 pixel box x0, x1, y0, y1,
-#: 23 depth range ``zr`` of the surfel's fragments (negative: seen edge-on, see :func:`_fragment`),
-#: 24-26 the quadratic form ``qxx, qxy, qyy`` of an edge-on surfel's screen filter (:func:`_filter_form`).
-NPARAM = 27
+#: 23 depth range ``zr`` of the surfel's fragments (negative: seen edge-on, see :func:`_fragment`).
+NPARAM = 24
 #: ``log2(t)`` at index ``t`` for the powers of two up to 1024 (tile edges; 0 elsewhere).
 TILE_SHIFTS = np.array([(t.bit_length() - 1) if t & (t - 1) == 0 else 0 for t in range(1025)], dtype=np.int64)
 #: Surfels whose normal is more than ``atan(EDGE_ON_TAN)`` (76 degrees) from the view ray through
@@ -193,6 +192,43 @@ def _filter_form(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, ortho, near, rf
     return qxx, qxy, qyy, hfx, hfy
 
 
+@njit(cache=True)
+def _edge_form(Pt, k, f, cx, cy, ortho, near, inv_rf2):
+    """``qxx, qxy, qyy`` of :func:`_filter_form` for the surfel of parameter row ``Pt[k]`` (valid
+    ellipse): the axes are recovered from their dual basis (``a_i = sum_j (H^-1)_ij b_j`` with
+    ``H`` the Gram matrix of ``b1, b2``) and the centre from its projection. Computed per
+    (surfel, tile) pair of the few edge-on surfels, so that ``P`` needs no extra columns."""
+    b1x, b1y, b1z = np.float64(Pt[k, 5]), np.float64(Pt[k, 6]), np.float64(Pt[k, 7])
+    b2x, b2y, b2z = np.float64(Pt[k, 8]), np.float64(Pt[k, 9]), np.float64(Pt[k, 10])
+    h11 = b1x * b1x + b1y * b1y + b1z * b1z
+    h22 = b2x * b2x + b2y * b2y + b2z * b2z
+    h12 = b1x * b2x + b1y * b2y + b1z * b2z
+    det = h11 * h22 - h12 * h12
+    if not (det > 0.0):
+        return inv_rf2, 0.0, inv_rf2
+    i11 = h22 / det
+    i22 = h11 / det
+    i12 = -h12 / det
+    a00 = i11 * b1x + i12 * b2x
+    a01 = i11 * b1y + i12 * b2y
+    a02 = i11 * b1z + i12 * b2z
+    a10 = i12 * b1x + i22 * b2x
+    a11 = i12 * b1y + i22 * b2y
+    a12 = i12 * b1z + i22 * b2z
+    cz = np.float64(Pt[k, 0])
+    sx = np.float64(Pt[k, 13])
+    sy = np.float64(Pt[k, 14])
+    if ortho:
+        c0 = (sx - cx) / f
+        c1 = (cy - sy) / f
+    else:
+        c0 = (sx - cx) * cz / f
+        c1 = (cy - sy) * cz / f
+    qxx, qxy, qyy, _, _ = _filter_form(c0, c1, cz, np.float64(Pt[k, 15]), a00, a01, a02, a10, a11, a12, f, ortho,
+                                       near, 1.0 / math.sqrt(inv_rf2))
+    return qxx, qxy, qyy
+
+
 @njit(cache=True, inline="always")
 def _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, cy, ortho, near, W, H,
                rfilter, P, j):
@@ -290,11 +326,8 @@ def _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, 
     for k in range(3):
         P[j, 16 + k] = colors[i, k]
     hfx = hfy = rfilter
-    if edge and rfilter > 0.0:
-        P[j, 24], P[j, 25], P[j, 26], hfx, hfy = _filter_form(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, ortho,
-                                                              near, rfilter)
-    else:
-        P[j, 24] = P[j, 25] = P[j, 26] = 0.0
+    if edge and valid and rfilter > 0.0:
+        hfx, hfy = _filter_form(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, ortho, near, rfilter)[3:]
     x0, x1, y0, y1 = _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H,
                                 hfx, hfy)
     P[j, 19] = x0
@@ -431,7 +464,7 @@ def gather_rows(P, items, out):
 
 @njit(cache=True)
 def _fragment(X, Y, pcx, pcy, ortho, inv_rf2, cz, nx, ny, nz, cn, b1x, b1y, b1z, b2x, b2y, b2z, cb1, cb2,
-              sx, sy, zr, qxx, qxy, qyy):
+              sx, sy, zr, qxx, qxy, qyy):  # qxx, qxy, qyy: _edge_form of the surfel when edge-on
     """``(rho, z)`` of one surfel at the pixel whose ray has ``X, Y`` and centre ``(pcx, pcy)``.
 
     The surfel is given by its parameters (layout of ``P``). ``rho = min(rho3, rho2)``; ``z`` is
@@ -1080,9 +1113,11 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
         edge = not (zr > 0.0)
         # edge-on surfels: the screen filter is an ellipse (_filter_form), rows scanned whole
         ewa = edge and inv_rf2 < np.inf
-        qxx = np.float64(Pt[k, 24])
-        qxy2 = 2.0 * np.float64(Pt[k, 25])
-        qyy = np.float64(Pt[k, 26])
+        qxx = qyy = inv_rf2
+        qxy2 = 0.0
+        if ewa and abs(np.float64(Pt[k, 11])) < np.inf and abs(np.float64(Pt[k, 12])) < np.inf:
+            qxx, qxy, qyy = _edge_form(Pt, k, f, cx, cy, ortho, near, inv_rf2)
+            qxy2 = 2.0 * qxy
         s = items[k]
         clip = has_clip and clip_offsets[s + 1] > clip_offsets[s]
         planar = abs(nz) > 1e-12  # orthographic: the rays meet the surfel plane
