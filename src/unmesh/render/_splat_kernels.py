@@ -51,8 +51,9 @@ TILE_SHIFTS = np.array([(t.bit_length() - 1) if t & (t - 1) == 0 else 0 for t in
 #: their centre are "edge-on": where their screen filter wins, fragments take the centre depth.
 EDGE_ON_TAN = 4.0
 #: Largest reach (pixels) of an edge-on surfel's screen filter along its projected major axis
-#: (:func:`_filter_form`): the former one-pixel disc, which closes the outline of a sheet seen
-#: edge-on with samples up to ~1.7 pixels apart (tests/render/test_splat.py).
+#: (:func:`_filter_form`): the former one-pixel disc. With a filter radius of 0.71 across, a sheet
+#: seen edge-on half a pixel off a row of pixel centres is then a closed line for samples up to
+#: 1.42 pixels apart (a 0.71 disc: 1.0; tests/render/test_splat.py has 1.28).
 EDGE_FILTER_REACH = 1.0
 
 
@@ -307,7 +308,7 @@ def _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, 
         P[j, 14] = np.nan
     P[j, 15] = r
     # depth range of the fragments: the ellipse itself (r) plus the screen filter footprint
-    # (rf pixels in world units at the centre depth) on the tilted plane
+    # (rfilter pixels in world units at the centre depth) on the tilted plane
     if ortho:
         cos = abs(n2)
     else:
