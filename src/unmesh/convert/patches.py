@@ -60,6 +60,12 @@ CORNER_OFFSET = 0.5
 #: l - 1: on Igea (1,690 triangles) 18 triangles' normal errors stayed at 0.007-0.07 from
 #: level 4 or 5 on and went to level 7, 117,000 of the atlas' 138,000 texels.
 STALL = 0.75
+#: Screen filter (texels) of the patch renders: the one-texel disc with which the thresholds,
+#: the stall rule and the depth tolerance were measured, kept when the splatter's default went
+#: down to ``render.splat.FILTER_RADIUS`` (0.71). With 0.71 the same thresholds stop many
+#: patches a level earlier; docs/performance.md ("Igea view 3: the splatter's screen filter at
+#: outlines, stop 35") has the figures.
+PATCH_FILTER_RADIUS = 1.0
 
 
 @dataclass(frozen=True)
@@ -359,7 +365,7 @@ def render_patches(mesh: TriangleMesh, cloud: SurfelCloud, *, texture_error: flo
             # their neighbours (their depth range grows with the filter footprint); a tolerance of
             # one radius would let them hide the surface behind them
             tol = max(1.0, 2.0 / float(np.median(r_c))) if len(r_c) else 1.0
-            rend = SplatRenderer(cam, SplatOptions(depth_tolerance=tol))
+            rend = SplatRenderer(cam, SplatOptions(filter_radius=PATCH_FILTER_RADIUS, depth_tolerance=tol))
             g = rend.render(arr).gbuffer()
             hmap = _height_map(cam, arr, tol, g, zeye, z) if out_depth is not None else None
             # error (6.1) at the visible surfels inside their triangle
@@ -448,7 +454,7 @@ def _height_map(cam: Camera, arr: SurfelArrays, tol: float, g, zeye: float, z: n
     """
     z0, zr = float(z.min()), max(float(np.ptp(z)), 1e-12)
     hz = np.ascontiguousarray(np.repeat(((z - z0) / zr)[:, None], 3, axis=1))
-    g_h = SplatRenderer(cam, SplatOptions(depth_tolerance=tol)).render(
+    g_h = SplatRenderer(cam, SplatOptions(filter_radius=PATCH_FILTER_RADIUS, depth_tolerance=tol)).render(
         SurfelArrays(arr.positions, arr.normals, arr.radii, arr.axes, hz)).gbuffer()
     centre = z0 + zr * g_h.albedo[..., 0]
     return np.where(g.coverage, 0.5 * ((zeye - np.where(g.coverage, g.depth, zeye)) + centre), 0.0)

@@ -23,7 +23,7 @@ def _pixel_centres(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 
 
 def splat_reference(positions: np.ndarray, normals: np.ndarray, axes: np.ndarray, colors: np.ndarray, camera: Camera,
-                    kappa: float = 2.0, filter_radius: float = 1.0, depth_tolerance: float = 1.0,
+                    kappa: float = 2.0, filter_radius: float = 0.71, depth_tolerance: float = 1.0,
                     zinit: np.ndarray | None = None) -> dict[str, Any]:
     """EWA splatting of N surfels (3.2) by brute force.
 
@@ -57,20 +57,37 @@ def splat_reference(positions: np.ndarray, normals: np.ndarray, axes: np.ndarray
             v = (p - c) @ b2
             rho3 = u * u + v * v
             rho3 = np.where(np.isfinite(rho3) & (np.abs(dn) > 1e-12), rho3, np.inf)
-            if rf2 > 0 and np.isfinite(prow[i]):
-                rho2 = ((rows - prow[i]) ** 2 + (cols - pcol[i]) ** 2) / rf2
-            else:
-                rho2 = np.full((h, w), np.inf)
             cz = pdepth[i]
-            # depth range: ellipse plus the screen filter footprint on the tilted plane
             if camera.is_ortho:
-                fw = filter_radius / camera.pixels_per_unit
                 cos = abs(n @ camera.forward)
             else:
-                fw = filter_radius * cz / camera.pixels_per_unit if cz > near else 0.0
                 cos = abs(n @ (c - camera.eye)) / np.linalg.norm(c - camera.eye)
             sin = np.sqrt(max(1 - cos * cos, 0.0))
             edge_on = sin > 4.0 * cos
+            ewa = edge_on and rf2 > 0
+            if rf2 > 0 and np.isfinite(prow[i]):
+                ey, ex = rows - prow[i], cols - pcol[i]
+                q = np.eye(2) / rf2  # the disc; edge-on: rf across, up to 1 pixel along (_filter_form)
+                if ewa and (camera.is_ortho or (cz > near and r < 0.25 * cz)):
+                    jj = np.zeros((2, 2))
+                    for ax in (a1, a2):  # screen images (col, row) of the axes, projection linearised at c
+                        hstep = 1e-4
+                        pr, pc, _ = camera.project(np.stack([c + hstep * ax, c - hstep * ax]))
+                        jv = np.array([pc[0] - pc[1], pr[0] - pr[1]]) / (2 * hstep)
+                        jj += np.outer(jv, jv)
+                    lam, vec = np.linalg.eigh(jj)
+                    if lam[1] > 0:
+                        reach = max(filter_radius, min(np.sqrt(lam[1] + rf2), 1.0))  # EDGE_FILTER_REACH
+                        e1, e2 = vec[:, 1], vec[:, 0]
+                        q = np.outer(e1, e1) / reach**2 + np.outer(e2, e2) / rf2
+                rho2 = q[0, 0] * ex * ex + 2 * q[0, 1] * ex * ey + q[1, 1] * ey * ey
+            else:
+                rho2 = np.full((h, w), np.inf)
+            # depth range: ellipse plus the screen filter footprint on the tilted plane
+            if camera.is_ortho:
+                fw = filter_radius / camera.pixels_per_unit
+            else:
+                fw = filter_radius * cz / camera.pixels_per_unit if cz > near else 0.0
             zr = r + fw * 4.0 if edge_on else r + fw * sin / cos
             zt = np.clip(t * along, cz - zr, cz + zr)
             z = np.where(np.isfinite(rho3) & (~edge_on | (rho3 <= rho2)) & np.isfinite(zt), zt, cz)

@@ -23,8 +23,10 @@ the same loop in its direct-accumulation mode, so their contributions are bit-id
 Fragment model (perspective-correct ray-splat intersection with an approximate EWA prefilter,
 after Botsch et al. 2004/2005 and Zwicker et al. 2001): the pixel ray meets the surfel plane at
 local coordinates ``(u, v)`` in units of the semi-axes, ``rho3 = u^2 + v^2``; the screen-space
-low-pass filter contributes ``rho2 = |pixel - projected centre|^2 / r_f^2``; the fragment exists
-when ``rho = min(rho3, rho2) < 1`` and weighs ``w = exp(-kappa rho)`` (a clipped Gaussian).
+low-pass filter contributes ``rho2 = |pixel - projected centre|^2 / r_f^2`` (for surfels seen
+edge-on an ellipse, ``r_f`` across their outline and up to one pixel along it, :func:`_filter_form`);
+the fragment exists when ``rho = min(rho3, rho2) < 1`` and weighs ``w = exp(-kappa rho)`` (a
+clipped Gaussian).
 """
 
 from __future__ import annotations
@@ -49,6 +51,11 @@ TILE_SHIFTS = np.array([(t.bit_length() - 1) if t & (t - 1) == 0 else 0 for t in
 #: Surfels whose normal is more than ``atan(EDGE_ON_TAN)`` (76 degrees) from the view ray through
 #: their centre are "edge-on": where their screen filter wins, fragments take the centre depth.
 EDGE_ON_TAN = 4.0
+#: Largest reach (pixels) of an edge-on surfel's screen filter along its projected major axis
+#: (:func:`_filter_form`): the former one-pixel disc. With a filter radius of 0.71 across, a sheet
+#: seen edge-on half a pixel off a row of pixel centres is then a closed line for samples up to
+#: 1.42 pixels apart (a 0.71 disc: 1.0; tests/render/test_splat.py has 1.28).
+EDGE_FILTER_REACH = 1.0
 
 
 @njit(cache=True)
@@ -69,14 +76,15 @@ def _camera_vector(frame, v):
 
 
 @njit(cache=True, inline="always")
-def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H, rfilter):
+def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H, rfilter, rfy):
     """Pixel box of a surfel (inclusive ranges; ``x0 > x1`` when invisible).
 
     The intersection of two conservative boxes: the bounding sphere's exact box and the box of
     the ellipse ``{c + u a1 + v a2 : u^2 + v^2 <= 1}`` under the projection linearised at the
     centre, widened by a bound ``err`` on the second-order remainder (skipped for splats larger
-    than a quarter of their depth); then united with the screen filter disc around the
-    projected centre.
+    than a quarter of their depth); then united with the box of the screen filter around the
+    projected centre: half-widths ``rfilter`` along x and ``rfy`` along y (the disc's radius, or
+    an edge-on surfel's filter ellipse, :func:`_filter_form`).
     """
     if c2 + r <= near:
         return 1, 0, 1, 0
@@ -116,13 +124,111 @@ def _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, ne
         if rfilter > 0.0 and abs(sx) < 1e9 and abs(sy) < 1e9:
             fx0 = max(math.ceil(max(sx - rfilter, -2.0) - 0.5), 0)
             fx1 = min(math.floor(min(sx + rfilter, W + 2.0) - 0.5), W - 1)
-            fy0 = max(math.ceil(max(sy - rfilter, -2.0) - 0.5), 0)
-            fy1 = min(math.floor(min(sy + rfilter, H + 2.0) - 0.5), H - 1)
+            fy0 = max(math.ceil(max(sy - rfy, -2.0) - 0.5), 0)
+            fy1 = min(math.floor(min(sy + rfy, H + 2.0) - 0.5), H - 1)
             if fx0 <= fx1 and fy0 <= fy1:
                 if x0 > x1 or y0 > y1:
                     return fx0, fx1, fy0, fy1
                 return min(x0, fx0), max(x1, fx1), min(y0, fy0), max(y1, fy1)
     return x0, x1, y0, y1
+
+
+@njit(cache=True, inline="always")
+def _filter_form(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, ortho, near, rfilter):
+    """Screen filter of an edge-on surfel: ``rho2 = qxx ex^2 + 2 qxy ex ey + qyy ey^2`` for the
+    offset ``(ex, ey)`` (pixels) of a pixel centre from the projected centre, and the half-widths
+    ``hfx, hfy`` of its box.
+
+    An ellipse with semi-axes ``rfilter`` across the surfel's projection (along its projected
+    normal, i.e. across the outline it lies on) and ``min(sqrt(a^2 + rfilter^2),
+    EDGE_FILTER_REACH)``, at least ``rfilter``, along its projected major semi-axis ``a`` (the
+    reach of the EWA resampling ellipse ``J J^T + rfilter^2 I`` of Zwicker et al. 2001 along
+    that axis, at most the former one-pixel disc). The thin ellipse of an edge-on surfel meets
+    few pixel centres, so the filter draws the outline: it has to bridge neighbouring surfels
+    along the outline, but should not reach further past it than any other splat's filter.
+    ``J`` is the projection of the axes linearised at the centre; perspective splats larger
+    than a quarter of their depth keep the disc (the linearisation does not hold there).
+    """
+    i2 = 1.0 / (rfilter * rfilter)
+    if ortho:
+        sc = f
+        j0 = 0.0
+        j1 = 0.0
+    elif c2 > near and r < 0.25 * c2:
+        sc = f / c2
+        j0 = c0 / c2
+        j1 = c1 / c2
+    else:
+        return i2, 0.0, i2, rfilter, rfilter
+    # screen images (x right, y down) of the two axes, and their second moments J J^T
+    p1x = sc * (a00 - j0 * a02)
+    p1y = -sc * (a01 - j1 * a02)
+    p2x = sc * (a10 - j0 * a12)
+    p2y = -sc * (a11 - j1 * a12)
+    sxx = p1x * p1x + p2x * p2x
+    syy = p1y * p1y + p2y * p2y
+    sxy = p1x * p1y + p2x * p2y
+    hd = 0.5 * (sxx - syy)
+    root = math.sqrt(hd * hd + sxy * sxy)
+    lam = 0.5 * (sxx + syy) + root  # a^2
+    if not (lam > 0.0) or not (lam < np.inf):
+        return i2, 0.0, i2, rfilter, rfilter
+    if hd >= 0.0:  # unit major direction (ux, uy), numerically stable branch
+        ux = hd + root
+        uy = sxy
+    else:
+        ux = sxy
+        uy = root - hd
+    ln = math.sqrt(ux * ux + uy * uy)
+    if not (ln > 0.0):
+        return i2, 0.0, i2, rfilter, rfilter
+    ux /= ln
+    uy /= ln
+    along = max(rfilter, min(math.sqrt(lam + rfilter * rfilter), EDGE_FILTER_REACH))
+    ia = 1.0 / (along * along)
+    qxx = ia * ux * ux + i2 * uy * uy
+    qyy = ia * uy * uy + i2 * ux * ux
+    qxy = (ia - i2) * ux * uy
+    hfx = math.sqrt(along * along * ux * ux + rfilter * rfilter * uy * uy)
+    hfy = math.sqrt(along * along * uy * uy + rfilter * rfilter * ux * ux)
+    return qxx, qxy, qyy, hfx, hfy
+
+
+@njit(cache=True)
+def _edge_form(Pt, k, f, cx, cy, ortho, near, inv_rf2):
+    """``qxx, qxy, qyy`` of :func:`_filter_form` for the surfel of parameter row ``Pt[k]`` (valid
+    ellipse): the axes are recovered from their dual basis (``a_i = sum_j (H^-1)_ij b_j`` with
+    ``H`` the Gram matrix of ``b1, b2``) and the centre from its projection. Computed per
+    (surfel, tile) pair of the few edge-on surfels, so that ``P`` needs no extra columns."""
+    b1x, b1y, b1z = np.float64(Pt[k, 5]), np.float64(Pt[k, 6]), np.float64(Pt[k, 7])
+    b2x, b2y, b2z = np.float64(Pt[k, 8]), np.float64(Pt[k, 9]), np.float64(Pt[k, 10])
+    h11 = b1x * b1x + b1y * b1y + b1z * b1z
+    h22 = b2x * b2x + b2y * b2y + b2z * b2z
+    h12 = b1x * b2x + b1y * b2y + b1z * b2z
+    det = h11 * h22 - h12 * h12
+    if not (det > 0.0):
+        return inv_rf2, 0.0, inv_rf2
+    i11 = h22 / det
+    i22 = h11 / det
+    i12 = -h12 / det
+    a00 = i11 * b1x + i12 * b2x
+    a01 = i11 * b1y + i12 * b2y
+    a02 = i11 * b1z + i12 * b2z
+    a10 = i12 * b1x + i22 * b2x
+    a11 = i12 * b1y + i22 * b2y
+    a12 = i12 * b1z + i22 * b2z
+    cz = np.float64(Pt[k, 0])
+    sx = np.float64(Pt[k, 13])
+    sy = np.float64(Pt[k, 14])
+    if ortho:
+        c0 = (sx - cx) / f
+        c1 = (cy - sy) / f
+    else:
+        c0 = (sx - cx) * cz / f
+        c1 = (cy - sy) * cz / f
+    qxx, qxy, qyy, _, _ = _filter_form(c0, c1, cz, np.float64(Pt[k, 15]), a00, a01, a02, a10, a11, a12, f, ortho,
+                                       near, 1.0 / math.sqrt(inv_rf2))
+    return qxx, qxy, qyy
 
 
 @njit(cache=True, inline="always")
@@ -205,21 +311,27 @@ def _setup_row(i, pos, nrm, radii, axes, elliptical, colors, frame, eye, f, cx, 
     # depth range of the fragments: the ellipse itself (r) plus the screen filter footprint
     # (rfilter pixels in world units at the centre depth) on the tilted plane
     if ortho:
-        fw = rfilter / f
         cos = abs(n2)
     else:
-        fw = rfilter * c2 / f if c2 > near else 0.0
         cl = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
         cos = abs(c0 * n0 + c1 * n1 + c2 * n2) / cl if cl > 0.0 else 1.0
     sin = math.sqrt(max(1.0 - cos * cos, 0.0))
-    if sin > EDGE_ON_TAN * cos:
+    edge = sin > EDGE_ON_TAN * cos
+    if ortho:
+        fw = rfilter / f
+    else:
+        fw = rfilter * c2 / f if c2 > near else 0.0
+    if edge:
         P[j, 23] = -(r + fw * EDGE_ON_TAN)
     else:
         P[j, 23] = r + fw * sin / cos
     for k in range(3):
         P[j, 16 + k] = colors[i, k]
+    hfx = hfy = rfilter
+    if edge and valid and rfilter > 0.0:
+        hfx, hfy = _filter_form(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, ortho, near, rfilter)[3:]
     x0, x1, y0, y1 = _splat_box(c0, c1, c2, r, a00, a01, a02, a10, a11, a12, f, cx, cy, ortho, near, W, H,
-                                rfilter)
+                                hfx, hfy)
     P[j, 19] = x0
     P[j, 20] = x1
     P[j, 21] = y0
@@ -354,18 +466,23 @@ def gather_rows(P, items, out):
 
 @njit(cache=True)
 def _fragment(X, Y, pcx, pcy, ortho, inv_rf2, cz, nx, ny, nz, cn, b1x, b1y, b1z, b2x, b2y, b2z, cb1, cb2,
-              sx, sy, zr):
+              sx, sy, zr, qxx, qxy, qyy):  # qxx, qxy, qyy: _edge_form of the surfel when edge-on
     """``(rho, z)`` of one surfel at the pixel whose ray has ``X, Y`` and centre ``(pcx, pcy)``.
 
     The surfel is given by its parameters (layout of ``P``). ``rho = min(rho3, rho2)``; ``z`` is
     the depth where the pixel ray meets the surfel plane, clamped to the surfel's depth range
     ``cz +- |zr|`` (ellipse plus screen-filter footprint), so fragments of neighbouring surfels of
     one surface agree in depth even when the screen filter wins (minification); for edge-on
-    surfels (``zr < 0``) the centre depth is used where the screen filter wins.
+    surfels (``zr < 0``) the centre depth is used where the screen filter wins, and their screen
+    filter is the ellipse ``qxx, qxy, qyy`` (:func:`_filter_form`) instead of the disc.
     """
     ex = pcx - sx
     ey = pcy - sy
-    rho2 = (ex * ex + ey * ey) * inv_rf2
+    ewa = not (zr > 0.0) and inv_rf2 < np.inf
+    if ewa:
+        rho2 = qxx * ex * ex + 2.0 * qxy * ex * ey + qyy * ey * ey
+    else:
+        rho2 = (ex * ex + ey * ey) * inv_rf2
     if not (rho2 >= 0.0):
         rho2 = np.inf
     if ortho:
@@ -996,6 +1113,13 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
         sx = np.float64(Pt[k, 13])
         sy = np.float64(Pt[k, 14])
         edge = not (zr > 0.0)
+        # edge-on surfels: the screen filter is an ellipse (_filter_form), rows scanned whole
+        ewa = edge and inv_rf2 < np.inf
+        qxx = qyy = inv_rf2
+        qxy2 = 0.0
+        if ewa and abs(np.float64(Pt[k, 11])) < np.inf and abs(np.float64(Pt[k, 12])) < np.inf:
+            qxx, qxy, qyy = _edge_form(Pt, k, f, cx, cy, ortho, near, inv_rf2)
+            qxy2 = 2.0 * qxy
         s = items[k]
         clip = has_clip and clip_offsets[s + 1] > clip_offsets[s]
         planar = abs(nz) > 1e-12  # orthographic: the rays meet the surfel plane
@@ -1037,7 +1161,7 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
                     V0 = cn * e20 - cb2 * dn0
                     qb = UX * U0 + VX * V0 - nx * dn0
                     qc = U0 * U0 + V0 * V0 - dn0 * dn0
-            if bx1 - bx0 < SPAN_MIN_WIDTH:  # narrow boxes: testing every pixel is cheaper
+            if bx1 - bx0 < SPAN_MIN_WIDTH or ewa:  # narrow boxes: testing every pixel is cheaper
                 first, last = bx0, bx1
             elif ey2 < rf2x:
                 first, last = _row_span(qa, iqa, qb, qc, f, cx, flo, fhi, bx0, bx1)
@@ -1048,7 +1172,10 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
                 pcx = px + 0.5
                 X = (pcx - cx) * invf
                 ex = pcx - sx
-                rho2 = (ex * ex + ey2) * inv_rf2
+                if ewa:
+                    rho2 = qxx * ex * ex + qxy2 * ex * ey + qyy * ey2
+                else:
+                    rho2 = (ex * ex + ey2) * inv_rf2
                 if not (rho2 >= 0.0):
                     rho2 = np.inf
                 z = cz

@@ -115,7 +115,7 @@ class RenderOptions:
     Example
     -------
     >>> RenderOptions(method="raycast").splat.filter_radius
-    1.0
+    0.71
     """
 
     method: str = "splat"

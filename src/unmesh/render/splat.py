@@ -12,7 +12,9 @@ buffer"). Sums are float64 and a pixel whose fragment count returns to zero is r
 Fragments (see :mod:`unmesh.render._splat_kernels`): the pixel ray meets the surfel plane at
 ``(u, v)`` in semi-axis units (perspective correct, any surfel orientation), the screen-space
 low-pass filter of EWA splatting (Zwicker et al. 2001) is approximated by the union with a disc
-of radius ``filter_radius`` pixels around the projected centre (Botsch et al. 2005), and the
+of radius ``filter_radius`` pixels around the projected centre (Botsch et al. 2005; for surfels
+seen edge-on an ellipse reaching ``filter_radius`` across their outline and up to one pixel
+along it, see :mod:`unmesh.render._splat_kernels`), and the
 clipped Gaussian ``w = exp(-kappa rho^2)``, ``rho < 1``, is the reconstruction kernel. The depth
 tolerance of the extended depth test is ``eps_s = depth_tolerance * r_s`` per surfel (3.2.1).
 
@@ -56,8 +58,12 @@ from unmesh.spatial import KDTree
 from unmesh.surfels import SurfelCloud
 from unmesh.surfels.cloud import GEOMETRY_DISCONTINUITY, SURFACE, TEXTURE_DISCONTINUITY
 
-__all__ = ["DISCONTINUITY_MIN_ANGLE", "ClipPlanes", "ClipSurfels", "ClipTree", "SplatOptions", "SplatRenderer", "SurfelArrays", "discontinuity_clip", "surfel_arrays"]
+__all__ = ["DISCONTINUITY_MIN_ANGLE", "FILTER_RADIUS", "ClipPlanes", "ClipSurfels", "ClipTree", "SplatOptions", "SplatRenderer", "SurfelArrays", "discontinuity_clip", "surfel_arrays"]
 
+#: Default radius (pixels) of the screen-space filter: just above sqrt(2)/2 (0.7071), the smallest
+#: disc that always contains a pixel centre (the fragment test ``rho < 1`` is strict), so every
+#: surfel still reaches a pixel; the particle splatter uses the same bound.
+FILTER_RADIUS = 0.71
 #: Per-thread work arrays of :meth:`SplatRenderer._run` (surfel parameters, boxes, groups) and of
 #: ``render()``'s spent renderers (visibility buffer; the sums of :func:`_thread_sums`), shared
 #: by all renderers of a thread, so that repeated ``render()`` calls neither allocate nor page
@@ -101,6 +107,10 @@ class SplatOptions:
     filter_radius : float
         Radius (pixels) of the screen-space low-pass filter; >= sqrt(2)/2 guarantees that every
         surfel reaches at least one pixel centre (no aliasing holes when minified). 0 disables it.
+        The default is that bound (:data:`FILTER_RADIUS`, 0.71): a wider disc spreads the splats
+        of an outline further past it (docs/performance.md, "Igea view 3: the splatter's screen
+        filter at outlines, stop 35"). Surfels seen edge-on reach up to one pixel along their
+        outline whatever the radius (``_splat_kernels.EDGE_FILTER_REACH``).
     depth_tolerance : float
         ``eps_z`` of the extended depth test as a multiple of each surfel's radius (3.2.1).
     tile : int
@@ -121,7 +131,7 @@ class SplatOptions:
     """
 
     kappa: float = 2.0
-    filter_radius: float = 1.0
+    filter_radius: float = FILTER_RADIUS
     depth_tolerance: float = 1.0
     tile: int = 32
     precision: str = "single"
