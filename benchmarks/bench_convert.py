@@ -32,6 +32,19 @@ import numpy as np
 DEFAULT_MODEL = Path(__file__).resolve().parents[2] / "shared" / "data" / "models" / "igea.ply"
 
 
+def patterned_cloud(model: str | Path):
+    """The benchmark's input: the model's vertices as surfels (:func:`unmesh.convert.cloud_from_mesh`)
+    with a procedural colour pattern."""
+    from unmesh import io
+    from unmesh.convert import cloud_from_mesh
+
+    cloud = cloud_from_mesh(io.load(model))
+    p = (cloud.positions - cloud.positions.mean(axis=0)) / np.ptp(cloud.positions, axis=0).max()
+    col = 0.55 + 0.35 * np.c_[np.sin(40 * p[:, 0]) * np.cos(30 * p[:, 1]), np.sin(25 * p[:, 2] + 3 * p[:, 0]),
+                              np.cos(35 * p[:, 1])]
+    return cloud.replace(colors=np.clip(col, 0, 1))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--model", default=os.fspath(DEFAULT_MODEL))
@@ -47,18 +60,12 @@ def main() -> None:
     from scipy import ndimage
     from skimage.metrics import structural_similarity
 
-    from unmesh import io
-    from unmesh.convert import ConvertOptions, cloud_from_mesh, convert_cloud
+    from unmesh.convert import ConvertOptions, convert_cloud
     from unmesh.render import Camera, render
 
     print(f"load average at start: {np.round(os.getloadavg(), 1).tolist()}")
     t0 = time.perf_counter()
-    mesh = io.load(args.model)
-    cloud = cloud_from_mesh(mesh)
-    p = (cloud.positions - cloud.positions.mean(axis=0)) / np.ptp(cloud.positions, axis=0).max()
-    col = 0.55 + 0.35 * np.c_[np.sin(40 * p[:, 0]) * np.cos(30 * p[:, 1]), np.sin(25 * p[:, 2] + 3 * p[:, 0]),
-                              np.cos(35 * p[:, 1])]
-    cloud = cloud.replace(colors=np.clip(col, 0, 1))
+    cloud = patterned_cloud(args.model)
     print(f"input: {len(cloud)} points (loading + radii {time.perf_counter() - t0:.1f} s)")
     kw = {}
     if args.faces:

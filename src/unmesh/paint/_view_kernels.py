@@ -41,34 +41,25 @@ def brush_discs(pr, pc, thr, z, src, R, r0, r1, c0, c1, col, nrm, albedo, normal
     ``nrm[src[i]]`` into ``albedo`` / ``normal`` (flat (P, 3) windows), its depth and coverage."""
     w = c1 - c0
     zb = np.full((r1 - r0) * w, np.inf)
-    for i in range(pr.shape[0]):
-        zi = z[src[i]]
-        for oy in range(-R, R + 1):
-            r = pr[i] + oy
-            if r < r0 or r >= r1:
-                continue
-            for ox in range(-R, R + 1):
-                c = pc[i] + ox
-                if c < c0 or c >= c1 or oy * oy + ox * ox > thr[i]:
+    for write in range(2):  # the nearest depth per pixel first, then the colours of the fragments at it
+        for i in range(pr.shape[0]):
+            zi = z[src[i]]
+            for oy in range(-R, R + 1):
+                r = pr[i] + oy
+                if r < r0 or r >= r1:
                     continue
-                f = (r - r0) * w + (c - c0)
-                if zi < zb[f]:
-                    zb[f] = zi
-    for i in range(pr.shape[0]):
-        zi = z[src[i]]
-        for oy in range(-R, R + 1):
-            r = pr[i] + oy
-            if r < r0 or r >= r1:
-                continue
-            for ox in range(-R, R + 1):
-                c = pc[i] + ox
-                if c < c0 or c >= c1 or oy * oy + ox * ox > thr[i]:
-                    continue
-                f = (r - r0) * w + (c - c0)
-                if zi == zb[f] and zi < depth[f]:
-                    for t in range(3):
-                        albedo[f, t] = col[src[i], t]
-                        normal[f, t] = nrm[src[i], t]
+                for ox in range(-R, R + 1):
+                    c = pc[i] + ox
+                    if c < c0 or c >= c1 or oy * oy + ox * ox > thr[i]:
+                        continue
+                    f = (r - r0) * w + (c - c0)
+                    if write == 0:
+                        if zi < zb[f]:
+                            zb[f] = zi
+                    elif zi == zb[f] and zi < depth[f]:
+                        for t in range(3):
+                            albedo[f, t] = col[src[i], t]
+                            normal[f, t] = nrm[src[i], t]
     for f in range(zb.shape[0]):
         if zb[f] < depth[f]:
             depth[f] = zb[f]
