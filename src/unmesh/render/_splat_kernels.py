@@ -1266,6 +1266,17 @@ def splat_tiles(P, items, offsets, order, tile, W, H, f, cx, cy, ortho, near, rf
                     visibility, sign, zvis, acc_w, acc_c, acc_n, acc_z, count, dirty)
 
 
+@njit(cache=True, inline="always")
+def _zero_pixel(count, acc_w, acc_z, acc_c, acc_n, i, j):  # pragma: no cover - numba
+    """Reset the sums of pixel ``(i, j)`` (no fragment left there)."""
+    count[i, j] = 0
+    acc_w[i, j] = 0.0
+    acc_z[i, j] = 0.0
+    for k3 in range(3):
+        acc_c[i, j, k3] = 0.0
+        acc_n[i, j, k3] = 0.0
+
+
 @njit(cache=True)
 def _splat_tile(t, P, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near, inv_rf2, kappa, eps_factor, has_clip,
                 eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree, clip_leaf, rmax, visibility, sign, zvis,
@@ -1278,12 +1289,7 @@ def _splat_tile(t, P, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near
             x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
             for i in range(y0, y0 + th):
                 for j in range(x0, x0 + tw):
-                    count[i, j] = 0
-                    acc_w[i, j] = 0.0
-                    acc_z[i, j] = 0.0
-                    for k3 in range(3):
-                        acc_c[i, j, k3] = 0.0
-                        acc_n[i, j, k3] = 0.0
+                    _zero_pixel(count, acc_w, acc_z, acc_c, acc_n, i, j)
             dirty[t] = 0
         return
     x0, y0, tw, th = tile_rect(t, ntx, tile, W, H)
@@ -1358,12 +1364,7 @@ def _splat_tile(t, P, items, offsets, tile, ntx, W, H, invf, cx, cy, ortho, near
             count[gy, gx] = c
             dirty[t] = 1
             if c <= 0:
-                count[gy, gx] = 0
-                acc_w[gy, gx] = 0.0
-                acc_z[gy, gx] = 0.0
-                for k3 in range(3):
-                    acc_c[gy, gx, k3] = 0.0
-                    acc_n[gy, gx, k3] = 0.0
+                _zero_pixel(count, acc_w, acc_z, acc_c, acc_n, gy, gx)
                 continue
             acc_w[gy, gx] += lw[q]
             acc_z[gy, gx] += ld[q]
