@@ -892,6 +892,12 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
 ROW_BAND_TOL = 2.0 * COPLANAR_EPS
 #: Margin (pixels) added to each end of a band, for the rounding of its ends.
 ROW_BAND_MARGIN = 0.01
+#: Rows of a surfel's span at most this many pixels wide evaluate the clip tree per fragment
+#: (its cache is cheaper there than the bands of every plane).
+ROW_MIN_WIDTH = 16
+#: Surfels with more partners than this take the per-fragment path (the one-partner-per-leaf
+#: check of :func:`_rows_begin` is quadratic in the partners).
+ROW_MAX_PARTNERS = 64
 
 
 @njit(cache=True)
@@ -917,11 +923,14 @@ def _rows_begin(s, bx0, bx1, by0, by1, zmin, zmax, cn, ortho, near, invf, cx, cy
         return False, 0.0
     if clip_mode[0] != 0:
         return False, 0.0
-    K = tree.shape[0]
-    if work[K, 6] != s:
-        _clip_lists(s, clip_offsets, partners, tree, work)
-    if not (work[K, 7] > 0.0):
+    a = clip_offsets[s]
+    b = clip_offsets[s + 1]
+    if b - a > ROW_MAX_PARTNERS:
         return False, 0.0
+    for j in range(a + 1, b):  # one partner per leaf (the rows of a leaf are mostly adjacent)
+        for i in range(j - 1, a - 1, -1):
+            if partners[i, 6] == partners[j, 6]:
+                return False, 0.0
     tmin = 1.0
     if not ortho:
         tmin = max(zmin, near)
@@ -934,8 +943,8 @@ def _rows_begin(s, bx0, bx1, by0, by1, zmin, zmax, cn, ortho, near, invf, cx, cy
     mw = abs(eye[0]) + abs(eye[1]) + abs(eye[2]) + 3.0 * pm  # bounds |world x|_1
     if not (mw < np.inf):
         return False, 0.0
-    base = K + 2 - clip_offsets[s]
-    for j in range(clip_offsets[s], clip_offsets[s + 1]):
+    base = tree.shape[0] + 2 - a
+    for j in range(a, b):
         r = base + j
         n0 = partners[j, 3]
         n1 = partners[j, 4]
@@ -1189,12 +1198,14 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
             else:
                 first, last = _row_span(qa, iqa, qb, qc, f, cx, np.inf, -np.inf, bx0, bx1)
             row = (py - y0) * tw - x0
-            nxt = -np.inf  # next band event of the row's clip intervals, the interval's value
+            inrow = rows and last - first >= ROW_MIN_WIDTH  # the clip tree's intervals in this row
+            nxt = -np.inf  # next band event
             inband = True
-            kept = -1
-            if rows:
-                _row_bands(s, first, last, ortho, Y, tA + tY * Y, tX, Y * ny + nz, nx, cn, tmin, f, cx, clip_offsets,
-                           clip_tree, work)
+            kept = -1  # the current interval's result (-1: not evaluated)
+            if clip_tree is not None:
+                if inrow:
+                    _row_bands(s, first, last, ortho, Y, tA + tY * Y, tX, Y * ny + nz, nx, cn, tmin, f, cx,
+                               clip_offsets, clip_tree, work)
             for px in range(first, last + 1):
                 pcx = px + 0.5
                 X = (pcx - cx) * invf
@@ -1231,20 +1242,22 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
                 q = row + px
                 if z > lz[q]:
                     continue
-                if rows:  # one tree evaluation per interval of constant leaf values (_rows_begin)
-                    if px >= nxt:
-                        inband, nxt = _row_event(px, s, clip_offsets, clip_tree, work)
-                        kept = -1
-                    if inband or not (hit and z == t):  # near a plane, or off the row's line
-                        if not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
-                                     clip_leaf, work):
-                            continue
-                    elif kept < 0:
-                        kept = 1 if _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode,
-                                          clip_tree, clip_leaf, work) else 0
-                        if kept == 0:
-                            continue
-                    elif kept == 0:
+                if inrow:
+                    # one tree evaluation per interval of constant leaf values (_rows_begin): the
+                    # fragments on the row's line outside every plane's band share their result
+                    if clip_tree is not None:
+                        if px >= nxt:
+                            inband, nxt = _row_event(px, s, clip_offsets, clip_tree, work)
+                            kept = -1
+                    line = not inband and hit and z == t
+                    if line and kept >= 0:
+                        keep = kept > 0
+                    else:
+                        keep = _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
+                                     clip_leaf, work)
+                        if line:
+                            kept = 1 if keep else 0
+                    if not keep:
                         continue
                 elif clip and not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
                                         clip_leaf, work):
