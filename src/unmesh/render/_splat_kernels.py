@@ -1100,7 +1100,9 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
     :func:`_fragment`, evaluated with the per-row constants taken out (the ray-plane
     intersection, ``u`` and ``v`` are affine in the pixel column ``X`` in orthographic views).
     Chapter 4's clipped splatting
-    tests each fragment here (:func:`_keep`, surfel ``items[k]``).
+    tests each fragment here (:func:`_keep`, surfel ``items[k]``); with a clip tree of one
+    partner per leaf, once per interval of a row between the partner planes' crossings
+    (:func:`_rows_begin`).
     """
     nrec = 0
     f = 1.0 / invf
