@@ -767,26 +767,6 @@ def _keep_single(s, x0, x1, x2, partners, tree, leaf, work):
     return True, margin
 
 
-@njit(cache=True)
-def _clip_lists(s, clip_offsets, partners, tree, work):
-    """The partner lists of the leaves for surfel ``s`` in ``work`` (:func:`keep_tree_cached`):
-    ``work[k, 1]`` the first partner row of leaf node ``k`` (-1: none), ``work[K + 2 + r, 0]``
-    the next row of row ``clip_offsets[s] + r`` in its leaf's list, each list in ascending row
-    order; ``work[K, 6] = s`` and ``work[K, 7]`` 1 when every leaf has at most one partner."""
-    K = tree.shape[0]
-    base = K + 2 - clip_offsets[s]
-    for k in range(K):
-        work[k, 1] = -1.0
-    single = 1.0
-    for j in range(clip_offsets[s + 1] - 1, clip_offsets[s] - 1, -1):
-        node = int(partners[j, 6])
-        if work[node, 1] >= 0.0:
-            single = 0.0
-        work[base + j, 0] = work[node, 1]
-        work[node, 1] = j
-    work[K, 6] = s
-    work[K, 7] = single
-
 
 @njit(cache=True)
 def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
@@ -811,8 +791,18 @@ def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     """
     K = tree.shape[0]
     base = K + 2 - clip_offsets[s]
-    if work[K, 6] != s:
-        _clip_lists(s, clip_offsets, partners, tree, work)
+    if work[K, 6] != s:  # partner lists of the leaves, each in ascending row order
+        for k in range(K):
+            work[k, 1] = -1.0
+        single = 1.0
+        for j in range(clip_offsets[s + 1] - 1, clip_offsets[s] - 1, -1):
+            node = int(partners[j, 6])
+            if work[node, 1] >= 0.0:
+                single = 0.0
+            work[base + j, 0] = work[node, 1]
+            work[node, 1] = j
+        work[K, 6] = s
+        work[K, 7] = single
     elif _cache_hit(work, K, s, x0, x1, x2):
         return work[K, 5] > 0.0
     elif _cache_hit(work, K + 1, s, x0, x1, x2):
@@ -892,8 +882,8 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
 ROW_BAND_TOL = 2.0 * COPLANAR_EPS
 #: Margin (pixels) added to each end of a band, for the rounding of its ends.
 ROW_BAND_MARGIN = 0.01
-#: Rows of a surfel's span at most this many pixels wide evaluate the clip tree per fragment
-#: (its cache is cheaper there than the bands of every plane).
+#: Rows of a surfel's span within a tile at most this many pixels wide evaluate the clip tree
+#: per fragment (its cache is cheaper there than the bands of every plane).
 ROW_MIN_WIDTH = 16
 #: Surfels with more partners than this take the per-fragment path (the one-partner-per-leaf
 #: check of :func:`_rows_begin` is quadratic in the partners).
@@ -960,10 +950,11 @@ def _rows_begin(s, bx0, bx1, by0, by1, zmin, zmax, cn, ortho, near, invf, cx, cy
 @njit(cache=True)
 def _row_bands(s, first, last, ortho, Y, t0, tX, dn0, nx, cn, tmin, f, cx, clip_offsets, tree, work):
     """The band of each partner plane in the pixel row ``first..last`` (:func:`_rows_begin`):
-    pixels ``lo..hi`` (``work[K + 2 + r]`` columns 1, 2; ``lo = hi + 1`` when no pixel is in
-    it, clamped to ``first - 2 .. last + 2``) around the plane's crossing, a superset of the
-    on-plane fragments within ``delta`` of the plane. Pixels before the band are on one side
-    of the plane, pixels after it on the other.
+    pixels ``lo..hi`` (``lo = hi + 1`` when no pixel is in it, clamped to ``first - 2 .. last +
+    2``) around the plane's crossing, a superset of the on-plane fragments within ``delta`` of
+    the plane. Pixels before the band are on one side of the plane, pixels after it on the
+    other. The bands that reach into the row are written to ``work[K + 2 + i]`` columns 1, 2
+    for ``i < nband``; returns ``nband``.
 
     On the row, an on-plane fragment at ray coordinate ``X`` is at depth ``t = t0 + tX X``
     (orthographic, world ``x = e + X F0 + Y F1 + t F2``) or ``t = cn / (nx X + dn0)``
@@ -974,6 +965,7 @@ def _row_bands(s, first, last, ortho, Y, t0, tX, dn0, nx, cn, tmin, f, cx, clip_
     base = K + 2 - clip_offsets[s]
     lmin = first - 2.0
     lmax = last + 2.0
+    nband = 0
     for j in range(clip_offsets[s], clip_offsets[s + 1]):
         r = base + j
         e = work[r, 3]
@@ -999,23 +991,25 @@ def _row_bands(s, first, last, ortho, Y, t0, tX, dn0, nx, cn, tmin, f, cx, clip_
                 lo = math.ceil(min(max(pa - ROW_BAND_MARGIN, lmin), lmax))
                 hi = math.floor(min(max(pb + ROW_BAND_MARGIN, lmin), lmax))
         elif abs(c0) >= dl:  # parallel to the row and off the band: no band
-            lo = lmax
-            hi = lmax - 1.0
-        work[r, 1] = lo
-        work[r, 2] = hi
+            continue
+        if hi < first or lo > last:  # the whole row on one side
+            continue
+        work[K + 2 + nband, 1] = lo
+        work[K + 2 + nband, 2] = hi
+        nband += 1
+    return nband
 
 
 @njit(cache=True)
-def _row_event(px, s, clip_offsets, tree, work):
-    """Whether pixel ``px`` of the row is in a plane's band (:func:`_row_bands`), and the next
-    pixel where that, or the side of a plane, changes."""
+def _row_event(px, s, nband, clip_offsets, tree, work):
+    """Whether pixel ``px`` of the row is in one of the ``nband`` bands of :func:`_row_bands`,
+    and the next pixel where that, or the side of a plane, changes."""
     K = tree.shape[0]
-    base = K + 2 - clip_offsets[s]
     inband = False
     nxt = np.inf
-    for j in range(clip_offsets[s], clip_offsets[s + 1]):
-        lo = work[base + j, 1]
-        hi = work[base + j, 2]
+    for i in range(nband):
+        lo = work[K + 2 + i, 1]
+        hi = work[K + 2 + i, 2]
         if lo > px:
             nxt = min(nxt, lo)
         elif hi >= px:
@@ -1167,7 +1161,7 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
         rows = False  # the clip tree's row intervals (_rows_begin)
         tmin = 1.0
         if clip_tree is not None:
-            if clip:
+            if clip and bx1 - bx0 >= ROW_MIN_WIDTH:
                 rows, tmin = _rows_begin(s, bx0, bx1, by0, by1, zmin, zmax, cn, ortho, near, invf, cx, cy, eye, frame,
                                          clip_offsets, clip_planes, clip_mode, clip_tree, work)
         for py in range(by0, by1 + 1):
@@ -1204,10 +1198,11 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
             nxt = -np.inf  # next band event
             inband = True
             kept = -1  # the current interval's result (-1: not evaluated)
+            nband = 0
             if clip_tree is not None:
                 if inrow:
-                    _row_bands(s, first, last, ortho, Y, tA + tY * Y, tX, Y * ny + nz, nx, cn, tmin, f, cx,
-                               clip_offsets, clip_tree, work)
+                    nband = _row_bands(s, first, last, ortho, Y, tA + tY * Y, tX, Y * ny + nz, nx, cn, tmin, f, cx,
+                                       clip_offsets, clip_tree, work)
             for px in range(first, last + 1):
                 pcx = px + 0.5
                 X = (pcx - cx) * invf
@@ -1244,26 +1239,27 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
                 q = row + px
                 if z > lz[q]:
                     continue
-                if inrow:
-                    # one tree evaluation per interval of constant leaf values (_rows_begin): the
-                    # fragments on the row's line outside every plane's band share their result
-                    if clip_tree is not None:
-                        if px >= nxt:
-                            inband, nxt = _row_event(px, s, clip_offsets, clip_tree, work)
-                            kept = -1
-                    line = not inband and hit and z == t
-                    if line and kept >= 0:
-                        keep = kept > 0
-                    else:
-                        keep = _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
-                                     clip_leaf, work)
-                        if line:
-                            kept = 1 if keep else 0
-                    if not keep:
+                if clip:
+                    if inrow:
+                        # one tree evaluation per interval of constant leaf values (_rows_begin):
+                        # the fragments on the row's line outside every plane's band share it
+                        if clip_tree is not None:
+                            if px >= nxt:
+                                inband, nxt = _row_event(px, s, nband, clip_offsets, clip_tree, work)
+                                kept = -1
+                        line = not inband and hit and z == t
+                        if line and kept >= 0:
+                            keep = kept > 0
+                        else:
+                            keep = _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode,
+                                         clip_tree, clip_leaf, work)
+                            if line:
+                                kept = 1 if keep else 0
+                        if not keep:
+                            continue
+                    elif not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
+                                   clip_leaf, work):
                         continue
-                elif clip and not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
-                                        clip_leaf, work):
-                    continue
                 if mode == 0:
                     frag_q[nrec] = q
                     frag_k[nrec] = k
