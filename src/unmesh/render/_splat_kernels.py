@@ -885,6 +885,7 @@ def _keep_single(s, x0, x1, x2, partners, tree, leaf, work):
     return True, margin
 
 
+
 @njit(cache=True)
 def keep_tree_cached(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
     """:func:`keep_tree` with the traversal short-circuited and its result reused between
@@ -993,6 +994,148 @@ def _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, c
     return not anymode
 
 
+#: Half-width of a partner plane's band along a pixel row (:func:`_row_bands`), relative to
+#: the coordinates' magnitude: twice :data:`COPLANAR_EPS`, so outside the band every fragment is
+#: off the plane's coplanar band (4.5) on one side, whatever the rounding of its world position.
+ROW_BAND_TOL = 2.0 * COPLANAR_EPS
+#: Margin (pixels) added to each end of a band, for the rounding of its ends.
+ROW_BAND_MARGIN = 0.01
+#: Rows of a surfel's span within a tile at most this many pixels wide evaluate the clip tree
+#: per fragment (its cache is cheaper there than the bands of every plane).
+ROW_MIN_WIDTH = 16
+#: Surfels with more partners than this take the per-fragment path (the one-partner-per-leaf
+#: check of :func:`_rows_begin` is quadratic in the partners).
+ROW_MAX_PARTNERS = 64
+
+
+@njit(cache=True)
+def _rows_begin(s, bx0, bx1, by0, by1, zmin, zmax, cn, ortho, near, invf, cx, cy, eye, frame, clip_offsets, partners,
+                clip_mode, tree, work):
+    """Set-up of the row-interval path of the clip tree for surfel ``s`` (box ``bx0..bx1``,
+    ``by0..by1``, fragment depths ``zmin..zmax``): returns ``(applies, tmin)``.
+
+    Along one pixel row, the fragments on the surfel's plane lie on a line, and each partner
+    plane's side (4.3, :func:`_clips_fragment`) changes at most once on it. When every leaf has
+    at most one partner (:func:`_keep_single`), a leaf's value is that side, so the row splits
+    into intervals of constant leaf values between the planes' crossings, and the tree
+    (Algorithms 4.2/4.3) needs one evaluation per interval. The path applies with a clip tree
+    (``clip_mode[0] == 0``; 1 evaluates every fragment, the reference of the tests), one partner
+    per leaf and, in perspective, a surfel plane off the eye (``cn = c.n != 0``, camera space)
+    and on-plane fragments in front of it (``tmin``: their smallest depth). Per partner row ``j`` it writes to ``work[K + 2 + r]`` (``r = j -
+    clip_offsets[s]``) columns 3-7: ``(e - c).n``, ``F0.n``, ``F1.n``, ``F2.n`` (``F`` the rows
+    of ``frame``, ``e`` the eye) and the band half-width ``delta``, which bounds
+    ``COPLANAR_EPS (1 + |x|_1)`` plus the rounding of the distance for every fragment ``x`` in
+    the box (:data:`ROW_BAND_TOL`).
+    """
+    if tree is None:
+        return False, 0.0
+    if clip_mode[0] != 0:
+        return False, 0.0
+    a = clip_offsets[s]
+    b = clip_offsets[s + 1]
+    if b - a > ROW_MAX_PARTNERS:
+        return False, 0.0
+    for j in range(a + 1, b):  # one partner per leaf (the rows of a leaf are mostly adjacent)
+        for i in range(j - 1, a - 1, -1):
+            if partners[i, 6] == partners[j, 6]:
+                return False, 0.0
+    tmin = 1.0
+    if not ortho:
+        tmin = max(zmin, near)
+        if not (tmin > 0.0) or not (abs(cn) > 0.0):
+            return False, 0.0
+    xm = max(abs((bx0 + 0.5 - cx) * invf), abs((bx1 + 0.5 - cx) * invf))
+    ym = max(abs((cy - by0 - 0.5) * invf), abs((cy - by1 - 0.5) * invf))
+    zm = max(abs(zmin), abs(zmax))
+    pm = xm + ym + zm if ortho else zm * (xm + ym + 1.0)  # bounds |camera-space x|_1
+    mw = abs(eye[0]) + abs(eye[1]) + abs(eye[2]) + 3.0 * pm  # bounds |world x|_1
+    if not (mw < np.inf):
+        return False, 0.0
+    base = tree.shape[0] + 2 - a
+    for j in range(a, b):
+        r = base + j
+        n0 = partners[j, 3]
+        n1 = partners[j, 4]
+        n2 = partners[j, 5]
+        work[r, 3] = (eye[0] - partners[j, 0]) * n0 + (eye[1] - partners[j, 1]) * n1 + (eye[2] - partners[j, 2]) * n2
+        work[r, 4] = frame[0, 0] * n0 + frame[0, 1] * n1 + frame[0, 2] * n2
+        work[r, 5] = frame[1, 0] * n0 + frame[1, 1] * n1 + frame[1, 2] * n2
+        work[r, 6] = frame[2, 0] * n0 + frame[2, 1] * n1 + frame[2, 2] * n2
+        work[r, 7] = ROW_BAND_TOL * (1.0 + mw + abs(partners[j, 0]) + abs(partners[j, 1]) + abs(partners[j, 2]))
+    return True, tmin
+
+
+@njit(cache=True)
+def _row_bands(s, first, last, ortho, Y, t0, tX, dn0, nx, cn, tmin, f, cx, clip_offsets, tree, work):
+    """The band of each partner plane in the pixel row ``first..last`` (:func:`_rows_begin`):
+    pixels ``lo..hi`` (``lo = hi + 1`` when no pixel is in it, clamped to ``first - 2 .. last +
+    2``) around the plane's crossing, a superset of the on-plane fragments within ``delta`` of
+    the plane. Pixels before the band are on one side of the plane, pixels after it on the
+    other. The bands that reach into the row are written to ``work[K + 2 + i]`` columns 1, 2
+    for ``i < nband``; returns ``nband``.
+
+    On the row, an on-plane fragment at ray coordinate ``X`` is at depth ``t = t0 + tX X``
+    (orthographic, world ``x = e + X F0 + Y F1 + t F2``) or ``t = cn / (nx X + dn0)``
+    (perspective, ``x = e + t (X F0 + Y F1 + F2)``), so its distance to the plane is affine in
+    ``X`` (orthographic) or ``t g(X)`` with ``g`` affine (perspective, ``t >= tmin > 0``).
+    """
+    K = tree.shape[0]
+    base = K + 2 - clip_offsets[s]
+    lmin = first - 2.0
+    lmax = last + 2.0
+    nband = 0
+    for j in range(clip_offsets[s], clip_offsets[s + 1]):
+        r = base + j
+        e = work[r, 3]
+        fa = work[r, 4]
+        fb = work[r, 5]
+        fc = work[r, 6]
+        dl = work[r, 7]
+        if ortho:
+            c0 = e + Y * fb + t0 * fc
+            c1 = fa + tX * fc
+        else:  # g(X) = d / t = e (nx X + dn0) / cn + X F0.n + Y F1.n + F2.n
+            c0 = e * dn0 / cn + Y * fb + fc
+            c1 = e * nx / cn + fa
+            dl = dl / tmin
+        lo = lmin  # the whole row unless shown otherwise
+        hi = lmax
+        if c1 != 0.0:
+            pa = (-dl - c0) / c1 * f + cx - 0.5
+            pb = (dl - c0) / c1 * f + cx - 0.5
+            if pa > pb:
+                pa, pb = pb, pa
+            if pa <= pb:
+                lo = math.ceil(min(max(pa - ROW_BAND_MARGIN, lmin), lmax))
+                hi = math.floor(min(max(pb + ROW_BAND_MARGIN, lmin), lmax))
+        elif abs(c0) >= dl:  # parallel to the row and off the band: no band
+            continue
+        if hi < first or lo > last:  # the whole row on one side
+            continue
+        work[K + 2 + nband, 1] = lo
+        work[K + 2 + nband, 2] = hi
+        nband += 1
+    return nband
+
+
+@njit(cache=True)
+def _row_event(px, s, nband, clip_offsets, tree, work):
+    """Whether pixel ``px`` of the row is in one of the ``nband`` bands of :func:`_row_bands`,
+    and the next pixel where that, or the side of a plane, changes."""
+    K = tree.shape[0]
+    inband = False
+    nxt = np.inf
+    for i in range(nband):
+        lo = work[K + 2 + i, 1]
+        hi = work[K + 2 + i, 2]
+        if lo > px:
+            nxt = min(nxt, lo)
+        elif hi >= px:
+            inband = True
+            nxt = min(nxt, hi + 1.0)
+    return inband, nxt
+
+
 @njit(cache=True, inline="always")
 def _accumulate(q, k, w, z, Pt, lw, lc, ln, ld, lcount):
     """Add one fragment of pair ``k`` with weight ``w`` and depth ``z`` to tile pixel ``q``."""
@@ -1069,7 +1212,9 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
     :func:`_fragment`, evaluated with the per-row constants taken out (the ray-plane
     intersection, ``u`` and ``v`` are affine in the pixel column ``X`` in orthographic views).
     Chapter 4's clipped splatting
-    tests each fragment here (:func:`_keep`, surfel ``items[k]``).
+    tests each fragment here (:func:`_keep`, surfel ``items[k]``); with a clip tree of one
+    partner per leaf, once per interval of a row between the partner planes' crossings
+    (:func:`_rows_begin`).
     """
     nrec = 0
     f = 1.0 / invf
@@ -1138,6 +1283,12 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
         iqa = 1.0 / qa if qa > 0.0 else 0.0
         flo = sx - rfl - 0.5 - SPAN_MARGIN
         fhi = sx + rfl - 0.5 + SPAN_MARGIN
+        rows = False  # the clip tree's row intervals (_rows_begin)
+        tmin = 1.0
+        if clip_tree is not None:
+            if clip and bx1 - bx0 >= ROW_MIN_WIDTH:
+                rows, tmin = _rows_begin(s, bx0, bx1, by0, by1, zmin, zmax, cn, ortho, near, invf, cx, cy, eye, frame,
+                                         clip_offsets, clip_planes, clip_mode, clip_tree, work)
         for py in range(by0, by1 + 1):
             pcy = py + 0.5
             Y = (cy - pcy) * invf
@@ -1168,6 +1319,15 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
             else:
                 first, last = _row_span(qa, iqa, qb, qc, f, cx, np.inf, -np.inf, bx0, bx1)
             row = (py - y0) * tw - x0
+            inrow = rows and last - first >= ROW_MIN_WIDTH  # the clip tree's intervals in this row
+            nxt = -np.inf  # next band event
+            inband = True
+            kept = -1  # the current interval's result (-1: not evaluated)
+            nband = 0
+            if clip_tree is not None:
+                if inrow:
+                    nband = _row_bands(s, first, last, ortho, Y, tA + tY * Y, tX, Y * ny + nz, nx, cn, tmin, f, cx,
+                                       clip_offsets, clip_tree, work)
             for px in range(first, last + 1):
                 pcx = px + 0.5
                 X = (pcx - cx) * invf
@@ -1207,9 +1367,27 @@ def _tile_pass(mode, Pt, items, a, b, x0, y0, tw, th, invf, cx, cy, ortho, near,
                 q = row + px
                 if z > lz[q]:
                     continue
-                if clip and not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
-                                      clip_leaf, work):
-                    continue
+                if clip:
+                    if inrow:
+                        # one tree evaluation per interval of constant leaf values (_rows_begin):
+                        # the fragments on the row's line outside every plane's band share it
+                        if clip_tree is not None:
+                            if px >= nxt:
+                                inband, nxt = _row_event(px, s, nband, clip_offsets, clip_tree, work)
+                                kept = -1
+                        line = not inband and hit and z == t
+                        if line and kept >= 0:
+                            keep = kept > 0
+                        else:
+                            keep = _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode,
+                                         clip_tree, clip_leaf, work)
+                            if line:
+                                kept = 1 if keep else 0
+                        if not keep:
+                            continue
+                    elif not _keep(s, X, Y, z, ortho, eye, frame, clip_offsets, clip_planes, clip_mode, clip_tree,
+                                   clip_leaf, work):
+                        continue
                 if mode == 0:
                     frag_q[nrec] = q
                     frag_k[nrec] = k
