@@ -131,3 +131,49 @@ def test_surfels_beyond_the_tree_budget_keep_the_full_tree(monkeypatch):
     g2 = SplatRenderer(cam).render(fa, clip=fc).gbuffer()
     for k in ("albedo", "normal", "depth", "coverage", "weight"):
         assert np.array_equal(getattr(g1, k), getattr(g2, k)), k
+
+
+@pytest.mark.parametrize("leaves", [5, 40])
+def test_signature_groups_equal_numpy_unique_rows(leaves):
+    """The packed-integer grouping of folding signatures (and its fallback for trees with too
+    many leaves to pack) gives the groups of ``np.unique(axis=0)`` in the same order."""
+    from unmesh.csg.fold import LEAF, _signatures
+
+    rng = np.random.default_rng(leaves)
+    k = 2 * leaves - 1
+    tree = np.zeros((k, 4), dtype=np.int32)
+    tree[rng.permutation(k)[:leaves], 0] = LEAF
+    cols = np.flatnonzero(tree[:, 0] == LEAF)
+    m = 500
+    state = np.full((m, k), -1, dtype=np.int8)
+    state[:, cols] = rng.integers(-1, 3, size=(m, leaves))
+    state[rng.integers(0, m, 200)] = state[rng.integers(0, m, 200)]  # repeated signatures
+    leaf = cols[rng.integers(0, leaves, m)].astype(np.int32)
+    leaf[:100] = leaf[100:200]
+    state[:100] = state[100:200]
+    first, which = _signatures(tree, leaf, state)
+    sig = np.concatenate([leaf[:, None].astype(np.int32), state.astype(np.int32)], axis=1)
+    _, first_ref, which_ref = np.unique(sig, axis=0, return_index=True, return_inverse=True)
+    assert np.array_equal(first, first_ref)
+    assert np.array_equal(which, which_ref.reshape(-1))
+
+
+def test_folding_cache_and_trusted_clip_tree_match_a_fresh_validated_fold(monkeypatch):
+    """Folded trees reused from earlier frames give the same arrays as folding afresh, and the
+    clip tree built without re-validation passes :class:`ClipTree`'s checks unchanged."""
+    from unmesh.csg import fold
+
+    fr = prepare(load(scenes.path("csg/spikes.toml")).model)
+    pts = scene_points(SurfelCloud(fr.arrays.positions, fr.arrays.normals, radii=fr.arrays.radii))
+    cam = Camera.fit(pts, 200, 200, fov=35)
+    arrays, clip = select(fr.arrays, fr.clip, front_facing(fr.arrays.positions, fr.arrays.normals, cam))
+    fa1, fc1 = fold_for_camera(arrays, clip, cam)  # fills the cache
+    monkeypatch.setattr(fold, "_FOLDED", {})
+    fa2, fc2 = fold_for_camera(arrays, clip, cam)
+    checked = ClipTree(fc1.offsets, fc1.partners, fc1.tree, fc1.leaf)
+    for a, b, c in zip((fc1.offsets, fc1.partners, fc1.tree, fc1.leaf), (fc2.offsets, fc2.partners, fc2.tree, fc2.leaf),
+                       (checked.offsets, checked.partners, checked.tree, checked.leaf), strict=True):
+        assert a.dtype == b.dtype == c.dtype and a.flags.c_contiguous
+        assert np.array_equal(a, b) and np.array_equal(a, c)
+    for k in ("positions", "normals", "radii", "colors"):
+        assert np.array_equal(getattr(fa1, k), getattr(fa2, k))

@@ -52,6 +52,12 @@ INTERSECTION, UNION, LEAF = 0, 1, 2
 #: does not fit keep the full one.
 TREE_ROWS = 1024
 
+#: Folded trees kept across calls (frames): (tree bytes, own leaf, state bytes) -> the result of
+#: :func:`fold_tree` (read only). Cleared when it holds this many.
+FOLD_CACHE = 4096
+_FOLDED: dict = {}
+_MISSING = object()
+
 
 def _tri(op: int, a: int, b: int) -> int:
     if a < 0:
@@ -134,6 +140,24 @@ def fold_tree(tree: np.ndarray, own: int, state: np.ndarray):
     return np.array(rows, dtype=np.int32), node_map
 
 
+def _signatures(tree: np.ndarray, leaf: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Groups of equal folding signatures ``(leaf[i], state[i])``: ``first`` (G,) the first
+    surfel of each group and ``which`` (M,) the group of each, the groups in lexicographic order
+    of the signatures (what ``np.unique(..., axis=0)`` gives). Only leaf columns of ``state``
+    vary (other nodes have no partners: -1); when they fit, each signature is packed into one
+    int64 (2 bits per leaf state, order kept) and the unique is one of integers."""
+    cols = np.flatnonzero(tree[:, 0] == LEAF)
+    bits = 2 * len(cols)
+    if bits + len(tree).bit_length() <= 62:
+        weights = np.left_shift(np.int64(1), 2 * np.arange(len(cols) - 1, -1, -1, dtype=np.int64))
+        key = (state[:, cols].astype(np.int64) + 1) @ weights + (leaf.astype(np.int64) << bits)
+        _, first, which = np.unique(key, return_index=True, return_inverse=True)
+    else:
+        sig = np.concatenate([leaf[:, None].astype(np.int32), state.astype(np.int32)], axis=1)
+        _, first, which = np.unique(sig, axis=0, return_index=True, return_inverse=True)
+    return first, which.reshape(-1)
+
+
 def _foldable(arrays: SurfelArrays, camera: Camera, filter_radius: float) -> np.ndarray:
     """(N,) bool: surfels whose every fragment lies on their disc (the screen filter's disc
     around the projected centre is well inside the projected splat)."""
@@ -204,9 +228,8 @@ def fold_for_camera(arrays: SurfelArrays, clip: ClipTree, camera: Camera,
     state = np.where(n_rows == 0, -1, np.where((n_cross > 0) | ((n_clip > 0) & (n_clip < n_rows)), VARIABLE, const))
     state = state.astype(np.int8)
     idx = np.flatnonzero(cand)
-    sig = np.concatenate([clip.leaf[idx, None].astype(np.int32), state[idx].astype(np.int32)], axis=1)
-    _, first, which = np.unique(sig, axis=0, return_index=True, return_inverse=True)
-    which = which.reshape(-1)
+    first, which = _signatures(tree, clip.leaf[idx], state[idx])
+    tree_key = tree.tobytes()
     trees = [tree]
     shift = K
     # per unique signature: None (drop), () (plain), (shift, node_map), or "full" (the tree rows
@@ -216,7 +239,13 @@ def fold_for_camera(arrays: SurfelArrays, clip: ClipTree, camera: Camera,
     full = np.zeros(len(first), dtype=bool)
     for q in np.argsort(-np.bincount(which, minlength=len(first)), kind="stable"):
         s = idx[first[q]]
-        res = fold_tree(tree, int(clip.leaf[s]), state[s])
+        own = int(clip.leaf[s])
+        key = (tree_key, own, state[s].tobytes())
+        res = _FOLDED.get(key, _MISSING)
+        if res is _MISSING:
+            if len(_FOLDED) >= FOLD_CACHE:
+                _FOLDED.clear()
+            res = _FOLDED[key] = fold_tree(tree, own, state[s])
         if res is None or res == ():
             folded[q] = res
         elif shift + len(res[0]) > max(TREE_ROWS, 2 * K):
@@ -262,4 +291,7 @@ def fold_for_camera(arrays: SurfelArrays, clip: ClipTree, camera: Camera,
     out = SurfelArrays(*(np.ascontiguousarray(getattr(arrays, k)[kept]) for k in ("positions", "normals", "radii")),
                        None if arrays.axes is None else np.ascontiguousarray(arrays.axes[kept]),
                        np.ascontiguousarray(arrays.colors[kept]))
-    return out, ClipTree(offsets, rows, np.concatenate(trees), new_leaf[kept])
+    # built here from the validated ``clip`` (leaf nodes of the concatenated trees, int32 rows):
+    # no re-validation every frame
+    return out, ClipTree.trusted(offsets, rows, np.ascontiguousarray(np.concatenate(trees), dtype=np.int32),
+                                 new_leaf[kept].astype(np.int32))

@@ -234,6 +234,20 @@ class ClipTree:
         object.__setattr__(self, "tree", tree)
         object.__setattr__(self, "leaf", leaf)
 
+    @classmethod
+    def trusted(cls, offsets: np.ndarray, partners: np.ndarray, tree: np.ndarray, leaf: np.ndarray) -> ClipTree:
+        """A clip tree from arrays already in the validated form (offsets (N+1,) int64 from 0 to
+        P, partners (P, 7) float64 C-contiguous with leaf nodes in column 6, tree (K, 4) int32
+        C-contiguous, leaf (N,) int32 leaf nodes), without re-checking them: for arrays built
+        by the library itself from a validated tree (the per-camera folding of
+        :mod:`unmesh.csg`, every frame). Other callers construct :class:`ClipTree` normally."""
+        self = object.__new__(cls)
+        object.__setattr__(self, "offsets", offsets)
+        object.__setattr__(self, "partners", partners)
+        object.__setattr__(self, "tree", tree)
+        object.__setattr__(self, "leaf", leaf)
+        return self
+
     def __len__(self) -> int:
         return len(self.offsets) - 1
 
