@@ -549,6 +549,15 @@ def _clips(P, j, x0, x1, x2):
     return (x0 - P[j, 0]) * P[j, 3] + (x1 - P[j, 1]) * P[j, 4] + (x2 - P[j, 2]) * P[j, 5] >= 0.0
 
 
+@njit(cache=True, inline="always")
+def _partner_dist2(partners, j, x0, x1, x2):  # pragma: no cover - numba
+    """Squared distance from ``(x0, x1, x2)`` to the centre of clip partner ``j``."""
+    dx = x0 - partners[j, 0]
+    dy = x1 - partners[j, 1]
+    dz = x2 - partners[j, 2]
+    return dx * dx + dy * dy + dz * dz
+
+
 @njit(cache=True)
 def same_plane(P, a, b):
     """Whether partner rows ``a`` and ``b`` lie on one plane (:data:`SAME_PLANE_TOL`): parallel
@@ -604,10 +613,7 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
         work[k, 3] = -1.0
     for j in range(clip_offsets[s], clip_offsets[s + 1]):  # s1 of every leaf
         node = int(partners[j, 6])
-        dx = x0 - partners[j, 0]
-        dy = x1 - partners[j, 1]
-        dz = x2 - partners[j, 2]
-        d = dx * dx + dy * dy + dz * dz
+        d = _partner_dist2(partners, j, x0, x1, x2)
         if d < work[node, 0]:
             work[node, 0] = d
             work[node, 2] = j
@@ -616,10 +622,7 @@ def keep_tree(s, x0, x1, x2, clip_offsets, partners, tree, leaf, work):
         i1 = int(work[node, 2])
         if j == i1 or same_plane(partners, i1, j):
             continue
-        dx = x0 - partners[j, 0]
-        dy = x1 - partners[j, 1]
-        dz = x2 - partners[j, 2]
-        d = dx * dx + dy * dy + dz * dz
+        d = _partner_dist2(partners, j, x0, x1, x2)
         if d < work[node, 1]:
             work[node, 1] = d
             work[node, 3] = j
@@ -768,10 +771,7 @@ def _leaf_value(k, s, x0, x1, x2, partners, tree, leaf, work, base):
         j = int(work[k, 1])
         while j >= 0:  # the same scan order and ties as keep_tree
             if j != i1 and not same_plane(partners, i1, j):
-                dx = x0 - partners[j, 0]
-                dy = x1 - partners[j, 1]
-                dz = x2 - partners[j, 2]
-                d = dx * dx + dy * dy + dz * dz
+                d = _partner_dist2(partners, j, x0, x1, x2)
                 if d < e1:
                     e2 = e1
                     e1 = d
