@@ -19,6 +19,8 @@ from unmesh.paint.transfer import (
     blend_props_reference,
     brush_pixels_reference,
     brush_write_back_reference,
+    child_frames,
+    child_frames_reference,
     hidden_fathers,
     hidden_fathers_reference,
     near_rows,
@@ -106,6 +108,20 @@ def test_pixel_state_equals_the_reference_bit_for_bit(plane_cloud):
         np.testing.assert_array_equal(g, w)
 
 
+def test_child_frames_equal_the_reference_bit_for_bit(plane_cloud):
+    rng = np.random.default_rng(10)
+    s = Session(plane_cloud, PaintOptions(haptics=False)).surface
+    n = s.n
+    s._data["lift"][:n] = rng.random(n) * 0.01
+    s._data["father"][:n] = rng.integers(0, n, n)
+    rq = rng.integers(0, n, 700).astype(np.int64)
+    pu = rng.normal(size=(700, 2))
+    o, _, t1, t2 = _plane(rng)
+    for g, w in zip(child_frames(s, rq, pu, o, t1, t2), child_frames_reference(s, rq, pu, o, t1, t2), strict=True):
+        assert g.shape == w.shape
+        np.testing.assert_array_equal(g, w)
+
+
 def test_brush_kernels_equal_the_references_bit_for_bit():
     rng = np.random.default_rng(9)
     nb, npx = 300, 900
@@ -152,6 +168,7 @@ def test_paint_event_with_the_references_paints_the_same(plane_cloud, monkeypatc
     monkeypatch.setattr(transfer_module, "near_rows", near_rows_reference)
     monkeypatch.setattr(transfer_module, "hidden_fathers", hidden_fathers_reference)
     monkeypatch.setattr(transfer_module, "pixel_state", pixel_state_reference)
+    monkeypatch.setattr(transfer_module, "child_frames", child_frames_reference)
     monkeypatch.setattr(transfer_module, "tk", SimpleNamespace(
         replaced_pixels=replaced_pixels_reference, brush_pixels=brush_pixels_reference,
         brush_write_back=brush_write_back_reference, blend_props=blend_props_reference))

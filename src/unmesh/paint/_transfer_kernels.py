@@ -6,7 +6,8 @@ temporaries. References (the former numpy steps) in :mod:`unmesh.paint.transfer`
 :func:`~unmesh.paint.transfer.replaced_pixels_reference`,
 :func:`~unmesh.paint.transfer.pixel_state_reference`,
 :func:`~unmesh.paint.transfer.brush_pixels_reference`,
-:func:`~unmesh.paint.transfer.brush_write_back_reference`.
+:func:`~unmesh.paint.transfer.brush_write_back_reference`,
+:func:`~unmesh.paint.transfer.child_frames_reference`.
 
 All but the first two are the same operations in the same order as their references (tests
 compare bit for bit). :func:`near_rows` and :func:`hidden_fathers` project onto the plane
@@ -214,3 +215,20 @@ def blend_props(props, P, fb, values):  # pragma: no cover - numba
         for k in range(P.shape[0]):
             q = P[k]
             props[f, q] = (1.0 - fb[k]) * props[f, q] + fb[k] * v
+
+
+@njit(cache=True)
+def child_frames(rq, pu, o, t1, t2, pos, nrm, lift, father, base_pt, onr, fnr, opl, owner_lift):  # pragma: no cover - numba
+    """Per child (owner row ``rq[k]``, pixel centre ``pu[k]``): the pixel centre in space
+    ``o + u t1 + v t2``, the owner's normal, its father's normal ``fnr``, its lift and its
+    father-surface point ``pos - lift fnr``; (K, ...) outputs filled in place."""
+    for k in range(rq.shape[0]):
+        r = rq[k]
+        f = father[r]
+        lf = lift[r]
+        owner_lift[k] = lf
+        for c in range(3):
+            base_pt[k, c] = (o[c] + pu[k, 0] * t1[c]) + pu[k, 1] * t2[c]
+            onr[k, c] = nrm[r, c]
+            fnr[k, c] = nrm[f, c]
+            opl[k, c] = pos[r, c] - lf * nrm[f, c]

@@ -320,6 +320,30 @@ def blend_props_reference(props: np.ndarray, P: np.ndarray, fb: np.ndarray, valu
         props[f, P] = (1.0 - fb) * props[f, P] + fb * values[f]
 
 
+def child_frames_reference(surface: PaintSurface, rq: np.ndarray, pu: np.ndarray, o: np.ndarray, t1: np.ndarray,
+                           t2: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Reference of :func:`child_frames`."""
+    base_pt = o + pu[:, :1] * t1 + pu[:, 1:] * t2
+    onr = surface.nrm[rq]
+    fnr = surface.nrm[surface.father[rq]]
+    owner_lift = surface.lift[rq]
+    opl = surface.pos[rq] - owner_lift[:, None] * fnr
+    return base_pt, onr, fnr, opl, owner_lift
+
+
+def child_frames(surface: PaintSurface, rq: np.ndarray, pu: np.ndarray, o: np.ndarray, t1: np.ndarray,
+                 t2: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Per child of owner row ``rq`` (K,) at pixel centre ``pu`` (K, 2): the pixel centre in space
+    (K, 3), the owner's normal (K, 3), its father's normal (K, 3), its father-surface point
+    (``pos - lift * father normal``, (K, 3)) and its lift (K,)."""
+    K = len(rq)
+    base_pt, onr, fnr, opl, owner_lift = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), \
+        np.empty(K)
+    tk.child_frames(rq, pu, o, t1, t2, surface.pos, surface.nrm, surface.lift, surface.father, base_pt, onr, fnr, opl,
+                    owner_lift)
+    return base_pt, onr, fnr, opl, owner_lift
+
+
 def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
                 direction: np.ndarray, tip: np.ndarray | None = None, body: np.ndarray | None = None,
                 km: bool = False) -> TransferResult:
@@ -460,19 +484,15 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
                                                              paint.metallic], np.float64))
     rho, kap, dif, refl, shin, met = props_a
     # children: pixel centres on the owner's plane
-    base_pt = o + pu[:, :1] * t1 + pu[:, 1:] * t2
-    onr = surface.nrm[rq]
-    # geometry and relief are relative to the original surface: the father's normal (so relief
-    # tilts never accumulate); the owner's plane is its father-surface point with that normal
-    fnr = surface.nrm[surface.father[rq]]
+    # geometry and relief are relative to the original surface: the father's normal fnr (so
+    # relief tilts never accumulate); the owner's plane is its father-surface point opl with that normal
+    base_pt, onr, fnr, opl, owner_lift = child_frames(surface, rq, pu, o, t1, t2)
     cosn = np.maximum(fnr @ N, 0.2)
-    owner_lift = surface.lift[rq]
-    opl = surface.pos[rq] - owner_lift[:, None] * fnr
     s = np.einsum("ij,ij->i", fnr, opl - base_pt) / cosn
     cpos = base_pt + s[:, None] * N
     area = np.full(len(Q), h * h) / cosn
-    lift = owner_lift * 1.0
-    nrm = onr.copy()
+    lift = owner_lift
+    nrm = onr
     if paint.relief == "hair" and P.any():
         thick = (vw[P] + vd[P]) / area[P]
         dirn = direction - np.dot(direction, N) * N
