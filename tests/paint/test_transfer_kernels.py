@@ -27,6 +27,7 @@ from unmesh.paint.transfer import (
     near_rows_reference,
     pixel_state,
     pixel_state_reference,
+    pixels_near_reference,
     plane_frame,
     replaced_pixels_reference,
 )
@@ -90,6 +91,24 @@ def test_replaced_pixels_equal_the_reference_bit_for_bit():
         for g, w in zip(tk.replaced_pixels(*case), replaced_pixels_reference(*case), strict=True):
             assert g.dtype == w.dtype
             np.testing.assert_array_equal(g, w)
+
+
+def test_pixels_near_equals_the_reference():
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        *_, ou, rad_r, lo0, lo1, W, H, h = _buffer_case(rng)
+        cu = ((np.arange(W) + 0.5) - 0.5 * W) * h + (lo0 + 0.5 * W * h)
+        cv = (0.5 * H - (np.arange(H) + 0.5)) * h + (lo1 + 0.5 * H * h)
+        U, V = np.meshgrid(cu, cv)
+        pix = np.stack([U.ravel(), V.ravel()], axis=1)
+        sel = np.sort(rng.choice(len(rad_r), 80, replace=False)).astype(np.int64)
+        # rows whose disc passes exactly through pixel centres
+        rad_r[sel[:5]] = np.hypot(pix[7, 0] - ou[sel[:5], 0], pix[7, 1] - ou[sel[:5], 1])
+        skip = rng.random(W * H) < 0.4
+        args = (ou, rad_r, sel, pix, skip, lo0, lo1, W, H, h)
+        got = tk.pixels_near(*args)
+        np.testing.assert_array_equal(got, pixels_near_reference(*args))
+        assert 7 in got or skip[7]
 
 
 def test_pixel_state_equals_the_reference_bit_for_bit(plane_cloud):
@@ -169,9 +188,12 @@ def test_paint_event_with_the_references_paints_the_same(plane_cloud, monkeypatc
     monkeypatch.setattr(transfer_module, "hidden_fathers", hidden_fathers_reference)
     monkeypatch.setattr(transfer_module, "pixel_state", pixel_state_reference)
     monkeypatch.setattr(transfer_module, "child_frames", child_frames_reference)
+    # ownership of every pixel (not only where the brush covers the buffer, then around the
+    # replaced surfels): the pixels left out own nothing that is used
     monkeypatch.setattr(transfer_module, "tk", SimpleNamespace(
         replaced_pixels=replaced_pixels_reference, brush_pixels=brush_pixels_reference,
-        brush_write_back=brush_write_back_reference, blend_props=blend_props_reference))
+        brush_write_back=brush_write_back_reference, blend_props=blend_props_reference,
+        pixels_near=lambda ou, rad_r, sel, pix, skip, *a: np.flatnonzero(~skip)))
     want = _paint(plane_cloud)
     assert got.surface.n == want.surface.n > got.surface.n_original
     for name in FIELDS:

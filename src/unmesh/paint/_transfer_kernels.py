@@ -125,6 +125,36 @@ def replaced_pixels(own, pen, covered, ou, rad_r, lo0, lo1, W, H, h):  # pragma:
 
 
 @njit(cache=True)
+def pixels_near(ou, rad_r, sel, pix, skip, lo0, lo1, W, H, h):  # pragma: no cover - numba
+    """The buffer pixels (ascending, (K,) int64) whose centre ``pix`` lies within the radius of
+    one of the rows ``sel`` (plane coordinates ``ou``, radii ``rad_r``; with a relative margin
+    of 1e-9), but for those marked in ``skip``: the pixels those rows may own (an owner covers
+    its pixel: distance / radius <= 1)."""
+    mark = np.zeros(W * H, np.bool_)
+    Hh = H * h
+    for t in range(sel.shape[0]):
+        i = sel[t]
+        u = ou[i, 0]
+        v = ou[i, 1]
+        r = rad_r[i] * (1.0 + 1e-9)
+        r2 = r * r
+        i0 = max(math.floor((u - r - lo0) / h) - 1, 0)
+        i1 = min(math.floor((u + r - lo0) / h) + 1, W - 1)
+        j0 = max(math.floor((lo1 + Hh - (v + r)) / h) - 1, 0)
+        j1 = min(math.floor((lo1 + Hh - (v - r)) / h) + 1, H - 1)
+        for j in range(j0, j1 + 1):
+            for c in range(i0, i1 + 1):
+                q = j * W + c
+                if skip[q] or mark[q]:
+                    continue
+                dx = pix[q, 0] - u
+                dy = pix[q, 1] - v
+                if dx * dx + dy * dy <= r2:
+                    mark[q] = True
+    return np.flatnonzero(mark)
+
+
+@njit(cache=True)
 def pixel_state(Q, own, rows, npix, wet, vw, vd, dry, rho, kappa, diff, refl, shin, metal, pix, rq, cw, vwq, vdq, dc,
                 props, pu):  # pragma: no cover - numba
     """Surface pixel state of pixels ``Q``: owner rows ``rq``, the owner's colours, its volumes

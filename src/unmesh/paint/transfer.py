@@ -263,6 +263,16 @@ def replaced_pixels_reference(own: np.ndarray, pen: np.ndarray, covered: np.ndar
     return is_rep, cpix, Q, npix
 
 
+def pixels_near_reference(ou: np.ndarray, rad_r: np.ndarray, sel: np.ndarray, pix: np.ndarray, skip: np.ndarray,
+                          lo0: float, lo1: float, W: int, H: int, h: float) -> np.ndarray:
+    """Reference of :func:`unmesh.paint._transfer_kernels.pixels_near` (every pixel against
+    every row of ``sel``)."""
+    r = rad_r[sel] * (1.0 + 1e-9)
+    dx = pix[:, None, 0] - ou[sel][None, :, 0]
+    dy = pix[:, None, 1] - ou[sel][None, :, 1]
+    return np.flatnonzero((dx * dx + dy * dy <= r * r).any(axis=1) & ~skip)
+
+
 def pixel_state_reference(surface: PaintSurface, Q: np.ndarray, own: np.ndarray, rows: np.ndarray,
                           npix: np.ndarray, pix: np.ndarray) -> tuple[np.ndarray, ...]:
     """Reference of :func:`pixel_state`."""
@@ -422,10 +432,18 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     cv = (0.5 * H - (np.arange(H) + 0.5)) * h + (lo[1] + 0.5 * H * h)
     U, V = np.meshgrid(cu, cv)
     pix = np.stack([U.ravel(), V.ravel()], axis=1)
-    # ownership: nearest object surfel in the plane, within its radius
     # ownership: among the nearest object surfels, the one covering the pixel best (smallest
-    # distance / radius), so cells of small children and large originals tile what they cover
-    own, ratio = owners(ou, rad_r, pix, min(8, len(rows)))
+    # distance / radius), so cells of small children and large originals tile what they cover.
+    # Asked first where the brush covers the buffer or the splats leave a pixel centre uncovered
+    # (penetration needs it there), then (below) around the replaced surfels; the other pixels
+    # own nothing that is used (not covered)
+    kk = min(8, len(rows))
+    need = cov_b.ravel() | ~cov_o.ravel()
+    own = np.zeros(W * H, np.int64)
+    ratio = np.full(W * H, np.inf)
+    first = np.flatnonzero(need)
+    if len(first):
+        own[first], ratio[first] = owners(ou, rad_r, pix[first], kk)
     covered = ratio <= 1.0
     # the object's height: splatted, or (where the clipped kernels leave a pixel centre
     # uncovered, e.g. at a corner of touching splats) the owner's plane (row-wise arithmetic:
@@ -457,6 +475,13 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     rep_local = np.flatnonzero(is_rep)
     if len(rep_local) == 0:
         return empty
+    # the other pixels a replaced surfel may own (within its radius): their owners, then Q again
+    # (is_rep depends only on the penetrated pixels' owners: unchanged)
+    more = tk.pixels_near(ou, rad_r, rep_local, pix, need, float(lo[0]), float(lo[1]), W, H, h)
+    if len(more):
+        own[more], ratio[more] = owners(ou, rad_r, pix[more], kk)
+        covered[more] = ratio[more] <= 1.0
+        is_rep, cpix, Q, npix = tk.replaced_pixels(own, pen, covered, ou, rad_r, float(lo[0]), float(lo[1]), W, H, h)
     P = pen[Q]
     # surface pixel state (exact shares of the owners)
     rq, cw, vw, vd, dc, props_a, pu = pixel_state(surface, Q, own, rows, npix, pix)
