@@ -23,6 +23,7 @@ from unmesh.paint.transfer import (
     child_frames_reference,
     hidden_fathers,
     hidden_fathers_reference,
+    merge_orphans,
     near_rows,
     near_rows_reference,
     pixel_state,
@@ -188,6 +189,8 @@ def test_paint_event_with_the_references_paints_the_same(plane_cloud, monkeypatc
     monkeypatch.setattr(transfer_module, "hidden_fathers", hidden_fathers_reference)
     monkeypatch.setattr(transfer_module, "pixel_state", pixel_state_reference)
     monkeypatch.setattr(transfer_module, "child_frames", child_frames_reference)
+    monkeypatch.setattr(transfer_module, "merge_orphan_rows", lambda s, ks, rr, cw, vw, dc, vd, props: merge_orphans(
+        s, ks, rr, cw, vw, dc, vd, dict(zip(transfer_module._PROPS, props, strict=True))))
     # ownership of every pixel (not only where the brush covers the buffer, then around the
     # replaced surfels): the pixels left out own nothing that is used
     monkeypatch.setattr(transfer_module, "tk", SimpleNamespace(

@@ -7,7 +7,8 @@ temporaries. References (the former numpy steps) in :mod:`unmesh.paint.transfer`
 :func:`~unmesh.paint.transfer.pixel_state_reference`,
 :func:`~unmesh.paint.transfer.brush_pixels_reference`,
 :func:`~unmesh.paint.transfer.brush_write_back_reference`,
-:func:`~unmesh.paint.transfer.child_frames_reference`.
+:func:`~unmesh.paint.transfer.child_frames_reference`,
+:func:`~unmesh.paint.transfer.merge_orphans` (of :func:`merge_orphan_rows`).
 
 All but the first two are the same operations in the same order as their references (tests
 compare bit for bit). :func:`near_rows` and :func:`hidden_fathers` project onto the plane
@@ -262,3 +263,38 @@ def child_frames(rq, pu, o, t1, t2, pos, nrm, lift, father, base_pt, onr, fnr, o
             onr[k, c] = nrm[r, c]
             fnr[k, c] = nrm[f, c]
             opl[k, c] = pos[r, c] - lf * nrm[f, c]
+
+
+@njit(cache=True)
+def merge_orphan_rows(ks, rr, s_vw, s_vd, s_wet, s_dry, s_rho, s_kappa, s_diff, s_refl, s_shin, s_metal, cw, vw, dc, vd,
+                      props):  # pragma: no cover - numba
+    """Merge surface rows ``rr`` into the pixel state at pixels ``ks``, one after the other (a
+    pixel may take several): volumes summed, colours and the attribute rows of ``props`` (rho,
+    kappa, diff, refl, shin, metal) mixed by volume; in place."""
+    for j in range(ks.shape[0]):
+        k = ks[j]
+        r = rr[j]
+        a = vw[k] + vd[k]
+        b = s_vw[r] + s_vd[r]
+        t = a + b
+        if t > 0:
+            props[0, k] = (a * props[0, k] + b * s_rho[r]) / t
+            props[1, k] = (a * props[1, k] + b * s_kappa[r]) / t
+            props[2, k] = (a * props[2, k] + b * s_diff[r]) / t
+            props[3, k] = (a * props[3, k] + b * s_refl[r]) / t
+            props[4, k] = (a * props[4, k] + b * s_shin[r]) / t
+            props[5, k] = (a * props[5, k] + b * s_metal[r]) / t
+        a = vw[k]
+        b = s_vw[r]
+        t = a + b
+        if t > 0:
+            for c in range(3):
+                cw[k, c] = (a * cw[k, c] + b * s_wet[r, c]) / t
+        vw[k] = t
+        a = vd[k]
+        b = s_vd[r]
+        t = a + b
+        if t > 0:
+            for c in range(3):
+                dc[k, c] = (a * dc[k, c] + b * s_dry[r, c]) / t
+        vd[k] = t

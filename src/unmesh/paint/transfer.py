@@ -354,6 +354,15 @@ def child_frames(surface: PaintSurface, rq: np.ndarray, pu: np.ndarray, o: np.nd
     return base_pt, onr, fnr, opl, owner_lift
 
 
+def merge_orphan_rows(surface: PaintSurface, ks: np.ndarray, rr: np.ndarray, cw: np.ndarray, vw: np.ndarray,
+                      dc: np.ndarray, vd: np.ndarray, props: np.ndarray) -> None:
+    """:func:`merge_orphans` (its reference) in one pass, the attributes as the rows of ``props``
+    (6, Q) in the order of ``_PROPS``; in place."""
+    s = surface
+    tk.merge_orphan_rows(np.ascontiguousarray(ks, np.int64), np.ascontiguousarray(rr, np.int64), s.vw, s.vd, s.wet,
+                         s.dry, s.rho, s.kappa, s.diff, s.refl, s.shin, s.metal, cw, vw, dc, vd, props)
+
+
 def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
                 direction: np.ndarray, tip: np.ndarray | None = None, body: np.ndarray | None = None,
                 km: bool = False) -> TransferResult:
@@ -485,7 +494,6 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     P = pen[Q]
     # surface pixel state (exact shares of the owners)
     rq, cw, vw, vd, dc, props_a, pu = pixel_state(surface, Q, own, rows, npix, pix)
-    props = dict(zip(_PROPS, props_a, strict=True))  # rows of props_a
     orphans = rep_local[npix[rep_local] == 0]
     if len(orphans):
         qpos = np.full(W * H, -1, np.int64)
@@ -493,7 +501,7 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         ks = qpos[cpix[orphans]]
         is_rep[orphans[ks < 0]] = False  # its pixel is not part of the resampled region: keep it
         orphans, ks = orphans[ks >= 0], ks[ks >= 0]
-        merge_orphans(surface, ks, rows[orphans], cw, vw, dc, vd, props)
+        merge_orphan_rows(surface, ks, rows[orphans], cw, vw, dc, vd, props_a)
         rep_local = np.flatnonzero(is_rep)
     # brush pixel state on penetrated pixels
     bsel, cbp, vbp, press = tk.brush_pixels(Q, P, bown, depth, sel, brush.wet, brush.vw, float(pressure),
