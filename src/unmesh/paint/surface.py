@@ -60,8 +60,8 @@ VISUAL_FIELDS = frozenset({"pos", "nrm", "rad", "active", "alive", "base", "wet"
 AREA_FACTOR = 0.5
 #: Row capacity reserved at the start, in original surfels. Painting appends children (a stroke
 #: across a 500k-surfel model appends ~60k rows; rows are never reused), so the capacity is
-#: reserved generously: the arrays come from ``np.zeros`` (fresh pages from the system), so
-#: rows never written cost no memory, and growing (a copy of every field) is rare.
+#: reserved generously: the arrays come from :func:`fresh_zeros` (fresh pages from the system),
+#: so rows never written cost no memory, and growing (a copy of every field) is rare.
 RESERVE = 4.0
 #: :meth:`PaintSurface.reserve_ahead` grows the capacity (by :data:`GROWTH`) once fewer rows than
 #: this fraction of the original surfels are free, so that a stroke never stops for a copy.
@@ -95,7 +95,10 @@ def fresh_zeros(shape: tuple[int, ...], dtype: Any) -> np.ndarray:
     nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
     if nbytes < FRESH_MIN_BYTES:
         return np.zeros(shape, dt)
-    buf = mmap.mmap(-1, nbytes)  # anonymous: zero pages, mapped on first write
+    if hasattr(mmap, "MAP_PRIVATE") and hasattr(mmap, "MAP_ANONYMOUS"):  # private, as malloc's (copied on fork)
+        buf = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    else:
+        buf = mmap.mmap(-1, nbytes)  # anonymous: zero pages, mapped on first write
     if hasattr(mmap, "MADV_NOHUGEPAGE"):
         buf.madvise(mmap.MADV_NOHUGEPAGE)
     return np.frombuffer(buf, dt).reshape(shape)
