@@ -443,11 +443,12 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     pix = np.stack([U.ravel(), V.ravel()], axis=1)
     # ownership: among the nearest object surfels, the one covering the pixel best (smallest
     # distance / radius), so cells of small children and large originals tile what they cover.
-    # Asked first where the brush covers the buffer or the splats leave a pixel centre uncovered
-    # (penetration needs it there), then (below) around the replaced surfels; the other pixels
-    # own nothing that is used (not covered)
+    # Asked first where the brush may penetrate (it covers the pixel, and the splatted height is
+    # above the brush's or the splats leave the pixel centre uncovered: penetration needs the
+    # owner there), then (below) around the replaced surfels; the other pixels own nothing that
+    # is used (not covered)
     kk = min(8, len(rows))
-    need = cov_b.ravel() | ~cov_o.ravel()
+    need = (cov_b.ravel() & (ho.ravel() - hb.ravel() > 0)) | ~cov_o.ravel()
     own = np.zeros(W * H, np.int64)
     ratio = np.full(W * H, np.inf)
     first = np.flatnonzero(need)
