@@ -18,7 +18,7 @@ const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1]
 const stats = { forces: 0, frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], previewLatencies: [],
                 stages: [], dropped: 0, fps: 0, errors: [], replies: [] };
 let server = { px_per_unit: 100, palette_px_per_unit: 173, presets: {}, width: 0, height: 0 };
-let stroke = null;          // {target, resampler, toImage, rows, ts, k, radius, color}
+let stroke = null;          // {target, resampler, toImage, k, radius, color}
 let cursor = null;          // {x, y, p, tilt, over}
 let drawing = Promise.resolve();
 let strokeNo = 0, endedNo = 0;  // strokes begun and acknowledged ("ended"): their dab previews go then
@@ -85,7 +85,7 @@ function bump(k) { $("strokes").textContent = String(Math.max(0, Number($("strok
 
 // Draws a frame; a frame older than the newest whole frame of its target is skipped (stale).
 // Latency split of a frame that shows pen events (ts = the newest event's time stamp):
-// input = event -> samples sent (batching per animation frame), wire = sent -> frame received,
+// input = event -> samples sent (page-side handling: samples go out with their pointer event), wire = sent -> frame received,
 // made of up (sent -> the server's event loop received it), the server's srv timings (queue,
 // paint, render, encode) and down (encoded -> the page received the frame; server and page share
 // the wall clock), and client = received -> decoded and drawn.
@@ -198,21 +198,23 @@ function beginStroke(ev, target, canvas) {
   const pxPerUnit = target === "model" ? server.px_per_unit : server.palette_px_per_unit;
   const spacing = Math.max(1, 0.4 * tools.size * pxPerUnit);  // two fifths of the brush radius on screen
   strokeNo += 1;
-  stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas), rows: [], ts: null,
+  stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas),
              k: strokeNo, radius: tools.size * pxPerUnit, color: hex(tools.color) };
   conn.send({ type: "begin", target, brush: { type: tools.brush, size: tools.size },
               paint: { type: tools.paint, color: tools.color, drying: tools.drying } });
   addSamples(ev);
 }
 
-// Samples are collected per animation frame and sent as one message (with the newest event's
-// time stamp); the model's dab previews are drawn in the same frame.
+// Samples are sent at once, one message per pointer event (its coalesced events, with its time
+// stamp): the server takes every message queued while it was busy into one frame, so holding them
+// here would only add latency. The model's dab previews are drawn at the next animation frame.
 function addSamples(ev) {
   const rows = [];
   for (const pt of inputPoints(ev, stroke.toImage, tools.pressure)) rows.push(...stroke.resampler.push(pt));
   if (!rows.length) return;
-  stroke.rows.push(...rows);
-  stroke.ts = ev.timeStamp;
+  const ts = ev.timeStamp;
+  conn.send({ type: "samples", samples: rows, ts });
+  sentAt.set(ts, performance.now());
   if (stroke.target === "model") {
     for (const r of rows) {
       if (onSurface(r[1], r[2])) {
@@ -221,37 +223,30 @@ function addSamples(ev) {
                     color: stroke.color });
       }
     }
+    scheduleDabs(ts);
   }
-  scheduleFlush();
 }
 
-let flushPending = false;
-function scheduleFlush() {
-  if (flushPending) return;
-  flushPending = true;
-  requestAnimationFrame(flushSamples);
-  setTimeout(flushSamples, 34);  // when animation frames are throttled (hidden page)
+let dabsPending = null;  // the newest pen event time stamp whose dab previews wait for the next animation frame
+function scheduleDabs(ts) {
+  const first = dabsPending === null;
+  dabsPending = ts;
+  if (!first) return;
+  requestAnimationFrame(flushDabs);
+  setTimeout(flushDabs, 34);  // when animation frames are throttled (hidden page)
 }
 
-function flushSamples() {
-  if (!flushPending) return;
-  flushPending = false;
-  if (!stroke || !stroke.rows.length) return;
-  const rows = stroke.rows, ts = stroke.ts;
-  stroke.rows = [];
-  conn.send({ type: "samples", samples: rows, ts });
-  sentAt.set(ts, performance.now());
-  if (stroke.target === "model") {
-    drawDabs();
-    stats.previewLatencies.push(performance.now() - ts);
-    if (stats.previewLatencies.length > 2000) stats.previewLatencies.shift();
-  }
+function flushDabs() {
+  if (dabsPending === null) return;
+  const ts = dabsPending;
+  dabsPending = null;
+  drawDabs();
+  stats.previewLatencies.push(performance.now() - ts);
+  if (stats.previewLatencies.length > 2000) stats.previewLatencies.shift();
 }
 
 function endStroke() {
   if (!stroke) return;
-  flushPending = true;
-  flushSamples();
   conn.send({ type: "end" });
   if (stroke.target === "model") bump(1);
   stroke = null;
@@ -267,10 +262,15 @@ overlay.addEventListener("pointerdown", (ev) => {
   else if (ev.button === 0) beginStroke(ev, "model", overlay);
   ev.preventDefault();
 });
+// Pen samples come from pointerrawupdate where the browser has it (secure contexts such as
+// 127.0.0.1): it is dispatched when the input arrives, while pointermove waits for the next
+// animation frame (about 8-16 ms); pointermove then only moves the cursor.
+const RAW = "onpointerrawupdate" in window;
+const penEvent = RAW ? "pointerrawupdate" : "pointermove";
+overlay.addEventListener(penEvent, (ev) => { if (stroke && stroke.target === "model") addSamples(ev); });
 overlay.addEventListener("pointermove", (ev) => {
   cursor = { x: ev.clientX, y: ev.clientY, p: pressureOf(ev, tools.pressure), tilt: tiltOf(ev), over: true };
-  if (stroke && stroke.target === "model") addSamples(ev);
-  else if (nav.drag) nav.move(ev, overlay.height);
+  if (!(stroke && stroke.target === "model") && nav.drag) nav.move(ev, overlay.height);
   drawCursor();
 });
 for (const type of ["pointerup", "pointercancel"]) {
@@ -294,7 +294,7 @@ paletteCanvas.addEventListener("pointerdown", (ev) => {
   paletteCanvas.setPointerCapture(ev.pointerId);
   beginStroke(ev, "palette", paletteCanvas);
 });
-paletteCanvas.addEventListener("pointermove", (ev) => { if (stroke && stroke.target === "palette") addSamples(ev); });
+paletteCanvas.addEventListener(penEvent, (ev) => { if (stroke && stroke.target === "palette") addSamples(ev); });
 for (const type of ["pointerup", "pointercancel"]) paletteCanvas.addEventListener(type, () => endStroke());
 
 // The brush at the pen position with its shadow (5.7): the shadow falls away from the tilt.
