@@ -96,12 +96,16 @@ async function drawFrame(head, blobs, recv) {
   const ctx = model ? viewCtx : paletteCtx;
   if (!head.full && (canvas.width !== head.w || canvas.height !== head.h)) return;
   if (head.full && model && (canvas.width !== head.w || canvas.height !== head.h)) return;  // stale size
-  const bitmaps = await Promise.all(blobs.map((b) => createImageBitmap(b)));
-  head.rects.forEach((r, i) => {
-    if (head.scale > 1) ctx.drawImage(bitmaps[i], 0, 0, head.w, head.h);
-    else ctx.drawImage(bitmaps[i], r[0], r[1]);
-    bitmaps[i].close();
-  });
+  if (head.fmt === "rgba") {  // raw tiles of a painting frame: copied at once
+    head.rects.forEach((r, i) => ctx.putImageData(blobs[i], r[0], r[1]));
+  } else {
+    const bitmaps = await Promise.all(blobs.map((b) => createImageBitmap(b)));
+    head.rects.forEach((r, i) => {
+      if (head.scale > 1) ctx.drawImage(bitmaps[i], 0, 0, head.w, head.h);
+      else ctx.drawImage(bitmaps[i], r[0], r[1]);
+      bitmaps[i].close();
+    });
+  }
   stats.frames += 1;
   stats.tiles += head.rects.length;
   stats.bytes += head.rects.reduce((a, r) => a + r[4], 0);
