@@ -9,8 +9,8 @@ It prints:
 * **input-to-screen latency** of paint events: from the pointer event's ``timeStamp`` to the
   moment the page's dab preview of it is drawn (client side, one animation frame), and to the
   moment the server's frame that contains it is drawn on the canvas (median, 90th percentile,
-  max), with the split of the latter into stages (means, which add up to the mean total): ``input`` (event -> samples sent,
-  batching per animation frame), ``queue`` / ``paint`` (ray casts + ``add_samples``) /
+  max), with the split of the latter into stages (means, which add up to the mean total): ``input`` (event -> samples sent:
+  the browser's input pipeline and the page's handler), ``queue`` / ``paint`` (ray casts + ``add_samples``) /
   ``render`` / ``encode`` (the server's timings in the frame header), ``up`` (sent -> received
   by the server's event loop) and ``down`` (encoded -> received by the page: event loop,
   WebSocket, the page's main thread), both from the shared wall clock, and ``client``
