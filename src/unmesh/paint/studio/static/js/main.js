@@ -18,7 +18,7 @@ const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1]
 const stats = { forces: 0, frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], previewLatencies: [],
                 stages: [], dropped: 0, fps: 0, errors: [], replies: [] };
 let server = { px_per_unit: 100, palette_px_per_unit: 173, presets: {}, width: 0, height: 0 };
-let stroke = null;          // {target, resampler, toImage, k, radius, color}
+let stroke = null;          // {target, resampler, toImage, k, radius, color, raw (samples from raw updates)}
 let cursor = null;          // {x, y, p, tilt, over}
 let drawing = Promise.resolve();
 let strokeNo = 0, endedNo = 0;  // strokes begun and acknowledged ("ended"): their dab previews go then
@@ -266,15 +266,18 @@ overlay.addEventListener("pointerdown", (ev) => {
   else if (ev.button === 0) beginStroke(ev, "model", overlay);
   ev.preventDefault();
 });
-// Pen samples come from pointerrawupdate where the browser has it (secure contexts such as
+// Pen samples come from pointerrawupdate where the browser fires it (secure contexts such as
 // 127.0.0.1): it is dispatched when the input arrives, while pointermove waits for the next
-// animation frame (about 8-16 ms); pointermove then only moves the cursor.
-const RAW = "onpointerrawupdate" in window;
-const penEvent = RAW ? "pointerrawupdate" : "pointermove";
-overlay.addEventListener(penEvent, (ev) => { if (stroke && stroke.target === "model") addSamples(ev); });
+// animation frame (about 8-16 ms). A stroke that gets raw updates takes its samples only from
+// them; otherwise (no raw updates) from pointermove's coalesced events as before.
+function penRaw(target) {
+  return (ev) => { if (stroke && stroke.target === target) { stroke.raw = true; addSamples(ev); } };
+}
+overlay.addEventListener("pointerrawupdate", penRaw("model"));
 overlay.addEventListener("pointermove", (ev) => {
   cursor = { x: ev.clientX, y: ev.clientY, p: pressureOf(ev, tools.pressure), tilt: tiltOf(ev), over: true };
-  if (!(stroke && stroke.target === "model") && nav.drag) nav.move(ev, overlay.height);
+  if (stroke && stroke.target === "model") { if (!stroke.raw) addSamples(ev); }
+  else if (nav.drag) nav.move(ev, overlay.height);
   drawCursor();
 });
 for (const type of ["pointerup", "pointercancel"]) {
@@ -298,7 +301,8 @@ paletteCanvas.addEventListener("pointerdown", (ev) => {
   paletteCanvas.setPointerCapture(ev.pointerId);
   beginStroke(ev, "palette", paletteCanvas);
 });
-paletteCanvas.addEventListener(penEvent, (ev) => { if (stroke && stroke.target === "palette") addSamples(ev); });
+paletteCanvas.addEventListener("pointerrawupdate", penRaw("palette"));
+paletteCanvas.addEventListener("pointermove", (ev) => { if (stroke && stroke.target === "palette" && !stroke.raw) addSamples(ev); });
 for (const type of ["pointerup", "pointercancel"]) paletteCanvas.addEventListener(type, () => endStroke());
 
 // The brush at the pen position with its shadow (5.7): the shadow falls away from the tilt.
