@@ -34,7 +34,9 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import atexit
 import math
+import shutil
 import statistics
 import sys
 import tempfile
@@ -92,7 +94,9 @@ def main() -> None:
     w, h = (int(v) for v in args.size.split("x"))
     haptics = {"thread": "thread", "process": "process", "off": False}[args.haptics]
     print(f"haptic loop: {args.haptics}")
-    out = Path(tempfile.mkdtemp()) / "blob_painted.ply"
+    folder = Path(tempfile.mkdtemp(prefix="unmesh_bench_studio_"))
+    atexit.register(shutil.rmtree, folder, True)  # the saved model and its autosave: ~0.4 GB at 500k surfels
+    out = folder / "blob_painted.ply"
     with BackgroundStudio(Workspace(Session(cloud, PaintOptions(haptics=haptics)), out, advance_every=None)) as studio:
         pw = sync_playwright().start()
         browser = pw.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
