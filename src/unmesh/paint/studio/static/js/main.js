@@ -306,18 +306,28 @@ paletteCanvas.addEventListener("pointermove", (ev) => { if (stroke && stroke.tar
 for (const type of ["pointerup", "pointercancel"]) paletteCanvas.addEventListener(type, () => endStroke());
 
 // The brush at the pen position with its shadow (5.7): the shadow falls away from the tilt.
+// Drawn at every pointer move, so kept cheap for the browser: only the last cursor's box is
+// cleared (the compositor redraws that much of the layer, not the whole canvas), and the soft
+// shadow is the canvas's own shadow of a shape drawn off the canvas (a blur of the shape's box;
+// a blur filter on the context filters the whole canvas: ~0.25 core at 60 moves per second).
+const SHADOW_SIGMA = 3;              // px: the shadow's Gaussian blur (shadowBlur is twice sigma)
+let cursorBox = null;                // [x, y, w, h] of the drawn cursor
 function drawCursor() {
   const ctx = overlayCtx;
-  ctx.clearRect(0, 0, overlay.width, overlay.height);
+  if (cursorBox) ctx.clearRect(...cursorBox);
+  cursorBox = null;
   if (!cursor || nav.drag) return;
   const rect = overlay.getBoundingClientRect();
   const x = (cursor.x - rect.left) * overlay.width / rect.width, y = (cursor.y - rect.top) * overlay.height / rect.height;
   const r = Math.max(2, tools.size * server.px_per_unit * (0.55 + 0.45 * cursor.p));
   const sx = 5 + cursor.tilt[1] * 0.15, sy = 7 + cursor.tilt[0] * 0.15;
+  const far = overlay.width + 4 * r + 100;  // the shape lies this far left of its shadow, off the canvas
   ctx.save();
-  ctx.filter = "blur(3px)";
-  ctx.fillStyle = "rgba(0, 0, 0, 0.28)";
-  ctx.beginPath(); ctx.ellipse(x + sx, y + sy, r * 1.05, r * 0.8, 0.3, 0, 2 * Math.PI); ctx.fill();
+  ctx.shadowColor = "rgba(0, 0, 0, 0.28)";
+  ctx.shadowBlur = 2 * SHADOW_SIGMA;
+  ctx.shadowOffsetX = far;
+  ctx.fillStyle = "#000";
+  ctx.beginPath(); ctx.ellipse(x + sx - far, y + sy, r * 1.05, r * 0.8, 0.3, 0, 2 * Math.PI); ctx.fill();
   ctx.restore();
   ctx.lineWidth = 2;
   ctx.strokeStyle = hex(tools.color);
@@ -327,6 +337,9 @@ function drawCursor() {
   ctx.beginPath(); ctx.arc(x, y, r + 1.5, 0, 2 * Math.PI); ctx.stroke();
   ctx.fillStyle = "rgba(20, 20, 20, 0.8)";
   ctx.fillRect(x - 0.5, y - 0.5, 1.5, 1.5);
+  // what was drawn: the rings (r + 2) and the shadow (1.05 r + 3 sigma around its offset centre)
+  const reach = Math.max(r + 2, 1.05 * r + Math.hypot(sx, sy) + 3 * SHADOW_SIGMA) + 2;
+  cursorBox = [Math.floor(x - reach), Math.floor(y - reach), Math.ceil(2 * reach) + 1, Math.ceil(2 * reach) + 1];
 }
 
 // ---- tools ----------------------------------------------------------------------------------------
