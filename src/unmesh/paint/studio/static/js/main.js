@@ -183,7 +183,8 @@ function sizeCanvas() {
   const w = Math.max(16, Math.min(2048, Math.round(stage.clientWidth)));
   const h = Math.max(16, Math.min(2048, Math.round(stage.clientHeight)));
   const changed = viewCanvas.width !== w || viewCanvas.height !== h;
-  for (const c of [viewCanvas, previewCanvas, overlay]) { c.width = w; c.height = h; }
+  for (const c of [viewCanvas, previewCanvas, overlay]) { c.width = w; c.height = h; }  // (clears them)
+  cursorBox = null;
   return changed;
 }
 let resizeTimer = null;
