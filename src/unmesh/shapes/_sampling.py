@@ -20,7 +20,7 @@ MIN_SPACING_FRACTION = 0.25
 #: Rounds of scattering fine candidates round themselves (reaches caps the candidate mesh cut short).
 SCATTER_ROUNDS = 2
 #: The local spacing grows at most this much per unit distance from a sharp cap (grading).
-GRADING = 0.25
+GRADING = 0.5
 
 
 def greedy_poisson_reference(order: np.ndarray, offsets: np.ndarray, indices: np.ndarray) -> np.ndarray:
@@ -117,7 +117,7 @@ def poisson_surface(vertices: np.ndarray, faces: np.ndarray, spacing: float,
       radius ``1/kappa_1`` where both principal curvatures are positive, at least
       ``MIN_SPACING_FRACTION`` of ``spacing``) is evaluated at the mesh vertices whose edges
       bend sharply and at the candidates on their faces, then graded,
-      ``s(x) = min_v (s_v + GRADING |x - v|)``, so the refinement reaches a few spacings
+      ``s(x) = min_v (s_v + GRADING |x - v|)``, so the refinement reaches up to 1.5 spacings
       round the apex. With neighbours at most ~1.8 s apart (a maximal Poisson-disk set),
       their normals differ by at most ~100 degrees round the cap, within the 120 degrees
       that :func:`unmesh.surfels.estimate_radii` (``smooth=True``) accepts as neighbours;
