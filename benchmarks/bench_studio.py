@@ -75,8 +75,10 @@ def main() -> None:
 
     spacing = args.spacing
     if args.surfels:
-        n0 = len(Blob().surfels(spacing=0.05))
-        spacing = 0.05 * math.sqrt(n0 / args.surfels)
+        # the pilot at 0.01 (26k surfels): at coarser spacings the ear caps' refinement
+        # (shapes._sampling) is a larger share and the estimate would fall short
+        n0 = len(Blob().surfels(spacing=0.01))
+        spacing = 0.01 * math.sqrt(n0 / args.surfels)
     t = time.perf_counter()
     cached = Path(args.cache) / f"blob_{spacing:.6g}.ply" if args.cache else None
     if cached is not None and cached.is_file():

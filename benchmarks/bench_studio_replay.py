@@ -53,7 +53,7 @@ def main() -> None:
 
     spacing = args.spacing
     if args.surfels:
-        spacing = 0.05 * math.sqrt(len(Blob().surfels(spacing=0.05)) / args.surfels)
+        spacing = 0.01 * math.sqrt(len(Blob().surfels(spacing=0.01)) / args.surfels)  # pilot as bench_studio's
     cached = Path(args.cache) / f"blob_{spacing:.6g}.ply" if args.cache else None
     if cached is not None and cached.is_file():
         from unmesh.io import load_surfels
