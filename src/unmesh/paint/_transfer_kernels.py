@@ -284,17 +284,18 @@ def merge_orphan_rows(ks, rr, s_vw, s_vd, s_wet, s_dry, s_rho, s_kappa, s_diff, 
             props[3, k] = (a * props[3, k] + b * s_refl[r]) / t
             props[4, k] = (a * props[4, k] + b * s_shin[r]) / t
             props[5, k] = (a * props[5, k] + b * s_metal[r]) / t
-        a = vw[k]
-        b = s_vw[r]
-        t = a + b
-        if t > 0:
-            for c in range(3):
-                cw[k, c] = (a * cw[k, c] + b * s_wet[r, c]) / t
-        vw[k] = t
-        a = vd[k]
-        b = s_vd[r]
-        t = a + b
-        if t > 0:
-            for c in range(3):
-                dc[k, c] = (a * dc[k, c] + b * s_dry[r, c]) / t
-        vd[k] = t
+        _mix_colour(cw, vw, k, s_wet, s_vw, r)
+        _mix_colour(dc, vd, k, s_dry, s_vd, r)
+
+
+@njit(cache=True, inline="always")
+def _mix_colour(col, vol, k, s_col, s_vol, r):  # pragma: no cover - numba
+    """Pixel ``k``'s colour (3,) and volume take surface row ``r``'s: colours mixed by volume,
+    volumes summed (the wet or the dry layer of :func:`merge_orphan_rows`); in place."""
+    a = vol[k]
+    b = s_vol[r]
+    t = a + b
+    if t > 0:
+        for c in range(3):
+            col[k, c] = (a * col[k, c] + b * s_col[r, c]) / t
+    vol[k] = t
