@@ -25,7 +25,14 @@ def _stroke_messages() -> list[dict]:
 async def _frames(url: str, origin: dict, compress: int) -> tuple[int, list[bytes]]:
     frames = []
     async with aiohttp.ClientSession() as http, http.ws_connect(url, headers=origin, compress=compress) as ws:
-        for m in _stroke_messages():
+        hello, *stroke = _stroke_messages()
+        await ws.send_str(json.dumps(hello))
+        while True:  # the first whole frame, before painting: the stroke's frames are then differential
+            msg = await ws.receive(timeout=120)
+            if msg.type == aiohttp.WSMsgType.BINARY:
+                frames.append(msg.data)
+                break
+        for m in stroke:
             await ws.send_str(json.dumps(m))
         while True:
             msg = await ws.receive(timeout=120)
