@@ -10,6 +10,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from unmesh._csr import csr_entries
+
 __all__ = ["greedy_poisson_reference", "local_spacing", "poisson_surface", "principal_curvatures"]
 
 #: Curvature-adaptive spacing: the local Poisson spacing is at most this many convex curvature
@@ -262,11 +264,8 @@ def _adaptive_conflicts(pts: np.ndarray, local: np.ndarray, spacing: float, offs
     """
     fine = local < spacing
     f = np.flatnonzero(fine)
-    lens = np.diff(offsets)
-    pos_f = np.repeat(offsets[f] - np.cumsum(np.r_[0, lens[f][:-1]]), lens[f]) + np.arange(lens[f].sum())
-    rows = np.unique(np.concatenate([f, indices[pos_f]]))  # fine candidates and their neighbours
-    pos = np.repeat(offsets[rows] - np.cumsum(np.r_[0, lens[rows][:-1]]), lens[rows]) + np.arange(lens[rows].sum())
-    r = np.repeat(rows, lens[rows])
+    rows = np.unique(np.concatenate([f, indices[csr_entries(offsets, f)[0]]]))  # fine candidates and their neighbours
+    pos, r = csr_entries(offsets, rows)
     j = indices[pos]
     check = fine[r] | fine[j]
     pos, r, j = pos[check], r[check], j[check]
