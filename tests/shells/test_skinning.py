@@ -291,3 +291,72 @@ def test_a_binding_without_a_plane_does_not_amplify_node_motion():
             worst[flag] = max(worst[flag], np.linalg.norm(out_p[0] - cloud_p[0]) / np.abs(eps).max())
     print(f"displacement / node motion: plane frames {worst[0]:.1f}, node-normal frames {worst[1]:.1f}")
     assert worst[1] < 3.0 < worst[0]
+
+
+# -- thin parts: the far face is not bound (module notes: bind_points facing) ---------------------
+def _double_sheet(thickness=0.12, seed=0):
+    """The two faces of a thin plate, ``thickness`` apart (under half the node spacing 0.4, as
+    at the tip of the plastic blob's ear): jittered surfels (spacing 0.1) and a node sheet on
+    each face, with outward normals (-z below, +z above)."""
+    from unmesh.surfels import SurfelCloud
+
+    cloud, nodes, _ = _plane_surface(seed)
+    up = np.tile([0.0, 0.0, 1.0], (len(cloud.positions), 1))
+    lift = np.array([0.0, 0.0, thickness])
+    both = SurfelCloud(np.vstack([cloud.positions, cloud.positions + lift]), np.vstack([-up, up]),
+                       radii=np.concatenate([cloud.radii, cloud.radii]))
+    node_up = np.tile([0.0, 0.0, 1.0], (len(nodes), 1))
+    return both, np.vstack([nodes, nodes + lift]), np.vstack([-node_up, node_up]), len(cloud.positions), len(nodes)
+
+
+def test_bind_points_facing_equals_the_brute_force_binding():
+    """With ``facing`` every point binds to its K + 1 nearest nodes among those whose normal is
+    within 90° of its own (the same face of a thin plate); the weights are those of (7.30)
+    over that node list."""
+    cloud, nodes, normals, _, _ = _double_sheet()
+    pts, pn = cloud.positions, cloud.normals
+    b, w = bind_points(pts, nodes, 6, facing=(pn, normals))
+    b_all, _ = bind_points(pts, nodes, 6)
+    assert (normals[b_all] @ [0.0, 0.0, 1.0] * (pn @ [0.0, 0.0, 1.0])[:, None] < 0).any(axis=1).mean() > 0.9
+    for s in range(0, len(pts), 7):
+        ok = np.flatnonzero(normals @ pn[s] >= 0.0)
+        d = np.linalg.norm(nodes[ok] - pts[s], axis=1)
+        order = np.argsort(d, kind="stable")[:7]
+        np.testing.assert_array_equal(b[s], ok[order])
+        np.testing.assert_allclose(w[s], skin_weight(d[order][1:] / d[order][-1]), rtol=1e-12)
+
+
+def test_the_far_face_of_a_thin_part_does_not_move_the_surfels():
+    """Moving one face of a thin plate leaves the surfels of the other face where they are, with
+    their normals: bound also to the far face's nodes (the nearest by distance), the surfels of
+    the plastic blob's ear followed the far side's motion (a dark, sunken fleck at the tip)."""
+    cloud, nodes, normals, n_low, n_nodes = _double_sheet()
+    surf = SkinnedSurface(cloud, nodes, normals)
+    top = np.arange(len(cloud.positions)) >= n_low
+    assert not (surf.bind[top] < n_nodes).any()                 # the lower face's nodes are not bound
+    rng = np.random.default_rng(3)
+    x = nodes.copy()
+    x[:n_nodes] += [0.1, -0.05, 0.0] + 0.03 * rng.normal(size=(n_nodes, 3))   # shear and crumple the lower face
+    out = surf.deform(x, normals)
+    np.testing.assert_allclose(out.positions[top], cloud.positions[top], atol=1e-12)
+    np.testing.assert_allclose(out.normals[top], cloud.normals[top], atol=1e-12)
+    # without the facing test the upper face's surfels are bound to lower-face nodes too
+    b, _ = bind_points(cloud.positions, nodes, 6)
+    assert (b[top] < n_nodes).any(axis=1).mean() > 0.9
+
+
+def test_a_rim_surfel_between_two_faces_takes_the_node_normals():
+    """A surfel on the rim of a thin plate (normal along the plate) whose nodes lie on its two
+    faces: their least-squares plane is the plate's, about 90° from the surfel's normal, so the
+    frames use the node normals (``PLANE_SURFACE_AGREEMENT``), whose sum points out of the rim."""
+    nodes = np.array([[0.0, 0, 0.06], [0, 0, -0.06], [-0.4, 0.3, 0.06], [-0.4, 0.3, -0.06], [-0.4, -0.3, 0.06],
+                      [-0.4, -0.3, -0.06], [-0.8, 0, 0.06]])
+    normals = np.array([[0.7, 0, 0.7], [0.7, 0, -0.7], [0, 0, 1], [0, 0, -1], [0, 0, 1], [0, 0, -1], [0, 0, 1.0]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    bind = np.arange(7)[None]
+    plane, flag = frame_normals(nodes, normals, bind)
+    assert flag.tolist() == [0] and abs(plane[0, 2]) > 0.99        # the nodes alone: a fine plane
+    plane, flag = frame_normals(nodes, normals, bind, points=np.array([[1.0, 0.0, 0.0]]))
+    assert flag.tolist() == [1]
+    o = normals.sum(axis=0)
+    np.testing.assert_allclose(plane[0], o / np.linalg.norm(o), atol=1e-12)

@@ -43,11 +43,12 @@ def _cover_pairs_reference(bind: np.ndarray, nbr: np.ndarray, rows: np.ndarray, 
 class _Passive:
     """Arrays of a set of bound passive points (dense surfels or discontinuity surfels), growable."""
 
-    FIELDS = ("points", "axes", "orient", "colors", "bind", "weights", "plane", "by_normals", "coords", "reach")
+    FIELDS = ("points", "normals", "axes", "orient", "colors", "bind", "weights", "plane", "by_normals", "coords", "reach")
 
     def __init__(self, k: int) -> None:
         self.n = 0
         self.points = np.zeros((0, 3))
+        self.normals = np.zeros((0, 3))  # rest surface normals (the facing test of the binding)
         self.axes = np.zeros((0, 2, 3))
         self.orient = np.zeros(0)
         self.colors = np.zeros((0, 3))
@@ -122,7 +123,8 @@ class Rebinding:
     def _rebind(self, part: _Passive, rows: np.ndarray, blocked: Any) -> None:
         pts = part.points[rows]
         axes = part.axes[rows]
-        b, w, plane, by_normals, reach = self._bind(pts, blocked, self._candidates(rows) if part is self.dense else None)
+        b, w, plane, by_normals, reach = self._bind(pts, part.normals[rows], blocked,
+                                                    self._candidates(rows) if part is self.dense else None)
         part.bind[rows], part.weights[rows], part.plane[rows], part.by_normals[rows] = b, w, plane, by_normals
         part.coords[rows] = self._coords(b, w, plane, pts, axes)
         part.reach[rows] = reach

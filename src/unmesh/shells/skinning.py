@@ -19,6 +19,13 @@ separate cleanly; each crack also adds a pair of *discontinuity surfels* with op
 normals on either side of the crack plane (for the edge clipping of 4.3; written with the
 per-surfel attribute ``discontinuity = 1``).
 
+Thin parts (beyond the thesis): where a part is about one node spacing thick (the tip of the
+plastic blob's ear) the nearest nodes of a surfel by distance include nodes of the far face.
+Bound to them, the surfel followed the far face's motion (a sunken, tilted splat: a dark fleck
+on the ear; knobs under the ear bent on impact). Like the nodes a crack hides (7.3.2), nodes
+whose rest normal makes more than 90° with the surfel's (:data:`FACING_MIN`) are not bound
+(:func:`bind_points`, ``facing``), unless every candidate faces away.
+
 Where the bound nodes have no plane (beyond the thesis): at a thin or sharply curved part (an
 ear's base) the nearest nodes of a surfel can lie on both sides of it, spread in all three
 directions. Their least-squares plane is then ill-defined (its normal turns with small motions
@@ -26,7 +33,9 @@ of the nodes) or crosses the surface, and frames built on it amplify small node 
 large displacements of the surfel (a stretched splat that detached from the surface of a
 dented plastic blob). Such surfels, found once at rest by :func:`frame_normals` (the two
 smallest spreads differ by less than :data:`PLANE_FLATNESS`, or the plane normal is more than
-60° from the sum of the node normals, :data:`PLANE_AGREEMENT`), use the normalised sum of
+60° from the sum of the node normals, :data:`PLANE_AGREEMENT`, or about 37° from the surfel's
+own normal, :data:`PLANE_SURFACE_AGREEMENT`: a surfel on the rim of a thin part whose nodes lie
+on its two faces, whose plane is the faces'), use the normalised sum of
 their nodes' normals as ``N``, as points bound to fewer than 3 nodes do. A frame whose edge
 ``e1`` is within 30° of ``N`` (:data:`FRAME_MAX_COS`; a node across the thin part) spans
 almost nothing across ``e1`` and gets no weight (:func:`usable_frames`).
@@ -54,14 +63,15 @@ from typing import Any
 import numpy as np
 
 from unmesh._threads import threads_for
-from unmesh._validate import as_points
+from unmesh._validate import as_array, as_points
 from unmesh.errors import InputError
 from unmesh.shells import _skinning_kernels as _sk
 from unmesh.shells.nodes import hide_blocked
 from unmesh.shells.rebinding import Rebinding, _cover_pairs, _cover_pairs_reference, _Passive  # noqa: F401
 from unmesh.surfels import SurfelCloud
 
-__all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "FRAME_MAX_COS", "PLANE_AGREEMENT", "PLANE_FLATNESS", "SkinnedSurface",
+__all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "FACING_MIN", "FRAME_MAX_COS", "PLANE_AGREEMENT",
+           "PLANE_FLATNESS", "PLANE_SURFACE_AGREEMENT", "SkinnedSurface",
            "bind_points", "cover_radii_reference", "deform_reference", "frame_normals", "skin_weight",
            "usable_frames"]
 
@@ -70,6 +80,11 @@ __all__ = ["COVER_CAP", "COVER_NEIGHBORS", "DEFAULT_SKIN_NODES", "FRAME_MAX_COS"
 PLANE_FLATNESS = 0.5
 #: ... or when its plane normal and the sum of its node normals make a larger angle (cosine).
 PLANE_AGREEMENT = 0.5
+#: ... or when its plane normal and the point's own rest normal make a larger angle (cosine, ~37°).
+PLANE_SURFACE_AGREEMENT = 0.8
+#: Nodes whose rest normal and the point's make a larger angle (cosine below this, 90°) lie on the
+#: far side of a thin part and are not bound (:func:`bind_points`, ``facing``).
+FACING_MIN = 0.0
 #: A frame whose rest edge ``e1`` makes a smaller angle with ``N`` (cosine above this) is degenerate
 #: (7.26: ``e2 = N x e1 / |e1|`` vanishes) and gets no weight (:func:`usable_frames`).
 FRAME_MAX_COS = float(np.cos(np.radians(30.0)))
@@ -103,7 +118,8 @@ def skin_weight(r: np.ndarray) -> np.ndarray:
 
 def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocked: Any = None,
                 tree: Any = None, candidates: tuple[np.ndarray, np.ndarray] | None = None,
-                exclude: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                exclude: np.ndarray | None = None, facing: tuple[np.ndarray, np.ndarray] | None = None,
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Bind points to their nearest (visible) nodes: indices (S, K+1) and frame weights (S, K).
 
     Parameters
@@ -126,6 +142,10 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
     exclude : ndarray (N,) bool, optional
         Nodes not to bind to (the crumbs of a torn shell: they carry no material); skipped
         like hidden ones.
+    facing : (ndarray (S, 3), ndarray (N, 3)), optional
+        Rest normals of the points and of the nodes: nodes whose normal makes more than 90°
+        with the point's (``n_p . n_x < FACING_MIN``: the far side of a thin part) are
+        skipped like hidden ones, unless every candidate faces away (module notes).
 
     Returns
     -------
@@ -148,7 +168,8 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
     if int(k) != k or k < 1:
         raise InputError(f"skin_nodes: expected a positive integer, got {k!r}")
     want = int(min(k + 1, len(x)))
-    cand = want if blocked is None and exclude is None else int(min(3 * want, len(x)))
+    filtered = blocked is not None or exclude is not None or facing is not None
+    cand = int(min(3 * want, len(x))) if filtered else want
     if candidates is not None:
         dist, idx = candidates
         if idx.shape != (len(p), cand):
@@ -158,6 +179,11 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
     keep = idx >= 0
     if exclude is not None:
         keep &= ~exclude[np.maximum(idx, 0)]
+    if facing is not None and len(p):
+        pn, xn = (as_array(a, what, (n, 3), np.float64) for a, what, n in
+                  ((facing[0], "facing[0] (point normals)", len(p)), (facing[1], "facing[1] (node normals)", len(x))))
+        faces = keep & (np.einsum("sa,sca->sc", pn, xn[np.maximum(idx, 0)]) >= FACING_MIN)
+        keep = np.where(faces.any(axis=1)[:, None], faces, keep)   # no node on its side: all count
     if blocked is not None and len(p):
         hide_blocked(keep, p, x, idx, blocked, want)
     # a point hidden from every candidate (a sliver between two cracks) follows its nearest node
@@ -182,15 +208,17 @@ def bind_points(points: Any, node_rest: Any, k: int = DEFAULT_SKIN_NODES, blocke
     return bind, weights
 
 
-def frame_normals(rest: np.ndarray, normals: np.ndarray, bind: np.ndarray, frame: np.ndarray | None = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def frame_normals(rest: np.ndarray, normals: np.ndarray, bind: np.ndarray, frame: np.ndarray | None = None,
+                  points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The rest normal ``N`` of each binding's frames (7.26) and whether it is the node normals'.
 
     ``N`` is the least-squares plane normal through the bound nodes, oriented along the sum of
     their normals, except where the nodes have no plane (module notes): fewer than 3 nodes,
     an eigenvalue ratio ``lambda_0 / lambda_1 > PLANE_FLATNESS`` of their covariance, or
-    ``|N . n_sum| < PLANE_AGREEMENT`` with ``n_sum`` the normalised sum of the node normals;
-    there ``N`` is the normalised sum of the ``frame`` normals, and the flag tells
+    ``|N . n_sum| < PLANE_AGREEMENT`` with ``n_sum`` the normalised sum of the node normals,
+    or (with ``points``) ``|N . n_p| < PLANE_SURFACE_AGREEMENT`` with ``n_p`` the point's own
+    rest normal (the plane is not the surface at the point: a rim surfel of a thin part whose
+    nodes lie on its two faces); there ``N`` is the normalised sum of the ``frame`` normals, and the flag tells
     :func:`unmesh.shells._skinning_kernels.deform` to use the node normals it is given for the
     deformed frames too (so ``frame`` must be what it is given at rest).
 
@@ -204,6 +232,8 @@ def frame_normals(rest: np.ndarray, normals: np.ndarray, bind: np.ndarray, frame
         Bound nodes (-1 unused).
     frame : ndarray (N, 3) float64, optional
         The node normals the deformation gets at rest (zero rows allowed); ``normals`` if omitted.
+    points : ndarray (S, 3) float64, optional
+        Rest normals of the bound points (unit); without them only the node tests apply.
 
     Returns
     -------
@@ -240,6 +270,8 @@ def frame_normals(rest: np.ndarray, normals: np.ndarray, bind: np.ndarray, frame
     unit = unit_sum(normals)
     loose = (lam[:, 0] > PLANE_FLATNESS * lam[:, 1]) | \
         (np.abs(np.einsum("sk,sk->s", plane, unit)) < PLANE_AGREEMENT)
+    if points is not None:
+        loose |= np.abs(np.einsum("sk,sk->s", plane, points)) < PLANE_SURFACE_AGREEMENT
     flag[(cnt >= 3) & loose] = 1
     if frame is not None:
         unit = unit_sum(frame)
@@ -420,11 +452,12 @@ class SkinnedSurface(Rebinding):
         pts = np.ascontiguousarray(cloud.positions)
         cross = np.cross(axes[:, 0], axes[:, 1])
         orient = np.where(np.einsum("ij,ij->i", cross, cloud.normals) >= 0, 1.0, -1.0)
-        bind, weights = bind_points(pts, self.node_rest, self.k, tree=self.tree)
-        plane, by_normals = self._frame_normals(bind)
+        nrm = np.ascontiguousarray(cloud.normals)
+        bind, weights = bind_points(pts, self.node_rest, self.k, tree=self.tree, facing=(nrm, self.node_normals))
+        plane, by_normals = self._frame_normals(bind, nrm)
         weights = usable_frames(self.node_rest, bind, weights, plane)
         self.dense = _Passive(self.k)
-        self.dense.append(points=pts, axes=axes, orient=orient, colors=cloud.colors, bind=bind, weights=weights,
+        self.dense.append(points=pts, normals=nrm, axes=axes, orient=orient, colors=cloud.colors, bind=bind, weights=weights,
                           plane=plane, by_normals=by_normals, coords=self._coords(bind, weights, plane, pts, axes),
                           reach=self._reaches(bind, pts))
         self.disc = _Passive(self.k)
@@ -436,7 +469,6 @@ class SkinnedSurface(Rebinding):
         rest_r = np.linalg.norm(axes, axis=2).max(axis=1)
         with np.errstate(divide="ignore"):
             scale2 = np.where(dist > 0, (rest_r[:, None] / dist) ** 2, 0.0)
-        nrm = cloud.normals
         facing = np.einsum("sk,sak->sa", nrm, nrm[self._cover_nbr]) >= COVER_FACING
         keep = _cover_pairs(bind, self._cover_nbr, np.arange(len(pts))) & facing
         self._cover_scale2 = np.where(keep, scale2, 0.0)
@@ -495,19 +527,20 @@ class SkinnedSurface(Rebinding):
                                   np.ascontiguousarray(axes), out)
         return out
 
-    def _bind(self, pts: np.ndarray, blocked: Any, cand: tuple[np.ndarray, np.ndarray] | None = None,
-              ) -> tuple[np.ndarray, ...]:
-        """Binding of points with visibility and without the excluded nodes: nodes, weights, frame
-        normals and their flags (:func:`frame_normals`), and reaches."""
+    def _bind(self, pts: np.ndarray, normals: np.ndarray, blocked: Any,
+              cand: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, ...]:
+        """Binding of points (rest positions and surface normals) with visibility, without the
+        excluded nodes and the nodes facing away: nodes, weights, frame normals and their flags
+        (:func:`frame_normals`), and reaches."""
         if cand is None:
             cand = self.tree.knn(pts, int(min(3 * min(self.k + 1, len(self.node_rest)), len(self.node_rest))))
         b, w = bind_points(pts, self.node_rest, self.k, blocked=blocked, tree=self.tree, candidates=cand,
-                           exclude=self.excluded)
-        plane, by_normals = self._frame_normals(b)
+                           exclude=self.excluded, facing=(normals, self.node_normals))
+        plane, by_normals = self._frame_normals(b, normals)
         return b, usable_frames(self.node_rest, b, w, plane), plane, by_normals, self._reaches(b, pts, cand[0])
 
-    def _frame_normals(self, bind: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return frame_normals(self.node_rest, self.node_normals, bind, self.frame_normals)
+    def _frame_normals(self, bind: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return frame_normals(self.node_rest, self.node_normals, bind, self.frame_normals, normals)
 
     def add_discontinuity(self, center: np.ndarray, normal: np.ndarray, radius: float, surface_normal: np.ndarray,
                           blocked: Any) -> None:
@@ -521,7 +554,7 @@ class SkinnedSurface(Rebinding):
         from its own side (towards the gap), spans the crack line and the surface normal,
         and takes the colour of a surfel of the nearest node.
         """
-        pts, axes, facing, colors = [], [], [], []
+        pts, axes, facing, colors, surface = [], [], [], [], []
         for center, normal, radius, surface_normal in zip(centers, normals, radii, surface_normals, strict=True):
             n = np.asarray(normal, dtype=np.float64)
             n = n / np.linalg.norm(n)
@@ -533,6 +566,7 @@ class SkinnedSurface(Rebinding):
             pts += [center + 0.1 * radius * n, center - 0.1 * radius * n]
             axes += [np.stack([radius * along, radius * up])] * 2
             facing += [-n, n]
+            surface += [sn / np.linalg.norm(sn)] * 2
             _, node = self.tree.knn(np.asarray(center, dtype=np.float64)[None], 1)
             owned = self._owned[self._owned_offsets[node[0, 0]]:self._owned_offsets[node[0, 0] + 1]]
             colors += [self.dense.colors[owned[0]] if len(owned) else self.dense.colors[0]] * 2
@@ -541,8 +575,9 @@ class SkinnedSurface(Rebinding):
         p, a = np.asarray(pts), np.asarray(axes)
         cross = np.cross(a[:, 0], a[:, 1])
         orient = np.where(np.einsum("ij,ij->i", cross, np.asarray(facing)) >= 0, 1.0, -1.0)
-        b, w, plane, by_normals, reach = self._bind(p, blocked)
-        self.disc.append(points=p, axes=a, orient=orient, colors=np.asarray(colors), bind=b, weights=w, plane=plane,
+        sn = np.asarray(surface)
+        b, w, plane, by_normals, reach = self._bind(p, sn, blocked)
+        self.disc.append(points=p, normals=sn, axes=a, orient=orient, colors=np.asarray(colors), bind=b, weights=w, plane=plane,
                          by_normals=by_normals,
                          coords=self._coords(b, w, plane, p, a), reach=reach)
         self._reach = max(self._reach, float(reach.max()))
