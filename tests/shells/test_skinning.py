@@ -360,3 +360,49 @@ def test_a_rim_surfel_between_two_faces_takes_the_node_normals():
     assert flag.tolist() == [1]
     o = normals.sum(axis=0)
     np.testing.assert_allclose(plane[0], o / np.linalg.norm(o), atol=1e-12)
+
+
+def test_a_frame_turned_onto_the_normal_fades():
+    """A frame node that rolls over onto the frame normal (a node across the rim of a thin part,
+    as at the plastic blob's ear when it bends on impact: its edge went from 40° to 10° off N)
+    spans almost nothing across its edge (7.26) and alone throws the surfel's normal far off;
+    faded (``FRAME_FADE_*``) the surfel moves as if that frame were not there. Rigid motions
+    stay exact."""
+    from unmesh.shells import _skinning_kernels as sk
+
+    cloud, nodes, surf = _plane_surface()
+    s = int(np.argmax(surf.weights.max(axis=1) < 0.5 * surf.weights.sum(axis=1)))   # several frames count
+    i = int(np.argmax(surf.weights[s]))
+    o, j = surf.bind[s, 0], surf.bind[s, i + 1]
+    up = np.tile([0.0, 0.0, 1.0], (len(nodes), 1))
+    x = nodes.copy()
+    length = np.linalg.norm(nodes[j] - nodes[o])
+    side = (nodes[j] - nodes[o]) / length
+    for _ in range(50):                        # node j 10° off the plane normal of the moved nodes
+        n = np.array(sk.plane_normal(x, up, surf.bind[s]))
+        t = side - (side @ n) * n
+        x[j] = nodes[o] + length * (np.cos(np.radians(10.0)) * n + np.sin(np.radians(10.0)) * t / np.linalg.norm(t))
+    e = x[j] - x[o]
+    assert abs(abs(e @ np.array(sk.plane_normal(x, up, surf.bind[s]))) / length - np.cos(np.radians(10.0))) < 1e-6
+
+    def skin(weights):
+        p, n, r = np.empty((1, 3)), np.empty((1, 3)), np.empty(1)
+        sk.deform(nodes, x, up, surf.bind[s:s + 1], weights, surf.dense.view("coords")[s:s + 1],
+                  surf.points[s:s + 1], surf.axes[s:s + 1], surf.dense.view("orient")[s:s + 1],
+                  surf.by_normals[s:s + 1], p, n, r)
+        return p[0], np.degrees(np.arccos(np.clip(n[0] @ cloud.normals[s], -1, 1)))
+
+    w = surf.weights[s:s + 1].copy()
+    p, turn = skin(w)
+    alone = np.zeros_like(w)
+    alone[0, i] = 1.0
+    _, turn_alone = skin(alone)
+    w[0, i] = 0.0
+    p_without, turn_without = skin(w)
+    print(f"normal turned {turn:.2f} degrees; without the turned frame {turn_without:.2f}, it alone {turn_alone:.1f}")
+    assert turn_alone > 30.0
+    assert abs(turn - turn_without) < 0.5 and np.linalg.norm(p - p_without) < 0.01 * length
+    np.testing.assert_allclose(surf.deform(x, up).positions[s], p, atol=1e-12)
+    q = rotation(np.random.default_rng(2))
+    moved = surf.deform(nodes @ q.T + 0.5, up @ q.T)
+    np.testing.assert_allclose(moved.positions, cloud.positions @ q.T + 0.5, atol=1e-10)

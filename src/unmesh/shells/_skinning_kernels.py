@@ -22,6 +22,14 @@ from unmesh.spatial._kernels import cell_key, dense_cell, dense_grid
 
 #: Doubles stored per frame: local coordinates of the offset p - x_0 and of the two tangent axes.
 COORDS = 9
+#: A deformed frame whose edge ``e1`` is within 30° of ``N`` (``|cos| >= FRAME_FADE_TO``) spans almost
+#: nothing across ``e1`` (7.26) and keeps only :data:`FRAME_FADE_FLOOR` of its weight; from 45°
+#: (``FRAME_FADE_FROM``) to 30° its weight fades linearly (:func:`frame_fade`).
+FRAME_FADE_FROM = 0.8660254037844387
+FRAME_FADE_TO = 0.9659258262890683
+#: The weight a degenerate frame keeps: when every frame of a point is degenerate their blend is
+#: the unfaded one (the fade stays continuous).
+FRAME_FADE_FLOOR = 1e-3
 
 
 @njit(cache=True)
@@ -75,6 +83,18 @@ def plane_normal(x, normals, nodes):
     if vx * ox + vy * oy + vz * oz < 0.0:
         return -vx, -vy, -vz
     return vx, vy, vz
+
+
+@njit(cache=True, inline="always")
+def frame_fade(cos):
+    """Weight factor of a deformed frame whose edge makes ``|cos| = |N . e1| / |e1|`` with ``N``:
+    1 up to ``FRAME_FADE_FROM``, linear down to ``FRAME_FADE_FLOOR`` at ``FRAME_FADE_TO``."""
+    if cos <= FRAME_FADE_FROM:
+        return 1.0
+    if cos >= FRAME_FADE_TO:
+        return FRAME_FADE_FLOOR
+    t = (FRAME_FADE_TO - cos) / (FRAME_FADE_TO - FRAME_FADE_FROM)
+    return FRAME_FADE_FLOOR + (1.0 - FRAME_FADE_FLOOR) * t
 
 
 @njit(cache=True, inline="always")
@@ -305,6 +325,7 @@ def _deform_block(s0, nb, cur, cur_normals, bind, weights, coords, points, axes,
             l2 = l20 if l20 > 0.0 else 1e-300
             inv_l = 1.0 / math.sqrt(l2)
             ne = (m0 * e0 + m1 * e1 + m2 * e2) * (inv_l * inv_l)
+            w *= frame_fade(abs(ne) * math.sqrt(l2))       # a frame turned onto N fades (FRAME_FADE_*)
             c0 = (m1 * e2 - m2 * e1) * inv_l
             c1 = (m2 * e0 - m0 * e2) * inv_l
             c2 = (m0 * e1 - m1 * e0) * inv_l
@@ -379,7 +400,9 @@ def deform(rest, cur, cur_normals, bind, weights, coords, points, axes, orient, 
     (7.30); coords (S, K, 9) from :func:`local_coordinates`. Writes positions, unit normals
     (``orient`` times the normalised cross product of the deformed axes; the plane normal
     where that vanishes, (0, 0, 1) where both do) and radii (the longer deformed axis,
-    1e-9 where zero). Points without any weighted frame are translated with x_0. Points with
+    1e-9 where zero). Each frame's weight is scaled by :func:`frame_fade` of its deformed
+    edge (beyond the thesis: a frame whose edge turned onto ``N`` amplifies node motion).
+    Points without any weighted frame are translated with x_0. Points with
     ``by_normals[s] != 0`` (S,) uint8 use the normalised sum of their nodes' normals as ``N``
     instead of the least-squares plane normal (see :func:`unmesh.shells.skinning.frame_normals`). The
     surfels are done in blocks of :data:`SBLK`; the plane normal is that of :func:`plane_normal`

@@ -38,7 +38,11 @@ own normal, :data:`PLANE_SURFACE_AGREEMENT`: a surfel on the rim of a thin part 
 on its two faces, whose plane is the faces'), use the normalised sum of
 their nodes' normals as ``N``, as points bound to fewer than 3 nodes do. A frame whose edge
 ``e1`` is within 30° of ``N`` (:data:`FRAME_MAX_COS`; a node across the thin part) spans
-almost nothing across ``e1`` and gets no weight (:func:`usable_frames`).
+almost nothing across ``e1`` and gets no weight (:func:`usable_frames`). A frame that becomes so
+in motion (a node across the rim of the ear rolls over onto ``N`` as the ear bends: 40° at rest,
+10° on impact, a needle-like splat standing off the rim) fades out between 30° and 15° in the
+deformed state (:func:`unmesh.shells._skinning_kernels.frame_fade`; weights of a blend only, so
+rigid motions stay exact).
 
 Splat radii (beyond the thesis): the deformed circle takes the longer deformed tangent axis,
 but the blend of (7.28) is not continuous where ``x_0`` changes between neighbouring
@@ -301,7 +305,8 @@ def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray,
                      bind: np.ndarray, weights: np.ndarray, points: np.ndarray,
                      axes: np.ndarray, by_normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Plain numpy version of the skinning kernel (7.26-7.30), for tests (``by_normals`` (S,):
-    the flags of :func:`frame_normals`, none set when omitted).
+    the flags of :func:`frame_normals`, none set when omitted; frame weights scaled by the fade
+    of the deformed frames, :func:`unmesh.shells._skinning_kernels.frame_fade`).
 
     Returns
     -------
@@ -328,6 +333,11 @@ def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray,
         e3 = np.cross(e2, e1) / ln
         return np.stack([e1, e2, e3])
 
+    def fade(e1, n):
+        c = abs(e1 @ n) / np.linalg.norm(e1)
+        t = np.clip((_sk.FRAME_FADE_TO - c) / (_sk.FRAME_FADE_TO - _sk.FRAME_FADE_FROM), 0.0, 1.0)
+        return _sk.FRAME_FADE_FLOOR + (1.0 - _sk.FRAME_FADE_FLOOR) * t
+
     for s in range(len(points)):
         o = bind[s, 0]
         flag = by_normals is not None and bool(by_normals[s])
@@ -339,6 +349,7 @@ def deform_reference(rest: np.ndarray, cur: np.ndarray, cur_normals: np.ndarray,
             if j < 0 or w <= 0:
                 continue
             f, g = frame(rest, o, j, n_rest), frame(cur, o, j, n_cur)
+            w = w * fade(g[0], n_cur)
             coord = lambda d, f=f: (f @ d) / np.einsum("ij,ij->i", f, f)  # noqa: E731
             acc_p += w * (coord(points[s] - rest[o]) @ g)
             acc_a += w * np.stack([coord(axes[s, 0]) @ g, coord(axes[s, 1]) @ g])
