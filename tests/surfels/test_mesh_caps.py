@@ -127,23 +127,24 @@ def test_no_refinement_at_creases_smooth_surfaces_or_coarse_meshes(mesh, d):
 def test_extended_radii_equal_the_radii_of_the_whole_cloud(smooth):
     """``_extend`` recomputes only the radii whose neighbourhood received a new point: bitwise
     the result of ``estimate_radii`` on the whole cloud (new points in a patch, one exactly on
-    an old point, one far away)."""
+    an old point, one far away, one near an isolated old point)."""
     rng = np.random.default_rng(7)
     pts = Sphere().surfels(0.08).positions
     pts = pts + 0.01 * rng.standard_normal(pts.shape)
+    pts = np.concatenate([pts, [[3.0, 0.0, 0.0]]])  # an isolated point: it reaches far
     nrm = pts / np.linalg.norm(pts, axis=1, keepdims=True)
     patch = pts[pts[:, 2] > 0.8] + 0.02 * rng.standard_normal((int((pts[:, 2] > 0.8).sum()), 3))
-    new = np.concatenate([patch, pts[:1], [[0.0, 0.0, -1.5]]])
+    new = np.concatenate([patch, pts[:1], [[0.0, 0.0, -1.5], [2.5, 0.0, 0.0]]])
     new_nrm = new / np.linalg.norm(new, axis=1, keepdims=True)
-    r0, state = _estimate(pts, nrm, 8, 1.05, 0.3, smooth)
-    np.testing.assert_array_equal(r0, estimate_radii(pts, nrm, max_radius=0.3, smooth=smooth))
+    r0, state = _estimate(pts, nrm, 8, 1.05, None, smooth)
+    np.testing.assert_array_equal(r0, estimate_radii(pts, nrm, smooth=smooth))
     r1, state = _extend(state, r0, new, new_nrm)
-    whole = estimate_radii(np.concatenate([pts, new]), np.concatenate([nrm, new_nrm]), max_radius=0.3,
-                           smooth=smooth)
+    whole = estimate_radii(np.concatenate([pts, new]), np.concatenate([nrm, new_nrm]), smooth=smooth)
     np.testing.assert_array_equal(r1, whole)
+    assert r1[len(pts) - 1] != r0[-1]  # the isolated point's radius changed
     assert np.any(r1[: len(pts)] != r0) and np.sum(r1[: len(pts)] != r0) < len(pts) // 4
     more = np.array([[0.0, 0.0, 1.05]])
     r2, _ = _extend(state, r1, more, [[0.0, 0.0, 1.0]])
     whole = estimate_radii(np.concatenate([pts, new, more]), np.concatenate([nrm, new_nrm, [[0.0, 0.0, 1.0]]]),
-                           max_radius=0.3, smooth=smooth)
+                           smooth=smooth)
     np.testing.assert_array_equal(r2, whole)

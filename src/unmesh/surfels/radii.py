@@ -206,8 +206,17 @@ def _extend(state: _RadiiState, radii: np.ndarray, points: Any, normals: Any) ->
     if len(new) == 0:
         return radii.copy(), _RadiiState(tree, nrm, state.reach.copy(), state.k, state.margin, state.cap,
                                           state.smooth)
-    near, _ = KDTree(new).knn(state.tree.points, 1)
-    rows = np.concatenate([np.flatnonzero(near[:, 0] <= state.reach), np.arange(n_old, len(pts))])
+    # old rows with a new point within their reach: a ball search around the new points, and a
+    # nearest-new-point search for the few rows that reach farther than 4x the median
+    cut = 4.0 * float(np.median(state.reach))
+    off, ind = state.tree.radius_neighbors(new, cut)
+    owner = np.repeat(np.arange(len(new)), np.diff(off))
+    hit = np.linalg.norm(state.tree.points[ind] - new[owner], axis=1) <= state.reach[ind]
+    far = np.flatnonzero(state.reach > cut)
+    if len(far):
+        near, _ = KDTree(new).knn(state.tree.points[far], 1)
+        far = far[near[:, 0] <= state.reach[far]]
+    rows = np.concatenate([np.union1d(ind[hit], far), np.arange(n_old, len(pts))])
     r_rows, reach_rows = _radii_rows(tree, nrm, rows, state.k, state.margin, state.cap, True, state.smooth)
     out = np.concatenate([radii, np.zeros(len(new))])
     reach = np.concatenate([state.reach, np.zeros(len(new))])

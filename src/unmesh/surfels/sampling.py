@@ -17,6 +17,25 @@ infinitesimal shift along ``(-eps, 1)`` in the projection plane), so a ray throu
 a shared edge or vertex of a closed mesh yields exactly one sample, never zero or two.
 (On an open boundary, a ray exactly through a boundary edge may yield none: the tie
 goes to the missing neighbour.)
+
+**Caps sharper than the spacing.** Where the surface bends round a cap whose curvature radius
+is below ``d`` (the blob's ear tips, a thin ellipsoid's ends), the lattice rays hit it only
+sparsely: the neighbours of a sample there lie far below its tangent plane or face away, and the
+radius rule (:mod:`unmesh.surfels.radii`) needs a disc up to ``sqrt(3) d`` that sticks out past
+the silhouette (2.28x the median radius at the blob's ear apex in the paint examples' model).
+``sample_mesh`` therefore refines, once, where a radius exceeds ``REFINE_RADIUS d`` (1.1 d;
+the median is about 0.76 d) and the sample's ball (of that radius) holds a triangle smaller than
+the spacing (bounding-sphere radius at most ``d / 2``) that no ray hit and whose normal is within
+the radius rule's ~75 degrees both of the sample's and of a sample in the ball that is beyond
+them: the surface passes through the orientations in between, a smooth bend that the mesh
+resolves and the rays do not. A crease (box edge, cylinder rim) has no such orientation and a
+mesh coarser than the rays has no such triangle; neither is refined. The triangles in the balls
+of those samples are ray cast on the lattice of spacing ``d / 2`` (offset from the main one, so
+no ray repeats), and a hit inside a ball is added when it lies at least ``REFINE_GAP d``
+(``sqrt(2) / 4 d``, half the diagonal of a refinement lattice cell) from every sample and from
+each hit added before it: the hits fill the gaps, they do not densify the cap. The radii are then
+the radius rule's on the whole cloud (recomputed only where a new sample is within reach). The
+lattice samples stay first, unchanged; adding samples keeps the covering distance.
 """
 
 from __future__ import annotations
