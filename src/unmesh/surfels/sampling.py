@@ -63,6 +63,9 @@ REFINE_RADIUS = 1.1
 #: Refinement rays at spacing d/2 keep only hits at least this many ``d`` from every sample (half the
 #: diagonal of a refinement lattice cell, ``sqrt(2) / 4``): they fill the gaps, they do not densify.
 REFINE_GAP = math.sqrt(2.0) / 4.0
+#: The refinement check sizes every triangle when there are at most this many per candidate sample
+#: (else only those near a candidate).
+FEW_TRIANGLES = 50
 
 
 def _expected_samples(mesh: TriangleMesh, d: float) -> float:
@@ -284,23 +287,30 @@ def _refine_caps(mesh: TriangleMesh, fn: np.ndarray, pos: np.ndarray, face: np.n
     if len(cand) == 0:
         return None
     rc = radii[cand]
-    # triangles with a vertex within reach + d of a candidate hold every small triangle of its ball
     v, f = mesh.vertices, mesh.faces
-    near_v = np.zeros(len(v), bool)
-    near_v[_ball_pairs(pos[cand], rc + d, v, np.zeros(len(v)), np.arange(len(v)))[1]] = True
-    tris = np.flatnonzero(near_v[f].any(axis=1))
+    if len(f) <= FEW_TRIANGLES * len(cand):  # size every triangle
+        tris = np.arange(len(f))
+    else:  # the triangles with a vertex within reach + d of a candidate hold every small one of its ball
+        near_v = np.zeros(len(v), bool)
+        near_v[_ball_pairs(pos[cand], rc + d, v, np.zeros(len(v)), np.arange(len(v)))[1]] = True
+        tris = np.flatnonzero(near_v[f].any(axis=1))
     corners = v[f[tris]]
     centre = np.zeros((len(f), 3))
     size = np.full(len(f), np.inf)
     centre[tris] = corners.mean(axis=1)
     size[tris] = np.sqrt(((corners - centre[tris][:, None, :]) ** 2).sum(axis=2).max(axis=1))
     small = tris[size[tris] <= 0.5 * d]
-    hit = np.zeros(len(mesh.faces), bool)
+    hit = np.zeros(len(f), bool)
     hit[face] = True
-    # triangles in each candidate's ball: unhit, valid for the candidate
-    tc, tt = _ball_pairs(pos[cand], rc, centre, size, small)
-    keep = ~hit[tt] & (np.einsum("ij,ij->i", fn[tt], nrm[cand[tc]]) > MIN_DOT)
-    uc, ut = tc[keep], tt[keep]
+    unhit = small[~hit[small]]
+    if len(unhit) == 0:
+        return None
+    # unhit small triangles in each candidate's ball, valid for the candidate
+    uc, ut = _ball_pairs(pos[cand], rc, centre, size, unhit)
+    keep = np.einsum("ij,ij->i", fn[ut], nrm[cand[uc]]) > MIN_DOT
+    uc, ut = uc[keep], ut[keep]
+    if len(uc) == 0:
+        return None
     # samples in each candidate's ball that are not valid for it
     off, ind = tree.radius_neighbors(pos[cand], float(rc.max()))
     sc = np.repeat(np.arange(len(cand)), np.diff(off))
@@ -322,7 +332,7 @@ def _refine_caps(mesh: TriangleMesh, fn: np.ndarray, pos: np.ndarray, face: np.n
     if not bend.any():
         return None
     b = np.flatnonzero(bend)
-    sel = np.unique(tt[np.isin(tc, b)])  # the small triangles in the refined balls
+    sel = np.unique(_ball_pairs(pos[cand[b]], rc[b], centre, size, small)[1])  # the small triangles in the balls
     p2, f2, b2 = ldc_samples(mesh.vertices, np.ascontiguousarray(mesh.faces[sel]), 0.5 * d)
     inside = np.unique(_ball_pairs(pos[cand[b]], rc[b], p2, np.zeros(len(p2)), np.arange(len(p2)))[1])
     if len(inside):
