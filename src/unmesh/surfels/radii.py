@@ -65,6 +65,7 @@ surface stays hole-free (``tests/surfels/test_radii_bound.py``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -130,8 +131,27 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
     >>> round(float(r[55]), 6)  # interior of a unit square grid: half the diagonal
     0.707107
     """
+    return _estimate(points, normals, k, margin, max_radius, smooth)[0]
+
+
+@dataclass(frozen=True)
+class _RadiiState:
+    """What :func:`_extend` needs to update the radii of :func:`_estimate` after points are added."""
+
+    tree: Any  # KDTree of the points
+    normals: np.ndarray  # (N,3) the normalised normals the radii were computed with
+    reach: np.ndarray  # (N,) distance of the farthest neighbour each radius depends on
+    k: int
+    margin: float
+    cap: float
+    smooth: bool
+
+
+def _estimate(points: Any, normals: Any, k: int, margin: float, max_radius: float | None,
+              smooth: bool) -> tuple[np.ndarray, _RadiiState | None]:
+    """:func:`estimate_radii` and, for oriented normals and more than ``4k + 1`` points, the state
+    that :func:`_extend` updates (None otherwise)."""
     from unmesh.spatial import KDTree
-    from unmesh.surfels._radii_kernels import voronoi_radii
 
     pts = as_points(points, "points")
     n = len(pts)
@@ -143,9 +163,9 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
         raise InputError(f"margin: expected a factor >= 1, got {m}")
     cap = np.inf if max_radius is None else positive_scalar(max_radius, "max_radius")
     if n == 0:
-        return np.zeros(0)
+        return np.zeros(0), None
     if n == 1:
-        return np.ones(1)
+        return np.ones(1), None
     oriented = normals is not None
     if normals is None:
         from unmesh.surfels.normals import pca_normals
@@ -158,44 +178,117 @@ def estimate_radii(points: Any, normals: Any = None, k: int = 8, *, margin: floa
             raise InputError("normals: expected non-zero vectors")
         nrm = np.ascontiguousarray(nrm / lengths[:, None])
     tree = KDTree(pts)
+    radii, reach = _radii_rows(tree, nrm, None, kk, m, cap, oriented, smooth)
+    if not oriented or n <= 4 * kk + 1:  # PCA normals depend on the neighbours; small clouds on n
+        return radii, None
+    return radii, _RadiiState(tree, nrm, reach, kk, m, cap, smooth)
+
+
+def _extend(state: _RadiiState, radii: np.ndarray, points: Any, normals: Any) -> tuple[np.ndarray, _RadiiState]:
+    """Radii (N+M,) of the cloud with ``points`` (M,3) and oriented ``normals`` (M,3) appended.
+
+    Bitwise equal to :func:`estimate_radii` of the whole cloud (same parameters): the new points
+    and the old ones with a new point within their reach are recomputed, the others keep their
+    radius (their neighbour lists are unchanged: a new point never ties before an old one, as
+    equal distances are ordered by index).
+    """
+    from unmesh.spatial import KDTree
+
+    new = as_points(points, "points")
+    nn = as_points(normals, "normals", length=len(new))
+    lengths = np.linalg.norm(nn, axis=1)
+    if not np.all(lengths > 1e-12):
+        raise InputError("normals: expected non-zero vectors")
+    n_old = len(state.tree.points)
+    pts = np.concatenate([state.tree.points, new])
+    nrm = np.ascontiguousarray(np.concatenate([state.normals, nn / lengths[:, None]]))
+    tree = KDTree(pts)
+    if len(new) == 0:
+        return radii.copy(), _RadiiState(tree, nrm, state.reach.copy(), state.k, state.margin, state.cap,
+                                          state.smooth)
+    # old rows with a new point within their reach: a ball search around the new points, and a
+    # nearest-new-point search for the few rows that reach farther than 4x the median
+    cut = 4.0 * float(np.median(state.reach))
+    off, ind = state.tree.radius_neighbors(new, cut)
+    owner = np.repeat(np.arange(len(new)), np.diff(off))
+    hit = np.linalg.norm(state.tree.points[ind] - new[owner], axis=1) <= state.reach[ind]
+    far = np.flatnonzero(state.reach > cut)
+    if len(far):
+        near, _ = KDTree(new).knn(state.tree.points[far], 1)
+        far = far[near[:, 0] <= state.reach[far]]
+    rows = np.concatenate([np.union1d(ind[hit], far), np.arange(n_old, len(pts))])
+    r_rows, reach_rows = _radii_rows(tree, nrm, rows, state.k, state.margin, state.cap, True, state.smooth)
+    out = np.concatenate([radii, np.zeros(len(new))])
+    reach = np.concatenate([state.reach, np.zeros(len(new))])
+    out[rows] = r_rows
+    reach[rows] = reach_rows
+    return out, _RadiiState(tree, nrm, reach, state.k, state.margin, state.cap, state.smooth)
+
+
+def _radii_rows(tree: Any, nrm: np.ndarray, rows: np.ndarray | None, kk: int, m: float, cap: float,
+                oriented: bool, smooth: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The radii of :func:`estimate_radii` for the points ``rows`` of ``tree`` (None: all), and each
+    one's reach: the distance of the farthest neighbour its radius depends on.
+
+    A row's radius depends only on its nearest neighbours up to its reach (the ``k+1`` nearest, or
+    the ``4k+1`` nearest where a cell was recomputed), so after points are added only the rows with
+    a new point within their reach change (:func:`_extend`); every row is computed with the
+    same arithmetic whatever ``rows`` is, so the radii are bitwise those of the whole cloud.
+    """
+    from unmesh.surfels._radii_kernels import voronoi_radii
+
+    pts = tree.points
+    n = len(pts)
     kq = min(kk + 1, n)
-    dist, idx = tree.knn(None, kq)
-    rows = np.arange(n)
+    everything = rows is None
+    if everything:
+        rows = np.arange(n)
+        dist, idx = tree.knn(None, kq)
+    else:
+        dist, idx = tree.knn(pts[rows], kq)
     min_dot = MIN_DOT_SMOOTH if smooth else MIN_DOT
     valid = _valid(nrm, rows, dist, idx, oriented, min_dot)
     clip = OPEN_CLIP * _positive_scale(dist)  # the local sample spacing, whatever the normals
-    radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, min_dot, 0.0)
+    if everything:
+        radii, opened = voronoi_radii(pts, nrm, np.where(valid, idx, -1), clip, oriented, min_dot, 0.0)
+    else:
+        radii, opened = _subset_radii(pts, nrm, rows, np.where(valid, idx, -1), clip, oriented, min_dot)
+    reach = dist[:, -1].copy()
     # Open cells, too few valid neighbours (another sheet was nearer), or cells that a neighbour
     # beyond the k-th may cut by much (a vertex past RECHECK times the k-th neighbour distance):
     # retry with 4k neighbours.
     kq2 = min(4 * kk + 1, n)
     redo = np.flatnonzero(opened | (valid.sum(axis=1) < min(kk, n - 1)) | (radii > RECHECK * dist[:, -1]))
     if len(redo) and kq2 > kq:
-        dist2, idx2 = tree.knn(pts[redo], kq2)
-        valid2 = _valid(nrm, redo, dist2, idx2, oriented, min_dot)
+        dist2, idx2 = tree.knn(pts[rows[redo]], kq2)
+        reach[redo] = dist2[:, -1]
+        valid2 = _valid(nrm, rows[redo], dist2, idx2, oriented, min_dot)
         nb2 = np.where(valid2, idx2, -1)
-        radii[redo], opened[redo] = _subset_radii(pts, nrm, redo, nb2, clip[redo], oriented, min_dot)
+        radii[redo], opened[redo] = _subset_radii(pts, nrm, rows[redo], nb2, clip[redo], oriented, min_dot)
     # Still open: a boundary or sharp edge. Close the cell at the 4th valid neighbour distance.
     still = np.flatnonzero(opened)
     if len(still):
-        dist3, nbrs3 = tree.knn(pts[still], kq2)
-        valid3 = _valid(nrm, still, dist3, nbrs3, oriented, min_dot)
+        dist3, nbrs3 = tree.knn(pts[rows[still]], kq2)
+        reach[still] = np.maximum(reach[still], dist3[:, -1])
+        valid3 = _valid(nrm, rows[still], dist3, nbrs3, oriented, min_dot)
         close = np.minimum(BOUNDARY_FACTOR * _valid_scale(dist3, valid3, 4), clip[still])
-        radii[still] = _subset_radii(pts, nrm, still, np.where(valid3, nbrs3, -1), close, oriented, min_dot)[0]
+        radii[still] = _subset_radii(pts, nrm, rows[still], np.where(valid3, nbrs3, -1), close, oriented,
+                                     min_dot)[0]
     if smooth:  # cells open or reaching past the k-th neighbour: a bend sharper than the spacing
         wide = np.flatnonzero((radii > clip / OPEN_CLIP) | opened)
         if len(wide):
-            dist4, nbrs4 = tree.knn(pts[wide], kq2)
-            distinct = (nbrs4 >= 0) & (nbrs4 != wide[:, None]) & (dist4 > 0)
-            r_all, open_all = _subset_radii(pts, nrm, wide, np.where(distinct, nbrs4, -1), clip[wide], oriented,
-                                            min_dot, reach=REACH)
+            dist4, nbrs4 = tree.knn(pts[rows[wide]], kq2)
+            reach[wide] = np.maximum(reach[wide], dist4[:, -1])
+            distinct = (nbrs4 >= 0) & (nbrs4 != rows[wide][:, None]) & (dist4 > 0)
+            r_all, open_all = _subset_radii(pts, nrm, rows[wide], np.where(distinct, nbrs4, -1), clip[wide],
+                                            oriented, min_dot, reach=REACH)
             radii[wide] = np.where(open_all, radii[wide], np.minimum(radii[wide], r_all))
     np.minimum(radii, MAX_FACTOR * clip / OPEN_CLIP, out=radii)  # bound by the local sample density
     radii *= m
     bad = ~(radii > 0)
     if bad.any():  # fully coincident points: fall back to the neighbour distance scale
         radii[bad] = clip[bad] / OPEN_CLIP
-    return np.minimum(radii, cap)
+    return np.minimum(radii, cap), reach
 
 
 def _positive_scale(dist: np.ndarray) -> np.ndarray:
