@@ -342,7 +342,7 @@ def test_local_rebuild_equals_the_reference_on_the_tearing_poster(monkeypatch):
 
     monkeypatch.setattr(tearing, "rebuild_local", both)
     sim, _ = build_simulation(load_scene(path("shells/tearing_poster.toml")))
-    for _ in range(1300):
+    for _ in range(1500):  # 53 events (47 by step 1300 since the paper is strong off the crease, c9f4d56)
         sim.step()
         assert sim.check() is None
     assert len(events) >= 20 and events[-1] >= 50
