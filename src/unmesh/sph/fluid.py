@@ -37,7 +37,7 @@ import numpy as np
 
 from unmesh._validate import as_array, as_points
 from unmesh.kernels import poly6, spiky_derivative, spiky_gradient
-from unmesh.sph._kernels import TENSILE_BACKGROUND, TENSION_SUPPORT
+from unmesh.sph._kernels import SOLID_TENSION_SUPPORT, TENSILE_BACKGROUND, TENSION_SUPPORT
 from unmesh.sph.collisions import penalty_projection
 
 __all__ = ["acceleration_reference", "density_diffusion_reference", "density_reference", "pressure", "xsph_reference"]
@@ -70,7 +70,10 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
     For fluids the tension is bounded as in :func:`unmesh.sph._kernels.fluid_pressure`: scaled by
     ``(ρ/ρ0)²`` and, with the neighbour ``counts`` (N,) of the particles and the count ``full`` on
     the rest lattice, by the share :data:`~unmesh.sph._kernels.TENSION_SUPPORT` that ramps linearly
-    from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``). ``fluid=False`` (solids): the law as it is.
+    from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``). ``fluid=False`` (solids,
+    :func:`unmesh.sph._kernels.solid_pressure`): the law as it is, its tension scaled by the share of
+    :data:`~unmesh.sph._kernels.SOLID_TENSION_SUPPORT` (0 up to ``full/16``, 1 from ``full/8``) and,
+    below ``full/8``, capped at ``ζK (ρ/ρ0)²`` (acts below ``ρ ≈ 0.62 ρ0``).
 
     Example
     -------
@@ -79,18 +82,20 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
     """
     r = np.asarray(rho, dtype=np.float64)
     p = k * ((r / rho0) ** gamma - 1.0)
-    if not fluid:
-        return np.where(p < 0, zeta * p, p)
-    share = (r / rho0) ** 2
+    by_count = np.ones_like(r)
     if counts is not None and full > 0:
-        lo, hi = TENSION_SUPPORT
-        share = share * np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
+        lo, hi = TENSION_SUPPORT if fluid else SOLID_TENSION_SUPPORT
+        by_count = np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
+    if not fluid:
+        capped = np.where(by_count < 1.0, np.maximum(zeta * by_count * p, -zeta * by_count * k * (r / rho0) ** 2), zeta * p)
+        return np.where(p < 0, capped, p)
+    share = (r / rho0) ** 2 * by_count
     return np.where(p < 0, zeta * share * p, p)
 
 
 def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h: float, dim: int,
                            objects: Any = None, phases: Any = None, tensile: float = 0.0,
-                           spacing: float | None = None, sound: Any = None) -> np.ndarray:
+                           spacing: float | None = None, sound: Any = None, rest_density: Any = None) -> np.ndarray:
     """Pressure (8.17) + viscosity (8.18) accelerations by brute force, shape (N, 3).
 
     ``mu`` (N,) per-particle dynamic viscosity (pairs use the mean). With
@@ -98,6 +103,10 @@ def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h:
     (one of them solid) is reduced to its repulsive part (8.37). ``tensile`` is ε of the tensile
     correction with the reference distance ``spacing`` (``d``); ``sound`` (N,) the particles' speeds of
     sound ``c`` of its background ``B c²/ρ`` (:data:`unmesh.sph._kernels.TENSILE_BACKGROUND`; None: 0).
+    ``rest_density`` (N,) or scalar ρ0: the viscosity divides by ``max(ρ_i, ρ0_i) max(ρ_j, ρ0_j)`` (a
+    summation density below ρ0 is the kernel's empty support; None: by ``ρ_i ρ_j``). The kernel
+    (:func:`unmesh.sph._kernels.force_pass`) bounds fluid particles and solid fragments (fewer than 1/8 of
+    the rest count of neighbours) only; this reference bounds every particle.
 
     Example
     -------
@@ -124,7 +133,8 @@ def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h:
         f = np.asarray(poly6(np.sqrt(r2), h, dim)) / float(poly6(0.5 * spacing, h, dim))
         bg = np.zeros(n) if sound is None else TENSILE_BACKGROUND * np.asarray(sound, float) ** 2 / rr
         rt = tensile * (np.maximum(-pr[i], 0) + np.maximum(-pr[j], 0) + bg[i] + bg[j]) * np.maximum(f ** 4 - 1, 0)
-    bracket = -(pr[i] + pr[j] + rt) + 2.0 * (dim + 2) * mubar / (rr[i] * rr[j]) * vx / (r2 + 0.01 * h * h)
+    rv = rr if rest_density is None else np.maximum(rr, np.broadcast_to(np.asarray(rest_density, float), (n,)))
+    bracket = -(pr[i] + pr[j] + rt) + 2.0 * (dim + 2) * mubar / (rv[i] * rv[j]) * vx / (r2 + 0.01 * h * h)
     f = (mm[j] * bracket)[:, None] * grad
     if objects is not None:
         ob = np.asarray(objects)

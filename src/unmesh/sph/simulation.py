@@ -574,6 +574,7 @@ class SPHSimulation(Simulation):
                 self._xref = np.empty_like(self.x)
             self._xref[:] = self.x
         self._diffuse()
+        self._partner_tension()
 
     def _density_from_candidates(self) -> None:
         bo, binv, bd, bk, bs = self.bgrid
@@ -585,6 +586,14 @@ class SPHSimulation(Simulation):
             if self._lists_fit():
                 break
         self._diffuse()
+        self._partner_tension()
+
+    def _partner_tension(self) -> None:
+        """The tension's share by count over the tension partners only (:func:`unmesh.sph._kernels.partner_pressure`),
+        when particles of different objects, one of them solid, may meet."""
+        if len(self.objects) > 1 and np.any(self.phase == SOLID):
+            K.partner_pressure(self.rho, self.p, self.phase, self.obj, self.mat, self.mats, self.nbr, self.nnbr,
+                               self.full_neighbors)
 
     def _lists_fit(self) -> bool:
         """True when the last density pass's neighbour and candidate lists held every entry (their
@@ -660,7 +669,8 @@ class SPHSimulation(Simulation):
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
                      self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.wall_mom,
                      self.corner_mom, self.bnoslip,
-                     self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
+                     self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp,
+                     self.full_neighbors)
         if self.elastic:
             # the new lattice state (in the new order) becomes the previous one of the next step
             self.amat, s["amat_out"] = s["amat_out"], self.amat
