@@ -167,8 +167,6 @@ def pressure_eos(rho, rho0, k, gamma, zeta):
 #: Share of the tension a solid particle carries by its neighbour count (fractions of the count on the
 #: rest lattice): none up to 1/16 (3 in 3D), all from 1/8 (:func:`solid_pressure`).
 SOLID_TENSION_SUPPORT = (0.0625, 0.125)
-#: Below this density (in ρ0) every solid particle's tension is capped (:func:`solid_pressure`).
-SOLID_CAP_DENSITY = 0.5
 
 
 @njit(**PLAIN)
@@ -179,17 +177,14 @@ def solid_pressure(rho, rho0, k, gamma, zeta, count, full):
     ``fluid_pressure``'s bounds broke the fracture scene's beam and the melting blob's ear), but a
     fragment of a few particles is not a continuum either: the tension fades in with the neighbour
     count between :data:`SOLID_TENSION_SUPPORT` (half the fluid's thresholds, ``full`` the count on the
-    rest lattice), and while it fades, or below :data:`SOLID_CAP_DENSITY` (half its support empty; a lone
-    ice particle whose count came from rod particles at the edge of its support, ρ ≈ 0.15 ρ0, was pulled
-    into the rod at 23 m/s), ``|p|/ρ² ≤ ζK/ρ0²`` (acts only below ``ρ ≈ 0.62 ρ0`` for Γ = 1; with the cap
-    on every solid the fracture scene's beam broke off at another place). Ice fragments
+    rest lattice), and while it fades ``|p|/ρ² ≤ ζK/ρ0²`` (acts only below ``ρ ≈ 0.62 ρ0`` for Γ = 1; with
+    the cap on every solid the fracture scene's beam broke off at another place). Ice fragments
     of 2–5 particles broken off the freezing rod (ζK = 150, ρ ≈ 0.35–0.6 ρ0, ``p/ρ²`` down to −700) were
     pulled onto each other (0.4 d) and rang at the time step, flying off at 8–11 m/s.
     """
-    s = rho / rho0
     if full <= 0.0 or count >= SOLID_TENSION_SUPPORT[1] * full:
-        p = pressure_eos(rho, rho0, k, gamma, zeta)
-        return max(p, -zeta * k * s * s) if s < SOLID_CAP_DENSITY else p
+        return pressure_eos(rho, rho0, k, gamma, zeta)
+    s = rho / rho0
     share = max((count / full - SOLID_TENSION_SUPPORT[0]) / (SOLID_TENSION_SUPPORT[1] - SOLID_TENSION_SUPPORT[0]), 0.0)
     return max(pressure_eos(rho, rho0, k, gamma, zeta * share), -zeta * share * k * s * s)
 

@@ -37,7 +37,7 @@ import numpy as np
 
 from unmesh._validate import as_array, as_points
 from unmesh.kernels import poly6, spiky_derivative, spiky_gradient
-from unmesh.sph._kernels import SOLID_CAP_DENSITY, SOLID_TENSION_SUPPORT, TENSILE_BACKGROUND, TENSION_SUPPORT
+from unmesh.sph._kernels import SOLID_TENSION_SUPPORT, TENSILE_BACKGROUND, TENSION_SUPPORT
 from unmesh.sph.collisions import penalty_projection
 
 __all__ = ["acceleration_reference", "density_diffusion_reference", "density_reference", "pressure", "xsph_reference"]
@@ -73,7 +73,7 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
     from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``). ``fluid=False`` (solids,
     :func:`unmesh.sph._kernels.solid_pressure`): the law as it is, its tension scaled by the share of
     :data:`~unmesh.sph._kernels.SOLID_TENSION_SUPPORT` (0 up to ``full/16``, 1 from ``full/8``) and,
-    below ``full/8`` or below ``SOLID_CAP_DENSITY`` ρ0, capped at ``ζK (ρ/ρ0)²`` (acts below ``ρ ≈ 0.62 ρ0``).
+    below ``full/8``, capped at ``ζK (ρ/ρ0)²`` (acts below ``ρ ≈ 0.62 ρ0``).
 
     Example
     -------
@@ -87,8 +87,7 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
         lo, hi = TENSION_SUPPORT if fluid else SOLID_TENSION_SUPPORT
         by_count = np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
     if not fluid:
-        cap = (by_count < 1.0) | (r / rho0 < SOLID_CAP_DENSITY)
-        capped = np.where(cap, np.maximum(zeta * by_count * p, -zeta * by_count * k * (r / rho0) ** 2), zeta * p)
+        capped = np.where(by_count < 1.0, np.maximum(zeta * by_count * p, -zeta * by_count * k * (r / rho0) ** 2), zeta * p)
         return np.where(p < 0, capped, p)
     share = (r / rho0) ** 2 * by_count
     return np.where(p < 0, zeta * share * p, p)
