@@ -9,8 +9,8 @@ It prints:
 * **input-to-screen latency** of paint events: from the pointer event's ``timeStamp`` to the
   moment the page's dab preview of it is drawn (client side, one animation frame), and to the
   moment the server's frame that contains it is drawn on the canvas (median, 90th percentile,
-  max), with the split of the latter into stages (means, which add up to the mean total): ``input`` (event -> samples sent,
-  batching per animation frame), ``queue`` / ``paint`` (ray casts + ``add_samples``) /
+  max), with the split of the latter into stages (means, which add up to the mean total): ``input`` (event -> samples sent:
+  the browser's input pipeline and the page's handler), ``queue`` / ``paint`` (ray casts + ``add_samples``) /
   ``render`` / ``encode`` (the server's timings in the frame header), ``up`` (sent -> received
   by the server's event loop) and ``down`` (encoded -> received by the page: event loop,
   WebSocket, the page's main thread), both from the shared wall clock, and ``client``
@@ -34,7 +34,9 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import atexit
 import math
+import shutil
 import statistics
 import sys
 import tempfile
@@ -73,8 +75,10 @@ def main() -> None:
 
     spacing = args.spacing
     if args.surfels:
-        n0 = len(Blob().surfels(spacing=0.05))
-        spacing = 0.05 * math.sqrt(n0 / args.surfels)
+        # the pilot at 0.01 (26k surfels): at coarser spacings the ear caps' refinement
+        # (shapes._sampling) is a larger share and the estimate would fall short
+        n0 = len(Blob().surfels(spacing=0.01))
+        spacing = 0.01 * math.sqrt(n0 / args.surfels)
     t = time.perf_counter()
     cached = Path(args.cache) / f"blob_{spacing:.6g}.ply" if args.cache else None
     if cached is not None and cached.is_file():
@@ -92,7 +96,9 @@ def main() -> None:
     w, h = (int(v) for v in args.size.split("x"))
     haptics = {"thread": "thread", "process": "process", "off": False}[args.haptics]
     print(f"haptic loop: {args.haptics}")
-    out = Path(tempfile.mkdtemp()) / "blob_painted.ply"
+    folder = Path(tempfile.mkdtemp(prefix="unmesh_bench_studio_"))
+    atexit.register(shutil.rmtree, folder, True)  # the saved model and its autosave: ~0.4 GB at 500k surfels
+    out = folder / "blob_painted.ply"
     with BackgroundStudio(Workspace(Session(cloud, PaintOptions(haptics=haptics)), out, advance_every=None)) as studio:
         pw = sync_playwright().start()
         browser = pw.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)

@@ -53,7 +53,7 @@ def main() -> None:
 
     spacing = args.spacing
     if args.surfels:
-        spacing = 0.05 * math.sqrt(len(Blob().surfels(spacing=0.05)) / args.surfels)
+        spacing = 0.01 * math.sqrt(len(Blob().surfels(spacing=0.01)) / args.surfels)  # pilot as bench_studio's
     cached = Path(args.cache) / f"blob_{spacing:.6g}.ply" if args.cache else None
     if cached is not None and cached.is_file():
         from unmesh.io import load_surfels
@@ -119,14 +119,21 @@ def main() -> None:
                 spent[key] = spent.get(key, 0.0) + time.process_time() - t
         setattr(obj, name, g)
 
-    def steady_stroke(k: int) -> None:
+    dur = 59 / 120  # seconds per stroke: 60 pen events at 120 per second
+
+    def stroke_batches(k: int) -> dict[int, list]:
+        """Stroke ``k``'s pen samples, batched by the animation frame (60 per second) they are sent at."""
         row, x0, x1 = segment(0.35 + 0.08 * k, 0.45 + 0.08 * k)
-        n, dur = int((x1 - x0) / step), 59 / 120
+        n = int((x1 - x0) / step)
         rows = [[1000 * dur * i * step / (x1 - x0), x0 + i * step, row, 0.3 + 0.6 * i * step / (x1 - x0), 0, 0]
                 for i in range(n + 1)]
         batches: dict[int, list] = {}
         for r in rows:
             batches.setdefault(int(r[0] / (1000 / 60)) + 1, []).append(r)
+        return batches
+
+    def steady_stroke(k: int) -> None:
+        batches = stroke_batches(k)
         ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.05},
                    "paint": {"type": "oil", "color": [0.14, 0.18, 0.62]}})
         for _, b in sorted(batches.items()):
@@ -163,13 +170,7 @@ def main() -> None:
         return
 
     def stroke(k: int) -> None:
-        row, x0, x1 = segment(0.35 + 0.08 * k, 0.45 + 0.08 * k)
-        n, dur = int((x1 - x0) / step), 59 / 120
-        rows = [[1000 * dur * i * step / (x1 - x0), x0 + i * step, row, 0.3 + 0.6 * i * step / (x1 - x0), 0, 0]
-                for i in range(n + 1)]
-        batches: dict[int, list] = {}
-        for r in rows:  # sent at the next animation frame
-            batches.setdefault(int(r[0] / (1000 / 60)) + 1, []).append(r)
+        batches = stroke_batches(k)
         queue = [(key * 1000 / 60, b) for key, b in sorted(batches.items())]
         ws.handle({"type": "begin", "brush": {"type": "round", "size": 0.05},
                    "paint": {"type": "oil", "color": [0.14, 0.18, 0.62]}})

@@ -33,7 +33,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 #: Layers, bottom to top; each names packages or modules (longest match wins).
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("base", ("unmesh.errors", "unmesh._validate", "unmesh._version", "unmesh._linalg_kernels", "unmesh._threads",
-              "unmesh._csr_kernels", "unmesh.sim.threads", "unmesh.scenes", "unmesh.distributed")),
+              "unmesh._csr_kernels", "unmesh._csr", "unmesh.sim.threads", "unmesh.scenes", "unmesh.distributed")),
     ("core", ("unmesh.kernels", "unmesh.spatial", "unmesh.surfels.cloud", "unmesh.meshes",
               "unmesh.particles")),
     ("geometry", ("unmesh.surfels", "unmesh.shapes", "unmesh.io")),

@@ -129,7 +129,7 @@ def test_orphan_merge_at_once_equals_one_after_the_other():
     of merging them one by one (replays stay byte-identical)."""
     from unmesh import SurfelCloud
     from unmesh.paint.surface import PaintSurface
-    from unmesh.paint.transfer import _PROPS, _merge_orphans, merge_orphans
+    from unmesh.paint.transfer import _PROPS, _merge_orphans, merge_orphan_rows, merge_orphans
 
     rng = np.random.default_rng(3)
     m = 40
@@ -169,3 +169,11 @@ def test_orphan_merge_at_once_equals_one_after_the_other():
         assert np.array_equal(x, y)
     for f in _PROPS:
         assert np.array_equal(a[4][f], b[4][f])
+    # the kernel merging one after the other (paint_event's) gives the same
+    c = state()
+    props = np.stack([c[4][f] for f in _PROPS])
+    merge_orphan_rows(surf, ks_dup, rr_dup, c[0], c[1], c[2], c[3], props)
+    for x, y in zip(a[:4], c[:4], strict=True):
+        assert np.array_equal(x, y)
+    for i, f in enumerate(_PROPS):
+        assert np.array_equal(a[4][f], props[i])

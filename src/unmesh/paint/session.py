@@ -463,8 +463,7 @@ class Session:
         """What :meth:`save` writes, copied now: every field's rows and the metadata line.
         :meth:`write_snapshot` makes the cloud of them (checks, visible colours), encodes and
         writes it later, on any thread, while painting goes on (the studio's autosave)."""
-        s = self.surface
-        return {name: np.array(getattr(s, name), copy=True) for name in FIELDS}, self._meta_line()
+        return self._state(copy=True)
 
     @staticmethod
     def write_snapshot(path: str | os.PathLike[str], snapshot: tuple[dict[str, np.ndarray], bytes]) -> None:

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from unmesh._threads import serial_if_small
+from unmesh.paint import _transfer_kernels as tk
 from unmesh.paint._buffer_kernels import grid_knn2d, pixel_owners
 from unmesh.paint.brush import BrushState, cross3
 from unmesh.paint.model import transfer
@@ -187,6 +188,181 @@ def merge_orphans(surface: PaintSurface, ks: np.ndarray, rr: np.ndarray, cw: np.
         _merge_orphans(surface, ks[j], rr[j], cw, vw, dc, vd, props)
 
 
+# -- the paint event's step chains: numpy references of the kernels in _transfer_kernels -----
+
+def near_rows_reference(rows: np.ndarray, pos: np.ndarray, nrm: np.ndarray, rad: np.ndarray, o: np.ndarray,
+                        N: np.ndarray, t1: np.ndarray, t2: np.ndarray, reach: float
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Reference of :func:`near_rows`."""
+    pos_r = pos[rows]
+    nrm_r = nrm[rows]
+    rel = pos_r - o
+    rh = rel @ N
+    ok = (nrm_r @ N > 0.2) & (np.abs(rh) < reach)
+    return rows[ok], pos_r[ok], nrm_r[ok], rad[rows[ok]], np.stack([rel[ok] @ t1, rel[ok] @ t2], axis=1)
+
+
+def near_rows(rows: np.ndarray, pos: np.ndarray, nrm: np.ndarray, rad: np.ndarray, o: np.ndarray, N: np.ndarray,
+              t1: np.ndarray, t2: np.ndarray, reach: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The surface rows ``rows`` (R,) int64 that face the plane (origin ``o``, unit normal ``N``,
+    tangents ``t1``, ``t2``; ``nrm . N > 0.2``) within ``reach`` of it, in order: their rows,
+    positions (M, 3), normals (M, 3), radii (M,) and plane coordinates (M, 2) (of the surface
+    fields ``pos``, ``nrm``, ``rad``)."""
+    n = len(rows)
+    out = np.empty(n, np.int64)
+    pos_r, nrm_r, rad_r, ou = np.empty((n, 3)), np.empty((n, 3)), np.empty(n), np.empty((n, 2))
+    m = tk.near_rows(np.ascontiguousarray(rows, np.int64), pos, nrm, rad, o, N, t1, t2, float(reach), out, pos_r,
+                     nrm_r, rad_r, ou)
+    return out[:m], pos_r[:m], nrm_r[:m], rad_r[:m], ou[:m]
+
+
+def hidden_fathers_reference(fathers: np.ndarray, replaced: np.ndarray, n_original: int, active: np.ndarray,
+                             pos: np.ndarray, nrm: np.ndarray, o: np.ndarray, N: np.ndarray, t1: np.ndarray,
+                             t2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Reference of :func:`hidden_fathers`."""
+    hidden = ~active[fathers] | np.isin(fathers, replaced[replaced < n_original])
+    fcand = fathers[hidden & (nrm[fathers] @ N > 0.2)]
+    rel_f = pos[fcand] - o
+    return fcand, np.stack([rel_f @ t1, rel_f @ t2], axis=1)
+
+
+def hidden_fathers(fathers: np.ndarray, replaced: np.ndarray, n_original: int, active: np.ndarray,
+                   pos: np.ndarray, nrm: np.ndarray, o: np.ndarray, N: np.ndarray, t1: np.ndarray,
+                   t2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The originals among ``fathers`` (F,) int64 that are hidden (not ``active``, or among the
+    ``replaced`` rows) and face the plane, in order, (M,) int64, and their plane coordinates (M, 2)."""
+    n = len(fathers)
+    idx, uv = np.empty(n, np.int64), np.empty((n, 2))
+    m = tk.hidden_fathers(np.ascontiguousarray(fathers, np.int64), np.ascontiguousarray(replaced, np.int64),
+                          n_original, active, pos, nrm, o, N, t1, t2, idx, uv)
+    return idx[:m], uv[:m]
+
+
+def replaced_pixels_reference(own: np.ndarray, pen: np.ndarray, covered: np.ndarray, ou: np.ndarray,
+                              rad_r: np.ndarray, lo0: float, lo1: float, W: int, H: int, h: float
+                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Reference of :func:`unmesh.paint._transfer_kernels.replaced_pixels`."""
+    # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer
+    r15 = 1.5 * rad_r
+    inner = (ou[:, 0] - r15 > lo0) & (ou[:, 0] + r15 < lo0 + W * h)
+    inner &= (ou[:, 1] - r15 > lo1) & (ou[:, 1] + r15 < lo1 + H * h)
+    # ... and surfels whose centre lies on a penetrated pixel but own no pixel (denser than the
+    # buffer): their paint goes to the pixel under their centre
+    ci = np.floor((ou[:, 0] - lo0) / h).astype(np.int64)
+    cj = np.floor((lo1 + H * h - ou[:, 1]) / h).astype(np.int64)
+    inside_buf = (ci >= 0) & (ci < W) & (cj >= 0) & (cj < H)
+    cpix = np.where(inside_buf, cj * W + ci, 0)
+    on_pen = inside_buf & pen[cpix]
+    rep_local = np.unique(np.concatenate([own[pen], np.flatnonzero(on_pen)]))
+    rep_local = rep_local[inner[rep_local]]
+    is_rep = np.zeros(len(rad_r), bool)
+    is_rep[rep_local] = True
+    Q = np.flatnonzero(covered & is_rep[own])
+    npix = np.bincount(own[Q], minlength=len(rad_r)).astype(np.float64)
+    return is_rep, cpix, Q, npix
+
+
+def pixels_near_reference(ou: np.ndarray, rad_r: np.ndarray, sel: np.ndarray, pix: np.ndarray, skip: np.ndarray,
+                          lo0: float, lo1: float, W: int, H: int, h: float) -> np.ndarray:
+    """Reference of :func:`unmesh.paint._transfer_kernels.pixels_near` (every pixel against
+    every row of ``sel``)."""
+    r = rad_r[sel] * (1.0 + 1e-9)
+    dx = pix[:, None, 0] - ou[sel][None, :, 0]
+    dy = pix[:, None, 1] - ou[sel][None, :, 1]
+    return np.flatnonzero((dx * dx + dy * dy <= r * r).any(axis=1) & ~skip)
+
+
+def pixel_state_reference(surface: PaintSurface, Q: np.ndarray, own: np.ndarray, rows: np.ndarray,
+                          npix: np.ndarray, pix: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Reference of :func:`pixel_state`."""
+    oq = own[Q]
+    rq = rows[oq]
+    share = 1.0 / npix[oq]
+    props = np.stack([surface.__getattr__(f)[rq] for f in _PROPS])
+    return rq, surface.wet[rq].copy(), surface.vw[rq] * share, surface.vd[rq] * share, surface.dry[rq].copy(), props, pix[Q]
+
+
+def pixel_state(surface: PaintSurface, Q: np.ndarray, own: np.ndarray, rows: np.ndarray, npix: np.ndarray,
+                pix: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Surface pixel state of buffer pixels ``Q`` (K,) (owned by ``rows[own[Q]]``, each owner's
+    paint shared equally by its ``npix`` pixels): owner rows (K,) int64, wet colour (K, 3),
+    wet and dry volume (K,), dry colour (K, 3), paint attributes (6, K) (rows in the order of
+    ``_PROPS``) and pixel centres (K, 2)."""
+    K = len(Q)
+    rq = np.empty(K, np.int64)
+    cw, vw, vd, dc = np.empty((K, 3)), np.empty(K), np.empty(K), np.empty((K, 3))
+    props, pu = np.empty((len(_PROPS), K)), np.empty((K, 2))
+    s = surface
+    tk.pixel_state(Q, own, rows, npix, s.wet, s.vw, s.vd, s.dry, s.rho, s.kappa, s.diff, s.refl, s.shin, s.metal,
+                   pix, rq, cw, vw, vd, dc, props, pu)
+    return rq, cw, vw, vd, dc, props, pu
+
+
+def brush_pixels_reference(Q: np.ndarray, P: np.ndarray, bown: np.ndarray, depth: np.ndarray, sel: np.ndarray,
+                           brush_wet: np.ndarray, brush_vw: np.ndarray, pressure: float, lower: float
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Reference of :func:`unmesh.paint._transfer_kernels.brush_pixels`."""
+    bq = bown[Q][P]
+    bsel = sel[bq]
+    nb = np.bincount(bq, minlength=len(sel)).astype(np.float64)
+    bshare = 1.0 / nb[bq]
+    press = pressure * np.clip(depth[Q][P] / max(lower, 1e-300), 0.0, 1.0)
+    return bsel, brush_wet[bsel], brush_vw[bsel] * bshare, press
+
+
+def brush_write_back_reference(bsel: np.ndarray, vb2: np.ndarray, cb2: np.ndarray, brush_wet: np.ndarray,
+                               brush_vw: np.ndarray) -> None:
+    """Reference of :func:`unmesh.paint._transfer_kernels.brush_write_back` (in place)."""
+    touched = np.unique(bsel)
+    tot = np.zeros(len(brush_vw))
+    np.add.at(tot, bsel, vb2)
+    acc = np.zeros((len(brush_vw), 3))
+    np.add.at(acc, bsel, vb2[:, None] * cb2)
+    safe = np.where(tot[touched] > 0, tot[touched], 1.0)[:, None]
+    brush_wet[touched] = np.where(tot[touched][:, None] > 0, acc[touched] / safe, brush_wet[touched])
+    brush_vw[touched] = tot[touched]
+
+
+def blend_props_reference(props: np.ndarray, P: np.ndarray, fb: np.ndarray, values: np.ndarray) -> None:
+    """Reference of :func:`unmesh.paint._transfer_kernels.blend_props` (``P`` indices or a mask; in place)."""
+    for f in range(len(props)):
+        props[f, P] = (1.0 - fb) * props[f, P] + fb * values[f]
+
+
+def child_frames_reference(surface: PaintSurface, rq: np.ndarray, pu: np.ndarray, o: np.ndarray, t1: np.ndarray,
+                           t2: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Reference of :func:`child_frames`."""
+    base_pt = o + pu[:, :1] * t1 + pu[:, 1:] * t2
+    onr = surface.nrm[rq]
+    fnr = surface.nrm[surface.father[rq]]
+    owner_lift = surface.lift[rq]
+    opl = surface.pos[rq] - owner_lift[:, None] * fnr
+    return base_pt, onr, fnr, opl, owner_lift
+
+
+def child_frames(surface: PaintSurface, rq: np.ndarray, pu: np.ndarray, o: np.ndarray, t1: np.ndarray,
+                 t2: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Per child of owner row ``rq`` (K,) at pixel centre ``pu`` (K, 2): the pixel centre in space
+    (K, 3), the owner's normal (K, 3), its father's normal (K, 3), its father-surface point
+    (``pos - lift * father normal``, (K, 3)) and its lift (K,)."""
+    K = len(rq)
+    base_pt, onr, fnr, opl, owner_lift = np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), np.empty((K, 3)), \
+        np.empty(K)
+    tk.child_frames(rq, pu, o, t1, t2, surface.pos, surface.nrm, surface.lift, surface.father, base_pt, onr, fnr, opl,
+                    owner_lift)
+    return base_pt, onr, fnr, opl, owner_lift
+
+
+def merge_orphan_rows(surface: PaintSurface, ks: np.ndarray, rr: np.ndarray, cw: np.ndarray, vw: np.ndarray,
+                      dc: np.ndarray, vd: np.ndarray, props: np.ndarray) -> None:
+    """:func:`merge_orphans` (its reference) in one pass, the attributes as the rows of ``props``
+    (6, Q) in the order of ``_PROPS``; in place."""
+    s = surface
+    tk.merge_orphan_rows(np.ascontiguousarray(ks, np.int64), np.ascontiguousarray(rr, np.int64), s.vw, s.vd, s.wet,
+                         s.dry, s.rho, s.kappa, s.diff, s.refl, s.shin, s.metal, cw, vw, dc, vd, props)
+
+
 def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure: float, dt: float,
                 direction: np.ndarray, tip: np.ndarray | None = None, body: np.ndarray | None = None,
                 km: bool = False) -> TransferResult:
@@ -231,18 +407,11 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     ext = float(np.abs(bu).max()) + 3.0 * rmax
     off, ind = tree.radius_neighbors(o[None], ext * 1.5)
     fathers = ind[off[0]:off[1]]
-    rows = surface.rows_of(fathers)
-    pos_r = surface.pos[rows]
-    nrm_r = surface.nrm[rows]
-    rel = pos_r - o
-    rh = rel @ N
-    ok = (nrm_r @ N > 0.2) & (np.abs(rh) < reach)
-    rows = rows[ok]
+    # those facing the plane within reach, their fields fetched once, and plane coordinates
+    rows, pos_r, nrm_r, rad_r, ou = near_rows(surface.rows_of(fathers), surface.pos, surface.nrm, surface.rad, o, N,
+                                              t1, t2, reach)
     if len(rows) == 0:
         return empty
-    # the gathered rows' fields, fetched once (the values of surface.<field>[rows])
-    pos_r, nrm_r, rad_r = pos_r[ok], nrm_r[ok], surface.rad[rows]
-    ou = np.stack([rel[ok] @ t1, rel[ok] @ t2], axis=1)
     # pixels about one brush surfel, but never coarser than the surface already is there
     h = min(h, 0.7 * float(np.median(rad_r)))
     # the buffer: centred on the brush footprint, margin of 3 object radii
@@ -272,10 +441,19 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     cv = (0.5 * H - (np.arange(H) + 0.5)) * h + (lo[1] + 0.5 * H * h)
     U, V = np.meshgrid(cu, cv)
     pix = np.stack([U.ravel(), V.ravel()], axis=1)
-    # ownership: nearest object surfel in the plane, within its radius
     # ownership: among the nearest object surfels, the one covering the pixel best (smallest
-    # distance / radius), so cells of small children and large originals tile what they cover
-    own, ratio = owners(ou, rad_r, pix, min(8, len(rows)))
+    # distance / radius), so cells of small children and large originals tile what they cover.
+    # Asked first where the brush may penetrate (it covers the pixel, and the splatted height is
+    # above the brush's or the splats leave the pixel centre uncovered: penetration needs the
+    # owner there), then (below) around the replaced surfels; the other pixels own nothing that
+    # is used (not covered)
+    kk = min(8, len(rows))
+    need = (cov_b.ravel() & (ho.ravel() - hb.ravel() > 0)) | ~cov_o.ravel()
+    own = np.zeros(W * H, np.int64)
+    ratio = np.full(W * H, np.inf)
+    first = np.flatnonzero(need)
+    if len(first):
+        own[first], ratio[first] = owners(ou, rad_r, pix[first], kk)
     covered = ratio <= 1.0
     # the object's height: splatted, or (where the clipped kernels leave a pixel centre
     # uncovered, e.g. at a corner of touching splats) the owner's plane (row-wise arithmetic:
@@ -300,35 +478,23 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     bown[cand] = bown_c
     if not pen.any():
         return empty
-    # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer
-    r15 = 1.5 * rad_r
-    inner = (ou[:, 0] - r15 > lo[0]) & (ou[:, 0] + r15 < lo[0] + W * h)
-    inner &= (ou[:, 1] - r15 > lo[1]) & (ou[:, 1] + r15 < lo[1] + H * h)
-    # ... and surfels whose centre lies on a penetrated pixel but own no pixel (denser than the
-    # buffer): their paint goes to the pixel under their centre
-    ci = np.floor((ou[:, 0] - lo[0]) / h).astype(np.int64)
-    cj = np.floor((lo[1] + H * h - ou[:, 1]) / h).astype(np.int64)
-    inside_buf = (ci >= 0) & (ci < W) & (cj >= 0) & (cj < H)
-    cpix = np.where(inside_buf, cj * W + ci, 0)
-    on_pen = inside_buf & pen[cpix]
-    rep_local = np.unique(np.concatenate([own[pen], np.flatnonzero(on_pen)]))
-    rep_local = rep_local[inner[rep_local]]
+    # replaced surfels: owners of penetrated pixels whose cell lies inside the buffer, and
+    # surfels whose centre lies on a penetrated pixel but own no pixel (denser than the buffer:
+    # their paint goes to the pixel under their centre, cpix); the pixels Q of the replaced
+    is_rep, cpix, Q, npix = tk.replaced_pixels(own, pen, covered, ou, rad_r, float(lo[0]), float(lo[1]), W, H, h)
+    rep_local = np.flatnonzero(is_rep)
     if len(rep_local) == 0:
         return empty
-    is_rep = np.zeros(len(rows), bool)
-    is_rep[rep_local] = True
-    Q = np.flatnonzero(covered & is_rep[own])
+    # the other pixels a replaced surfel may own (within its radius): their owners, then Q again
+    # (is_rep depends only on the penetrated pixels' owners: unchanged)
+    more = tk.pixels_near(ou, rad_r, rep_local, pix, need, float(lo[0]), float(lo[1]), W, H, h)
+    if len(more):
+        own[more], ratio[more] = owners(ou, rad_r, pix[more], kk)
+        covered[more] = ratio[more] <= 1.0
+        is_rep, cpix, Q, npix = tk.replaced_pixels(own, pen, covered, ou, rad_r, float(lo[0]), float(lo[1]), W, H, h)
     P = pen[Q]
-    oq = own[Q]
-    rq = rows[oq]
-    npix = np.bincount(oq, minlength=len(rows)).astype(np.float64)
-    share = 1.0 / npix[oq]
     # surface pixel state (exact shares of the owners)
-    cw = surface.wet[rq].copy()
-    vw = surface.vw[rq] * share
-    vd = surface.vd[rq] * share
-    dc = surface.dry[rq].copy()
-    props = {f: surface.__getattr__(f)[rq] for f in _PROPS}  # fancy indexing copies
+    rq, cw, vw, vd, dc, props_a, pu = pixel_state(surface, Q, own, rows, npix, pix)
     orphans = rep_local[npix[rep_local] == 0]
     if len(orphans):
         qpos = np.full(W * H, -1, np.int64)
@@ -336,54 +502,31 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
         ks = qpos[cpix[orphans]]
         is_rep[orphans[ks < 0]] = False  # its pixel is not part of the resampled region: keep it
         orphans, ks = orphans[ks >= 0], ks[ks >= 0]
-        merge_orphans(surface, ks, rows[orphans], cw, vw, dc, vd, props)
+        merge_orphan_rows(surface, ks, rows[orphans], cw, vw, dc, vd, props_a)
         rep_local = np.flatnonzero(is_rep)
     # brush pixel state on penetrated pixels
-    bq = bown[Q][P]
-    bsel = sel[bq]
-    nb = np.bincount(bq, minlength=len(sel)).astype(np.float64)
-    bshare = 1.0 / nb[bq]
-    cbp = brush.wet[bsel]
-    vbp = brush.vw[bsel] * bshare
-    press = pressure * np.clip(depth[Q][P] / max(brush.sk.lower, 1e-300), 0.0, 1.0)
+    bsel, cbp, vbp, press = tk.brush_pixels(Q, P, bown, depth, sel, brush.wet, brush.vw, float(pressure),
+                                            float(brush.sk.lower))
     cs2, vs2, cb2, vb2, fb = transfer(cw[P], vw[P], cbp, vbp, paint.back_transfer, paint.transfer, press, dt, km)
     cw[P] = cs2
     vw[P] = vs2
     # brush write-back: per brush surfel, total volume and volume-weighted colour
-    touched = np.unique(bsel)
-    tot = np.zeros(len(brush.vw))
-    np.add.at(tot, bsel, vb2)
-    acc = np.zeros((len(brush.vw), 3))
-    np.add.at(acc, bsel, vb2[:, None] * cb2)
-    safe = np.where(tot[touched] > 0, tot[touched], 1.0)[:, None]
-    brush.wet[touched] = np.where(tot[touched][:, None] > 0, acc[touched] / safe, brush.wet[touched])
-    brush.vw[touched] = tot[touched]
+    tk.brush_write_back(bsel, vb2, cb2, brush.wet, brush.vw)
     # new paint attributes blend by the fraction of brush paint in the pixel
-    def blend(field: str, value: float) -> np.ndarray:
-        out = props[field]
-        out[P] = (1.0 - fb) * out[P] + fb * value
-        return out
-    rho = blend("rho", paint.density / paint.thickness)
-    kap = blend("kappa", paint.drying)
-    dif = blend("diff", paint.diffusion)
-    refl = blend("refl", paint.reflectivity)
-    shin = blend("shin", paint.shininess)
-    met = blend("metal", paint.metallic)
+    tk.blend_props(props_a, np.flatnonzero(P), fb, np.array([paint.density / paint.thickness, paint.drying,
+                                                             paint.diffusion, paint.reflectivity, paint.shininess,
+                                                             paint.metallic], np.float64))
+    rho, kap, dif, refl, shin, met = props_a
     # children: pixel centres on the owner's plane
-    pu = pix[Q]
-    base_pt = o + pu[:, :1] * t1 + pu[:, 1:] * t2
-    onr = surface.nrm[rq]
-    # geometry and relief are relative to the original surface: the father's normal (so relief
-    # tilts never accumulate); the owner's plane is its father-surface point with that normal
-    fnr = surface.nrm[surface.father[rq]]
+    # geometry and relief are relative to the original surface: the father's normal fnr (so
+    # relief tilts never accumulate); the owner's plane is its father-surface point opl with that normal
+    base_pt, onr, fnr, opl, owner_lift = child_frames(surface, rq, pu, o, t1, t2)
     cosn = np.maximum(fnr @ N, 0.2)
-    owner_lift = surface.lift[rq]
-    opl = surface.pos[rq] - owner_lift[:, None] * fnr
     s = np.einsum("ij,ij->i", fnr, opl - base_pt) / cosn
     cpos = base_pt + s[:, None] * N
     area = np.full(len(Q), h * h) / cosn
-    lift = owner_lift * 1.0
-    nrm = onr.copy()
+    lift = owner_lift
+    nrm = onr
     if paint.relief == "hair" and P.any():
         thick = (vw[P] + vd[P]) / area[P]
         dirn = direction - np.dot(direction, N) * N
@@ -414,11 +557,9 @@ def paint_event(surface: PaintSurface, brush: BrushState, paint: Paint, pressure
     # inherited its owner's father drifted from it over repeated repaints, and downsampling then
     # grew the father to cover far children.)
     replaced = rows[rep_local]
-    hidden = ~surface.active[fathers] | np.isin(fathers, replaced[replaced < no])
-    fcand = fathers[hidden & (onrm[fathers] @ N > 0.2)]
+    fcand, fuv = hidden_fathers(fathers, replaced, no, surface.active, surface.pos, surface.nrm, o, N, t1, t2)
     if len(fcand):
-        rel_f = opos[fcand] - o
-        _, nf = nearest(np.stack([rel_f @ t1, rel_f @ t2], axis=1), pu)
+        _, nf = nearest(fuv, pu)
         fat = fcand[nf]
     else:
         fat = surface.father[rq]

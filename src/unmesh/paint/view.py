@@ -35,7 +35,7 @@ from unmesh._threads import serial_if_small
 from unmesh.errors import InputError
 from unmesh.paint._paint_kernels import gather_surfels, scatter_surfels
 from unmesh.paint._view_kernels import brush_discs, shadow_lookup
-from unmesh.paint.surface import PaintSurface
+from unmesh.paint.surface import PaintSurface, fresh_zeros
 from unmesh.render import Camera, SplatOptions, SplatRenderer
 from unmesh.render._kernels import facing_rows
 from unmesh.render.shading import GBuffer, RenderResult, shade
@@ -195,7 +195,7 @@ class PaintView:
             return
 
         def g(a: np.ndarray) -> np.ndarray:
-            out = np.zeros((m, *a.shape[1:]), a.dtype)
+            out = fresh_zeros((m, *a.shape[1:]), a.dtype)
             out[:used] = a[:used]
             return out
         self._on, self._pos, self._nrm, self._rad, self._col, self._partial = (

@@ -152,8 +152,9 @@ class Blob(FramedShape):
     (relative accuracy about 1e-5). The mesh is marching cubes
     (scikit-image) with every vertex moved along its grid edge onto the exact
     surface (resolve the ears: ``spacing <= 0.05 * scale``); surfels are a
-    maximal Poisson-disk sampling of the surface with tangent-plane Voronoi radii
-    (``estimate_radii(smooth=True)``: bounded at the ear tips).
+    maximal Poisson-disk sampling of the surface, denser at the ear tips where their
+    curvature radius is below the spacing (``poisson_surface``, curvature-adaptive), with
+    tangent-plane Voronoi radii (``estimate_radii(smooth=True)``).
 
     Example
     -------

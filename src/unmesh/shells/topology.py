@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from unmesh._csr import csr_entries
 from unmesh._validate import as_array, as_indices
 from unmesh.errors import InputError
 
@@ -63,19 +64,6 @@ def csr_from_groups(groups: np.ndarray, count: int) -> tuple[np.ndarray, np.ndar
 
     order, offsets = counting_sort_csr(np.ascontiguousarray(groups, dtype=np.int64), int(count))
     return offsets, order
-
-
-def csr_entries(offsets: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Positions of the entries of the listed CSR rows (in row order) and the row of each.
-
-    Example
-    -------
-    >>> csr_entries(np.array([0, 2, 3, 5]), np.array([2, 0]))
-    (array([3, 4, 0, 1]), array([2, 2, 0, 0]))
-    """
-    counts = offsets[rows + 1] - offsets[rows]
-    pos = np.repeat(offsets[rows] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-    return pos.astype(np.int64), np.repeat(rows, counts)
 
 
 def csr_from_groups_reference(groups: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:

@@ -59,6 +59,10 @@ _RAW_REFUSED = ("..", "%2e", "%2f", "%5c", "%25", "%00", "\\", "//")
 _FORCE_PERIOD = 0.05
 #: Seconds of message handling after which the worker renders a frame before going on.
 FRAME_BUDGET = 0.04
+#: WebSocket per-message compression (RFC 7692 permessage-deflate, negotiated with the page):
+#: painting frames carry raw RGBA tiles, which deflate several-fold; the browser inflates them
+#: in its network stack, before the page's handler runs.
+COMPRESS = True
 
 
 class Studio:
@@ -175,7 +179,7 @@ class Studio:
 
     async def _ws(self, request: web.Request) -> web.StreamResponse:
         self._check(request, state_changing=True)
-        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, compress=False)
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, compress=COMPRESS)
         await ws.prepare(request)
         self.clients.add(ws)
         try:

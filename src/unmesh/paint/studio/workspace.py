@@ -111,7 +111,7 @@ class Workspace:
         self.advance_every = advance_every
         self._last_advance = time.monotonic()
         self._force_session = self.session
-        self.encoder = FrameEncoder()
+        self.encoder = FrameEncoder(tiles="rgba")  # painting frames: raw tiles, drawn at once by the page
         self._t0 = time.monotonic()
         self._stroke: dict[str, Any] | None = None
         self._since_autosave = 0

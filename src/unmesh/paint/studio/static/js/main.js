@@ -18,7 +18,7 @@ const tools = { brush: "round", size: 0.05, paint: "oil", color: [0.8, 0.1, 0.1]
 const stats = { forces: 0, frames: 0, modelFrames: 0, tiles: 0, bytes: 0, latencies: [], previewLatencies: [],
                 stages: [], dropped: 0, fps: 0, errors: [], replies: [] };
 let server = { px_per_unit: 100, palette_px_per_unit: 173, presets: {}, width: 0, height: 0 };
-let stroke = null;          // {target, resampler, toImage, rows, ts, k, radius, color}
+let stroke = null;          // {target, resampler, toImage, k, radius, color, raw (samples from raw updates)}
 let cursor = null;          // {x, y, p, tilt, over}
 let drawing = Promise.resolve();
 let strokeNo = 0, endedNo = 0;  // strokes begun and acknowledged ("ended"): their dab previews go then
@@ -85,7 +85,7 @@ function bump(k) { $("strokes").textContent = String(Math.max(0, Number($("strok
 
 // Draws a frame; a frame older than the newest whole frame of its target is skipped (stale).
 // Latency split of a frame that shows pen events (ts = the newest event's time stamp):
-// input = event -> samples sent (batching per animation frame), wire = sent -> frame received,
+// input = event -> samples sent (page-side handling: samples go out with their pointer event), wire = sent -> frame received,
 // made of up (sent -> the server's event loop received it), the server's srv timings (queue,
 // paint, render, encode) and down (encoded -> the page received the frame; server and page share
 // the wall clock), and client = received -> decoded and drawn.
@@ -96,12 +96,16 @@ async function drawFrame(head, blobs, recv) {
   const ctx = model ? viewCtx : paletteCtx;
   if (!head.full && (canvas.width !== head.w || canvas.height !== head.h)) return;
   if (head.full && model && (canvas.width !== head.w || canvas.height !== head.h)) return;  // stale size
-  const bitmaps = await Promise.all(blobs.map((b) => createImageBitmap(b)));
-  head.rects.forEach((r, i) => {
-    if (head.scale > 1) ctx.drawImage(bitmaps[i], 0, 0, head.w, head.h);
-    else ctx.drawImage(bitmaps[i], r[0], r[1]);
-    bitmaps[i].close();
-  });
+  if (head.fmt === "rgba") {  // raw tiles of a painting frame: copied at once
+    head.rects.forEach((r, i) => ctx.putImageData(blobs[i], r[0], r[1]));
+  } else {
+    const bitmaps = await Promise.all(blobs.map((b) => createImageBitmap(b)));
+    head.rects.forEach((r, i) => {
+      if (head.scale > 1) ctx.drawImage(bitmaps[i], 0, 0, head.w, head.h);
+      else ctx.drawImage(bitmaps[i], r[0], r[1]);
+      bitmaps[i].close();
+    });
+  }
   stats.frames += 1;
   stats.tiles += head.rects.length;
   stats.bytes += head.rects.reduce((a, r) => a + r[4], 0);
@@ -179,7 +183,8 @@ function sizeCanvas() {
   const w = Math.max(16, Math.min(2048, Math.round(stage.clientWidth)));
   const h = Math.max(16, Math.min(2048, Math.round(stage.clientHeight)));
   const changed = viewCanvas.width !== w || viewCanvas.height !== h;
-  for (const c of [viewCanvas, previewCanvas, overlay]) { c.width = w; c.height = h; }
+  for (const c of [viewCanvas, previewCanvas, overlay]) { c.width = w; c.height = h; }  // (clears them)
+  cursorBox = null;
   return changed;
 }
 let resizeTimer = null;
@@ -198,21 +203,23 @@ function beginStroke(ev, target, canvas) {
   const pxPerUnit = target === "model" ? server.px_per_unit : server.palette_px_per_unit;
   const spacing = Math.max(1, 0.4 * tools.size * pxPerUnit);  // two fifths of the brush radius on screen
   strokeNo += 1;
-  stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas), rows: [], ts: null,
+  stroke = { target, resampler: new Resampler(spacing), toImage: imageMapper(canvas),
              k: strokeNo, radius: tools.size * pxPerUnit, color: hex(tools.color) };
   conn.send({ type: "begin", target, brush: { type: tools.brush, size: tools.size },
               paint: { type: tools.paint, color: tools.color, drying: tools.drying } });
   addSamples(ev);
 }
 
-// Samples are collected per animation frame and sent as one message (with the newest event's
-// time stamp); the model's dab previews are drawn in the same frame.
+// Samples are sent at once, one message per pointer event (its coalesced events, with its time
+// stamp): the server takes every message queued while it was busy into one frame, so holding them
+// here would only add latency. The model's dab previews are drawn at the next animation frame.
 function addSamples(ev) {
   const rows = [];
   for (const pt of inputPoints(ev, stroke.toImage, tools.pressure)) rows.push(...stroke.resampler.push(pt));
   if (!rows.length) return;
-  stroke.rows.push(...rows);
-  stroke.ts = ev.timeStamp;
+  const ts = ev.timeStamp;
+  conn.send({ type: "samples", samples: rows, ts });
+  sentAt.set(ts, performance.now());
   if (stroke.target === "model") {
     for (const r of rows) {
       if (onSurface(r[1], r[2])) {
@@ -221,37 +228,30 @@ function addSamples(ev) {
                     color: stroke.color });
       }
     }
+    scheduleDabs(ts);
   }
-  scheduleFlush();
 }
 
-let flushPending = false;
-function scheduleFlush() {
-  if (flushPending) return;
-  flushPending = true;
-  requestAnimationFrame(flushSamples);
-  setTimeout(flushSamples, 34);  // when animation frames are throttled (hidden page)
+let dabsPending = null;  // the newest pen event time stamp whose dab previews wait for the next animation frame
+function scheduleDabs(ts) {
+  const first = dabsPending === null;
+  dabsPending = ts;
+  if (!first) return;
+  requestAnimationFrame(flushDabs);
+  setTimeout(flushDabs, 34);  // when animation frames are throttled (hidden page)
 }
 
-function flushSamples() {
-  if (!flushPending) return;
-  flushPending = false;
-  if (!stroke || !stroke.rows.length) return;
-  const rows = stroke.rows, ts = stroke.ts;
-  stroke.rows = [];
-  conn.send({ type: "samples", samples: rows, ts });
-  sentAt.set(ts, performance.now());
-  if (stroke.target === "model") {
-    drawDabs();
-    stats.previewLatencies.push(performance.now() - ts);
-    if (stats.previewLatencies.length > 2000) stats.previewLatencies.shift();
-  }
+function flushDabs() {
+  if (dabsPending === null) return;
+  const ts = dabsPending;
+  dabsPending = null;
+  drawDabs();
+  stats.previewLatencies.push(performance.now() - ts);
+  if (stats.previewLatencies.length > 2000) stats.previewLatencies.shift();
 }
 
 function endStroke() {
   if (!stroke) return;
-  flushPending = true;
-  flushSamples();
   conn.send({ type: "end" });
   if (stroke.target === "model") bump(1);
   stroke = null;
@@ -267,9 +267,17 @@ overlay.addEventListener("pointerdown", (ev) => {
   else if (ev.button === 0) beginStroke(ev, "model", overlay);
   ev.preventDefault();
 });
+// Pen samples come from pointerrawupdate where the browser fires it (secure contexts such as
+// 127.0.0.1): it is dispatched when the input arrives, while pointermove waits for the next
+// animation frame (about 8-16 ms). A stroke that gets raw updates takes its samples only from
+// them; otherwise (no raw updates) from pointermove's coalesced events as before.
+function penRaw(target) {
+  return (ev) => { if (stroke && stroke.target === target) { stroke.raw = true; addSamples(ev); } };
+}
+overlay.addEventListener("pointerrawupdate", penRaw("model"));
 overlay.addEventListener("pointermove", (ev) => {
   cursor = { x: ev.clientX, y: ev.clientY, p: pressureOf(ev, tools.pressure), tilt: tiltOf(ev), over: true };
-  if (stroke && stroke.target === "model") addSamples(ev);
+  if (stroke && stroke.target === "model") { if (!stroke.raw) addSamples(ev); }
   else if (nav.drag) nav.move(ev, overlay.height);
   drawCursor();
 });
@@ -294,22 +302,33 @@ paletteCanvas.addEventListener("pointerdown", (ev) => {
   paletteCanvas.setPointerCapture(ev.pointerId);
   beginStroke(ev, "palette", paletteCanvas);
 });
-paletteCanvas.addEventListener("pointermove", (ev) => { if (stroke && stroke.target === "palette") addSamples(ev); });
+paletteCanvas.addEventListener("pointerrawupdate", penRaw("palette"));
+paletteCanvas.addEventListener("pointermove", (ev) => { if (stroke && stroke.target === "palette" && !stroke.raw) addSamples(ev); });
 for (const type of ["pointerup", "pointercancel"]) paletteCanvas.addEventListener(type, () => endStroke());
 
 // The brush at the pen position with its shadow (5.7): the shadow falls away from the tilt.
+// Drawn at every pointer move, so kept cheap for the browser: only the last cursor's box is
+// cleared (the compositor redraws that much of the layer, not the whole canvas), and the soft
+// shadow is the canvas's own shadow of a shape drawn off the canvas (a blur of the shape's box;
+// a blur filter on the context filters the whole canvas: ~0.25 core at 60 moves per second).
+const SHADOW_SIGMA = 3;              // px: the shadow's Gaussian blur (shadowBlur is twice sigma)
+let cursorBox = null;                // [x, y, w, h] of the drawn cursor
 function drawCursor() {
   const ctx = overlayCtx;
-  ctx.clearRect(0, 0, overlay.width, overlay.height);
+  if (cursorBox) ctx.clearRect(...cursorBox);
+  cursorBox = null;
   if (!cursor || nav.drag) return;
   const rect = overlay.getBoundingClientRect();
   const x = (cursor.x - rect.left) * overlay.width / rect.width, y = (cursor.y - rect.top) * overlay.height / rect.height;
   const r = Math.max(2, tools.size * server.px_per_unit * (0.55 + 0.45 * cursor.p));
   const sx = 5 + cursor.tilt[1] * 0.15, sy = 7 + cursor.tilt[0] * 0.15;
+  const far = overlay.width + 4 * r + 100;  // the shape lies this far left of its shadow, off the canvas
   ctx.save();
-  ctx.filter = "blur(3px)";
-  ctx.fillStyle = "rgba(0, 0, 0, 0.28)";
-  ctx.beginPath(); ctx.ellipse(x + sx, y + sy, r * 1.05, r * 0.8, 0.3, 0, 2 * Math.PI); ctx.fill();
+  ctx.shadowColor = "rgba(0, 0, 0, 0.28)";
+  ctx.shadowBlur = 2 * SHADOW_SIGMA;
+  ctx.shadowOffsetX = far;
+  ctx.fillStyle = "#000";
+  ctx.beginPath(); ctx.ellipse(x + sx - far, y + sy, r * 1.05, r * 0.8, 0.3, 0, 2 * Math.PI); ctx.fill();
   ctx.restore();
   ctx.lineWidth = 2;
   ctx.strokeStyle = hex(tools.color);
@@ -319,6 +338,9 @@ function drawCursor() {
   ctx.beginPath(); ctx.arc(x, y, r + 1.5, 0, 2 * Math.PI); ctx.stroke();
   ctx.fillStyle = "rgba(20, 20, 20, 0.8)";
   ctx.fillRect(x - 0.5, y - 0.5, 1.5, 1.5);
+  // what was drawn: the rings (r + 2) and the shadow (1.05 r + 3 sigma around its offset centre)
+  const reach = Math.max(r + 2, 1.05 * r + Math.hypot(sx, sy) + 3 * SHADOW_SIGMA) + 2;
+  cursorBox = [Math.floor(x - reach), Math.floor(y - reach), Math.ceil(2 * reach) + 1, Math.ceil(2 * reach) + 1];
 }
 
 // ---- tools ----------------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 // The WebSocket session: JSON messages out, JSON replies and binary frames in.
 // Frame format (see unmesh/paint/studio/frames.py): uint32 LE header length, JSON header,
-// then one JPEG per rectangle [x, y, w, h, nbytes].
+// then one image per rectangle [x, y, w, h, nbytes]: a JPEG (head.fmt "jpeg", returned as a
+// Blob) or raw RGBA rows (head.fmt "rgba", returned as ImageData, drawn without decoding).
 
 export function decodeFrame(buffer) {
   const view = new DataView(buffer);
@@ -8,7 +9,9 @@ export function decodeFrame(buffer) {
   const head = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, n)));
   let pos = 4 + n;
   const blobs = head.rects.map((r) => {
-    const blob = new Blob([new Uint8Array(buffer, pos, r[4])], { type: "image/jpeg" });
+    const blob = head.fmt === "rgba"
+      ? new ImageData(new Uint8ClampedArray(buffer, pos, r[4]), r[2], r[3])
+      : new Blob([new Uint8Array(buffer, pos, r[4])], { type: "image/jpeg" });
     pos += r[4];
     return blob;
   });
