@@ -262,8 +262,36 @@ def test_pressure_equation_of_state():
     counts = np.array([1, 2, 3, 4, 5, 6, 42])
     ref = pressure(np.repeat(rho, len(counts)), 1.0, 300.0, 1.0, 0.5, counts=np.tile(counts, len(rho)), full=42,
                    fluid=False)
-    got = [K.solid_pressure(r, 1.0, 300.0, 1.0, 0.5, c, 42.0) for r in rho for c in counts]
+    got = [K.solid_pressure(r, 1.0, 300.0, 1.0, 0.5, c, 42.0, 1.0) for r in rho for c in counts]
     assert np.allclose(got, ref, rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("gamma", [1.0, 7.0])
+def test_solid_pressure_from_its_tension_reference_density(gamma):
+    """A solid's tension is measured from ``rho_t``, the density it froze at: none between ``rho_t`` and
+    ``ρ_b = max(rho_t, 0.9 ρ0)``, from there a ramp back to the law at ρ0, ``ζK((ρ/rho_t)^Γ − 1)`` below
+    ``rho_t`` (continuous), the law unchanged above ρ0 and for ``rho_t = ρ0``; the kernel equals the numpy
+    reference, fragments (share and cap) included."""
+    rho = np.array([0.1, 0.2, 0.3, 0.45, 0.5, 0.55, 0.7, 0.85, 0.9, 0.92, 0.95, 0.98, 1.0, 1.1])
+    counts = np.array([2, 4, 5, 6, 42])
+    for rt in (0.3, 0.5, 0.8, 1.0, 1.3):
+        rr, cc = np.repeat(rho, len(counts)), np.tile(counts, len(rho))
+        ref = pressure(rr, 1.0, 300.0, gamma, 0.5, counts=cc, full=42, fluid=False, rho_t=rt)
+        got = np.array([K.solid_pressure(r, 1.0, 300.0, gamma, 0.5, c, 42.0, rt) for r, c in zip(rr, cc, strict=True)])
+        assert np.allclose(got, ref, rtol=1e-14, atol=0)
+        law = pressure(rr, 1.0, 300.0, gamma, 0.5, counts=cc, full=42, fluid=False)
+        ref_t = min(rt, 1.0)
+        assert np.array_equal(ref[rr >= 1.0], law[rr >= 1.0])
+        lo = max(ref_t, 0.9)
+        assert np.all(ref[(rr >= ref_t) & (rr < lo)] == 0.0)
+        band = (rr >= lo) & (rr < 1.0)
+        assert np.allclose(ref[band], law[band] * (rr[band] - lo) / (1.0 - lo), rtol=1e-12, atol=1e-12)
+        below = rr < ref_t
+        assert np.all(ref[below & (cc == 42)] < 0) and np.all(ref[below] >= law[below])  # less tension than the law
+        if rt >= 1.0:
+            assert np.array_equal(ref, law)
+    # the bulk (42 neighbours) below rho_t: ζK((ρ/rho_t)^Γ − 1)
+    assert K.solid_pressure(0.3, 1.0, 300.0, gamma, 0.5, 42, 42.0, 0.5) == pytest.approx(150.0 * (0.6 ** gamma - 1.0))
 
 
 @pytest.mark.parametrize("dim", [2, 3])

@@ -167,26 +167,50 @@ def pressure_eos(rho, rho0, k, gamma, zeta):
 #: Share of the tension a solid particle carries by its neighbour count (fractions of the count on the
 #: rest lattice): none up to 1/16 (3 in 3D), all from 1/8 (:func:`solid_pressure`).
 SOLID_TENSION_SUPPORT = (0.0625, 0.125)
+#: Lower end of the band below ρ0 (fraction of ρ0) in which a solid that froze at a lower density ramps back to
+#: the law (8.16) (:func:`solid_pressure`).
+FROZEN_BAND = 0.9
 
 
 @njit(**PLAIN)
-def solid_pressure(rho, rho0, k, gamma, zeta, count, full):
+def solid_pressure(rho, rho0, k, gamma, zeta, count, full, rho_t):
     """:func:`pressure_eos` of a solid particle with ``count`` neighbours, its tension bounded.
 
     Solids keep the law (8.16) in their bulk and at their surfaces (their lattice forces carry tension;
-    ``fluid_pressure``'s bounds broke the fracture scene's beam and the melting blob's ear), but a
-    fragment of a few particles is not a continuum either: the tension fades in with the neighbour
+    ``fluid_pressure``'s bounds broke the fracture scene's beam and the melting blob's ear), measured from
+    the state the solid froze in: ``rho_t`` (≤ ρ0) is the particle's tension reference density, ρ0 for a
+    solid from the start, the density its own object gave it at the step a fluid particle froze (at a free
+    surface that is the kernel's empty support, not a stretched solid). With ``ρ_b = max(rho_t, FROZEN_BAND ρ0)``
+    the pressure is the law ``p_law = K((ρ/ρ0)^Γ − 1)`` (ζ on its negative part) at ``ρ ≥ ρ0``, ``p_law (ρ − ρ_b)/(ρ0 − ρ_b)``
+    for ``ρ_b ≤ ρ < ρ0``, 0 for ``rho_t ≤ ρ < ρ_b`` and ``ζK((ρ/rho_t)^Γ − 1)`` below ``rho_t`` (continuous; with
+    ``rho_t = ρ0`` the law itself). So a freshly frozen surface particle has no tension until it is stretched
+    beyond the state it froze in, and ice in the bulk (ρ near ρ0, e.g. among fluid) keeps most of the law's
+    small tension, whose tensile correction keeps the fluid off it (with none there a slime particle came within
+    0.27 d of the ice). Surface ice of the freezing rod that froze at ρ ≈ 0.4–0.6 ρ0 got the full tension
+    (``p/ρ²`` to −700) the moment it froze and was pulled into the ice at 6–14 m/s.
+
+    A fragment of a few particles is not a continuum either: the tension fades in with the neighbour
     count between :data:`SOLID_TENSION_SUPPORT` (half the fluid's thresholds, ``full`` the count on the
     rest lattice), and while it fades ``|p|/ρ² ≤ ζK/ρ0²`` (acts only below ``ρ ≈ 0.62 ρ0`` for Γ = 1; with
     the cap on every solid the fracture scene's beam broke off at another place). Ice fragments
     of 2–5 particles broken off the freezing rod (ζK = 150, ρ ≈ 0.35–0.6 ρ0, ``p/ρ²`` down to −700) were
     pulled onto each other (0.4 d) and rang at the time step, flying off at 8–11 m/s.
     """
-    if full <= 0.0 or count >= SOLID_TENSION_SUPPORT[1] * full:
+    if rho >= rho0:
         return pressure_eos(rho, rho0, k, gamma, zeta)
+    ref = min(rho_t, rho0)
+    scale = 1.0
+    if rho >= ref:  # the band near ρ0 back to the law (ref < ρ0 here)
+        lo = max(ref, FROZEN_BAND * rho0)
+        scale = max(rho - lo, 0.0) / (rho0 - lo)
+        if scale == 0.0:
+            return 0.0
+        ref = rho0
+    if full <= 0.0 or count >= SOLID_TENSION_SUPPORT[1] * full:
+        return scale * pressure_eos(rho, ref, k, gamma, zeta)
     s = rho / rho0
     share = max((count / full - SOLID_TENSION_SUPPORT[0]) / (SOLID_TENSION_SUPPORT[1] - SOLID_TENSION_SUPPORT[0]), 0.0)
-    return max(pressure_eos(rho, rho0, k, gamma, zeta * share), -zeta * share * k * s * s)
+    return scale * max(pressure_eos(rho, ref, k, gamma, zeta * share), -zeta * share * k * s * s)
 
 
 @njit(**PLAIN)
@@ -204,7 +228,7 @@ def fluid_pressure(rho, rho0, k, gamma, zeta, count, full):
 
 
 @njit(cache=True, parallel=True)
-def partner_pressure(rho, p, phase, obj, matid, mats, nbr, nnbr, full):
+def partner_pressure(rho, p, phase, obj, matid, mats, nbr, nnbr, full, rho_t):
     """Pressure (8.15–8.16) with the tension's share by count taken over the particle's tension partners.
 
     Particles of different objects, one of them solid, only repel each other (8.37): they carry no tension
@@ -212,7 +236,8 @@ def partner_pressure(rho, p, phase, obj, matid, mats, nbr, nnbr, full):
     :func:`solid_pressure`) therefore counts only the neighbours of the same object (or, between fluids,
     any): a clump of slime in a pocket of the freezing rod's ice, or a fragment of ice in the slime, is no
     more a continuum than in the air. Rewrites ``p`` (N,) of the particles that have other neighbours
-    (run after the density pass when objects may collide; ``nbr``/``nnbr`` its neighbour lists).
+    (run after the density pass when objects may collide; ``nbr``/``nnbr`` its neighbour lists; ``rho_t`` (N,) the
+    solids' tension reference densities of :func:`solid_pressure`).
     """
     cap = nbr.shape[1] - 1
     for i in prange(rho.shape[0]):
@@ -228,7 +253,7 @@ def partner_pressure(rho, p, phase, obj, matid, mats, nbr, nnbr, full):
         mt = matid[i]
         if solid_i:
             p[i] = solid_pressure(rho[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], part,
-                                  full)
+                                  full, rho_t[i])
         else:
             p[i] = fluid_pressure(rho[i], mats[mt, M.RHO0], mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], part,
                                   full)
@@ -300,7 +325,7 @@ def _axis_gaps(xa, c, reach, origin, cell, n, out):
 
 @njit(**PLAIN)
 def _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
-                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full):
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full, rho_t):
     """Particles ``r0 .. r1 - 1`` of :func:`density_pass` once ``rho`` holds their particle sums and ``nnbr``
     their neighbour counts: boundary particles, analytic walls, density and pressure (one call per block:
     a call per particle would pass its two dozen arguments each time)."""
@@ -344,7 +369,7 @@ def _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, 
                 rho_a -= rho0 * _table2(corner_rho, da, db, h)
         rho[a] = rho_a
         if phase[a] == SOLID:
-            p[a] = solid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full)
+            p[a] = solid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full, rho_t[a])
         else:
             p[a] = fluid_pressure(rho_a, rho0, mats[mt, M.K], mats[mt, M.GAMMA], mats[mt, M.ZETA], cnt, full)
 
@@ -352,7 +377,7 @@ def _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, 
 @njit(**PLAIN)
 def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, nbr, nnbr,
                    bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners,
-                   corner_rho, rho, p, phase, full, hs, cand, ncand):
+                   corner_rho, rho, p, phase, full, rho_t, hs, cand, ncand):
     """Particles ``r0 .. r1 - 1`` of :func:`density_pass` (one block, serial)."""
     h2 = h * h
     want = cand.shape[0] > 0  # also store the candidates within hs (Verlet lists)
@@ -447,13 +472,13 @@ def _density_block(r0, r1, x, xm, matid, mats, h, dim, origin, inv_cell, dims, c
         if want:
             ncand[a] = cc
     _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
-                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full)
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full, rho_t)
 
 
 @njit(cache=True, parallel=True)
 def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, cell_start, dense, xm, nbr, nnbr,
                  bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
-                 plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, hs, cand, ncand):
+                 plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, rho_t, hs, cand, ncand):
     """Neighbour lists, density (8.4) and pressure (8.15–8.16) of every particle.
 
     ``x`` (N, 3) must be the grid's sorted points (z = 0 in 2D); any cell size works.
@@ -470,8 +495,9 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     ``nbr`` and repeats). ``bnbr`` / ``nbnbr`` the same for boundary particles ``bx``
     (static grid ``b*``; ``bnbr`` has no scratch column). Fluid particles (``phase``) get
     :func:`fluid_pressure` with ``full``, the neighbour count on the rest lattice (0: no share by
-    count); solid ones :func:`solid_pressure` (their lattice forces carry tension: either bound of the fluid
-    changed how the fracture scene's beam breaks or the melting blob's ear holds on; only the cap far below ρ0).
+    count); solid ones :func:`solid_pressure` with their tension reference densities ``rho_t`` (N,) (their
+    lattice forces carry tension: either bound of the fluid changed how the fracture scene's beam breaks or the
+    melting blob's ear holds on; only the cap far below ρ0).
 
     Verlet lists: with ``cand`` (N, ccap + 1) int32 non-empty (``(0, 1)``: none) the scan reaches
     ``hs >= h`` instead of ``h`` and also stores every particle within ``hs`` (itself included, ascending)
@@ -488,13 +514,13 @@ def density_pass(x, m, matid, mats, h, dim, origin, inv_cell, dims, cell_keys, c
     for blk in prange(nblk):
         _density_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), x, xm, matid, mats, h, dim, origin, inv_cell, dims,
                        cell_keys, cell_start, dense, nbr, nnbr, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr,
-                       nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, hs, cand, ncand)
+                       nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full, rho_t, hs, cand, ncand)
 
 
 @njit(**PLAIN)
 def _density_list_block(r0, r1, x, xm, matid, mats, h, dim, cand, ncand, nbr, nnbr, bx, bvol, borigin, binv_cell,
                         bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p,
-                        phase, full):
+                        phase, full, rho_t):
     """Particles ``r0 .. r1 - 1`` of :func:`density_list_pass` (one block, serial)."""
     h2 = h * h
     cap = nbr.shape[1] - 1
@@ -518,12 +544,13 @@ def _density_list_block(r0, r1, x, xm, matid, mats, h, dim, cand, ncand, nbr, nn
         nnbr[a] = cnt
         rho[a] = rho_a
     _density_rest(r0, r1, x, matid, mats, h, dim, bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr,
-                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full)
+                  plane_p, plane_n, wall_rho, corners, corner_rho, nnbr, rho, p, phase, full, rho_t)
 
 
 @njit(cache=True, parallel=True)
 def density_list_pass(x, m, matid, mats, h, dim, cand, ncand, xm, nbr, nnbr, bx, bvol, borigin, binv_cell, bdims,
-                      bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full):
+                      bkeys, bstart, bnbr, nbnbr, plane_p, plane_n, wall_rho, corners, corner_rho, rho, p, phase, full,
+                      rho_t):
     """:func:`density_pass` over stored candidates (Verlet lists) instead of the cell scan.
 
     ``cand`` / ``ncand``: the candidates of :func:`density_pass` (radius ``hs``), stored when the
@@ -543,7 +570,7 @@ def density_list_pass(x, m, matid, mats, h, dim, cand, ncand, xm, nbr, nnbr, bx,
     for blk in prange(nblk):
         _density_list_block(blk * BLOCK, min(n, (blk + 1) * BLOCK), x, xm, matid, mats, h, dim, cand, ncand, nbr, nnbr,
                             bx, bvol, borigin, binv_cell, bdims, bkeys, bstart, bnbr, nbnbr, plane_p, plane_n,
-                            wall_rho, corners, corner_rho, rho, p, phase, full)
+                            wall_rho, corners, corner_rho, rho, p, phase, full, rho_t)
 
 
 @njit(cache=True, parallel=True)

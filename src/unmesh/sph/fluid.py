@@ -37,7 +37,7 @@ import numpy as np
 
 from unmesh._validate import as_array, as_points
 from unmesh.kernels import poly6, spiky_derivative, spiky_gradient
-from unmesh.sph._kernels import SOLID_TENSION_SUPPORT, TENSILE_BACKGROUND, TENSION_SUPPORT
+from unmesh.sph._kernels import FROZEN_BAND, SOLID_TENSION_SUPPORT, TENSILE_BACKGROUND, TENSION_SUPPORT
 from unmesh.sph.collisions import penalty_projection
 
 __all__ = ["acceleration_reference", "density_diffusion_reference", "density_reference", "pressure", "xsph_reference"]
@@ -64,21 +64,26 @@ def density_reference(x: Any, m: Any, h: float, dim: int) -> np.ndarray:
 
 
 def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 1.0,
-             counts: Any = None, full: float = 0.0, fluid: bool = True) -> np.ndarray:
+             counts: Any = None, full: float = 0.0, fluid: bool = True, rho_t: Any = None) -> np.ndarray:
     """Eq. (8.15) ``K((ρ/ρ0)^Γ − 1)`` with negative values (tension) scaled by ζ (8.16).
 
     For fluids the tension is bounded as in :func:`unmesh.sph._kernels.fluid_pressure`: scaled by
     ``(ρ/ρ0)²`` and, with the neighbour ``counts`` (N,) of the particles and the count ``full`` on
     the rest lattice, by the share :data:`~unmesh.sph._kernels.TENSION_SUPPORT` that ramps linearly
     from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``). ``fluid=False`` (solids,
-    :func:`unmesh.sph._kernels.solid_pressure`): the law as it is, its tension scaled by the share of
-    :data:`~unmesh.sph._kernels.SOLID_TENSION_SUPPORT` (0 up to ``full/16``, 1 from ``full/8``) and,
-    below ``full/8``, capped at ``ζK (ρ/ρ0)²`` (acts below ``ρ ≈ 0.62 ρ0``).
+    :func:`unmesh.sph._kernels.solid_pressure`): the tension is measured from the tension reference
+    density ``rho_t`` (N,) or scalar (None: ρ0; values above ρ0 count as ρ0): the law ``p_law`` at ``ρ ≥ ρ0``,
+    ``p_law (ρ − ρ_b)/(ρ0 − ρ_b)`` in the band ``ρ_b = max(rho_t, FROZEN_BAND ρ0) ≤ ρ < ρ0``, 0 for
+    ``rho_t ≤ ρ < ρ_b``, ``ζK((ρ/rho_t)^Γ − 1)`` below; that tension is scaled by the
+    share of :data:`~unmesh.sph._kernels.SOLID_TENSION_SUPPORT` (0 up to ``full/16``, 1 from ``full/8``)
+    and, below ``full/8``, capped at ``ζK (ρ/ρ0)²`` (acts below ``ρ ≈ 0.62 ρ0``).
 
     Example
     -------
     >>> pressure(np.array([1.1, 0.9]), 1.0, 100.0, zeta=0.5).round(9).tolist()
     [10.0, -4.05]
+    >>> pressure(np.array([0.6, 0.3]), 1.0, 100.0, zeta=0.5, fluid=False, rho_t=0.5).round(9).tolist()
+    [0.0, -20.0]
     """
     r = np.asarray(rho, dtype=np.float64)
     p = k * ((r / rho0) ** gamma - 1.0)
@@ -87,8 +92,14 @@ def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 
         lo, hi = TENSION_SUPPORT if fluid else SOLID_TENSION_SUPPORT
         by_count = np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
     if not fluid:
-        capped = np.where(by_count < 1.0, np.maximum(zeta * by_count * p, -zeta * by_count * k * (r / rho0) ** 2), zeta * p)
-        return np.where(p < 0, capped, p)
+        ref = np.minimum(np.broadcast_to(np.asarray(rho0 if rho_t is None else rho_t, np.float64), r.shape), rho0)
+        lo = np.maximum(ref, FROZEN_BAND * rho0)
+        band = (r >= ref) & (r < rho0)  # the band back to the law, ramped from ρ_b = lo up to ρ0
+        scale = np.where(band, np.clip(r - lo, 0.0, None) / np.where(band, rho0 - lo, 1.0), 1.0)
+        ref = np.where(band, rho0, ref)
+        t = k * ((r / ref) ** gamma - 1.0)  # the tension measured from the reference density
+        capped = np.where(by_count < 1.0, np.maximum(zeta * by_count * t, -zeta * by_count * k * (r / rho0) ** 2), zeta * t)
+        return np.where(p >= 0, p, scale * capped) + 0.0
     share = (r / rho0) ** 2 * by_count
     return np.where(p < 0, zeta * share * p, p)
 
