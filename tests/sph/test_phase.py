@@ -245,3 +245,63 @@ def test_shipped_melting_blob_stays_one_piece_at_every_frame():
             next_frame += frame
             assert components(sim.particles().positions, 1.5 * d) == 1, f"t = {sim.time:.2f} s"
     assert np.all(sim.particles().phases == FLUID)
+
+
+def _frozen_on_a_block(d: float = 0.0125) -> tuple[SPHSimulation, np.ndarray]:
+    """A cold slime particle one lattice layer above the face of a fixed block of ice (the freezing rod's
+    material, no gravity), certain to freeze in its first step: its summation density is about 0.4 ρ0
+    (18 neighbours, all of the block). Returns the simulation and the mask of the free particle."""
+    pts = closest_packing([-0.06] * 3, [0.06] * 3, d, 3, centered=True)
+    ys = np.unique(np.round(pts[:, 1], 9))
+    block = pts[pts[:, 1] < ys[-3] + 1e-9]
+    layer = pts[np.abs(pts[:, 1] - ys[-2]) < 1e-9]
+    drop = layer[[int(np.argmin(np.linalg.norm(layer[:, [0, 2]], axis=1)))]]
+    slime = Material("slime", stiffness=300.0, negative_pressure=0.5, xsph=0.3, viscosity=0.02,
+                     elastic_stiffness=2e6, freeze_rate=1e4, freezing_point=0.0, freeze_min_neighbors=1)
+    sim = SPHSimulation(SPHConfig(dim=3, spacing=d, dt=2.5e-4, gravity=(0, 0, 0)), {"slime": slime},
+                        [SPHObject("ice", block, "slime", phase="solid", fixed=True, temperature=-30.0),
+                         SPHObject("drop", drop, "slime", temperature=-30.0)])
+    return sim, sim.uid == len(block)
+
+
+def test_surface_ice_is_not_pulled_into_the_ice_it_froze_onto():
+    """Issue 23: a fluid particle that freezes at a free surface (summation density ≈ 0.4 ρ0) used to get
+    the solid's full tension ``ζK(ρ/ρ0 − 1)`` at once and was pulled into the ice (on a 0.2 m block at
+    9.3 m/s; the freezing rod's surface ice at 6–14 m/s). A solid's tension is measured from the density its
+    own object gave it when it froze (``rho_t``): it starts without tension and settles onto the block at
+    about 1 m/s (the block's own surface tension)."""
+    sim, drop = _frozen_on_a_block()
+    rho0 = sim.mats[0, 0]
+    sim.step()
+    i = sim.uid == int(sim.uid[drop][0])
+    assert sim.phase[i][0] == SOLID and sim.obj[i][0] == 0
+    assert 0.3 * rho0 < sim.rho_t[i][0] < 0.5 * rho0 and sim.rho_t[i][0] <= sim.rho[i][0]
+    fastest = 0.0
+    while sim.time < 0.03:
+        sim.step()
+        assert sim.check() is None
+        fastest = max(fastest, float(np.linalg.norm(sim.v[sim.uid == int(np.flatnonzero(drop)[0])][0])))
+    assert fastest < 2.0
+    assert np.all(sim.rho_t[sim.fixed == 1] == rho0)  # solids from the start keep the law
+
+
+def test_resume_keeps_the_tension_reference_of_frozen_particles():
+    """``rho_t`` is simulation state: a checkpoint taken after the freeze restores it and the run continues
+    bit for bit; a checkpoint without it (before stop 37) loads with ρ0 for every particle."""
+    a, _drop = _frozen_on_a_block()
+    for _ in range(3):
+        a.step()
+    state = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in a.state_dict().items()}
+    assert "rho_t" in state and state["rho_t"].min() < a.mats[0, 0]
+    b, _ = _frozen_on_a_block()
+    b.load_state_dict(state)
+    assert np.array_equal(b.rho_t, a.rho_t)
+    for _ in range(10):
+        a.step()
+        b.step()
+    pa, pb = a.particles(), b.particles()
+    assert np.array_equal(pa.positions, pb.positions) and np.array_equal(pa.velocities, pb.velocities)
+    old = {k: v for k, v in state.items() if k != "rho_t"}
+    c, _ = _frozen_on_a_block()
+    c.load_state_dict(old)
+    assert np.all(c.rho_t == c.mats[0, 0])

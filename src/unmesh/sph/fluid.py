@@ -37,7 +37,7 @@ import numpy as np
 
 from unmesh._validate import as_array, as_points
 from unmesh.kernels import poly6, spiky_derivative, spiky_gradient
-from unmesh.sph._kernels import TENSILE_BACKGROUND, TENSION_SUPPORT
+from unmesh.sph._kernels import FROZEN_BAND, SOLID_TENSION_SUPPORT, TENSILE_BACKGROUND, TENSION_SUPPORT
 from unmesh.sph.collisions import penalty_projection
 
 __all__ = ["acceleration_reference", "density_diffusion_reference", "density_reference", "pressure", "xsph_reference"]
@@ -64,33 +64,49 @@ def density_reference(x: Any, m: Any, h: float, dim: int) -> np.ndarray:
 
 
 def pressure(rho: Any, rho0: float, k: float, gamma: float = 1.0, zeta: float = 1.0,
-             counts: Any = None, full: float = 0.0, fluid: bool = True) -> np.ndarray:
+             counts: Any = None, full: float = 0.0, fluid: bool = True, rho_t: Any = None) -> np.ndarray:
     """Eq. (8.15) ``K((ρ/ρ0)^Γ − 1)`` with negative values (tension) scaled by ζ (8.16).
 
     For fluids the tension is bounded as in :func:`unmesh.sph._kernels.fluid_pressure`: scaled by
     ``(ρ/ρ0)²`` and, with the neighbour ``counts`` (N,) of the particles and the count ``full`` on
     the rest lattice, by the share :data:`~unmesh.sph._kernels.TENSION_SUPPORT` that ramps linearly
-    from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``). ``fluid=False`` (solids): the law as it is.
+    from 0 (``counts ≤ full/8``) to 1 (``counts ≥ full/4``). ``fluid=False`` (solids,
+    :func:`unmesh.sph._kernels.solid_pressure`): the tension is measured from the tension reference
+    density ``rho_t`` (N,) or scalar (None: ρ0; values above ρ0 count as ρ0): the law ``p_law`` at ``ρ ≥ ρ0``,
+    ``p_law (ρ − ρ_b)/(ρ0 − ρ_b)`` in the band ``ρ_b = max(rho_t, FROZEN_BAND ρ0) ≤ ρ < ρ0``, 0 for
+    ``rho_t ≤ ρ < ρ_b``, ``ζK((ρ/rho_t)^Γ − 1)`` below; that tension is scaled by the
+    share of :data:`~unmesh.sph._kernels.SOLID_TENSION_SUPPORT` (0 up to ``full/16``, 1 from ``full/8``)
+    and, below ``full/8``, capped at ``ζK (ρ/ρ0)²`` (acts below ``ρ ≈ 0.62 ρ0``).
 
     Example
     -------
     >>> pressure(np.array([1.1, 0.9]), 1.0, 100.0, zeta=0.5).round(9).tolist()
     [10.0, -4.05]
+    >>> pressure(np.array([0.6, 0.3]), 1.0, 100.0, zeta=0.5, fluid=False, rho_t=0.5).round(9).tolist()
+    [0.0, -20.0]
     """
     r = np.asarray(rho, dtype=np.float64)
     p = k * ((r / rho0) ** gamma - 1.0)
-    if not fluid:
-        return np.where(p < 0, zeta * p, p)
-    share = (r / rho0) ** 2
+    by_count = np.ones_like(r)
     if counts is not None and full > 0:
-        lo, hi = TENSION_SUPPORT
-        share = share * np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
+        lo, hi = TENSION_SUPPORT if fluid else SOLID_TENSION_SUPPORT
+        by_count = np.clip((np.asarray(counts, dtype=np.float64) / full - lo) / (hi - lo), 0.0, 1.0)
+    if not fluid:
+        ref = np.minimum(np.broadcast_to(np.asarray(rho0 if rho_t is None else rho_t, np.float64), r.shape), rho0)
+        lo = np.maximum(ref, FROZEN_BAND * rho0)
+        band = (r >= ref) & (r < rho0)  # the band back to the law, ramped from ρ_b = lo up to ρ0
+        scale = np.where(band, np.clip(r - lo, 0.0, None) / np.where(band, rho0 - lo, 1.0), 1.0)
+        ref = np.where(band, rho0, ref)
+        t = k * ((r / ref) ** gamma - 1.0)  # the tension measured from the reference density
+        capped = np.where(by_count < 1.0, np.maximum(zeta * by_count * t, -zeta * by_count * k * (r / rho0) ** 2), zeta * t)
+        return np.where(p >= 0, p, scale * capped) + 0.0
+    share = (r / rho0) ** 2 * by_count
     return np.where(p < 0, zeta * share * p, p)
 
 
 def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h: float, dim: int,
                            objects: Any = None, phases: Any = None, tensile: float = 0.0,
-                           spacing: float | None = None, sound: Any = None) -> np.ndarray:
+                           spacing: float | None = None, sound: Any = None, rest_density: Any = None) -> np.ndarray:
     """Pressure (8.17) + viscosity (8.18) accelerations by brute force, shape (N, 3).
 
     ``mu`` (N,) per-particle dynamic viscosity (pairs use the mean). With
@@ -98,6 +114,10 @@ def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h:
     (one of them solid) is reduced to its repulsive part (8.37). ``tensile`` is ε of the tensile
     correction with the reference distance ``spacing`` (``d``); ``sound`` (N,) the particles' speeds of
     sound ``c`` of its background ``B c²/ρ`` (:data:`unmesh.sph._kernels.TENSILE_BACKGROUND`; None: 0).
+    ``rest_density`` (N,) or scalar ρ0: the viscosity divides by ``max(ρ_i, ρ0_i) max(ρ_j, ρ0_j)`` (a
+    summation density below ρ0 is the kernel's empty support; None: by ``ρ_i ρ_j``). The kernel
+    (:func:`unmesh.sph._kernels.force_pass`) bounds fluid particles and solid fragments (fewer than 1/8 of
+    the rest count of neighbours) only; this reference bounds every particle.
 
     Example
     -------
@@ -124,7 +144,8 @@ def acceleration_reference(x: Any, v: Any, m: Any, rho: Any, p: Any, mu: Any, h:
         f = np.asarray(poly6(np.sqrt(r2), h, dim)) / float(poly6(0.5 * spacing, h, dim))
         bg = np.zeros(n) if sound is None else TENSILE_BACKGROUND * np.asarray(sound, float) ** 2 / rr
         rt = tensile * (np.maximum(-pr[i], 0) + np.maximum(-pr[j], 0) + bg[i] + bg[j]) * np.maximum(f ** 4 - 1, 0)
-    bracket = -(pr[i] + pr[j] + rt) + 2.0 * (dim + 2) * mubar / (rr[i] * rr[j]) * vx / (r2 + 0.01 * h * h)
+    rv = rr if rest_density is None else np.maximum(rr, np.broadcast_to(np.asarray(rest_density, float), (n,)))
+    bracket = -(pr[i] + pr[j] + rt) + 2.0 * (dim + 2) * mubar / (rv[i] * rv[j]) * vx / (r2 + 0.01 * h * h)
     f = (mm[j] * bracket)[:, None] * grad
     if objects is not None:
         ob = np.asarray(objects)

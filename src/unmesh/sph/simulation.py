@@ -74,7 +74,8 @@ __all__ = ["SPHConfig", "SPHObject", "SPHSimulation"]
 #: :func:`unmesh._threads.serial_if_small`).
 PARALLEL_MIN = 2000
 
-_PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed")
+_PARTICLE_ARRAYS = ("x", "v", "a", "xsph", "m", "rho", "p", "temp", "dtemp", "phase", "obj", "mat", "uid", "fixed",
+                    "rho_t")
 _ELASTIC_ARRAYS = ("amat", "ainv", "occ", "docked", "lam", "pmat")
 #: Per-particle arrays that every step recomputes after the re-sort (not re-sorted in a step).
 _RECOMPUTED = ("a", "xsph", "rho", "p", "dtemp")
@@ -425,6 +426,8 @@ class SPHSimulation(Simulation):
         self.mat = np.concatenate(mt)
         self.uid = np.arange(n, dtype=np.int64)
         self.fixed = np.concatenate(fx)
+        # tension reference density of the solids (K.solid_pressure): ρ0, and the density a particle froze at
+        self.rho_t = np.ascontiguousarray(self.mats[self.mat, MT.RHO0])
         self._check_layout()
         q = len(self.slot_vecs)
         self.amat = np.ascontiguousarray(np.repeat(self.frame[None], n, axis=0))
@@ -566,7 +569,7 @@ class SPHSimulation(Simulation):
                            g.cell_keys, g.cell_start, dense, self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol,
                            bo, binv, bd, bk, bs, self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho,
                            self.corners, self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors,
-                           self.h + self.skin, self.cand, self.ncand)
+                           self.rho_t, self.h + self.skin, self.cand, self.ncand)
             if self._lists_fit():
                 break
         if self.skin > 0.0:
@@ -574,6 +577,7 @@ class SPHSimulation(Simulation):
                 self._xref = np.empty_like(self.x)
             self._xref[:] = self.x
         self._diffuse()
+        self._partner_tension()
 
     def _density_from_candidates(self) -> None:
         bo, binv, bd, bk, bs = self.bgrid
@@ -581,10 +585,18 @@ class SPHSimulation(Simulation):
             K.density_list_pass(self.x, self.m, self.mat, self.mats, self.h, self.dim, self.cand, self.ncand,
                                 self._rows["xm"], self.nbr, self.nnbr, self.bx, self.bvol, bo, binv, bd, bk, bs,
                                 self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_rho, self.corners,
-                                self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors)
+                                self.corner_rho, self.rho, self.p, self.phase, self.full_neighbors, self.rho_t)
             if self._lists_fit():
                 break
         self._diffuse()
+        self._partner_tension()
+
+    def _partner_tension(self) -> None:
+        """The tension's share by count over the tension partners only (:func:`unmesh.sph._kernels.partner_pressure`),
+        when particles of different objects, one of them solid, may meet."""
+        if len(self.objects) > 1 and np.any(self.phase == SOLID):
+            K.partner_pressure(self.rho, self.p, self.phase, self.obj, self.mat, self.mats, self.nbr, self.nnbr,
+                               self.full_neighbors, self.rho_t)
 
     def _lists_fit(self) -> bool:
         """True when the last density pass's neighbour and candidate lists held every entry (their
@@ -660,7 +672,8 @@ class SPHSimulation(Simulation):
                      self.bnbr, self.nbnbr, self.plane_p, self.plane_n, self.wall_grad, self.corners,
                      self.corner_grad, self.config.wall_pressure, self.plane_noslip, self.wall_visc, self.wall_mom,
                      self.corner_mom, self.bnoslip,
-                     self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp)
+                     self.grad_scale, self.config.tensile_correction, self.config.contact_damping, self.spacing, self.elastic, s["fel"], s["fown"], self._rows["pk"], self.a, self.xsph, self.dtemp,
+                     self.full_neighbors)
         if self.elastic:
             # the new lattice state (in the new order) becomes the previous one of the next step
             self.amat, s["amat_out"] = s["amat_out"], self.amat
@@ -805,6 +818,11 @@ class SPHSimulation(Simulation):
                          for name in self.material_names], np.int32)
         back = thawed[home[self.mat[thawed]] >= 0]
         self.obj[back] = home[self.mat[back]]
+        # a new solid's rest state is the state it froze in: its tension is measured from the density its own
+        # object gives it now (K.solid_pressure; a surface particle's summation density is the kernel's empty
+        # support, not a stretched solid, and the fluid around it only repels it, 8.37); a thawed one is back to ρ0
+        self.rho_t[thawed] = self.mats[self.mat[thawed], MT.RHO0]
+        self.rho_t[frozen] = np.minimum(self.mats[self.mat[frozen], MT.RHO0], self._own_density(frozen))
         if self.elastic:
             self.amat[frozen] = self.frame
             self.ainv[frozen] = self.frame.T
@@ -817,6 +835,19 @@ class SPHSimulation(Simulation):
             if self.lam.shape[1]:
                 self.lam[changed] = self.mats[self.mat[changed], MT.DOCK_MAX][:, None]
         self.phase[changed] = new_phase[changed]
+
+    def _own_density(self, idx: np.ndarray) -> np.ndarray:
+        """Summation density (8.4) of particles ``idx`` over their own object's particles (self included), (len(idx),)."""
+        from unmesh.kernels import poly6
+
+        out = np.empty(len(idx))
+        cap = self.nbr.shape[1] - 1
+        for k, i in enumerate(idx):
+            nb = self.nbr[i, : min(int(self.nnbr[i]), cap)]
+            nb = nb[self.obj[nb] == self.obj[i]]
+            r = np.linalg.norm(self.x[nb] - self.x[i], axis=1)
+            out[k] = self.m[i] * float(poly6(0.0, self.h, self.dim)) + float(np.sum(self.m[nb] * poly6(r, self.h, self.dim)))
+        return out
 
     def _bind_skins(self) -> dict[str, Any]:
         from unmesh.sph.surface import Skin
@@ -967,6 +998,9 @@ class SPHSimulation(Simulation):
         if int(state["n"]) != len(self.x):
             raise InputError(f"checkpoint has {int(state['n'])} particles but the scene has {len(self.x)}; "
                              "it belongs to a different scene")
+        state = dict(state)
+        if "rho_t" not in state and "mat" in state:  # checkpoints before stop 37: every solid measured from ρ0
+            state["rho_t"] = self.mats[np.asarray(state["mat"], np.int64), MT.RHO0]
         for name in self._arrays():
             if name not in state:
                 raise InputError(f"checkpoint lacks {name!r}; it belongs to a different scene")
