@@ -185,6 +185,18 @@ def _tetrahedron(edge: float) -> np.ndarray:
     return edge * np.array([[0, 0, 0], [1, 0, 0], [0.5, np.sqrt(3) / 2, 0], [0.5, np.sqrt(3) / 6, np.sqrt(2 / 3)]])
 
 
+def _top_speed_after_release(sim, speed, duration):
+    """Give the particles random motion of about ``speed`` (zero mean), run ``duration``, return the top speed."""
+    sim.v[:] = speed * np.random.default_rng(0).standard_normal(sim.v.shape)
+    sim.v -= sim.v.mean(axis=0)
+    top = 0.0
+    while sim.time < duration:
+        sim.step()
+        top = max(top, float(np.linalg.norm(sim.v, axis=1).max()))
+    assert sim.check() is None
+    return top
+
+
 @pytest.mark.parametrize("edge", [0.42, 0.5, 0.7])
 def test_close_clump_of_viscous_fluid_does_not_ring(edge):
     """Four slime particles (μ = 0.02, the freezing rod's) in a tetrahedron closer than d, released with
@@ -200,13 +212,7 @@ def test_close_clump_of_viscous_fluid_does_not_ring(edge):
     mat = Material("slime", stiffness=300.0, negative_pressure=0.5, viscosity=0.02, xsph=0.3)
     sim = SPHSimulation(SPHConfig(dim=3, spacing=d, dt=1e-3, cfl=0.3, gravity=(0, 0, 0)), {"slime": mat},
                         [SPHObject("drop", _tetrahedron(edge * d), "slime")])
-    sim.v[:] = 0.05 * np.random.default_rng(0).standard_normal((4, 3))
-    sim.v -= sim.v.mean(axis=0)
-    top = 0.0
-    while sim.time < 0.05:
-        sim.step()
-        top = max(top, float(np.linalg.norm(sim.v, axis=1).max()))
-    assert sim.check() is None
+    top = _top_speed_after_release(sim, 0.05, 0.05)
     assert top < 0.2, top
     assert np.abs((sim.m[:, None] * sim.v).sum(axis=0)).max() < 1e-15
 
@@ -223,13 +229,7 @@ def test_small_fragment_of_cohesive_ice_stays_at_rest(n, edge):
     mat = Material("slime", stiffness=300.0, negative_pressure=0.5, viscosity=0.02, xsph=0.3, elastic_stiffness=2e6)
     sim = SPHSimulation(SPHConfig(dim=3, spacing=d, dt=1e-3, cfl=0.3, gravity=(0, 0, 0)), {"slime": mat},
                         [SPHObject("ice", _tetrahedron(edge * d)[:n], "slime", phase="solid")])
-    sim.v[:] = 0.02 * np.random.default_rng(0).standard_normal((n, 3))
-    sim.v -= sim.v.mean(axis=0)
-    top = 0.0
-    while sim.time < 0.1:
-        sim.step()
-        top = max(top, float(np.linalg.norm(sim.v, axis=1).max()))
-    assert sim.check() is None
+    top = _top_speed_after_release(sim, 0.02, 0.1)
     assert top < 0.2, top
 
 
