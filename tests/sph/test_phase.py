@@ -305,3 +305,65 @@ def test_resume_keeps_the_tension_reference_of_frozen_particles():
     c, _ = _frozen_on_a_block()
     c.load_state_dict(old)
     assert np.all(c.rho_t == c.mats[0, 0])
+
+
+def _ice_with_a_degenerate_lattice(dim: int, drop_phase: str) -> tuple[SPHSimulation, int, int]:
+    """A fixed rod, a slime particle frozen onto it one lattice row above its top particle, and a cold slime
+    particle 0.45 d above that one (both certain to freeze). The frozen particle's lattice is degenerate like
+    that of the freezing rod's surface ice with few lattice members (seed 3: singular values 2.7, 1.7, 0.22,
+    the smallest along the drop): in it the drop rounds to a slot, not to the ice particle's own site.
+    Returns the simulation and the ids of the ice particle and the drop."""
+    d = 0.01
+    hi = [0.06, 0.04, 0.0 if dim == 2 else 0.04]
+    rod = closest_packing([0, 0, 0], hi, d, dim, centered=True)
+    k = int(np.argmax(rod[:, 1]))
+    top = rod[k]
+    ice, drop = top + np.array([0.0, d, 0.0]), top + np.array([0.0, 1.45 * d, 0.0])
+    mats = {"steel": Material("steel", elastic_stiffness=1e5),
+            "water": Material("water", elastic_stiffness=1e5, freeze_rate=1e9, freezing_point=0.0)}
+    sim = SPHSimulation(SPHConfig(dim=dim, spacing=d, dt=1e-3, gravity=(0, 0, 0)), mats,
+                        [SPHObject("rod", rod, "steel", phase="solid", fixed=True, temperature=-10.0),
+                         SPHObject("ice", ice[None], "water", phase="solid", temperature=-10.0),
+                         SPHObject("drop", (top + np.array([0.0, 2.0 * d, 0.0]))[None], "water", phase=drop_phase,
+                                   temperature=-10.0)])
+    i_ice, i_drop = len(rod), len(rod) + 1
+    rod_obj = sim.obj[sim.uid == k][0]
+    sim.obj[sim.uid == i_ice] = rod_obj                        # frozen onto the rod: the rod's object
+    if drop_phase == "solid":
+        sim.obj[sim.uid == i_drop] = rod_obj
+    sim.x[sim.uid == i_drop] = drop                            # closer than d/2 is an overlap for the constructor
+    sim._update()
+    sv = np.array([2.7, 0.22, 1.7])[:dim] if dim == 3 else np.array([2.7, 0.22])
+    a = np.eye(3)
+    a[np.arange(dim), np.arange(dim)] = sv
+    for u in (i_ice, i_drop) if drop_phase == "solid" else (i_ice,):
+        sim.amat[sim.uid == u] = a
+        sim.ainv[sim.uid == u] = np.linalg.inv(a)
+    y = np.linalg.inv(a) @ (drop - ice) / d
+    assert np.linalg.norm(y) > 1.0                             # the drop does not round to the ice particle's site
+    return sim, i_ice, i_drop
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_no_freezing_into_an_occupied_site_of_a_degenerate_lattice(dim):
+    """Issue 23 item 1 (freezing rod, seed 3): a particle 0.45 d from a frozen particle whose lattice is
+    degenerate rounded to a slot of that lattice and froze; the two, bound as lattice neighbours, were thrown
+    apart at 36 m/s. Closer than half a spacing (the inradius of the rest lattice's site) is the ice
+    particle's site whatever its lattice: the drop does not freeze; the same pair already frozen
+    (on different steps) -> exactly one, the larger id, thaws."""
+    sim, i_ice, i_drop = _ice_with_a_degenerate_lattice(dim, "fluid")
+    assert _freezing_rates(sim)[i_drop] == 0.0
+    sim._phase_transitions(1e-3)
+    assert sim.phase[sim.uid == i_ice][0] == SOLID and sim.phase[sim.uid == i_drop][0] == FLUID
+    sim, i_ice, i_drop = _ice_with_a_degenerate_lattice(dim, "solid")
+    sim._phase_transitions(1e-3)
+    assert sim.phase[sim.uid == i_ice][0] == SOLID and sim.phase[sim.uid == i_drop][0] == FLUID
+    fastest = 0.0
+    for _ in range(30):
+        sim.step()
+        assert sim.check() is None
+        fastest = max(fastest, float(np.linalg.norm(sim.v, axis=1).max()))
+        both = (sim.phase[sim.uid == i_ice][0] == SOLID) & (sim.phase[sim.uid == i_drop][0] == SOLID)
+        gap = np.linalg.norm(sim.x[sim.uid == i_drop][0] - sim.x[sim.uid == i_ice][0])
+        assert not (both and gap < 0.5 * sim.spacing)
+    print(f"dim {dim}: fastest {fastest:.3f} m/s")
