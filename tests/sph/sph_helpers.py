@@ -81,7 +81,8 @@ class LatticeState:
         """The same forces from the numpy reference (:mod:`unmesh.sph.elastic`)."""
         mu, lam = self.mat.lame
         par = ElasticParams(self.dim, self.mat.elastic_stiffness, self.mat.goal_deformation, mu, lam,
-                            self.mat.density, self.mat.plastic_yield, self.mat.plastic_creep)
+                            self.mat.density, self.mat.plastic_yield, self.mat.plastic_creep,
+                            self.mat.freeze_rate > 0.0)
         w0 = float(poly6(0.0, self.h, self.dim))
         f = np.zeros((self.n, 3))
         for i in np.flatnonzero(self.solid):

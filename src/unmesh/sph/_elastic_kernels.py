@@ -41,6 +41,11 @@ from unmesh.sph._slot_kernels import _d3_round_k, nearest_slot
 SOLID = 1
 #: Singular values are clamped to at least this when forming goal positions (inverted lattices).
 SIGMA_FLOOR = 0.05
+#: A neighbourhood of a freezing material with fewer members than ``FIT_MEMBERS_PER_DIM * dim`` (3D: 6 of the
+#: 12 lattice neighbours, 2D: 4 of 6) fits only a rotation: its lattice transformation, goal matrix (8.29-8.30) and next assignment
+#: use the rotation ``R`` of the fit (8.24), not its stretch, and it has no strain stress (surface ice of a few
+#: members otherwise fits a squashed lattice, singular values like 2.7 / 1.7 / 0.22, and its force rings).
+FIT_MEMBERS_PER_DIM = 2
 _EYE = np.eye(3)
 
 
@@ -233,6 +238,8 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
     lp = np.empty((9, LANES))
     lpi = np.empty((9, LANES))
     lpl = np.zeros(LANES)
+    rigid = np.zeros(LANES)  # lanes with too few members for a stretch: the rotation of the fit only
+    few = FIT_MEMBERS_PER_DIM * dim
     pm = np.empty((3, 3))
     pinv = np.empty((3, 3))
     ys = np.empty((3, 3))
@@ -246,6 +253,7 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         for k in range(LANES):
             ok[k] = 0.0
             cand[k] = 0.0
+            rigid[k] = 0.0
             # an idle lane holds the identity (its algebra stays finite)
             for e in range(15):
                 sums[e, k] = 0.0
@@ -426,6 +434,7 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                 b22 = 1.0
             ok[k] = 1.0
             cand[k] = 1.0
+            rigid[k] = 1.0 if (count < few) & (mats[mt, M.FREEZE_RATE] > 0.0) else 0.0
             lane = (s00, s01, s02, s11, s12, s22, b00, b01, b02, b10, b11, b12, b20, b21, b22)
             for e in range(15):
                 sums[e, k] = lane[e]
@@ -457,7 +466,7 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
         # stored plastic deformation: decompose the elastic part A_e = A P⁻¹ (rest offsets P l)
         for k in range(LANES):
             lpl[k] = 0.0
-            if plastic and k < nl and ok[k] > 0.0 and mats[matid[g0 + k], M.YIELD] < np.inf:
+            if plastic and k < nl and ok[k] > 0.0 and rigid[k] == 0.0 and mats[matid[g0 + k], M.YIELD] < np.inf:
                 lpl[k] = 1.0
                 _plastic_split(k, order[g0 + k], pmat, la, lminv, ltot, lp, lpi, pm, pinv)
         # polar decomposition (8.24) of every lane at once (3D; the SVD where it does not apply)
@@ -546,6 +555,16 @@ def _lattice_block(r0, r1, lo_b, win, x, m, phase, obj, matid, uid, mats, nbr, n
                     for q in range(3):
                         lg[3 * p + q, k] = u[p, 0] * dg0 * v[q, 0] + u[p, 1] * dg1 * v[q, 1] + u[p, 2] * dg2 * v[q, 2]
                         lrot[3 * p + q, k] = u[p, 0] * v[q, 0] + u[p, 1] * v[q, 1] + u[p, 2] * v[q, 2]
+            if rigid[k] > 0.0:
+                # too few members for a stretch: the fit's rotation is the transformation and the goal
+                trs = 0.0
+                for p in range(3):
+                    for q in range(3):
+                        r_pq = lrot[3 * p + q, k]
+                        a[p, q] = r_pq
+                        lg[3 * p + q, k] = r_pq
+                        amat_out[i, p, q] = r_pq
+                        ainv_out[i, q, p] = r_pq
             if lpl[k] > 0.0:
                 _plastic_finish(i, k, ys, ltot, lp, lpi, lg, amat_out, ainv_out, pmat_out, mats[mt, M.YIELD],
                                 mats[mt, M.CREEP], dt, dim, pm)

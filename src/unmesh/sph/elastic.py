@@ -46,6 +46,11 @@ For a particle ``i`` with neighbours ``j`` (``r_ij = x_j − x_i``, weights
    the rest shape creeps towards the current shape (the thesis' yield and creep rule for
    shells, eqs. 7.20–7.22, applied to the lattice; section 8.2.5 names stored plastic strain as
    an addition to the inherent plasticity).
+7. **Few members** (not in the thesis): a neighbourhood of a freezing material with fewer than ``FIT_MEMBERS_PER_DIM * dim``
+   members (3D: 6 of 12) fits a rotation only: its transformation and goal are ``R = U Vᵀ`` of the fit,
+   ``g' = R l``, with no strain stress and no plastic flow. A few members on one side of a particle
+   (surface ice) do not determine a stretch: their fit is squashed (singular values like 2.7, 1.7, 0.22),
+   its next assignment rounds neighbours to wrong slots and its forces ring.
 
 Example
 -------
@@ -89,6 +94,8 @@ __all__ = [
 
 #: Singular values are clamped to at least this when forming goal positions (inverted lattices).
 SIGMA_FLOOR = 0.05
+#: Fewer members than ``FIT_MEMBERS_PER_DIM * dim``: only the rotation of the fit (item 7 of the module docstring).
+FIT_MEMBERS_PER_DIM = 2
 
 
 @dataclass(frozen=True)
@@ -112,6 +119,8 @@ class ElasticParams:
     plastic_yield, plastic_creep : float
         Yield strain ``β`` and creep rate ``α`` (1/s) of the stored plastic deformation
         (:func:`plastic_flow`; ``β = inf``: none).
+    few_member_rotation : bool
+        Item 7 of the module docstring (materials that freeze, ``freeze_rate > 0``).
 
     Example
     -------
@@ -128,6 +137,7 @@ class ElasticParams:
     rest_density: float = 1.0
     plastic_yield: float = float("inf")
     plastic_creep: float = float("inf")
+    few_member_rotation: bool = False
 
     def __post_init__(self) -> None:
         if self.dim not in (2, 3):
@@ -504,6 +514,10 @@ def neighbourhood_forces(xi: Any, r: Any, l: Any, w: Any, w_self: float, mi: flo
         return np.zeros(3), fj
     a = _shape_matrix(rr, ll, ww, n, m)
     pl = np.eye(3) if plastic is None else as_array(plastic, "plastic", (3, 3))
+    if params.few_member_rotation and len(rr) < FIT_MEMBERS_PER_DIM * n:  # too few members for a stretch: the rotation alone (item 7)
+        u, sig, v = rotation_svd(a, dim)
+        a = u @ v.T
+        pl = np.eye(3)
     pinv = np.linalg.inv(pl)
     a = a @ pinv                                  # the elastic part A_e = A P⁻¹
     u, sig, v = rotation_svd(a, dim)

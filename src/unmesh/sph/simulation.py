@@ -62,6 +62,7 @@ from unmesh.sph.boundary import (
     wall_moment_tables,
     wall_tables,
 )
+from unmesh.sph.elastic import rotation_svd
 from unmesh.sph.front import surge_front
 from unmesh.sph.materials import Material, material_table
 from unmesh.sph.phase import HeatSource
@@ -826,8 +827,12 @@ class SPHSimulation(Simulation):
         if self.elastic:
             self.amat[frozen] = self.frame
             self.ainv[frozen] = self.frame.T
-            self.amat[has] = self.amat[donor[has]]
-            self.ainv[has] = self.ainv[donor[has]]
+            # the donor's frame (the rotation of its transformation, 8.24), not its stretch: a few-member
+            # fit of surface ice may be squashed, and a particle that froze onto it would keep the squash
+            for i in has:
+                u, _, v = rotation_svd(self.amat[donor[i]], self.dim)
+                self.amat[i] = u @ v.T
+                self.ainv[i] = v @ u.T
             if len(self.pmat):
                 self.pmat[changed] = np.eye(3)  # a new solid has its lattice's rest shape
             self.occ[changed] = -1
